@@ -1,0 +1,274 @@
+"""Measuring the speed/accuracy trade: timing, result tables and Pareto plots.
+
+On CUDA, kernels run asynchronously: wall-clock timing around a launch measures the launch,
+not the work. ``time_fn`` therefore uses CUDA events recorded on the stream after a warm-up
+and a synchronize, and ``time.perf_counter`` on the CPU. Report the median: it ignores the
+occasional slow run caused by another process, a page fault or a cold cache.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import json
+import math
+import os
+import platform
+import re
+import shlex
+import statistics
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from course.device import default_device
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Seconds per call of one timed function, over ``repeats`` calls after a warm-up."""
+
+    median: float
+    min: float
+    max: float
+    mean: float
+    repeats: int
+    device: str
+    method: str  # "cuda-events" or "perf_counter"
+
+    def __str__(self) -> str:
+        return (f"{self.median * 1e3:.3f} ms (median of {self.repeats}, "
+                f"min {self.min * 1e3:.3f} ms, {self.method} on {self.device})")
+
+
+def _tensor_device(args: Sequence) -> torch.device | None:
+    """The device of the first tensor among ``args`` or their dataclass fields (Rays, Mesh)."""
+    for arg in args:
+        values = ([getattr(arg, f.name) for f in dataclasses.fields(arg)]
+                  if dataclasses.is_dataclass(arg) else [arg])
+        for value in values:
+            if isinstance(value, torch.Tensor):
+                return value.device
+    return None
+
+
+def time_fn(fn: Callable, *args, repeats: int = 20, warmup: int = 3,
+            device: str | torch.device | None = None, **kwargs) -> Timing:
+    """Time ``fn(*args, **kwargs)``; returns its per-call ``Timing`` in seconds.
+
+    device: where ``fn`` runs; by default the device of the first tensor argument (looking
+    inside dataclasses such as Rays), else ``default_device()``. Warm-up calls absorb
+    one-time costs (allocator growth, autotuning, ``torch.compile``).
+    """
+    if repeats < 1:
+        raise ValueError(f"repeats: expected at least 1, got {repeats}")
+    if warmup < 0:
+        raise ValueError(f"warmup: expected 0 or more, got {warmup}")
+    if device is None:
+        device = _tensor_device([*args, *kwargs.values()])
+    device = default_device(device)
+    for _ in range(warmup):
+        fn(*args, **kwargs)
+    if device.type == "cuda":
+        seconds, method = _time_cuda(fn, args, kwargs, repeats, device), "cuda-events"
+    else:
+        seconds, method = _time_cpu(fn, args, kwargs, repeats), "perf_counter"
+    return Timing(median=statistics.median(seconds), min=min(seconds), max=max(seconds),
+                  mean=statistics.fmean(seconds), repeats=repeats, device=str(device),
+                  method=method)
+
+
+def _time_cuda(fn, args, kwargs, repeats: int, device: torch.device) -> list[float]:
+    starts = [torch.cuda.Event(enable_timing=True) for _ in range(repeats)]
+    ends = [torch.cuda.Event(enable_timing=True) for _ in range(repeats)]
+    torch.cuda.synchronize(device)  # the warm-up's queued work must not land in the first run
+    with torch.cuda.device(device):
+        for start, end in zip(starts, ends):
+            start.record()
+            fn(*args, **kwargs)
+            end.record()
+    torch.cuda.synchronize(device)
+    return [start.elapsed_time(end) / 1e3 for start, end in zip(starts, ends)]
+
+
+def _time_cpu(fn, args, kwargs, repeats: int) -> list[float]:
+    seconds = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn(*args, **kwargs)
+        seconds.append(time.perf_counter() - start)
+    return seconds
+
+
+def device_name(device: str | torch.device | None = None) -> str:
+    """A filesystem-safe name for ``device``: ``"nvidia-h100-80gb-hbm3"``, ``"cpu-8cores"``.
+
+    Used as the folder of recorded results (``bench/results/<device_name>/``).
+    """
+    device = default_device(device)
+    if device.type == "cuda":
+        return re.sub(r"[^a-z0-9]+", "-", torch.cuda.get_device_name(device).lower()).strip("-")
+    return f"cpu-{os.cpu_count()}cores"
+
+
+def _device_description(device: torch.device) -> str:
+    if device.type == "cuda":
+        return torch.cuda.get_device_name(device)
+    return f"{platform.processor() or platform.machine()} ({os.cpu_count()} cores)"
+
+
+def _plain(value):
+    """A JSON-ready version of a cell: tensors and numpy scalars become Python numbers."""
+    if hasattr(value, "tolist"):  # tensors, numpy arrays and numpy scalars
+        return value.tolist()
+    if isinstance(value, (torch.dtype, torch.device, Path)):
+        return str(value)
+    return value
+
+
+class ResultTable:
+    """Rows of one benchmark: each a dict of knob settings, seconds, throughput and errors.
+
+    >>> table = ResultTable("lab1 intersection")
+    >>> table.add(variant="moller_trumbore", dtype="float32", seconds=0.01, max_error=1e-6)
+    >>> table.to_json("bench/results/cpu-8cores/lab1.json")
+    """
+
+    def __init__(self, name: str = "", device: str | torch.device | None = None,
+                 metadata: dict | None = None, rows: list[dict] | None = None):
+        self.name = name
+        self.metadata = metadata if metadata is not None else self._collect_metadata(device)
+        self.rows: list[dict] = list(rows or [])
+
+    @staticmethod
+    def _collect_metadata(device) -> dict:
+        device = default_device(device)
+        return {"device": _device_description(device), "device_name": device_name(device),
+                "torch": torch.__version__, "python": platform.python_version(),
+                "command": shlex.join(sys.argv),
+                "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+
+    def add(self, **row) -> dict:
+        """Append one row, e.g. ``add(variant="woop", seconds=t.median, max_error=e)``."""
+        row = {key: _plain(value) for key, value in row.items()}
+        self.rows.append(row)
+        return row
+
+    def columns(self) -> list[str]:
+        """Every key used by any row, in order of first appearance."""
+        return list(dict.fromkeys(key for row in self.rows for key in row))
+
+    def to_json(self, path: str | Path) -> Path:
+        """Write ``{"name", "metadata", "rows"}`` to ``path`` (folders are created)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"name": self.name, "metadata": self.metadata,
+                                    "rows": self.rows}, indent=2) + "\n")
+        return path
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> ResultTable:
+        data = json.loads(Path(path).read_text())
+        return cls(data["name"], metadata=data["metadata"], rows=data["rows"])
+
+    def to_markdown(self) -> str:
+        """A GitHub-flavoured Markdown table; floats with 4 significant digits."""
+        columns = self.columns()
+        lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+        lines += ["| " + " | ".join(_cell(row.get(c)) for c in columns) + " |" for row in self.rows]
+        return "\n".join(lines)
+
+
+def _cell(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def pareto_front(rows: Sequence[dict], x: str, y: str, maximize_x: bool = False) -> list[int]:
+    """Indices of the rows no other row beats on both ``x`` and ``y`` (lower ``y`` is better).
+
+    Rows lacking a finite ``x`` or ``y`` are ignored. Returned in order of improving x.
+    """
+    usable = [i for i, row in enumerate(rows) if _finite(row.get(x)) and _finite(row.get(y))]
+    sign = -1.0 if maximize_x else 1.0
+    # Sweep from the best x to the worst: a row is on the front iff its y beats all before it.
+    order = sorted(usable, key=lambda i: (sign * rows[i][x], rows[i][y]))
+    front, best_y = [], math.inf
+    for i in order:
+        if rows[i][y] < best_y:
+            front.append(i)
+            best_y = rows[i][y]
+    return front
+
+
+def _finite(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_throughput(key: str) -> bool:
+    return any(part in key for part in ("per_s", "/s", "throughput"))
+
+
+def pareto_plot(rows: Sequence[dict], x: str = "seconds", y: str = "error",
+                label: str | None = None, path: str | Path | None = None,
+                maximize_x: bool | None = None, group: str | None = None,
+                log: bool = True, title: str | None = None):
+    """Scatter ``y`` (an error, lower is better) against ``x`` (cost or throughput) and mark
+    the Pareto front: the settings worth choosing. Returns the matplotlib Figure.
+
+    label: key whose value annotates each point (e.g. ``"setting"``);
+    group: key whose values get one colour each (e.g. ``"variant"``);
+    maximize_x: whether higher ``x`` is better; by default True for keys that look like a
+    throughput (``"rays_per_s"``, ``"throughput"``) and False for times;
+    log: log axes (symmetric-log where a column holds zeros, e.g. an exact setting's error);
+    path: where to save the figure (PNG, SVG or PDF by suffix).
+    """
+    from matplotlib.figure import Figure  # object-oriented: no pyplot state, no GUI backend
+
+    maximize_x = _is_throughput(x) if maximize_x is None else maximize_x
+    points = [i for i, row in enumerate(rows) if _finite(row.get(x)) and _finite(row.get(y))]
+    if not points:
+        raise ValueError(f"rows: no row has finite values for both x={x!r} and y={y!r}")
+    fig = Figure(figsize=(6.4, 4.8), layout="constrained")
+    ax = fig.add_subplot()
+    groups = dict.fromkeys(rows[i].get(group) for i in points) if group else {None: None}
+    for value in groups:
+        members = [i for i in points if group is None or rows[i].get(group) == value]
+        ax.scatter([rows[i][x] for i in members], [rows[i][y] for i in members],
+                   label=None if group is None else f"{group}={value}", alpha=0.8)
+    front = pareto_front(rows, x, y, maximize_x)
+    ax.plot([rows[i][x] for i in front], [rows[i][y] for i in front], "k--", marker="o",
+            markerfacecolor="none", markersize=11, label="Pareto front")
+    if label:
+        for i in points:
+            ax.annotate(str(rows[i].get(label, "")), (rows[i][x], rows[i][y]),
+                        textcoords="offset points", xytext=(4, 4), fontsize=8)
+    if log:
+        _log_scale(ax.set_xscale, [rows[i][x] for i in points])
+        _log_scale(ax.set_yscale, [rows[i][y] for i in points])
+    ax.set_xlabel(f"{x} ({'higher' if maximize_x else 'lower'} is better)")
+    ax.set_ylabel(f"{y} (lower is better)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    if title:
+        ax.set_title(title)
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=150)
+    return fig
+
+
+def _log_scale(set_scale, values: list[float]) -> None:
+    """Log scale, or symmetric log when some values are <= 0 (a log axis would drop them)."""
+    positive = [abs(v) for v in values if v != 0]
+    if all(v > 0 for v in values):
+        set_scale("log")
+    elif positive:
+        set_scale("symlog", linthresh=min(positive))

@@ -1,0 +1,100 @@
+"""``rtcourse``: demo, grade, mutants, release."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _root() -> Path:
+    from course.grading.runner import repo_root
+
+    return repo_root()
+
+
+def cmd_demo(args):
+    from course.device import default_device
+    from course.gallery import build_gallery
+
+    root = _root()
+    device = str(default_device(args.device))
+    impl = args.impl or ("solutions" if (root / "solutions").is_dir() else "labs")
+    folder = root / impl if impl in ("solutions", "labs") else Path(impl).resolve()
+    rows = build_gallery(root, folder, device, Path(args.out), args.size)
+    print(f"\n{'lab':>3}  {'status':<22} {'seconds':>8}")
+    for row in rows:
+        print(f"{row['lab']:>3}  {row['status']:<22} {row['seconds']:>8.2f}")
+    print(f"\ngallery: {Path(args.out).resolve() / 'index.html'}")
+
+
+def cmd_grade(args):
+    from course.grading.runner import grade
+
+    data = grade(args.impl, labs=args.lab, json_path=args.json, keyword=args.k,
+                 trusted=args.trusted, quiet=not args.verbose)
+    return 0 if data["max_score"] > 0 else 1
+
+
+def cmd_mutants(args):
+    import tempfile
+
+    from course.grading.mutants import grade_mutant, load_mutants
+
+    root = _root()
+    survivors = 0
+    for mutant in load_mutants(root):
+        if args.lab and mutant.lab not in args.lab:
+            continue
+        with tempfile.TemporaryDirectory() as tmp:
+            data = grade_mutant(mutant, root, tmp)
+        caught = data["score"] < data["max_score"]
+        survivors += not caught
+        print(f"lab {mutant.lab} {mutant.name:<32} {data['score']:.2f}/{data['max_score']:.2f}"
+              f"  {'caught' if caught else 'SURVIVED'}: {mutant.why}")
+    return 1 if survivors else 0
+
+
+def cmd_release(args):
+    from course.grading.release import release
+
+    files = release(_root(), args.out)
+    print(f"wrote {len(files)} files of the student handout to {Path(args.out).resolve()}")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="rtcourse", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("demo", help="render each lab's showcase into a gallery")
+    p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
+    p.add_argument("--out", default="out", help="output folder (default: out/)")
+    p.add_argument("--impl", default=None, help="solutions (default) or labs or a folder")
+    p.add_argument("--size", type=int, default=256, help="image size in pixels")
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("grade", help="grade an implementation; print scores, write JSON")
+    p.add_argument("--impl", default=None,
+                   help="labs, solutions or a folder with a student's lab files")
+    p.add_argument("--lab", type=int, action="append", help="grade only this lab (repeatable)")
+    p.add_argument("--json", default=None, help="write Gradescope results.json here")
+    p.add_argument("-k", default=None, help="pytest -k expression selecting tests")
+    p.add_argument("--trusted", action="store_true",
+                   help="run the implementation in-process (only for code you trust)")
+    p.add_argument("-v", "--verbose", action="store_true")
+    p.set_defaults(func=cmd_grade)
+
+    p = sub.add_parser("mutants", help="grade every mutant; each must lose points")
+    p.add_argument("--lab", type=int, action="append")
+    p.set_defaults(func=cmd_mutants)
+
+    p = sub.add_parser("release", help="write the student handout")
+    p.add_argument("out", help="output folder")
+    p.set_defaults(func=cmd_release)
+
+    args = parser.parse_args(argv)
+    return args.func(args) or 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

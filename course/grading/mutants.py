@@ -1,0 +1,88 @@
+"""Mutants: typical student mistakes, applied to a reference solution.
+
+A grader is only as good as the mistakes it catches. Each lab lists its
+mutants in ``solutions/mutants/labN.py``; :func:`grade_mutant` writes the
+mutated module into a scratch folder and grades it on the tests of the
+function it breaks (the ``tests`` ``-k`` expression), in a fresh process.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class Mutant:
+    """Replace ``find`` (exactly once, inside ``function``) by ``replace``."""
+
+    name: str
+    module: str
+    function: str
+    find: str
+    replace: str
+    tests: str
+    why: str
+
+    @property
+    def lab(self) -> int:
+        return int(self.module.split("_")[0].removeprefix("lab"))
+
+
+def load_mutants(root) -> list[Mutant]:
+    """All mutants shipped under ``root/solutions/mutants``."""
+    from course.grading.wire import import_file
+
+    mutants = []
+    for path in sorted(Path(root, "solutions", "mutants").glob("lab*.py")):
+        mutants += import_file(path, f"rtcourse_mutants_{path.stem}").MUTANTS
+    return mutants
+
+
+def _function_span(source: str, qualname: str) -> tuple[int, int]:
+    """Character span of a (possibly ``Class.method``) definition in ``source``."""
+    tree = ast.parse(source)
+    nodes = tree.body
+    node = None
+    for part in qualname.split("."):
+        node = next((n for n in nodes if isinstance(
+            n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and n.name == part), None)
+        if node is None:
+            raise ValueError(f"mutant: no definition {qualname!r} in the solution")
+        nodes = node.body
+    lines = source.splitlines(keepends=True)
+    start = sum(len(line) for line in lines[:node.lineno - 1])
+    end = sum(len(line) for line in lines[:node.end_lineno])
+    return start, end
+
+
+def apply_mutant(mutant: Mutant, source: str) -> str:
+    """The solution's source with the mistake applied."""
+    start, end = _function_span(source, mutant.function)
+    body = source[start:end]
+    count = body.count(mutant.find)
+    if count != 1:
+        raise ValueError(f"mutant {mutant.name}: {mutant.find!r} occurs {count} times in "
+                         f"{mutant.function}, expected exactly once")
+    return source[:start] + body.replace(mutant.find, mutant.replace) + source[end:]
+
+
+def grade_mutant(mutant: Mutant, root, workdir, timeout: float = 600) -> dict:
+    """Grade the mutated solution on its tests; return the results dictionary."""
+    root, workdir = Path(root), Path(workdir)
+    source = (root / "solutions" / f"{mutant.module}.py").read_text()
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / f"{mutant.module}.py").write_text(apply_mutant(mutant, source))
+    out = workdir / "results.json"
+    # The mutant is our own code: grade it in-process in the child for speed.
+    cmd = [sys.executable, "-m", "course.cli", "grade", "--impl", str(workdir), "--trusted",
+           "--lab", str(mutant.lab), "-k", mutant.tests, "--json", str(out)]
+    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=timeout)
+    if not out.exists():
+        raise RuntimeError(f"grading mutant {mutant.name} wrote no results:\n"
+                           f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return json.loads(out.read_text())

@@ -1,0 +1,138 @@
+"""The pytest plugin every grader runs under (enabled in pyproject's addopts).
+
+It provides
+  * ``--impl labs|solutions|PATH``: which implementation the tests load
+    (also ``RTCOURSE_IMPL``); only ``solutions`` runs in-process, everything else
+    runs in a sandboxed worker (see :mod:`course.grading.sandbox`);
+  * the ``impl`` fixture: the lab module named by the test module's ``LAB_MODULE``;
+  * the ``device`` parametrisation: ``cpu`` always, ``cuda`` when present;
+  * markers ``points(n)``, ``task(k)``, ``gpu``, ``slow``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+import torch
+
+from course.grading.sandbox import LocalLab, SandboxedLab, Worker
+from course.grading.wire import import_file
+
+MARKERS = (
+    "points(n): the test is graded and worth n points",
+    "task(k): the lab task (1, 2, ...) the test grades",
+    "gpu: needs a CUDA device",
+    "slow: long-running; skipped unless --runslow",
+)
+
+
+def pytest_addoption(parser):
+    group = parser.getgroup("rtcourse", "GPU ray tracing course grader")
+    group.addoption("--impl", default=os.environ.get("RTCOURSE_IMPL"),
+                    help="implementation to grade: solutions (the default where it exists), "
+                         "labs (the default in the student handout), or a folder holding a "
+                         "student's lab files")
+    group.addoption("--trusted", action="store_true",
+                    default=os.environ.get("RTCOURSE_TRUSTED") == "1",
+                    help="run the implementation in-process (only for code you trust)")
+    group.addoption("--time-limit", type=float,
+                    default=float(os.environ.get("RTCOURSE_TIME_LIMIT", "120")),
+                    help="seconds of student code per test (sandboxed runs)")
+    group.addoption("--memory-limit", type=float,
+                    default=float(os.environ.get("RTCOURSE_MEMORY_GB", "4")),
+                    help="GiB of extra memory the student code may use (sandboxed runs)")
+    group.addoption("--runslow", action="store_true", help="also run tests marked slow")
+
+
+def pytest_configure(config):
+    for marker in MARKERS:
+        config.addinivalue_line("markers", marker)
+
+
+def pytest_collection_modifyitems(config, items):
+    has_cuda = torch.cuda.is_available()
+    for item in items:
+        if "slow" in item.keywords and not config.getoption("--runslow"):
+            item.add_marker(pytest.mark.skip(reason="slow test: run with --runslow"))
+        if "gpu" in item.keywords and not has_cuda:
+            item.add_marker(pytest.mark.skip(reason="needs a CUDA device"))
+
+
+def pytest_generate_tests(metafunc):
+    if "device" in metafunc.fixturenames:
+        devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+        metafunc.parametrize("device", devices)
+
+
+def default_impl(root: Path) -> str:
+    """``solutions`` in the course repository, ``labs`` in the student handout."""
+    return "solutions" if (root / "solutions").is_dir() else "labs"
+
+
+def resolve_impl(config) -> tuple[Path, bool]:
+    """The folder holding the lab files, and whether it is trusted."""
+    root = Path(config.rootpath)
+    impl = config.getoption("--impl") or default_impl(root)
+    if impl in ("solutions", "labs"):
+        folder = root / impl
+    else:
+        folder = Path(impl).expanduser().resolve()
+        if (folder / "labs").is_dir() and not any(folder.glob("lab*_*.py")):
+            folder = folder / "labs"  # a copy of the whole handout
+    trusted = impl == "solutions" or config.getoption("--trusted")
+    return folder, trusted
+
+
+class _Labs:
+    """Lab modules loaded for this session, one warm worker per sandboxed lab."""
+
+    def __init__(self, config):
+        self.config = config
+        self.folder, self.trusted = resolve_impl(config)
+        self.loaded: dict[str, object] = {}
+        self.workers: list[Worker] = []
+
+    def get(self, name: str):
+        if name not in self.loaded:
+            path = self.folder / f"{name}.py"
+            if not path.is_file():
+                pytest.fail(f"no {name}.py in {self.folder}: the submission must contain "
+                            f"the file {name}.py", pytrace=False)
+            if self.trusted:
+                self.loaded[name] = LocalLab(name, import_file(path, f"trusted_{name}"))
+            else:
+                limit = self.config.getoption("--time-limit")
+                worker = Worker(str(path),
+                                memory_bytes=int(self.config.getoption("--memory-limit") * 2**30))
+                self.workers.append(worker)
+                self.loaded[name] = SandboxedLab(name, worker, limit)
+        return self.loaded[name]
+
+    def close(self):
+        for worker in self.workers:
+            worker.stop()
+
+
+@pytest.fixture(scope="session")
+def _rtcourse_labs(request):
+    labs = _Labs(request.config)
+    yield labs
+    labs.close()
+
+
+@pytest.fixture
+def impl(request, _rtcourse_labs):
+    """The lab module under test (named by the test module's ``LAB_MODULE``)."""
+    name = getattr(request.module, "LAB_MODULE", None)
+    if name is None:
+        pytest.fail(f"{request.module.__name__} must define LAB_MODULE", pytrace=False)
+    lab = _rtcourse_labs.get(name)
+    lab._start_clock()
+    yield lab
+    worker = getattr(lab, "_worker", None)
+    if worker is not None:
+        text = worker.take_output()
+        if text.strip():
+            request.node.add_report_section("call", "submission output", text)

@@ -1,0 +1,227 @@
+"""What crosses between the grader and the sandboxed worker, and how.
+
+Everything is first turned into plain Python data (dicts, lists, tuples, str,
+bytes, numbers, None) and then pickled. The grader unpickles the worker's
+replies with an unpickler that refuses *every* class, so a submission cannot
+smuggle an object (a tensor subclass that compares equal to anything, a class
+with a malicious ``__reduce__``) into the checking process: a tensor arrives as
+raw bytes and is rebuilt here as a plain ``torch.Tensor``.
+
+Tagged values are dicts with the key ``TAG``:
+  tensor   {"dtype", "shape", "device", "data"}
+  ndarray  {"dtype", "shape", "data"}
+  dataclass of the ``course`` package {"cls", "fields"}
+  func     a module-level function, by reference {"module" or "file", "qualname"}
+  ref      an object that stays in the worker {"id", "type"}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import importlib.util
+import inspect
+import io
+import pickle
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+TAG = "__rtcourse__"
+_PLAIN = (str, bytes, int, float, bool, type(None))
+
+
+class _NoClasses(pickle.Unpickler):
+    """An unpickler for plain data only: any class or function is refused."""
+
+    def find_class(self, module, name):
+        raise pickle.UnpicklingError(f"refused to load {module}.{name} from the worker")
+
+
+def dumps(obj) -> bytes:
+    return pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def loads_plain(data: bytes):
+    return _NoClasses(io.BytesIO(data)).load()
+
+
+# ---------------------------------------------------------------- encoding
+
+
+def _tensor_bytes(t: torch.Tensor) -> bytes:
+    # Strip any subclass behaviour before touching the data.
+    with torch._C.DisableTorchFunctionSubclass():
+        t = torch.Tensor.detach(t).to("cpu").contiguous()
+        if t.numel() == 0:
+            return b""
+        return t.reshape(-1).view(torch.uint8).numpy().tobytes()
+
+
+def encode(obj, refs=None):
+    """Plain-data form of ``obj``. Objects that cannot travel are stored in
+    ``refs`` (a dict id -> object, worker side) and sent as references; with
+    ``refs=None`` such an object is an error."""
+    if isinstance(obj, _PLAIN):
+        return obj
+    if isinstance(obj, torch.Tensor):
+        with torch._C.DisableTorchFunctionSubclass():
+            return {TAG: "tensor", "dtype": str(obj.dtype).removeprefix("torch."),
+                    "shape": tuple(obj.shape), "device": str(obj.device),
+                    "data": _tensor_bytes(obj)}
+    if isinstance(obj, np.ndarray) and obj.dtype.kind in "biufc":
+        return {TAG: "ndarray", "dtype": obj.dtype.str, "shape": obj.shape,
+                "data": np.ascontiguousarray(obj).tobytes()}
+    if isinstance(obj, np.generic) and obj.dtype.kind in "biufc":
+        return obj.item()
+    if isinstance(obj, torch.dtype):
+        return {TAG: "dtype", "name": str(obj).removeprefix("torch.")}
+    if isinstance(obj, torch.device):
+        return {TAG: "device", "name": str(obj)}
+    if (dataclasses.is_dataclass(obj) and not isinstance(obj, type)
+            and type(obj).__module__.startswith("course.")):
+        return {TAG: "dataclass", "cls": f"{type(obj).__module__}:{type(obj).__qualname__}",
+                "fields": {f.name: encode(getattr(obj, f.name), refs)
+                           for f in dataclasses.fields(obj)}}
+    if type(obj) in (list, tuple) or isinstance(obj, tuple):  # named tuples travel as tuples
+        items = [encode(x, refs) for x in obj]
+        return items if type(obj) is list else tuple(items)
+    if type(obj) is dict:
+        return {TAG: "dict", "items": [(encode(k, refs), encode(v, refs)) for k, v in obj.items()]}
+    if refs is None:
+        if inspect.isfunction(obj) and obj.__qualname__ == obj.__name__:
+            return _encode_function(obj)
+        raise TypeError(f"cannot send {type(obj).__name__} to the sandboxed worker")
+    ref_id = id(obj)
+    refs[ref_id] = obj
+    return {TAG: "ref", "id": ref_id, "type": type(obj).__name__}
+
+
+def _encode_function(fn) -> dict:
+    """A module-level function travels by reference: the worker imports it."""
+    module = sys.modules.get(fn.__module__)
+    if fn.__module__.startswith("course.") or fn.__module__ == "course":
+        return {TAG: "func", "module": fn.__module__, "qualname": fn.__qualname__}
+    path = getattr(module, "__file__", None) or inspect.getfile(fn)
+    return {TAG: "func", "file": str(Path(path).resolve()), "qualname": fn.__qualname__}
+
+
+# ---------------------------------------------------------------- decoding
+
+_ALLOWED_DTYPES = {
+    name: getattr(torch, name)
+    for name in ("float16", "bfloat16", "float32", "float64", "uint8", "int8", "int16",
+                 "int32", "int64", "bool", "complex64", "complex128", "uint16", "uint32",
+                 "uint64")
+    if hasattr(torch, name)
+}
+
+
+def _decode_tensor(d, device_map) -> torch.Tensor:
+    dtype = _ALLOWED_DTYPES.get(d["dtype"])
+    if dtype is None:
+        raise TypeError(f"tensor of unsupported dtype {d['dtype']!r}")
+    shape = tuple(int(s) for s in d["shape"])
+    data = d["data"]
+    if len(data) == 0:
+        t = torch.empty(shape, dtype=dtype)
+    else:
+        t = torch.frombuffer(bytearray(data), dtype=torch.uint8).view(dtype).reshape(shape)
+    device = device_map(d["device"])
+    return t if device == "cpu" else t.to(device)
+
+
+def _local_device(name: str) -> str:
+    """Results keep the device they were produced on, when this process has it."""
+    if name.startswith("cuda") and torch.cuda.is_available():
+        return name
+    return "cpu"
+
+
+def load_function(d):
+    if "module" in d:
+        module = importlib.import_module(d["module"])
+    else:
+        module = import_file(d["file"])
+    obj = module
+    for part in d["qualname"].split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def import_file(path, name=None):
+    """Import a Python file as a module (cached by path)."""
+    path = str(Path(path).resolve())
+    name = name or "rtcourse_file_" + Path(path).stem
+    module = sys.modules.get(name)
+    if module is not None and getattr(module, "__file__", None) == path:
+        return module
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        sys.modules.pop(name, None)
+        raise
+    return module
+
+
+def decode(obj, *, make_ref=None, allow_functions=False):
+    """Rebuild a value from its plain-data form.
+
+    ``make_ref(id, type)`` turns a worker reference into a local handle (grader
+    side). Functions are resolved only when ``allow_functions`` (worker side:
+    they come from the trusted grader).
+    """
+    if isinstance(obj, _PLAIN):
+        return obj
+    if type(obj) is list:
+        return [decode(x, make_ref=make_ref, allow_functions=allow_functions) for x in obj]
+    if type(obj) is tuple:
+        return tuple(decode(x, make_ref=make_ref, allow_functions=allow_functions) for x in obj)
+    if type(obj) is not dict or TAG not in obj:
+        raise TypeError(f"malformed value of type {type(obj).__name__} from the other side")
+    kind = obj[TAG]
+    sub = dict(make_ref=make_ref, allow_functions=allow_functions)
+    if kind == "tensor":
+        return _decode_tensor(obj, _local_device)
+    if kind == "ndarray":
+        dtype = np.dtype(obj["dtype"])
+        if dtype.kind not in "biufc":
+            raise TypeError(f"array of unsupported dtype {dtype}")
+        return np.frombuffer(bytearray(obj["data"]), dtype=dtype).reshape(obj["shape"])
+    if kind == "dtype":
+        dtype = _ALLOWED_DTYPES.get(obj["name"])
+        if dtype is None:
+            raise TypeError(f"unsupported dtype {obj['name']!r}")
+        return dtype
+    if kind == "device":
+        return torch.device(obj["name"])
+    if kind == "dict":
+        return {decode(k, **sub): decode(v, **sub) for k, v in obj["items"]}
+    if kind == "dataclass":
+        module_name, qualname = obj["cls"].split(":")
+        if not module_name.startswith("course."):
+            raise TypeError(f"refused class {obj['cls']}")
+        cls = getattr(importlib.import_module(module_name), qualname)
+        if not dataclasses.is_dataclass(cls):
+            raise TypeError(f"refused class {obj['cls']}")
+        fields = {k: decode(v, **sub) for k, v in obj["fields"].items()}
+        return _build_dataclass(cls, fields)
+    if kind == "ref" and make_ref is not None:
+        return make_ref(obj["id"], obj["type"])
+    if kind == "func" and allow_functions:
+        return load_function(obj)
+    raise TypeError(f"unexpected value kind {kind!r}")
+
+
+def _build_dataclass(cls, fields):
+    # Skip __init__/__post_init__: validation belongs to the checks, which report
+    # a malformed result as a wrong answer rather than crashing the decoder.
+    obj = object.__new__(cls)
+    for name, value in fields.items():
+        object.__setattr__(obj, name, value)
+    return obj
