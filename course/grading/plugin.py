@@ -130,9 +130,19 @@ def impl(request, _rtcourse_labs):
         pytest.fail(f"{request.module.__name__} must define LAB_MODULE", pytrace=False)
     lab = _rtcourse_labs.get(name)
     lab._start_clock()
-    yield lab
-    worker = getattr(lab, "_worker", None)
+    request.node.stash[_LAB_KEY] = lab
+    return lab
+
+
+_LAB_KEY = pytest.StashKey()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Attach what the submission printed to the report of the phase that ran it."""
+    outcome = yield
+    worker = getattr(item.stash.get(_LAB_KEY, None), "_worker", None)
     if worker is not None:
         text = worker.take_output()
         if text.strip():
-            request.node.add_report_section("call", "submission output", text)
+            outcome.get_result().sections.append((f"submission output {call.when}", text))

@@ -35,7 +35,8 @@ def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, t
     files = lab_test_files(root, labs)
     if not files:
         raise SystemExit(f"rtcourse grade: no graders found for labs {labs}")
-    args = [str(f) for f in files] + ["-p", "no:cacheprovider", "--rootdir", str(root)]
+    args = [str(f) for f in files] + ["-p", "no:cacheprovider", "-c", str(root / "pyproject.toml"),
+                                      "--rootdir", str(root)]
     if impl:
         args += ["--impl", impl]
     args += ["-q", "--no-header", "-rN"] if quiet else ["-rf"]
