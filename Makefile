@@ -1,0 +1,39 @@
+# Two commands do all set-up on a fresh machine:
+#   make demo   create .venv, install, render the gallery into out/
+#   make test   create .venv, install, run the test suite (graders, references, course)
+#
+# torch: on a machine without an NVIDIA GPU we ask for the CPU build explicitly, so
+# that pip never fetches a multi-GB CUDA build. Override TORCH_SPEC (and add an index
+# with PIP_EXTRA) where that build lives elsewhere, e.g.
+#   make test PIP_EXTRA="--index-url https://download.pytorch.org/whl/cpu"
+PYTHON ?= python3
+VENV ?= .venv
+TORCH_SPEC ?= torch==2.13.0
+PIP_EXTRA ?=
+PY := $(VENV)/bin/python
+HAS_GPU := $(shell command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/null 2>&1 && echo 1)
+
+.PHONY: demo test grade release clean
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+ifneq ($(HAS_GPU),1)
+	$(PY) -m pip install --quiet --disable-pip-version-check $(PIP_EXTRA) "$(TORCH_SPEC)"
+endif
+	$(PY) -m pip install --quiet --disable-pip-version-check $(PIP_EXTRA) -e ".[dev]"
+	touch $@
+
+demo: $(VENV)/.installed
+	$(VENV)/bin/rtcourse demo
+
+test: $(VENV)/.installed
+	$(PY) -m pytest -q -p no:cacheprovider
+
+grade: $(VENV)/.installed
+	$(VENV)/bin/rtcourse grade --impl labs --json results.json
+
+release: $(VENV)/.installed
+	$(VENV)/bin/rtcourse release out/handout
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

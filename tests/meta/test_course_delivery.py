@@ -1,0 +1,106 @@
+"""The course as a whole: the handout, the grader's verdicts on the skeletons and on
+the references, and the mutants every grader must catch."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from course.grading.mutants import grade_mutant, load_mutants
+from course.grading.release import release
+
+ROOT = Path(__file__).resolve().parents[2]
+MUTANTS = load_mutants(ROOT)
+
+
+def _rtcourse(*args, cwd, timeout=900):
+    return subprocess.run([sys.executable, "-m", "course.cli", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def handout(tmp_path_factory):
+    out = tmp_path_factory.mktemp("handout")
+    release(ROOT, out)
+    return out
+
+
+def test_handout_holds_no_solutions(handout):
+    assert not (handout / "solutions").exists()
+    assert not (handout / "tests" / "meta").exists()
+    assert (handout / "labs").is_dir() and (handout / "tests").is_dir()
+    assert (handout / "README.md").is_file() and (handout / "pyproject.toml").is_file()
+    for lab in sorted((handout / "labs").glob("lab*_*.py")):
+        solution = ROOT / "solutions" / lab.name
+        assert solution.is_file(), f"{lab.name} has no reference solution"
+        assert _public_api(lab) == _public_api(solution), \
+            f"{lab.name}: the skeleton's API differs from the solution's"
+        assert lab.read_text().count("NotImplementedError") >= 1
+
+
+def _public_api(path: Path) -> dict:
+    """Public functions, classes and methods with their parameter names."""
+    api = {}
+
+    def visit(nodes, prefix=""):
+        for node in nodes:
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and not node.name.startswith("_") \
+                    or isinstance(node, ast.FunctionDef) and node.name == "__init__":
+                if isinstance(node, ast.ClassDef):
+                    api[prefix + node.name] = "class"
+                    visit(node.body, prefix + node.name + ".")
+                else:
+                    args = node.args
+                    api[prefix + node.name] = [a.arg for a in args.posonlyargs + args.args
+                                               + args.kwonlyargs]
+
+    visit(ast.parse(path.read_text()).body)
+    return api
+
+
+def test_skeletons_score_zero_with_teaching_messages(handout, tmp_path):
+    results = tmp_path / "results.json"
+    proc = _rtcourse("grade", "--json", str(results), cwd=handout)
+    assert results.exists(), proc.stdout[-3000:] + proc.stderr[-3000:]
+    data = json.loads(results.read_text())
+    assert data["max_score"] > 0 and data["score"] == 0, data["output"]
+    assert "total: 0.00" in proc.stdout, "the score table is printed"
+    silent = [t["name"] for t in data["tests"] if "not implemented yet" not in t["output"]]
+    assert not silent, f"tests failing without 'not implemented yet': {silent[:5]}"
+
+
+def test_references_score_full_marks(tmp_path):
+    results = tmp_path / "results.json"
+    proc = _rtcourse("grade", "--impl", "solutions", "--json", str(results), cwd=ROOT)
+    data = json.loads(results.read_text())
+    lost = [t["name"] for t in data["tests"] if t["status"] != "passed"]
+    assert not lost and data["score"] == pytest.approx(data["max_score"]) > 0, \
+        f"references lost points on {lost}\n{proc.stdout[-3000:]}"
+
+
+@pytest.fixture(scope="module")
+def mutant_scores(tmp_path_factory):
+    base = tmp_path_factory.mktemp("mutants")
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        scores = pool.map(lambda m: grade_mutant(m, ROOT, base / m.name), MUTANTS)
+        return dict(zip([m.name for m in MUTANTS], scores))
+
+
+def test_every_lab_ships_mutants():
+    labs = {int(p.name.split("_")[0][3:]) for p in (ROOT / "solutions").glob("lab*_*.py")}
+    counts = {lab: sum(m.lab == lab for m in MUTANTS) for lab in labs}
+    assert all(n >= 4 for n in counts.values()), f"mutants per lab: {counts}"
+
+
+@pytest.mark.parametrize("mutant", MUTANTS, ids=[m.name for m in MUTANTS])
+def test_mutant_loses_points(mutant_scores, mutant):
+    data = mutant_scores[mutant.name]
+    assert data["max_score"] > 0, f"{mutant.name}: its -k {mutant.tests!r} selects no test"
+    assert data["score"] < data["max_score"], \
+        f"mutant {mutant.name} ({mutant.why}) kept full marks: the grader misses this mistake"
