@@ -52,9 +52,11 @@ class ScoreKeeper:
     results: dict = field(default_factory=dict)
     started: float = field(default_factory=time.monotonic)
 
-    def pytest_collection_modifyitems(self, session, config, items):
+    def pytest_collection_finish(self, session):
+        # After -k/-m deselection: only the tests that run count.
         # points(n) is worth n for the test function, split over its parametrisations,
         # so a machine with CUDA (two devices) has the same maximum as one without.
+        items = session.items
         counts = defaultdict(int)
         for item in items:
             if item.get_closest_marker("points") is not None:

@@ -1,0 +1,40 @@
+"""Lab 0 showcase: one frame of the rotating triangle, through the whole interop pipeline.
+
+FrameLoop renders into its one packed framebuffer on the device, a FrameDownloader brings
+it to (pinned, on CUDA) host memory, unpack_rgba8 turns the words back into sRGB bytes
+and course.image.from_srgb8 into the linear image the gallery expects.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from course.bench import time_fn
+from course.image import from_srgb8
+
+
+def render(lab, device, size: int = 256):
+    """``(image (size, size, 3) float linear RGB, info)`` for the gallery."""
+    device = torch.device(device)
+    loop = lab.FrameLoop(size, size, device)
+    downloader = lab.FrameDownloader((size, size), device, num_buffers=2)
+
+    def frame():  # render + download + wait, no overlap: the latency of one frame
+        downloader.submit(loop.step())
+        return downloader.receive()
+
+    timing = time_fn(frame, repeats=10, warmup=2, device=device)
+    # The picture: frame 20, drawn into the loop's own framebuffer and downloaded.
+    downloader.submit(lab.render_rotating_triangle(20, loop.framebuffer))
+    host = downloader.receive()
+    image = from_srgb8(lab.unpack_rgba8(host)[..., :3])
+
+    nbytes = size * size * 4
+    info = {"frame_ms": timing.median * 1e3, "frames_per_second": 1 / timing.median,
+            "frame_bytes": nbytes}
+    if device.type == "cuda":
+        info["d2h_pageable_GBps"] = lab.measure_copy_bandwidth(nbytes, False, device)
+        info["d2h_pinned_GBps"] = lab.measure_copy_bandwidth(nbytes, True, device)
+    else:
+        info["host_copy_GBps"] = lab.measure_copy_bandwidth(nbytes, False, device)
+    return image, info
