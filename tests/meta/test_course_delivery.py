@@ -80,7 +80,8 @@ def test_references_score_full_marks(tmp_path):
     proc = _rtcourse("grade", "--impl", "solutions", "--json", str(results), cwd=ROOT)
     data = json.loads(results.read_text())
     lost = [t["name"] for t in data["tests"] if t["status"] != "passed"]
-    assert not lost and data["score"] == pytest.approx(data["max_score"]) > 0, \
+    assert not lost and data["max_score"] > 0 and data["score"] == pytest.approx(
+        data["max_score"]), \
         f"references lost points on {lost}\n{proc.stdout[-3000:]}"
 
 
