@@ -171,10 +171,10 @@ def _broadcast(shape, other, name, vectors):
     try:
         return torch.broadcast_shapes(shape, other)
     except RuntimeError:
+        before = list(vectors)[:list(vectors).index(name)] if name in vectors else list(vectors)
         raise ValueError(f"{name}: leading shape {tuple(other)} does not broadcast with "
-                         f"{tuple(shape)} (the broadcast of the arguments before it, "
-                         f"{', '.join(n for n in vectors if n != name)}); rays (N, 1, 3) "
-                         f"against triangles (1, M, 3) give (N, M) results") from None
+                         f"{tuple(shape)}, the broadcast of {', '.join(before)}; rays "
+                         f"(N, 1, 3) against triangles (1, M, 3) give (N, M) results") from None
 
 
 def check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max):

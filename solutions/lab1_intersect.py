@@ -1,0 +1,643 @@
+"""Lab 1: ray/primitive intersection (reference solution).
+
+Every kernel here is batched: its tensor arguments broadcast against each other over
+their leading dimensions, so rays ``(N, 1, 3)`` against triangles ``(1, M, 3)`` give
+``(N, M)`` results, and rays ``(N, 3)`` against triangles ``(N, 3)`` give one test per
+ray. Each kernel computes in the dtype of its inputs (float16, bfloat16, float32 or
+float64: the speed/accuracy knob) on their device, with no Python loop over rays or
+triangles.
+
+Conventions shared by all kernels
+---------------------------------
+* A ray is ``origin + t * direction``; directions need not be unit length (``t`` is in
+  units of the direction's length).
+* A hit is accepted when ``t`` lies in the **closed** interval ``[t_min, t_max]``
+  (``t == t_min`` and ``t == t_max`` are hits). ``t_min``/``t_max`` are Python numbers
+  or float tensors that broadcast with the result.
+* Triangle kernels return ``(t, u, v)``: ``t = inf`` where missed, and the barycentrics
+  ``u, v`` of the hit point ``(1 - u - v) v0 + u v1 + v v2`` (``u = v = 0`` where
+  missed). Both windings hit (no back-face culling).
+* Degenerate input is a case, not an error: zero-area triangles, rays parallel to a
+  triangle, zero direction components and NaN/inf coordinates give misses, never NaN
+  outputs. Malformed input (wrong shape, integer dtype, mixed dtypes or devices) raises
+  ``ValueError``/``TypeError`` naming the argument.
+
+Tasks (points)
+--------------
+1. ``intersect_simple``   plane + sub-triangle areas                          (3)
+2. ``moller_trumbore``    Möller–Trumbore with a relative determinant test      (3)
+3. ``woop_precompute``, ``woop_unit``   Woop's unit-triangle test              (3)
+4. ``watertight``         Woop, Benthin, Wald 2013                              (3)
+5. ``safe_reciprocal``, ``ray_box`` (2) and ``ray_sphere`` (2)
+6. ``closest_hit``        chunked brute force over a mesh                       (3)
+7. ``op_counts``, ``register_estimate``, ``occupancy_for``   the lecture's
+   operation, register and occupancy accounting, measured on your kernels       (2)
+
+What each variant survives (measured by the grader's stress tests)
+-----------------------------------------------------------------
+float32 unless stated. A "crack" is a ray through a shared edge or vertex of a closed mesh
+that hits none of the triangles sharing it (icosphere level 2; rays through its vertices
+and the points at 1/2 and 1/4 of its edges; from outside / from the centre).
+
+==========================  =========  ===========  =========  ==========  =====================
+case                        simple     MT           woop       watertight  why
+==========================  =========  ===========  =========  ==========  =====================
+shared edges and vertices,  0.7% / 8%  1.1% / 5.5%  0.9% / 6%  0           only watertight
+near the origin             cracks     cracks       cracks                 computes a shared
+                                                                           edge bit for bit
+                                                                           alike for both sides
+same, scene translated      2-9%       0 measured,  3-28%      0           simple rounds the
+by 1e5 and 1e6              cracks     not assured  cracks                 hit point p at 1e6;
+                                                                           woop's transform
+                                                                           cancels |x|/|edge|
+                                                                           digits
+triangle of side 2e-4       hit        hit          hit (u, v  hit         an absolute det
+                                                    to 1e-2)               epsilon (1e-6)
+                                                                           rejects it
+scene scaled by 1e-6, 1e6   hit        hit          hit        hit         range: simple, MT
+                                                                           ~1e-12..1e12
+                                                                           (|n|^2, |d||e1||e2|);
+                                                                           the others > 1e16
+ray parallel to / in plane  miss       miss         miss       miss        det == 0 exactly
+zero-area, repeated corner  miss       miss         miss       miss        watertight must test
+                                                                           e1 x e2 == 0 itself
+NaN/inf origin, direction   miss       miss         miss       miss        NaN fails compares
+exact inside/outside for    no         no           no         yes         double fallback:
+axis-parallel rays                                                         exact edge signs
+float16 / bfloat16          loose      loose        loose      loose       3 / 2 digits: only
+                                                                           well-shaped
+                                                                           triangles
+==========================  =========  ===========  =========  ==========  =====================
+
+``ray_box`` is conservative (never misses a box the exact test hits, Ize 2013) and
+NaN-safe for rays starting on a slab plane; ``ray_sphere`` keeps full relative accuracy
+for small spheres far away (Ray Tracing Gems, chapter 7), where the textbook quadratic
+loses every digit of the discriminant.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from course.types import Hits, Mesh, Rays
+
+VARIANTS = ("intersect_simple", "moller_trumbore", "woop_unit", "watertight")
+"""The triangle kernels of this lab, by name (``closest_hit(..., variant=...)``)."""
+
+
+# ---------------------------------------------------------------------------------------
+# Provided helpers (not tasks)
+
+
+def cross(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Cross product over the last axis, written out (6 mul, 3 sub per vector)."""
+    ax, ay, az = a.unbind(-1)
+    bx, by, bz = b.unbind(-1)
+    return torch.stack((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx), dim=-1)
+
+
+def dot(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Dot product over the last axis, written out (3 mul, 2 add): ``(..., 3) -> (...)``."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def gamma(n: int, dtype: torch.dtype) -> float:
+    """``n u / (1 - n u)`` with ``u`` the unit roundoff of ``dtype``: the relative error
+    bound of ``n`` successive roundings (pbrt's gamma)."""
+    u = torch.finfo(dtype).eps / 2
+    return n * u / (1 - n * u)
+
+
+def check_inputs(vectors: dict, scalars: dict | None = None):
+    """Validate a kernel's arguments; return ``(shape, scalars)``.
+
+    vectors: ``{name: (tensor, trailing)}``: each must be a floating-point tensor whose
+        last dimensions equal ``trailing`` (e.g. ``(3,)`` for points, ``(3, 4)`` for a
+        transform), all of one dtype and device, with leading dimensions that broadcast.
+    scalars: ``{name: value}`` such as ``t_min``: Python numbers or float tensors on the
+        same device, broadcast with the rest and converted to the kernels' dtype.
+    shape: the broadcast shape of the results.
+    Raises TypeError (not a tensor, not floating point, mixed dtypes) or ValueError
+    (wrong trailing shape, other device, shapes that do not broadcast) naming the argument.
+    """
+    first = None
+    shape = torch.Size()
+    for name, (x, trailing) in vectors.items():
+        want = "(..., " + ", ".join(map(str, trailing)) + ")"
+        if not isinstance(x, torch.Tensor):
+            raise TypeError(f"{name}: expected a torch.Tensor of shape {want}, "
+                            f"got {type(x).__name__}")
+        if not x.is_floating_point():
+            raise TypeError(f"{name}: expected a floating-point tensor (float16, bfloat16, "
+                            f"float32 or float64), got {x.dtype}")
+        if x.ndim < len(trailing) or tuple(x.shape[x.ndim - len(trailing):]) != trailing:
+            raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
+        if first is None:
+            first = (name, x)
+        elif x.dtype != first[1].dtype:
+            raise TypeError(f"{name}: expected dtype {first[1].dtype} like {first[0]}, "
+                            f"got {x.dtype}")
+        elif x.device != first[1].device:
+            raise ValueError(f"{name}: expected a tensor on {first[1].device} like {first[0]}, "
+                             f"got one on {x.device}")
+        shape = _broadcast(shape, x.shape[:x.ndim - len(trailing)], name, vectors)
+    converted = {}
+    for name, value in (scalars or {}).items():
+        if isinstance(value, torch.Tensor):
+            if not value.is_floating_point():
+                raise TypeError(f"{name}: expected a number or a floating-point tensor, "
+                                f"got {value.dtype}")
+            if value.device != first[1].device:
+                raise ValueError(f"{name}: expected a tensor on {first[1].device} like "
+                                 f"{first[0]}, got one on {value.device}")
+        elif not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise TypeError(f"{name}: expected a number or a float tensor, "
+                            f"got {type(value).__name__}")
+        value = torch.as_tensor(value, dtype=first[1].dtype, device=first[1].device)
+        shape = _broadcast(shape, value.shape, name, vectors)
+        converted[name] = value
+    return shape, converted
+
+
+def _broadcast(shape, other, name, vectors):
+    try:
+        return torch.broadcast_shapes(shape, other)
+    except RuntimeError:
+        before = list(vectors)[:list(vectors).index(name)] if name in vectors else list(vectors)
+        raise ValueError(f"{name}: leading shape {tuple(other)} does not broadcast with "
+                         f"{tuple(shape)}, the broadcast of {', '.join(before)}; rays "
+                         f"(N, 1, 3) against triangles (1, M, 3) give (N, M) results") from None
+
+
+def check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max):
+    """``check_inputs`` for a triangle kernel's arguments; returns ``t_min, t_max`` as
+    tensors of the kernel's dtype and device."""
+    p3 = (3,)
+    _, s = check_inputs({"origins": (origins, p3), "directions": (directions, p3),
+                         "v0": (v0, p3), "v1": (v1, p3), "v2": (v2, p3)},
+                        {"t_min": t_min, "t_max": t_max})
+    return s["t_min"], s["t_max"]
+
+
+def masked_result(hit, t, u, v):
+    """A triangle kernel's outputs: ``(t, u, v)`` where ``hit``, ``(inf, 0, 0)`` elsewhere
+    (so no NaN computed for a miss ever leaves the kernel)."""
+    inf = torch.full((), math.inf, dtype=t.dtype, device=t.device)
+    zero = torch.zeros((), dtype=t.dtype, device=t.device)
+    return torch.where(hit, t, inf), torch.where(hit, u, zero), torch.where(hit, v, zero)
+
+
+# ---------------------------------------------------------------------------------------
+# Task 1: the simple test
+
+
+def intersect_simple(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
+    """The lecture's first test: intersect the plane, then test the point by areas.
+
+    origins, directions: (..., 3) float; v0, v1, v2: (..., 3) float, the corners;
+    t_min, t_max: numbers or tensors broadcastable with the result.
+    Returns ``(t, u, v)`` of the broadcast shape.
+
+    1. The plane through the triangle has the (unnormalised) normal ``n = e1 x e2``,
+       ``e1 = v1 - v0``, ``e2 = v2 - v0``; the ray meets it at
+       ``t = n . (v0 - o) / (n . d)`` (no hit when ``n . d == 0``: parallel ray).
+    2. At ``p = o + t d``, the three sub-triangles ``(p, v1, v2)``, ``(p, v2, v0)``,
+       ``(p, v0, v1)`` have signed areas ``A_i = n . ((vj - p) x (vk - p)) / 2|n|``;
+       ``p`` is inside when all three are >= 0.
+    3. The barycentrics are the area ratios ``u = A_1 / A``, ``v = A_2 / A`` with the full
+       area ``A = |n| / 2`` (compared in units of ``|n|^2`` to avoid square roots).
+
+    Accuracy: not watertight (neighbouring triangles round ``p`` and their areas
+    differently), and ``p`` carries the error of ``t`` into the inside test.
+    """
+    t_min, t_max = check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max)
+    e1, e2 = v1 - v0, v2 - v0
+    n = cross(e1, e2)
+    denom = dot(n, directions)
+    t = dot(n, v0 - origins) / denom
+    p = origins + t[..., None] * directions
+    a0 = dot(cross(v1 - p, v2 - p), n)
+    a1 = dot(cross(v2 - p, v0 - p), n)
+    a2 = dot(cross(v0 - p, v1 - p), n)
+    inv_area = 1 / dot(n, n)
+    hit = (denom != 0) & (a0 >= 0) & (a1 >= 0) & (a2 >= 0) & (t >= t_min) & (t <= t_max)
+    return masked_result(hit, t, a1 * inv_area, a2 * inv_area)
+
+
+# ---------------------------------------------------------------------------------------
+# Task 2: Möller–Trumbore
+
+
+def moller_trumbore(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
+    """Möller & Trumbore 1997: solve ``o + t d = v0 + u e1 + v e2`` by Cramer's rule.
+
+    Same arguments and results as :func:`intersect_simple`.
+
+    With ``p = d x e2``, ``det = e1 . p``, ``s = o - v0``, ``q = s x e1``:
+    ``u = s . p / det``, ``v = d . q / det``, ``t = e2 . q / det``; inside when
+    ``u >= 0, v >= 0, u + v <= 1``.
+
+    The parallel test is *relative*: ``|det| <= eps * |d| |e1| |e2|`` (max-norms) means the
+    ray is parallel to the plane to within rounding. The textbook absolute test
+    ``|det| < 1e-6`` instead rejects every triangle smaller than about 1e-3 (``det`` scales
+    with the triangle's area) and accepts garbage for huge ones.
+
+    Accuracy: not watertight (each triangle computes the shared edge from its own ``v0``).
+    """
+    t_min, t_max = check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max)
+    e1, e2 = v1 - v0, v2 - v0
+    p = cross(directions, e2)
+    det = dot(e1, p)
+    scale = directions.abs().amax(-1) * e1.abs().amax(-1) * e2.abs().amax(-1)
+    eps = torch.finfo(det.dtype).eps
+    not_parallel = det.abs() > eps * scale
+    inv_det = 1 / det
+    s = origins - v0
+    u = dot(s, p) * inv_det
+    q = cross(s, e1)
+    v = dot(directions, q) * inv_det
+    t = dot(e2, q) * inv_det
+    inside = (u >= 0) & (v >= 0) & (u + v <= 1)
+    hit = not_parallel & inside & (t >= t_min) & (t <= t_max)
+    return masked_result(hit, t, u, v)
+
+
+# ---------------------------------------------------------------------------------------
+# Task 3: Woop's unit-triangle test
+
+
+def woop_precompute(v0, v1, v2):
+    """The affine map that takes each triangle to the unit triangle (Woop 2004).
+
+    v0, v1, v2: (..., 3) float. Returns ``(..., 3, 4)`` of the same dtype: rows
+    ``[r_i | c_i]`` with ``x' = r_i . x + c_i`` such that ``v0 -> (0, 0, 0)``,
+    ``v1 -> (1, 0, 0)``, ``v2 -> (0, 1, 0)`` and ``v0 + n -> (0, 0, 1)`` for the unit normal
+    ``n = e1 x e2 / |e1 x e2|`` (so z' is the signed distance to the plane). It is the
+    inverse of the matrix with columns ``[e1 e2 n]``, whose rows are
+    ``(e2 x n) / |e1 x e2|``, ``(n x e1) / |e1 x e2|`` and ``n``; then ``c_i = -r_i . v0``.
+
+    Computed in float64 and rounded once (it runs once per triangle, offline). A
+    degenerate triangle (``e1 x e2 == 0``) gets the zero transform, which every ray misses
+    (``t = -0 / 0`` is NaN).
+    """
+    check_inputs({"v0": (v0, (3,)), "v1": (v1, (3,)), "v2": (v2, (3,))})
+    a, b, c = v0.double(), v1.double(), v2.double()
+    e1, e2 = b - a, c - a
+    n = cross(e1, e2)
+    area2 = torch.sqrt(dot(n, n))[..., None]  # twice the area
+    n = n / area2
+    rows = torch.stack((cross(e2, n) / area2, cross(n, e1) / area2, n), dim=-2)
+    offsets = -(rows @ a[..., None])
+    transform = torch.cat((rows, offsets), dim=-1)
+    good = (area2 > 0) & torch.isfinite(transform).flatten(-2).all(-1, keepdim=True)
+    transform = torch.where(good[..., None], transform, torch.zeros_like(transform))
+    return transform.to(v0.dtype)
+
+
+def _affine_row(row, origins, directions):
+    """``(r . o + c, r . d)`` for one row ``[r | c]`` of a transform."""
+    return dot(row[..., :3], origins) + row[..., 3], dot(row[..., :3], directions)
+
+
+def woop_unit(origins, directions, transform, t_min=0.0, t_max=math.inf):
+    """Intersect rays with unit triangles given by :func:`woop_precompute` transforms.
+
+    origins, directions: (..., 3) float; transform: (..., 3, 4) float; returns ``(t, u, v)``.
+
+    One row at a time, each with an early exit (on a GPU, a warp skips the rest once
+    all its lanes fail; batched, the rejections accumulate in a mask):
+    z: ``t = -o'z / d'z``, reject outside ``[t_min, t_max]``;
+    x: ``u = o'x + t d'x``, reject outside ``[0, 1]``;
+    y: ``v = o'y + t d'y``, reject ``v < 0`` or ``u + v > 1``.
+
+    Accuracy: the transform's offsets are about ``|v0| / |edge|``; far from the origin
+    ``r . o + c`` cancels those digits, so the test degrades like ``eps |x| / |edge|``.
+    """
+    _, s = check_inputs({"origins": (origins, (3,)), "directions": (directions, (3,)),
+                         "transform": (transform, (3, 4))}, {"t_min": t_min, "t_max": t_max})
+    oz, dz = _affine_row(transform[..., 2, :], origins, directions)
+    t = -oz / dz
+    hit = (t >= s["t_min"]) & (t <= s["t_max"])
+    ox, dx = _affine_row(transform[..., 0, :], origins, directions)
+    u = ox + t * dx
+    hit &= (u >= 0) & (u <= 1)
+    oy, dy = _affine_row(transform[..., 1, :], origins, directions)
+    v = oy + t * dy
+    hit &= (v >= 0) & (u + v <= 1)
+    return masked_result(hit, t, u, v)
+
+
+# ---------------------------------------------------------------------------------------
+# Task 4: watertight
+
+
+def watertight(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
+    """Woop, Benthin & Wald 2013, "Watertight Ray/Triangle Intersection" (JCGT 2(1)).
+
+    Same arguments and results as :func:`intersect_simple`.
+
+    1. Per ray: ``kz = argmax |d|``, ``kx = (kz + 1) % 3``, ``ky = (kx + 1) % 3`` (swapped
+       when ``d[kz] < 0`` to keep the winding), shear ``Sx = d[kx] / d[kz]``,
+       ``Sy = d[ky] / d[kz]``, ``Sz = 1 / d[kz]``: the ray becomes the +z axis.
+    2. Per vertex ``V`` (A, B, C = v0, v1, v2, relative to the origin):
+       ``Vx = V[kx] - Sx V[kz]``, ``Vy = V[ky] - Sy V[kz]``.
+    3. 2D edge functions ``U = Cx By - Cy Bx``, ``V = Ax Cy - Ay Cx``, ``W = Bx Ay - By Ax``;
+       where any of them rounds to exactly 0, all three are recomputed in float64 from
+       the same sheared floats (products of two floats are exact there), so every sign is
+       exact (the double fallback; nothing to do for float64 inputs).
+    4. Miss on mixed signs, or ``det = U + V + W == 0``, or a zero-area triangle
+       (``e1 x e2 == 0``: after the rounded shear it may have a sliver of noise area).
+    5. ``T = U Az + V Bz + W Cz`` with ``Vz = Sz V[kz]``; compare ``T`` with ``t_min det``
+       and ``t_max det`` (sign-corrected) without dividing. Only hits divide:
+       ``t = T / det``, ``u = V / det``, ``v = W / det``.
+
+    Contract: **watertight**. A shared edge gives the two triangles the same edge function
+    with opposite signs, bit for bit, so a ray through a shared edge or vertex of a closed
+    mesh hits at least one of the triangles sharing it. (Holds in eager PyTorch, where
+    every product is rounded; a compiler that fuses ``a*b - c*d`` into an FMA breaks it.)
+    """
+    t_min, t_max = check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max)
+    dtype = directions.dtype
+    # 1. Per-ray axes and shear.
+    kz = directions.abs().argmax(dim=-1, keepdim=True)
+    kx, ky = (kz + 1) % 3, (kz + 2) % 3
+    dz = torch.take_along_dim(directions, kz, dim=-1)
+    kx, ky = torch.where(dz < 0, ky, kx), torch.where(dz < 0, kx, ky)
+    dx = torch.take_along_dim(directions, kx, dim=-1)
+    dy = torch.take_along_dim(directions, ky, dim=-1)
+    sx, sy, sz = (dx / dz)[..., 0], (dy / dz)[..., 0], (1 / dz)[..., 0]
+
+    # 2. Vertices relative to the origin, sheared.
+    def shear(vertex):
+        rel = vertex - origins
+        along = torch.take_along_dim(rel, kz, dim=-1)[..., 0]
+        return (torch.take_along_dim(rel, kx, dim=-1)[..., 0] - sx * along,
+                torch.take_along_dim(rel, ky, dim=-1)[..., 0] - sy * along, along)
+
+    ax, ay, az = shear(v0)
+    bx, by, bz = shear(v1)
+    cx, cy, cz = shear(v2)
+    # 3. Edge functions, with the double fallback where one rounded to exactly zero.
+    U, V, W = cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax
+    shape = torch.broadcast_shapes(U.shape, V.shape, W.shape)
+    U, V, W = U.expand(shape).clone(), V.expand(shape).clone(), W.expand(shape).clone()
+    exact = (U == 0) | (V == 0) | (W == 0)
+    if dtype != torch.float64 and bool(exact.any()):
+        def at(x):
+            return x.expand(shape)[exact].double()
+
+        ax64, ay64, bx64, by64, cx64, cy64 = map(at, (ax, ay, bx, by, cx, cy))
+        U[exact] = (cx64 * by64 - cy64 * bx64).to(dtype)
+        V[exact] = (ax64 * cy64 - ay64 * cx64).to(dtype)
+        W[exact] = (bx64 * ay64 - by64 * ax64).to(dtype)
+    # 4. Inside test and determinant.
+    negative = (U < 0) | (V < 0) | (W < 0)
+    positive = (U > 0) | (V > 0) | (W > 0)
+    det = U + V + W
+    ray_ok = torch.isfinite(sz) & (sz != 0)
+    # A zero-area triangle (e1 x e2 == 0, a per-triangle property a tracer checks once) can
+    # get a sliver of rounding-noise area in the sheared frame, and a meaningless T / det.
+    flat = (cross(v1 - v0, v2 - v0) == 0).all(-1)
+    hit = ~(negative & positive) & (det != 0) & torch.isfinite(det) & ray_ok & ~flat
+    # 5. Distance, compared without dividing: t_min <= T / det <= t_max.
+    T = U * (sz * az) + V * (sz * bz) + W * (sz * cz)
+    flip = det < 0
+    T_abs = torch.where(flip, -T, T)
+    det_abs = det.abs()
+    hit &= (T_abs >= t_min * det_abs) & (T_abs <= t_max * det_abs)
+    inv_det = 1 / torch.where(hit, det, torch.ones_like(det))
+    return masked_result(hit, T * inv_det, V * inv_det, W * inv_det)
+
+
+# ---------------------------------------------------------------------------------------
+# Task 5: boxes and spheres
+
+
+def safe_reciprocal(directions):
+    """``1 / d`` per component, keeping the sign of zero: ``1/+0 = +inf``, ``1/-0 = -inf``.
+
+    directions: (..., 3) float. IEEE division already does this; the point of the
+    function is that nothing replaces zeros by a small epsilon (which would turn an
+    axis-parallel ray into a slightly tilted one) or drops the sign of ``-0.0``.
+    """
+    check_inputs({"directions": (directions, (3,))})
+    return torch.reciprocal(directions)
+
+
+def ray_box(origins, inv_directions, box_min, box_max, t_min=0.0, t_max=math.inf):
+    """Slab test of rays against axis-aligned boxes (Kay & Kajiya; Ize 2013).
+
+    origins, inv_directions: (..., 3) float, ``inv_directions = safe_reciprocal(d)``;
+    box_min, box_max: (..., 3) float. Returns ``(t_near, t_far, hit)``: the parametric
+    interval of the ray inside the box clipped to ``[t_min, t_max]`` (meaningful where
+    ``hit``) and ``hit = t_near <= t_far`` (bool).
+
+    Per axis the slab gives ``t0 = (min - o) / d``, ``t1 = (max - o) / d``, ordered by
+    min/max; the box interval is the intersection of the three slabs and ``[t_min, t_max]``.
+    * Axis-parallel rays: ``1/±0 = ±inf`` puts the slab at ``[-inf, inf]`` (inside it) or
+      at ``±inf`` (outside it: miss).
+    * A ray starting *on* a slab plane with ``d = 0`` gives ``0 * inf = NaN``: that slab
+      says nothing, so the reduction over the slabs drops NaN (``fmax``/``fmin``).
+    * Conservative: ``t_far`` is scaled by ``1 + 2 gamma(3)`` (Ize 2013, "Robust BVH Ray
+      Traversal"), so rounding never turns a hit into a miss; an empty box
+      (``min > max``) and a ray with NaN/inf components never hit.
+    """
+    _, s = check_inputs({"origins": (origins, (3,)), "inv_directions": (inv_directions, (3,)),
+                         "box_min": (box_min, (3,)), "box_max": (box_max, (3,))},
+                        {"t_min": t_min, "t_max": t_max})
+    t0 = (box_min - origins) * inv_directions
+    t1 = (box_max - origins) * inv_directions
+    lo = torch.minimum(t0, t1)
+    hi = torch.maximum(t0, t1) * (1 + 2 * gamma(3, t0.dtype))
+    t_near = torch.fmax(s["t_min"], torch.fmax(torch.fmax(lo[..., 0], lo[..., 1]), lo[..., 2]))
+    t_far = torch.fmin(s["t_max"], torch.fmin(torch.fmin(hi[..., 0], hi[..., 1]), hi[..., 2]))
+    valid = (torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1)
+             & (box_min <= box_max).all(-1))
+    # t_near = inf: a zero direction component outside its slab (the slab lies at infinity).
+    return t_near, t_far, (t_near <= t_far) & (t_near < math.inf) & valid
+
+
+def ray_sphere(origins, directions, center, radius, t_min=0.0, t_max=math.inf):
+    """Nearest intersection of rays with spheres in ``[t_min, t_max]``; ``inf`` for a miss.
+
+    origins, directions, center: (..., 3) float; radius: number or tensor (...) float.
+    Returns ``t`` of the broadcast shape.
+
+    ``|f + t d|^2 = r^2`` with ``f = o - c``: ``a t^2 + 2 b t + c = 0``, ``a = d.d``,
+    ``b = f.d``, ``c = f.f - r^2``. Two precision fixes (Ray Tracing Gems, ch. 7):
+    * the discriminant ``b^2 - a c`` cancels catastrophically for a small sphere far away;
+      the equal ``a (r^2 - |l|^2)`` with ``l = f - (b/a) d`` (the part of ``f``
+      perpendicular to the ray) does not;
+    * ``q = -(b + sign(b) sqrt(disc))``, roots ``c / q`` and ``q / a``: no subtraction of
+      nearly equal numbers for the smaller root.
+    """
+    _, s = check_inputs({"origins": (origins, (3,)), "directions": (directions, (3,)),
+                         "center": (center, (3,))},
+                        {"radius": radius, "t_min": t_min, "t_max": t_max})
+    r, t_min, t_max = s["radius"], s["t_min"], s["t_max"]
+    f = origins - center
+    a = dot(directions, directions)
+    b = dot(f, directions)
+    c = dot(f, f) - r * r
+    perp = f - (b / a)[..., None] * directions  # the book's l
+    disc = a * (r * r - dot(perp, perp))
+    q = -(b + torch.copysign(torch.sqrt(disc), b))
+    t0 = c / q
+    t1 = q / a
+    near, far = torch.minimum(t0, t1), torch.maximum(t0, t1)
+    inf = torch.full((), math.inf, dtype=near.dtype, device=near.device)
+    near_ok = (near >= t_min) & (near <= t_max) & (r >= 0)
+    far_ok = (far >= t_min) & (far <= t_max) & (r >= 0)
+    return torch.where(near_ok, near, torch.where(far_ok, far, inf))
+
+
+# ---------------------------------------------------------------------------------------
+# Task 6: closest hit by brute force
+
+BYTES_PER_PAIR = 64
+"""Element sizes a triangle kernel keeps alive per (ray, triangle) pair, at most: the
+chunk size is ``memory_budget_bytes // (BYTES_PER_PAIR * element size)`` pairs."""
+
+
+def check_closest_hit_inputs(rays, mesh, variant, memory_budget_bytes):
+    """Provided: validate :func:`closest_hit`'s arguments (ValueError/TypeError naming the
+    argument). Objects that crossed a process boundary are re-validated too."""
+    if not isinstance(rays, Rays):
+        raise TypeError(f"rays: expected course.types.Rays, got {type(rays).__name__}")
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+    rays.validate()
+    mesh.validate()
+    if mesh.dtype != rays.dtype:
+        raise TypeError(f"mesh: expected vertices of dtype {rays.dtype} like rays, "
+                        f"got {mesh.dtype}")
+    if mesh.device != rays.device:
+        raise ValueError(f"mesh: expected a mesh on {rays.device} like rays, got {mesh.device}")
+    if variant not in VARIANTS:
+        raise ValueError(f"variant: expected one of {', '.join(VARIANTS)}, got {variant!r}")
+    if not isinstance(memory_budget_bytes, int) or memory_budget_bytes <= 0:
+        raise ValueError(f"memory_budget_bytes: expected a positive int, "
+                         f"got {memory_budget_bytes!r}")
+
+
+def closest_hit(rays: Rays, mesh: Mesh, variant: str = "moller_trumbore",
+                memory_budget_bytes: int = 2**28) -> Hits:
+    """The nearest hit of every ray among all triangles of ``mesh``, by brute force.
+
+    rays: N rays; mesh: F triangles, same dtype and device; variant: the name of a
+    triangle kernel of this lab (see ``VARIANTS``). Returns ``Hits`` (N,): ``t`` (inf
+    where missed), ``triangle`` (-1 where missed), ``u, v`` (0 where missed).
+
+    Memory: a kernel call on ``n`` rays x ``m`` triangles makes temporaries of ``n m``
+    pairs, so the work goes in tiles of at most
+    ``P = memory_budget_bytes // (BYTES_PER_PAIR * element size)`` pairs:
+    ``m = min(F, P)`` triangles and ``max(1, P // m)`` rays per tile (all triangles at
+    once when they fit, else chunks of triangles for one ray at a time). Each tile is
+    reduced to its nearest hit per ray; its local triangle index plus the tile's offset
+    replaces the running best only when strictly nearer, so ties in ``t`` go to the
+    lowest triangle index whatever the tiling.
+    """
+    check_closest_hit_inputs(rays, mesh, variant, memory_budget_bytes)
+    n, m = len(rays), mesh.num_faces
+    pairs = max(1, memory_budget_bytes // (BYTES_PER_PAIR * rays.origins.element_size()))
+    tri_chunk = min(m, pairs)
+    ray_chunk = max(1, min(n, pairs // tri_chunk))
+    corners = mesh.triangles()
+    kernel = globals()[variant]
+    if variant == "woop_unit":
+        transforms = woop_precompute(corners[:, 0], corners[:, 1], corners[:, 2])
+
+    best = Hits.miss(n, dtype=rays.dtype, device=rays.device)
+    t_best, tri_best, u_best, v_best = best.t, best.triangle, best.u, best.v
+    for r0 in range(0, n, ray_chunk):
+        rs = slice(r0, min(n, r0 + ray_chunk))
+        o, d = rays.origins[rs, None, :], rays.directions[rs, None, :]
+        t_lo, t_hi = rays.t_min[rs, None], rays.t_max[rs, None]
+        for f0 in range(0, m, tri_chunk):
+            fs = slice(f0, min(m, f0 + tri_chunk))
+            if variant == "woop_unit":
+                t, u, v = kernel(o, d, transforms[None, fs], t_lo, t_hi)
+            else:
+                tri = corners[None, fs]
+                t, u, v = kernel(o, d, tri[..., 0, :], tri[..., 1, :], tri[..., 2, :], t_lo, t_hi)
+            # The nearest triangle of this chunk; among equal t the lowest index.
+            cols = torch.arange(t.shape[1], device=t.device)
+            t_near = t.amin(dim=1, keepdim=True)
+            first = torch.where(t == t_near, cols, t.shape[1]).amin(dim=1, keepdim=True)
+            first = first.clamp(max=t.shape[1] - 1)
+            t_sel = t.gather(1, first)[:, 0]
+            # Strictly nearer only: earlier chunks (lower indices) keep ties.
+            take = t_sel < t_best[rs]
+            t_best[rs] = torch.where(take, t_sel, t_best[rs])
+            tri_best[rs] = torch.where(take, first[:, 0] + f0, tri_best[rs])
+            u_best[rs] = torch.where(take, u.gather(1, first)[:, 0], u_best[rs])
+            v_best[rs] = torch.where(take, v.gather(1, first)[:, 0], v_best[rs])
+    return Hits(t=t_best, triangle=tri_best, u=u_best, v=v_best)
+
+
+# ---------------------------------------------------------------------------------------
+# Task 7: operation counts, registers, occupancy
+
+
+def accounting_inputs(variant: str) -> tuple:
+    """Provided: the one lane the accounting measures, as arguments for ``variant``.
+
+    One ray (origin (0.25, 0.2, -1), direction (0.1, 0.05, 1)) against one triangle
+    ((0,0,0), (1,0,0), (0,1,0)), float32 on the CPU, each of shape (1, 3): a single lane
+    that hits, so no early exit is taken. ``woop_unit`` gets the precomputed transform
+    (the lecture counts the per-triangle precomputation as free).
+    """
+    if variant not in VARIANTS:
+        raise ValueError(f"variant: expected one of {', '.join(VARIANTS)}, got {variant!r}")
+    o = torch.tensor([[0.25, 0.2, -1.0]])
+    d = torch.tensor([[0.1, 0.05, 1.0]])
+    v0, v1, v2 = torch.tensor([[0.0, 0.0, 0.0]]), torch.tensor([[1.0, 0.0, 0.0]]), \
+        torch.tensor([[0.0, 1.0, 0.0]])
+    if variant == "woop_unit":
+        return o, d, woop_precompute(v0, v1, v2)
+    return o, d, v0, v1, v2
+
+
+def op_counts(variant: str) -> dict:
+    """Floating-point operations of one test of ``variant`` (a name in ``VARIANTS``).
+
+    Runs ``course.accounting.count_ops`` on this module's kernel with
+    ``accounting_inputs(variant)`` and one lane. Returns the counts as a dict with the
+    keys ``mul, add, div, sqrt, fma, compare, abs, select, other`` and ``cycles_bound``,
+    the lecture's lower bound ``4 * (N_mul + |N_add - N_mul|)`` with ``N_mul`` read as the
+    number of mul/add pairs a mad can fuse, ``min(mul, add)``.
+    """
+    from course.accounting import count_ops
+
+    counts = count_ops(globals()[variant], *accounting_inputs(variant), lanes=1)
+    result = {key: getattr(counts, key) for key in
+              ("mul", "add", "div", "sqrt", "fma", "compare", "abs", "select", "other")}
+    pairs = min(counts.mul, counts.add)
+    result["cycles_bound"] = 4 * (pairs + abs(counts.add - counts.mul))
+    return result
+
+
+def register_estimate(variant: str) -> int:
+    """Registers one thread of ``variant`` needs, estimated from the values alive at once.
+
+    ``course.accounting.live_values`` on ``accounting_inputs(variant)`` (one lane); its
+    ``peak_last_use`` (every value dies at its last use, as a register allocator frees it),
+    rounded up.
+    """
+    from course.accounting import live_values
+
+    live = live_values(globals()[variant], *accounting_inputs(variant), lanes=1)
+    return math.ceil(live.peak_last_use)
+
+
+def occupancy_for(variant: str, arch: str = "g80", block_size: int = 64):
+    """Occupancy of a kernel running ``variant`` with ``register_estimate(variant)``
+    registers per thread on ``arch`` (a name in ``course.occupancy.PRESETS``) with
+    ``block_size`` threads per block: a ``course.occupancy.Occupancy``."""
+    from course.occupancy import PRESETS, occupancy
+
+    if arch not in PRESETS:
+        raise ValueError(f"arch: expected one of {', '.join(PRESETS)}, got {arch!r}")
+    return occupancy(PRESETS[arch], register_estimate(variant), block_size)
