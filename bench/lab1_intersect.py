@@ -1,0 +1,444 @@
+"""Lab 1 speed/accuracy benchmark: every triangle test at every precision, and the Triton kernels.
+
+    python bench/lab1_intersect.py --device cpu|cuda [--rays N --tris M] [--out DIR]
+
+For each torch variant of the lab (``intersect_simple``, ``moller_trumbore``,
+``woop_unit``, ``watertight``, run through the reference ``closest_hit``) at each
+precision (fp16, bf16, fp32, fp64) it measures
+
+* throughput: ray-triangle tests per second (``rays x triangles / seconds``), brute force
+  over a random soup;
+* error against a float64 watertight reference on the same rays: the hit/miss
+  disagreement rate, the rate of hits on another triangle, and the median and maximum
+  relative error of t where both chose the same triangle;
+* the crack rate: rays aimed at the shared edge midpoints and vertices of a closed
+  icosphere, from outside, must all hit; the fraction that miss, with the sphere at the
+  origin and translated by 1e6.
+
+On CUDA it adds ``torch.compile`` of Möller–Trumbore (fp32) and the Triton kernels of
+``course.triton_intersect``: registers and spills of each compiled configuration, the
+occupancy they allow (``course.occupancy``) and the throughput, over num_warps x rays per
+thread (block sizes): occupancy against speed.
+
+Writes ``lab1_intersect.json`` (a ResultTable with the command line), ``lab1_intersect.md``
+and Pareto plots (throughput against disagreement and against crack rate) into ``--out``,
+by default ``bench/results/<device_name>/lab1/``. On the CPU only ratios between rows of
+one run mean anything; absolute numbers count on a GPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
+
+from course import triton_intersect as ti
+from course.bench import ResultTable, device_name, pareto_plot, time_fn
+from course.device import default_device
+from course.occupancy import PRESETS, occupancy
+from course.types import Hits, Mesh, Rays
+from solutions.lab1_intersect import VARIANTS, closest_hit, moller_trumbore
+
+DTYPES = {"fp16": torch.float16, "bf16": torch.bfloat16, "fp32": torch.float32,
+          "fp64": torch.float64}
+OFFSETS = {"origin": 0.0, "1e6": 1e6}
+
+# Sizes: (rays, triangles) of the torch variants, rays of the Triton kernels, icosphere level;
+# memory: closest_hit's budget for its (rays, triangles) tiles; on a GPU a small budget
+# makes tiles so small that kernel launches, not arithmetic, set the time.
+SIZES = {"cpu": {"rays": 1024, "tris": 256, "triton_rays": 0, "ico_level": 2, "repeats": 5,
+                 "warmup": 1, "memory": 2**28},
+         "cuda": {"rays": 65536, "tris": 2048, "triton_rays": 1 << 20, "ico_level": 4,
+                  "repeats": 10, "warmup": 2, "memory": 2**32}}
+
+# The Triton sweep: num_warps x rays per thread (block_rays = 32 * num_warps * rays/thread).
+NUM_WARPS = (1, 2, 4, 8)
+RAYS_PER_THREAD = (1, 2, 4, 8)
+UNROLLS = (1, 2, 4, 8)
+TRITON_KERNELS = {  # row name: (function, layout builder, extra keywords)
+    "triton_mt": (ti.mt_closest_hit_triton, ti.mt_layout, {}),
+    "triton_mt_divfree": (ti.mt_closest_hit_triton, ti.mt_layout, {"division_free": True}),
+    "triton_unit": (ti.unit_closest_hit_triton, ti.unit_layout, {}),
+}
+
+
+# --------------------------------------------------------------------------------------
+# Scenes and rays (built in float64, cast per precision)
+# --------------------------------------------------------------------------------------
+
+def load_meshes(tris: int, ico_level: int) -> tuple[Mesh, Mesh, str]:
+    """(random soup, icosphere, where they came from), float64 on the CPU.
+
+    course.scenes builds both but needs trimesh; where trimesh is missing (a bare GPU
+    machine) the fallbacks below build the same geometry with torch alone.
+    """
+    try:
+        from course.scenes import load_scene
+    except ImportError:
+        return _soup_fallback(tris, 0), _icosphere_fallback(ico_level), "bench fallback"
+    soup = load_scene("random_soup", n=tris, seed=0, device="cpu", dtype=torch.float64).mesh
+    ico = load_scene("icosphere", level=ico_level, device="cpu", dtype=torch.float64).mesh
+    return soup, ico, "course.scenes"
+
+
+def _soup_fallback(n: int, seed: int) -> Mesh:
+    """course.scenes' random_soup, step for step (same triangles for a seed)."""
+    g = torch.Generator().manual_seed(seed)
+    size = torch.exp(torch.empty(n, dtype=torch.float64).uniform_(math.log(1e-3), math.log(0.25),
+                                                                 generator=g))
+    centre = size[:, None] + (1 - 2 * size[:, None]) * torch.rand(n, 3, dtype=torch.float64,
+                                                                  generator=g)
+    offsets = (2 * torch.rand(n, 3, 3, dtype=torch.float64, generator=g) - 1) * size[:, None, None]
+    vertices = (centre[:, None, :] + offsets).reshape(-1, 3)
+    return Mesh(vertices=vertices, faces=torch.arange(3 * n).reshape(n, 3))
+
+
+def _icosphere_fallback(level: int) -> Mesh:
+    """A unit icosphere like trimesh's: the icosahedron, each face split in 4 ``level``
+    times, the vertices pushed to the sphere after each split. Closed: every edge is
+    shared by two faces."""
+    phi = (1 + 5**0.5) / 2
+    vertices = torch.tensor([[-1, phi, 0], [1, phi, 0], [-1, -phi, 0], [1, -phi, 0],
+                             [0, -1, phi], [0, 1, phi], [0, -1, -phi], [0, 1, -phi],
+                             [phi, 0, -1], [phi, 0, 1], [-phi, 0, -1], [-phi, 0, 1]],
+                            dtype=torch.float64)
+    faces = torch.tensor([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
+                          [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
+                          [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
+                          [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    for _ in range(level):
+        edges = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).sort(1).values
+        unique, index = edges.unique(dim=0, return_inverse=True)
+        mid = len(vertices) + index.reshape(3, -1)  # new vertex of edge (0,1), (1,2), (2,0)
+        vertices = torch.cat([vertices, vertices[unique].mean(1)])
+        vertices = vertices / vertices.norm(dim=1, keepdim=True)
+        a, b, c = faces.unbind(1)
+        ab, bc, ca = mid
+        faces = torch.cat([torch.stack(f, 1) for f in
+                           ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
+    return Mesh(vertices=vertices / vertices.norm(dim=1, keepdim=True), faces=faces)
+
+
+def soup_rays(n: int, seed: int = 1) -> Rays:
+    """Rays from a sphere of radius 2 around the unit cube, aimed at random points in it."""
+    g = torch.Generator().manual_seed(seed)
+    target = torch.rand(n, 3, dtype=torch.float64, generator=g)
+    out = torch.randn(n, 3, dtype=torch.float64, generator=g)
+    origins = 0.5 + 2.0 * out / out.norm(dim=1, keepdim=True)
+    return Rays.create(origins, target - origins)
+
+
+def crack_scene(mesh: Mesh, offset: float, dtype: torch.dtype) -> tuple[Rays, Mesh]:
+    """The closed ``mesh`` moved by ``offset`` (on every axis) and rounded to ``dtype``, with
+    rays through its vertices and the points at 1/2 and 1/4 of every edge, computed from the
+    *rounded* vertices: from outside towards the centre and from the centre outwards. Every
+    ray must hit; one that hits nothing found a crack. (The grader's construction.)"""
+    vertices = (mesh.vertices + offset).to(dtype)
+    exact = vertices.double()
+    edges = torch.cat([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]], mesh.faces[:, [2, 0]]])
+    edges = edges.sort(1).values.unique(dim=0)
+    targets = torch.cat([exact] + [exact[edges[:, 0]] * (1 - f) + exact[edges[:, 1]] * f
+                                   for f in (0.5, 0.25)])
+    centre = torch.full((3,), offset, dtype=torch.float64)
+    radial = (targets - centre) / (targets - centre).norm(dim=1, keepdim=True)
+    origins = torch.cat([centre + 3 * radial, centre.expand_as(targets)]).to(dtype)
+    directions = (targets.repeat(2, 1) - origins.double()).to(dtype)
+    return Rays.create(origins, directions), Mesh(vertices, mesh.faces)
+
+
+# --------------------------------------------------------------------------------------
+# Errors
+# --------------------------------------------------------------------------------------
+
+def accuracy(hits: Hits, ref: Hits) -> dict:
+    """Disagreement with the float64 reference: hit/miss, triangle, and t where both agree."""
+    got, want = hits.hit.cpu(), ref.hit.cpu()
+    same = got & want & (hits.triangle.cpu() == ref.triangle.cpu())
+    t, t_ref = hits.t.cpu().double()[same], ref.t.cpu()[same]
+    rel = (t - t_ref).abs() / t_ref.abs()
+    return {"disagreement": (got != want).double().mean().item(),
+            "wrong_triangle": (got & want & ~same).double().mean().item(),
+            "t_rel_err_median": rel.median().item() if len(rel) else math.nan,
+            "t_rel_err_max": rel.max().item() if len(rel) else math.nan}
+
+
+def crack_rates(trace, ico: Mesh, dtype: torch.dtype, device) -> dict:
+    """Fraction of the edge/vertex rays of `crack_scene` that miss, per offset.
+
+    trace(rays, mesh) -> Hits runs one variant on rays and mesh in ``dtype``."""
+    rates = {}
+    for name, offset in OFFSETS.items():
+        rays, mesh = crack_scene(ico, offset, dtype)
+        hits = trace(rays.to(device), mesh.to(device))
+        rates[f"crack_{name}"] = (~hits.hit).double().mean().item()
+    return rates
+
+
+# --------------------------------------------------------------------------------------
+# The torch variants
+# --------------------------------------------------------------------------------------
+
+def bench_torch(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hits,
+                device, cfg: dict, variants, dtypes) -> None:
+    pairs = len(rays) * soup.num_faces
+    for variant in variants:
+        for dname in dtypes:
+            dtype = DTYPES[dname]
+            r, m = rays.to(device, dtype), soup.to(device, dtype)
+
+            def trace(r, m, variant=variant):
+                return closest_hit(r, m, variant=variant, memory_budget_bytes=cfg["memory"])
+
+            started = time.perf_counter()
+            timing = time_fn(trace, r, m, repeats=cfg["repeats"], warmup=cfg["warmup"])
+            hits = trace(r, m)
+            row = table.add(impl="torch", variant=variant, dtype=dname, rays=len(rays),
+                            tris=soup.num_faces, seconds=timing.median,
+                            tests_per_s=pairs / timing.median, **accuracy(hits, ref),
+                            **crack_rates(trace, ico, dtype, device))
+            _log(row, started)
+
+
+def _compiled_mt_closest():
+    """``torch.compile`` of one tile of Möller–Trumbore brute force plus its min-reduction:
+    the compiler fuses the (rays, triangles) tile away."""
+    def tile(o, d, v0, v1, v2):
+        t, _, _ = moller_trumbore(o[:, None], d[:, None], v0[None], v1[None], v2[None])
+        t_best, index = t.min(dim=1)
+        return t_best, index
+
+    return torch.compile(tile, dynamic=False)
+
+
+def bench_compile(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hits,
+                  device, cfg: dict, chunk: int = 8192) -> None:
+    tile = _compiled_mt_closest()
+
+    def trace(r: Rays, m: Mesh) -> Hits:
+        v0, v1, v2 = m.triangles().unbind(1)
+        n = len(r)
+        pad = -n % chunk  # whole chunks only: one compiled shape
+        o = torch.nn.functional.pad(r.origins, (0, 0, 0, pad))
+        d = torch.nn.functional.pad(r.directions, (0, 0, 0, pad))
+        parts = [tile(o[i:i + chunk], d[i:i + chunk], v0, v1, v2) for i in range(0, n + pad, chunk)]
+        t = torch.cat([p[0] for p in parts])[:n]
+        index = torch.cat([p[1] for p in parts])[:n]
+        hit = torch.isfinite(t)
+        zero = torch.zeros_like(t)
+        return Hits(t=t, triangle=torch.where(hit, index, -1), u=zero, v=zero)
+
+    started = time.perf_counter()
+    r, m = rays.to(device, torch.float32), soup.to(device, torch.float32)
+    trace(r, m)  # compile outside the timing
+    timing = time_fn(trace, r, m, repeats=cfg["repeats"], warmup=cfg["warmup"])
+    row = table.add(impl="torch.compile", variant="moller_trumbore", dtype="fp32",
+                    rays=len(rays), tris=soup.num_faces, seconds=timing.median,
+                    tests_per_s=len(rays) * soup.num_faces / timing.median,
+                    **accuracy(trace(r, m), ref),
+                    **crack_rates(trace, ico, torch.float32, device))
+    _log(row, started)
+
+
+# --------------------------------------------------------------------------------------
+# The Triton kernels
+# --------------------------------------------------------------------------------------
+
+def arch_preset(device):
+    """The course.occupancy preset of the device's generation (the newest not newer)."""
+    major, minor = torch.cuda.get_device_capability(device)
+    older = [a for a in PRESETS.values()
+             if tuple(map(int, a.compute_capability.split("."))) <= (major, minor)]
+    return max(older, key=lambda a: tuple(map(int, a.compute_capability.split("."))))
+
+
+def _triton_trace(fn, builder, extra):
+    def trace(r: Rays, m: Mesh) -> Hits:
+        t, index, u, v = fn(r.origins, r.directions, builder(m.triangles()), r.t_min, r.t_max,
+                            **extra)
+        return Hits(t=t, triangle=index, u=u, v=v)
+    return trace
+
+
+def bench_triton(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hits,
+                 device, n_rays: int, cfg: dict) -> None:
+    arch = arch_preset(device)
+    big = soup_rays(n_rays).to(device, torch.float32)
+    pairs = n_rays * soup.num_faces
+    triangles = soup.to(device, torch.float32).triangles()
+    for name, (fn, builder, extra) in TRITON_KERNELS.items():
+        started = time.perf_counter()
+        trace = _triton_trace(fn, builder, extra)
+        errors = {**accuracy(trace(rays.to(device, torch.float32),
+                                   soup.to(device, torch.float32)), ref),
+                  **crack_rates(trace, ico, torch.float32, device)}
+        layout = builder(triangles)  # built once, like an acceleration structure
+        configs = [(w, k * 32 * w, ti.DEFAULT_UNROLL) for w in NUM_WARPS for k in RAYS_PER_THREAD]
+        configs += [(ti.DEFAULT_NUM_WARPS, ti.DEFAULT_BLOCK_RAYS, u) for u in UNROLLS
+                    if u != ti.DEFAULT_UNROLL]
+        for num_warps, block_rays, unroll in configs:
+            launch = dict(block_rays=block_rays, num_warps=num_warps, unroll=unroll, **extra)
+            info = ti.compiled_kernel_info(fn, big.origins, big.directions, layout, **launch)
+            occ = (occupancy(arch, info.n_regs, info.threads_per_block, info.shared_bytes or 0)
+                   if info.n_regs else None)
+            timing = time_fn(fn, big.origins, big.directions, layout, repeats=2 * cfg["repeats"],
+                             warmup=cfg["warmup"], **launch)
+            row = table.add(impl="triton", variant=name, dtype="fp32", rays=n_rays,
+                            tris=soup.num_faces, seconds=timing.median,
+                            tests_per_s=pairs / timing.median, num_warps=num_warps,
+                            block_rays=block_rays, rays_per_thread=block_rays // (32 * num_warps),
+                            unroll=unroll, n_regs=info.n_regs, n_spills=info.n_spills,
+                            occupancy=occ.occupancy if occ else None,
+                            warps_per_sm=occ.active_warps if occ else None,
+                            occupancy_limit=occ.limiter if occ else None,
+                            occupancy_arch=arch.name, **errors)
+            _log(row, started)
+
+
+# --------------------------------------------------------------------------------------
+# Output
+# --------------------------------------------------------------------------------------
+
+def _log(row: dict, started: float) -> None:
+    keys = ("impl", "variant", "dtype", "num_warps", "block_rays", "unroll", "n_regs",
+            "occupancy")
+    label = " ".join(f"{row[k]}" if k in ("impl", "variant", "dtype") else f"{k}={row[k]}"
+                     for k in keys if row.get(k) is not None)
+    print(f"{label}: {row['tests_per_s'] / 1e9:.3g} G tests/s, disagreement "
+          f"{row['disagreement']:.2%}, crack@1e6 {row['crack_1e6']:.2%} "
+          f"({time.perf_counter() - started:.1f} s)", flush=True)
+
+
+def plot_rows(table: ResultTable) -> list[dict]:
+    """What the Pareto plots show: every torch row and the fastest config of each Triton kernel."""
+    # Colour = variant (series), label = precision: short labels keep the plot readable.
+    rows = [dict(r, series=r["variant"] if r["impl"] == "torch" else r["impl"],
+                 setting=r["dtype"]) for r in table.rows if r["impl"] != "triton"]
+    for name in TRITON_KERNELS:
+        sweep = [r for r in table.rows if r["impl"] == "triton" and r["variant"] == name]
+        if sweep:
+            best = max(sweep, key=lambda r: r["tests_per_s"])
+            rows.append(dict(best, series="triton", setting=name.removeprefix("triton_")))
+    return rows
+
+
+def occupancy_plot(table: ResultTable, path: Path) -> None:
+    """Triton sweep: throughput against occupancy, one colour per kernel."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6.4, 4.8), layout="constrained")
+    ax = fig.add_subplot()
+    for name in TRITON_KERNELS:
+        rows = [r for r in table.rows if r["variant"] == name and r.get("occupancy") is not None]
+        ax.scatter([r["occupancy"] for r in rows], [r["tests_per_s"] / 1e9 for r in rows],
+                   label=name, alpha=0.8)
+        for r in rows:
+            ax.annotate(f"{r['n_regs']}r w{r['num_warps']} x{r['rays_per_thread']}",
+                        (r["occupancy"], r["tests_per_s"] / 1e9), textcoords="offset points",
+                        xytext=(3, 3), fontsize=6)
+    ax.set_xlabel("occupancy (active warps / max warps per SM)")
+    ax.set_ylabel("G ray-triangle tests / s")
+    ax.set_title("Triton brute force: occupancy is not speed")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    fig.savefig(path, dpi=150)
+
+
+def write_outputs(table: ResultTable, out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    table.to_json(out / "lab1_intersect.json")
+    meta = table.metadata
+    device = (f"Device: {meta['device']}; torch {meta['torch']}, triton {meta.get('triton')}; "
+              f"{meta['date']}.")
+    legend = ("tests_per_s: ray-triangle tests per second; disagreement: hit/miss differs from "
+              "the float64 watertight reference; wrong_triangle: both hit, other triangle; "
+              "t_rel_err_*: on rays where both chose the same triangle; crack_*: fraction of "
+              "rays through shared edges/vertices of a closed icosphere (at the origin, moved "
+              "by 1e6) that miss.")
+    header = [f"# {table.name}", "", device, "", f"Command: `{meta['command']}`", "", legend, ""]
+    (out / "lab1_intersect.md").write_text("\n".join(header) + table.to_markdown() + "\n")
+    rows = plot_rows(table)
+    for y, title in (("disagreement", "hit/miss disagreement with float64 watertight"),
+                     ("crack_1e6", "crack rate, closed icosphere moved by 1e6")):
+        fig = pareto_plot(rows, x="tests_per_s", y=y, label="setting", group="series",
+                          title=title)
+        fig.axes[0].set_ylim(bottom=0)  # rates: the symlog axis need not show negatives
+        fig.savefig(out / f"pareto_{y}.png", dpi=150)
+    if any(r.get("occupancy") is not None for r in table.rows):
+        occupancy_plot(table, out / "triton_occupancy.png")
+
+
+# --------------------------------------------------------------------------------------
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
+    parser.add_argument("--rays", type=int, help="rays of the torch variants")
+    parser.add_argument("--tris", type=int, help="triangles of the random soup")
+    parser.add_argument("--triton-rays", type=int, help="rays of the Triton sweep (0: skip)")
+    parser.add_argument("--ico-level", type=int, help="icosphere subdivisions (crack test)")
+    parser.add_argument("--repeats", type=int, help="timed runs per setting (median reported)")
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
+    parser.add_argument("--dtypes", nargs="+", default=list(DTYPES), choices=list(DTYPES))
+    parser.add_argument("--no-compile", action="store_true", help="skip torch.compile (CUDA)")
+    parser.add_argument("--out", type=Path, help="output folder "
+                        "(default: bench/results/<device_name>/lab1)")
+    args = parser.parse_args(argv)
+
+    device = default_device(args.device)
+    cfg = dict(SIZES["cuda" if device.type == "cuda" else "cpu"])
+    for key in ("rays", "tris", "triton_rays", "ico_level", "repeats"):
+        if getattr(args, key) is not None:
+            cfg[key] = getattr(args, key)
+    out = args.out or REPO / "bench" / "results" / device_name(device) / "lab1"
+
+    torch.manual_seed(0)
+    soup, ico, source = load_meshes(cfg["tris"], cfg["ico_level"])
+    rays = soup_rays(cfg["rays"])
+    table = ResultTable("Lab 1: ray/triangle intersection, speed against accuracy", device)
+    table.metadata.update(
+        command=shlex.join([Path(sys.executable).name, *sys.argv]) if argv is None
+        else shlex.join(["python", "bench/lab1_intersect.py", *argv]),
+        triton=_triton_version(), scenes=source, sizes=cfg, crack_rays=len(crack_scene(ico, 0.0, torch.float64)[0]),
+        icosphere_faces=ico.num_faces, reference="closest_hit(variant='watertight'), float64")
+    print(f"{table.metadata['device']}: {cfg}, scenes from {source}", flush=True)
+
+    started = time.perf_counter()
+    def reference(r: Rays, m: Mesh) -> Hits:
+        return closest_hit(r, m, variant="watertight", memory_budget_bytes=cfg["memory"])
+
+    ref = reference(rays.to(device), soup.to(device))
+    ref_cracks = crack_rates(reference, ico, torch.float64, device)
+    print(f"reference: {ref.hit.double().mean().item():.1%} of the rays hit, "
+          f"reference cracks {ref_cracks} ({time.perf_counter() - started:.1f} s)", flush=True)
+
+    bench_torch(table, soup, ico, rays, ref, device, cfg, args.variants, args.dtypes)
+    if device.type == "cuda":
+        if not args.no_compile:
+            bench_compile(table, soup, ico, rays, ref, device, cfg)
+        if cfg["triton_rays"] and _triton_version():
+            bench_triton(table, soup, ico, rays, ref, device, cfg["triton_rays"], cfg)
+    else:
+        print("Triton and torch.compile rows run on CUDA only", flush=True)
+    write_outputs(table, out)
+    print(f"wrote {out}")
+
+
+def _triton_version() -> str | None:
+    try:
+        import triton
+    except ImportError:
+        return None
+    return triton.__version__
+
+
+if __name__ == "__main__":
+    main()
