@@ -37,7 +37,7 @@ def main():
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
-    table = ResultTable("grading cost: in-process vs sandboxed worker")
+    table = ResultTable("grading cost: in-process vs sandboxed worker", device="cpu")
     with tempfile.TemporaryDirectory() as tmp:
         copy = Path(tmp) / "submission"
         shutil.copytree(ROOT / "solutions", copy, ignore=shutil.ignore_patterns("mutants"))
