@@ -21,18 +21,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from course.bench import ResultTable, device_name
+from course.bench import ResultTable, device_name, load_lab
 from course.device import default_device
-from course.grading.wire import import_file
 
 KIB, MIB = 1 << 10, 1 << 20
 COPY_SIZES = [64 * KIB, 256 * KIB, MIB, 4 * MIB, 16 * MIB, 64 * MIB, 128 * MIB]
 FRAME_SIZES = [(512, 512), (1080, 1920), (2160, 3840)]  # (H, W)
-
-
-def load_lab(impl: str):
-    folder = ROOT / impl if impl in ("solutions", "labs") else Path(impl)
-    return import_file(folder / "lab0_interop.py", f"bench_{Path(folder).name}_lab0")
 
 
 def measure(lab, device, quick: bool) -> ResultTable:
@@ -106,8 +100,7 @@ def main(argv=None):
     out = Path(args.out) if args.out else (ROOT / "bench" / "results" / device_name(device)
                                            / "lab0_interop.json")
     print(f"lab 0 interop bench on {device}")
-    impl = args.impl or ("solutions" if (ROOT / "solutions").is_dir() else "labs")
-    table = measure(load_lab(impl), device, args.quick)
+    table = measure(load_lab("lab0_interop", args.impl), device, args.quick)
     print(f"wrote {table.to_json(out)}")
     print(f"wrote {plot(table, out.with_suffix('.png'))}")
     print(table.to_markdown())

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import shlex
 import sys
 import time
@@ -38,14 +39,17 @@ from pathlib import Path
 import torch
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
+sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
 from course import triton_intersect as ti
-from course.bench import ResultTable, device_name, pareto_plot, time_fn
+from course.bench import ResultTable, device_name, load_lab, pareto_plot, time_fn
 from course.device import default_device
 from course.occupancy import PRESETS, occupancy
 from course.types import Hits, Mesh, Rays
-from solutions.lab1_intersect import VARIANTS, closest_hit, moller_trumbore
+
+# The kernels measured: the references by default, a student's with RTCOURSE_IMPL=labs.
+LAB = load_lab("lab1_intersect", os.environ.get("RTCOURSE_IMPL"))
+VARIANTS, closest_hit, moller_trumbore = LAB.VARIANTS, LAB.closest_hit, LAB.moller_trumbore
 
 DTYPES = {"fp16": torch.float16, "bf16": torch.bfloat16, "fp32": torch.float32,
           "fp64": torch.float64}

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import torch
 
+from course.bench import load_lab
 from course.grading.wire import import_file
 from course.image import save_png
 
@@ -27,13 +28,6 @@ def showcases(root: Path) -> list[tuple[int, Path]]:
     return found
 
 
-def _lab_module(folder: Path, number: int):
-    matches = sorted(folder.glob(f"lab{number}_*.py"))
-    if not matches:
-        return None
-    return import_file(matches[0], f"gallery_{matches[0].stem}")
-
-
 def build_gallery(root: Path, impl_folder: Path, device: str, out: Path, size: int,
                   log=print) -> list[dict]:
     """Render every available showcase into ``out`` and write ``out/index.html``."""
@@ -42,8 +36,9 @@ def build_gallery(root: Path, impl_folder: Path, device: str, out: Path, size: i
     cases = showcases(root)
     for step, (number, path) in enumerate(cases, 1):
         log(f"[{step}/{len(cases)}] lab {number}: rendering {path.stem} on {device} ...")
-        lab = _lab_module(impl_folder, number)
-        if lab is None:
+        try:
+            lab = load_lab(f"lab{number}", str(impl_folder))
+        except FileNotFoundError:
             log(f"    no lab {number} module in {impl_folder}; skipped")
             continue
         start = time.perf_counter()
