@@ -97,8 +97,9 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help="small sizes only")
     args = parser.parse_args(argv)
     device = default_device(args.device)
-    out = Path(args.out) if args.out else (ROOT / "bench" / "results" / device_name(device)
-                                           / "lab0_interop.json")
+    out = Path(args.out) if args.out else ROOT / "bench" / "results" / device_name(device)
+    if out.suffix != ".json":  # a folder
+        out = out / "lab0_interop.json"
     print(f"lab 0 interop bench on {device}")
     table = measure(load_lab("lab0_interop", args.impl), device, args.quick)
     print(f"wrote {table.to_json(out)}")
