@@ -1,4 +1,4 @@
-"""``rtcourse``: demo, grade, mutants, release."""
+"""``rtcourse``: demo, grade, mutants, release, gradescope, slides."""
 
 from __future__ import annotations
 
@@ -62,6 +62,24 @@ def cmd_release(args):
     print(f"wrote {len(files)} files of the student handout to {Path(args.out).resolve()}")
 
 
+def cmd_gradescope(args):
+    from course.grading.gradescope import build_autograder
+
+    try:
+        names = build_autograder(_root(), args.out, labs=args.lab)
+    except ValueError as exc:
+        raise SystemExit(f"rtcourse gradescope: {exc}") from None
+    print(f"wrote the Gradescope autograder ({len(names)} files) to {Path(args.out).resolve()}")
+
+
+def cmd_slides(args):
+    from course.slides import render_slides
+
+    rows = render_slides(_root(), Path(args.out), execute=args.execute)
+    print(f"\nslides and lecture notes: {Path(args.out).resolve() / 'index.html'}")
+    return 1 if any(row["errors"] for row in rows) else 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="rtcourse", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -91,6 +109,18 @@ def main(argv=None):
     p = sub.add_parser("release", help="write the student handout")
     p.add_argument("out", help="output folder")
     p.set_defaults(func=cmd_release)
+
+    p = sub.add_parser("gradescope", help="build a Gradescope autograder zip")
+    p.add_argument("out", help="the zip file to write, e.g. autograder.zip")
+    p.add_argument("--lab", type=int, action="append",
+                   help="grade only this lab (repeatable; default: every lab)")
+    p.set_defaults(func=cmd_gradescope)
+
+    p = sub.add_parser("slides", help="render slides/*.ipynb to reveal.js slides and notes")
+    p.add_argument("--out", default="out/slides", help="output folder (default: out/slides)")
+    p.add_argument("--execute", action=argparse.BooleanOptionalAction, default=True,
+                   help="run the notebooks first (RTCOURSE_SMALL=1 unless set; default)")
+    p.set_defaults(func=cmd_slides)
 
     args = parser.parse_args(argv)
     return args.func(args) or 0

@@ -6,7 +6,11 @@ It provides
     runs in a sandboxed worker (see :mod:`course.grading.sandbox`);
   * the ``impl`` fixture: the lab module named by the test module's ``LAB_MODULE``;
   * the ``device`` parametrisation: ``cpu`` always, ``cuda`` when present;
-  * markers ``points(n)``, ``task(k)``, ``gpu``, ``slow``.
+  * markers ``points(n)``, ``task(k)``, ``visibility(v)``, ``gpu``, ``slow``.
+
+Tests under ``tests/hidden/`` are the instructor's hidden tests: ``rtcourse release`` leaves
+them out of the handout, ``rtcourse gradescope`` ships them, and unless marked otherwise
+Gradescope shows them to students only after the due date.
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ from course.grading.wire import import_file
 MARKERS = (
     "points(n): the test is graded and worth n points",
     "task(k): the lab task (1, 2, ...) the test grades",
+    ("visibility(v): when Gradescope shows the test to students: visible (default), hidden, "
+     "after_due_date or after_published"),
     "gpu: needs a CUDA device",
     "slow: long-running; skipped unless --runslow",
 )
@@ -51,9 +57,20 @@ def pytest_configure(config):
         config.addinivalue_line("markers", marker)
 
 
+VISIBILITIES = ("visible", "hidden", "after_due_date", "after_published")
+HIDDEN_DEFAULT = "after_due_date"  # tests in a hidden/ folder unless marked otherwise
+
+
 def pytest_collection_modifyitems(config, items):
     has_cuda = torch.cuda.is_available()
     for item in items:
+        visibility = item.get_closest_marker("visibility")
+        if visibility is None and item.path.parent.name == "hidden":
+            item.add_marker(pytest.mark.visibility(HIDDEN_DEFAULT))
+        elif visibility is not None and (len(visibility.args) != 1
+                                         or visibility.args[0] not in VISIBILITIES):
+            raise pytest.UsageError(f"{item.nodeid}: visibility{visibility.args} must be one "
+                                    f"of {', '.join(VISIBILITIES)}")
         if "slow" in item.keywords and not config.getoption("--runslow"):
             item.add_marker(pytest.mark.skip(reason="slow test: run with --runslow"))
         if "gpu" in item.keywords and not has_cuda:

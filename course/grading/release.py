@@ -1,20 +1,28 @@
 """``rtcourse release OUT``: the student handout.
 
 Everything a student needs and nothing they must not see: the reference
-solutions, the mutants and the tests of the course itself stay behind. In the
-handout the graders default to ``labs/`` because there is no ``solutions/``.
+solutions, the mutants, the hidden graders (``tests/hidden``) and the tests of the
+course itself stay behind. In the handout the graders default to ``labs/`` because
+there is no ``solutions/``. The handout also gets ``labs/README.md``, generated from
+the graders: each lab's tasks and points, how to test one lab or one function, and
+how to see one's score.
 """
 
 from __future__ import annotations
 
+import ast
 import shutil
 import subprocess
 from pathlib import Path
 
+from course.grading.catalog import LabInfo, functions_of, lab_catalog, skeleton_functions
+
 # Paths (relative to the repository root) that never ship to students.
-WITHHELD = ("solutions", "tests/meta", ".git", ".venv", ".ci", "out", "build", "dist")
+WITHHELD = ("solutions", "tests/meta", "tests/hidden", ".git", ".venv", ".ci", "out", "build",
+            "dist")
 _IGNORED_NAMES = ("__pycache__", ".pytest_cache", ".ruff_cache", ".ipynb_checkpoints",
                   "*.egg-info", "results.json")
+LABS_README = Path("labs") / "README.md"
 
 
 def _tracked_files(root: Path) -> list[Path] | None:
@@ -26,9 +34,25 @@ def _tracked_files(root: Path) -> list[Path] | None:
     return [Path(line) for line in out.splitlines() if line]
 
 
-def _withheld(rel: Path) -> bool:
+def _under(rel: Path, prefixes) -> bool:
     parts = rel.as_posix()
-    return any(parts == w or parts.startswith(w + "/") for w in WITHHELD)
+    return any(parts == w or parts.startswith(w + "/") for w in prefixes)
+
+
+def _withheld(rel: Path) -> bool:
+    return _under(rel, WITHHELD)
+
+
+def course_files(root, withheld=WITHHELD) -> list[Path]:
+    """Files of the course at ``root`` (git's view when it is a checkout: tracked and
+    untracked-but-not-ignored), relative to ``root``, minus the ``withheld`` paths."""
+    root = Path(root)
+    files = _tracked_files(root)
+    if files is None:  # not a git checkout: walk the tree instead
+        ignore = shutil.ignore_patterns(*_IGNORED_NAMES)
+        files = [path.relative_to(root) for path in root.rglob("*") if path.is_file()
+                 and not any(ignore("", [part]) for part in path.relative_to(root).parts)]
+    return sorted(rel for rel in files if not _under(rel, withheld) and (root / rel).is_file())
 
 
 def release(root, out) -> list[Path]:
@@ -36,21 +60,141 @@ def release(root, out) -> list[Path]:
     root, out = Path(root).resolve(), Path(out).resolve()
     if out == root or root in out.parents and not _withheld(out.relative_to(root)):
         raise ValueError(f"out: the handout folder {out} must lie outside the course folder")
-    files = _tracked_files(root)
-    if files is None:  # not a git checkout: walk the tree instead
-        ignore = shutil.ignore_patterns(*_IGNORED_NAMES)
-        files = []
-        for path in root.rglob("*"):
-            rel = path.relative_to(root)
-            if path.is_file() and not _withheld(rel) and not ignore(str(path.parent),
-                                                                     [path.name]):
-                files.append(rel)
     written = []
-    for rel in files:
-        if _withheld(rel) or not (root / rel).is_file():
-            continue
+    for rel in course_files(root):
         dest = out / rel
         dest.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(root / rel, dest)
         written.append(rel)
+    if (out / "labs").is_dir():
+        (out / LABS_README).write_text(labs_readme(out, hidden_root=root))
+        written.append(LABS_README)
     return written
+
+
+# ------------------------------------------------------------------ labs/README.md
+
+
+def _pts(points: float) -> str:
+    return f"{points:g}"
+
+
+def _lab_title(lab_file: Path, number: int) -> str:
+    """The first line of the skeleton's docstring ("Lab 0: interop — ...")."""
+    try:
+        doc = ast.get_docstring(ast.parse(lab_file.read_text())) or ""
+    except (OSError, SyntaxError):
+        doc = ""
+    return doc.strip().splitlines()[0].rstrip(".") if doc.strip() else f"Lab {number}"
+
+
+def _lab_section(root: Path, lab: LabInfo, hidden: LabInfo | None) -> list[str]:
+    lab_file = root / "labs" / f"{lab.module}.py"
+    functions = skeleton_functions(lab_file) if lab_file.is_file() else []
+    test_file = lab.files[0].relative_to(root).as_posix()
+    all_names = [t.name.lower() for t in lab.tests]
+    your_file = (f"Your file: `labs/{lab.module}.py`" if lab_file.is_file() else
+                 f"Your file `labs/{lab.module}.py` is not in this handout yet")
+    lines = [f"## {_lab_title(lab_file, lab.number)}", "",
+             f"{your_file} · its grader: `{test_file}` · {_pts(lab.points())} points", "",
+             "| task | title | points | you write | run only these tests |",
+             "|---:|---|---:|---|---|"]
+    for task, title in sorted(lab.tasks.items()):
+        tests = lab.graded(task)
+        names = sorted({f for t in tests for f in functions_of(t, functions)},
+                       key=functions.index)
+        # -k matches substrings of test names: use the functions that select some test.
+        selectable = [f for f in names if any(f.lower() in n for n in all_names)]
+        run = f'`-k "{" or ".join(selectable)}"`' if selectable else ""
+        you_write = ", ".join(f"`{f}`" for f in names)
+        title = str(title).replace("|", "\\|")  # a literal | inside a Markdown table cell
+        lines.append(f"| {task} | {title} | {_pts(lab.points(task))} | {you_write} | {run} |")
+    extra = [t for t in lab.tests if t.needs]
+    notes = []
+    if extra:
+        notes.append(f"Tests worth {_pts(sum(t.points for t in extra))} more points run only "
+                     f"with a CUDA GPU or with `--runslow`; `rtcourse grade` counts them "
+                     f"only where they run.")
+    if hidden is not None and hidden.points() > 0:
+        more = hidden.points()
+        notes.append(f"The course's autograder also runs hidden tests of this lab, worth "
+                     f"{_pts(more)} more point{'s' * (more != 1)}, that are not in this handout. "
+                     f"They check the same contracts (each function's docstring) on other "
+                     f"inputs: meet the docstring, not just the visible tests.")
+    return lines + ([""] + notes if notes else []) + [""]
+
+
+def _commented(rows) -> str:
+    width = max(len(cmd) for cmd, _ in rows) + 2
+    return "\n".join(f"{cmd:<{width}}# {why}" for cmd, why in rows)
+
+
+def labs_readme(root, hidden_root=None) -> str:
+    """The handout's ``labs/README.md``, from the graders in ``root/tests`` (and the hidden
+    graders of ``hidden_root``, whose points it mentions without shipping them)."""
+    from course.grading.runner import lab_test_files
+
+    root = Path(root)
+    labs = lab_catalog(sorted((root / "tests").glob("test_lab*_*.py")))
+    hidden = {}
+    if hidden_root is not None:
+        hidden = lab_catalog([f for f in lab_test_files(Path(hidden_root))
+                              if f.parent.name == "hidden"])
+    example = next(iter(labs.values()), None)
+    first = example.files[0].relative_to(root).as_posix() if example else \
+        "tests/test_lab0_interop.py"
+    number = example.number if example else 0
+    functions = (skeleton_functions(root / "labs" / f"{example.module}.py")
+                 if example and (root / "labs" / f"{example.module}.py").is_file() else [])
+    fn = functions[0] if functions else "pack_rgba8"
+    test_cmds = _commented([
+        (f"python -m pytest {first}", f"all tests of lab {number}"),
+        (f"python -m pytest {first} -k {fn}", "only the tests of one function"),
+        (f"python -m pytest {first} -x -k {fn}", "stop at the first failure"),
+    ])
+    grade_cmds = _commented([
+        (f"rtcourse grade --lab {number}", f"per-task score table of lab {number}"),
+        ("rtcourse grade", "every lab (the same as `make grade`)"),
+        (f"rtcourse grade --lab {number} --json results.json", "also write results.json"),
+    ])
+    head = f"""# The labs
+
+Generated by `rtcourse release` from the graders in `tests/`: what each lab asks for and
+what it is worth.
+
+Each lab is one file here, `labN_topic.py`. Fill in every function that raises
+`NotImplementedError("not implemented yet: ...")`: its docstring states the task, the
+shapes and dtypes, the accuracy contract and hints, and the module docstring at the top of
+the file explains the lab. Keep the names and signatures: the grader calls them.
+
+Run every command below from the handout's top folder (the one holding `Makefile`), after
+`make test` has created `.venv` once: activate it with `source .venv/bin/activate`, or
+type `.venv/bin/python` and `.venv/bin/rtcourse` instead of `python` and `rtcourse`.
+
+## Test one lab, one function
+
+```sh
+{test_cmds}
+```
+
+The tests run your `labs/` files. A function you have not written yet fails with
+"not implemented yet: ..."; a wrong one fails with what was expected, what came back and
+where (the first differing pixel, ray or element). `-k` selects the tests whose name
+contains the words you give, so `-k pack_rgba8` also runs the tests of `unpack_rgba8`.
+
+## See your score
+
+```sh
+{grade_cmds}
+```
+
+Your code runs in a separate, sandboxed process with a time limit per test, as it will on
+the course's autograder: a crash or an endless loop costs that test, not the run. A test's
+points are split evenly over its cases (devices, dtypes, sizes), so a partly working
+function earns part of its points.
+
+"""
+    sections = []
+    for number_, lab in labs.items():
+        sections += _lab_section(root, lab, hidden.get(number_))
+    return head + "\n".join(sections)

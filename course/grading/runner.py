@@ -20,8 +20,11 @@ def repo_root() -> Path:
 
 
 def lab_test_files(root: Path, labs=None) -> list[Path]:
-    """The graders ``tests/test_labN_*.py``, for the chosen labs (all by default)."""
+    """The graders ``tests/test_labN_*.py`` and, where present (not in the student
+    handout), the hidden graders ``tests/hidden/test_labN_*.py``, for the chosen labs
+    (all by default)."""
     files = sorted((root / "tests").glob("test_lab*_*.py"))
+    files += sorted((root / "tests" / "hidden").glob("test_lab*_*.py"))
     if labs:
         wanted = {int(n) for n in labs}
         files = [f for f in files if int(re.match(r"test_lab(\d+)_", f.name).group(1)) in wanted]

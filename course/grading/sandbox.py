@@ -8,6 +8,10 @@ tensors. A crash, ``os._exit``, a hang or a memory blow-up costs the current cal
 
 ``LocalLab`` gives the trusted reference solutions the same interface in-process,
 with the same input-mutation check, so tests read the same either way.
+
+With ``RTCOURSE_WORKER_USER`` set (the Gradescope autograder sets it when it runs as root)
+the worker runs as that unprivileged user, so a submission cannot read what only the
+grader may (the reference solutions shipped in the autograder) or touch the results.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ class MemoryLimitExceeded(MemoryError):
 def _raise_student_error(err: dict, where: str):
     """Re-raise a submission's exception as the closest builtin exception type,
     so ``pytest.raises(ValueError)`` works across the process boundary."""
+    __tracebackhide__ = True  # a student's failure report shows their call, not the sandbox
     import builtins
 
     text = f"{err['type']}: {err['message']}" if err["type"] not in (
@@ -69,6 +74,22 @@ def _copy_back(target: torch.Tensor, value: torch.Tensor):
         target.copy_(value.to(target.device))
 
 
+def _as_user(name: str | None) -> dict:
+    """``Popen`` arguments that start the worker as user ``name`` (none when unset)."""
+    if not name:
+        return {}
+    import pwd
+
+    try:
+        entry = pwd.getpwnam(name)
+    except KeyError:
+        raise RuntimeError(f"RTCOURSE_WORKER_USER={name}: no such user") from None
+    if os.geteuid() != 0:
+        raise RuntimeError(f"RTCOURSE_WORKER_USER={name}: only a grader running as root can "
+                           f"start the worker as another user")
+    return {"user": entry.pw_uid, "group": entry.pw_gid, "extra_groups": []}
+
+
 class Worker:
     """One worker process serving one lab file, restarted after a failure."""
 
@@ -82,12 +103,14 @@ class Worker:
 
     # -- process management
     def start(self, deadline=None):
+        as_user = _as_user(os.environ.get("RTCOURSE_WORKER_USER"))
         parent, child = socket.socketpair()
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "course.grading.worker", str(child.fileno()),
              self.lab_file, str(self.memory_bytes)],
             pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, env=env,
+            **as_user,
         )
         child.close()
         self.conn = Connection(parent.detach())
@@ -188,6 +211,7 @@ class SandboxedLab:
         return self._deadline or time.monotonic() + self._time_limit
 
     def _request(self, message, where):
+        __tracebackhide__ = True
         reply = self._worker.request(message, self._remaining_deadline(), where)
         if "error" in reply:
             _raise_student_error(reply["error"], where)
@@ -228,6 +252,7 @@ class RemoteCallable:
         self._lab, self._ref, self._name, self._where = lab, ref, name, where
 
     def __call__(self, *args, **kwargs):
+        __tracebackhide__ = True
         reply = self._lab._request(
             {"op": "call", "ref": self._ref, "name": self._name,
              "args": wire.encode(args), "kwargs": wire.encode(kwargs)}, self._where)

@@ -1,0 +1,196 @@
+"""``rtcourse gradescope OUT.zip``: the course as a Gradescope autograder.
+
+The zip holds, at its top level, what Gradescope asks for::
+
+    setup.sh          run once to build the image: installs CPU torch and the course
+    run_autograder    run per submission: collect the lab files, grade them, write results
+    rtcourse/         the course: course/, tests/ (with tests/hidden/), labs/, solutions/
+
+``run_autograder`` copies the student's ``labN_topic.py`` files out of the submission
+(wherever they lie in it: at the top, under ``labs/``, ...) into a fresh folder and runs
+``rtcourse grade --impl FOLDER --json RESULTS/results.json``. The submission is never
+trusted: it runs in the sandboxed worker, and, when the autograder runs as root (as on
+Gradescope), as the unprivileged user ``rtcourse-student`` that setup.sh creates, which
+cannot read the reference solutions. A lab that was not submitted, or fails to import,
+scores 0; hidden tests reach results.json with their ``visibility``.
+
+Environment overrides (for trying the package locally; Gradescope needs none):
+``RTCOURSE_SUBMISSION_DIR`` (default /autograder/submission), ``RTCOURSE_RESULTS_DIR``
+(/autograder/results), ``RTCOURSE_PYTHON`` (python3), ``RTCOURSE_WORKER_USER``; for
+setup.sh ``PYTHON``, ``TORCH_SPEC`` (torch==2.13.0) and ``TORCH_INDEX`` (PyTorch's CPU
+wheel index; empty for pip's default).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import zipfile
+from pathlib import Path
+
+from course.grading.catalog import lab_catalog
+from course.grading.release import course_files
+from course.grading.runner import lab_test_files
+
+PACKAGE = "rtcourse"  # the folder of the zip holding the course
+STUDENT_USER = "rtcourse-student"
+# What the autograder needs of the repository: the package, its graders (hidden ones
+# included), the skeletons and the references. Not the course's own meta-tests.
+INCLUDED = ("pyproject.toml", "README.md", "course", "tests", "labs", "solutions")
+EXCLUDED = ("tests/meta",)
+_MAX_LAB_FILE = 2 * 2**20  # bytes; a larger "lab file" is not source code
+
+SETUP_SH = r"""#!/usr/bin/env bash
+# Gradescope runs this once, as root, in /autograder/source, to build the autograder image.
+# Like the course's Makefile it installs the CPU build of torch explicitly (the graders run
+# on the CPU), then the course from ./rtcourse.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")"
+PYTHON="${PYTHON:-python3}"
+TORCH_SPEC="${TORCH_SPEC:-torch==2.13.0}"
+TORCH_INDEX="${TORCH_INDEX-https://download.pytorch.org/whl/cpu}"
+export PIP_DISABLE_PIP_VERSION_CHECK=1 PIP_BREAK_SYSTEM_PACKAGES=1
+
+if ! "$PYTHON" -m pip --version >/dev/null 2>&1; then
+    apt-get update && apt-get install -y python3 python3-pip
+fi
+"$PYTHON" -m pip install ${TORCH_INDEX:+--index-url "$TORCH_INDEX"} "$TORCH_SPEC"
+"$PYTHON" -m pip install ./rtcourse
+
+# Student code runs as this user: it cannot read the reference solutions.
+id -u @USER@ >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin @USER@
+"""
+
+RUN_AUTOGRADER = r"""#!/usr/bin/env bash
+# Gradescope runs this for every submission, as root. It copies the student's lab files out
+# of the submission into a fresh folder and grades them there; the submission runs
+# sandboxed (and, as root, as an unprivileged user). Local runs: set
+# RTCOURSE_SUBMISSION_DIR and RTCOURSE_RESULTS_DIR (and RTCOURSE_PYTHON).
+set -uo pipefail
+HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+if [ -d "$HERE/@PACKAGE@" ]; then SOURCE="$HERE/@PACKAGE@"; else SOURCE=/autograder/source/@PACKAGE@; fi
+SUBMISSION="${RTCOURSE_SUBMISSION_DIR:-/autograder/submission}"
+RESULTS="${RTCOURSE_RESULTS_DIR:-/autograder/results}"
+PYTHON="${RTCOURSE_PYTHON:-python3}"
+LABS=(@LABS@)  # the labs this autograder grades (rtcourse gradescope --lab); empty: all
+
+WORK="$(mktemp -d)"
+trap 'rm -rf "$WORK"' EXIT
+mkdir -p "$RESULTS"
+rm -f "$RESULTS/results.json"
+cd "$SOURCE"
+
+"$PYTHON" -m course.grading.gradescope collect "$SUBMISSION" "$WORK" ${LABS[@]+"${LABS[@]}"}
+
+if [ -z "${RTCOURSE_WORKER_USER+set}" ] && [ "$(id -u)" = 0 ] && id -u @USER@ >/dev/null 2>&1
+then
+    export RTCOURSE_WORKER_USER=@USER@
+fi
+if [ -n "${RTCOURSE_WORKER_USER:-}" ]; then
+    chmod -R go-rwx solutions   # the references are the grader's only
+    chmod -R a+rX "$WORK"       # the submission is the worker's to read
+fi
+
+"$PYTHON" -m course.cli grade --impl "$WORK" ${LABS[@]+"${LABS[@]}"} --json "$RESULTS/results.json"
+
+if [ ! -s "$RESULTS/results.json" ]; then
+    printf '%s\n' '{"score": 0, "output": "The autograder stopped before it could grade this submission. Please tell the course staff."}' > "$RESULTS/results.json"
+fi
+exit 0
+"""
+
+
+def _script(template: str, labs) -> str:
+    lab_args = " ".join(f"--lab {int(n)}" for n in sorted(set(labs or ())))
+    return (template.replace("@PACKAGE@", PACKAGE).replace("@USER@", STUDENT_USER)
+            .replace("@LABS@", lab_args))
+
+
+def package_files(root) -> list[Path]:
+    """The repository files the autograder ships, relative to ``root``."""
+    files = course_files(root, withheld=EXCLUDED + (".git", ".venv"))
+    return [rel for rel in files if rel.parts[0] in INCLUDED]
+
+
+def _add(archive: zipfile.ZipFile, name: str, data: bytes, executable=False):
+    info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))  # reproducible zips
+    info.external_attr = (0o100755 if executable else 0o100644) << 16
+    info.compress_type = zipfile.ZIP_DEFLATED
+    archive.writestr(info, data)
+
+
+def build_autograder(root, out, labs=None) -> list[str]:
+    """Write the Gradescope autograder zip of the course at ``root`` to ``out``; return the
+    names it holds. ``labs``: grade only these lab numbers (default: every lab)."""
+    root, out = Path(root).resolve(), Path(out).resolve()
+    known = lab_catalog(lab_test_files(root))
+    missing = sorted(set(labs or ()) - set(known))
+    if missing:
+        raise ValueError(f"labs: no grader for lab(s) {missing}; the course has {sorted(known)}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    names = []
+    with zipfile.ZipFile(out, "w") as archive:
+        for name, template in (("setup.sh", SETUP_SH), ("run_autograder", RUN_AUTOGRADER)):
+            _add(archive, name, _script(template, labs).encode(), executable=True)
+            names.append(name)
+        for rel in package_files(root):
+            name = f"{PACKAGE}/{rel.as_posix()}"
+            _add(archive, name, (root / rel).read_bytes())
+            names.append(name)
+    return names
+
+
+# ------------------------------------------------------------ inside the autograder
+
+
+def collect_submission(submission, dest, modules) -> dict[str, Path | None]:
+    """Copy each ``module.py`` of ``modules`` found in ``submission`` into ``dest``.
+
+    A file may lie anywhere in the submission (students upload single files, their
+    ``labs/`` folder or the whole handout); the shallowest match wins. Only regular files
+    are copied, never links (a link could point at the grader's files).
+    Returns module -> the file copied (relative to ``submission``), or None if absent.
+    """
+    submission, dest = Path(submission), Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    found: dict[str, Path | None] = {}
+    candidates = sorted((p for p in submission.rglob("*.py")
+                         if not any(part.startswith(".") or part == "__MACOSX"
+                                    for part in p.relative_to(submission).parts)),
+                        key=lambda p: (len(p.relative_to(submission).parts), str(p)))
+    for module in modules:
+        found[module] = None
+        for path in candidates:
+            if path.name == f"{module}.py" and not path.is_symlink() and path.is_file() \
+                    and path.stat().st_size <= _MAX_LAB_FILE:
+                shutil.copyfile(path, dest / path.name, follow_symlinks=False)
+                found[module] = path.relative_to(submission)
+                break
+    return found
+
+
+def _collect_main(submission: str, dest: str, labs=None) -> int:
+    from course.grading.runner import repo_root
+
+    modules = [lab.module for lab in lab_catalog(lab_test_files(repo_root(), labs)).values()]
+    found = collect_submission(submission, dest, modules)
+    for module, path in found.items():
+        print(f"{module + '.py':<24} " + (f"found: {path}" if path else
+                                          "not in the submission: its lab scores 0"))
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m course.grading.gradescope")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("collect", help="copy a submission's lab files into a folder")
+    p.add_argument("submission")
+    p.add_argument("dest")
+    p.add_argument("--lab", type=int, action="append", help="only this lab's file (repeatable)")
+    args = parser.parse_args(argv)
+    return _collect_main(args.submission, args.dest, args.lab)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,78 @@
+"""Hidden grader for Lab 0, task 1: packed framebuffers at sizes and layouts the handout's
+tests do not use (not in the student handout; shown on Gradescope after the due date).
+
+The reference is the packing formula itself, evaluated in int64 and wrapped to int32 by
+hand: independent of the byte-view reference of the visible grader and of the host's byte
+order.
+"""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from course.testing import assert_equal, check_tensor, generator
+
+LAB_MODULE = "lab0_interop"
+TASKS = {1: "Packed framebuffers"}
+pytestmark = pytest.mark.visibility("after_due_date")
+
+# One pixel, a single odd row, a single column, odd primes, and a 1080p frame.
+SHAPES = [(1, 1), (1, 1023), (517, 1), (37, 53), (1080, 1920)]
+
+
+def formula_pack(rgba: torch.Tensor) -> torch.Tensor:
+    c = rgba.cpu().to(torch.int64)
+    word = c[..., 0] + (c[..., 1] << 8) + (c[..., 2] << 16) + (c[..., 3] << 24)
+    return (word - (word >= 2**31).to(torch.int64) * 2**32).to(torch.int32)
+
+
+def random_rgba(shape, seed) -> torch.Tensor:
+    rgba = torch.randint(0, 256, (*shape, 4), generator=generator(seed), dtype=torch.uint8)
+    every_other = torch.arange(rgba[..., 3].numel()).reshape(shape) % 2 == 0
+    rgba[..., 3] |= every_other.to(torch.uint8) << 7  # half the words negative as int32
+    return rgba
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+@pytest.mark.parametrize("shape", SHAPES, ids=[f"{h}x{w}" for h, w in SHAPES])
+def test_pack_rgba8_unpack_rgba8_odd_and_large_sizes(impl, device, shape):
+    rgba = random_rgba(shape, seed=shape[0] * 7919 + shape[1])
+    packed = check_tensor(impl.pack_rgba8(rgba.to(device)), f"pack_rgba8 of a {shape} image",
+                          shape=shape, dtype=torch.int32, device=device)
+    assert_equal(packed, formula_pack(rgba), name=f"pack_rgba8 of a {shape} image",
+                 where="pixel")
+    back = check_tensor(impl.unpack_rgba8(packed), f"unpack_rgba8 of a {shape} framebuffer",
+                        shape=(*shape, 4), dtype=torch.uint8, device=device)
+    assert_equal(back, rgba, name=f"unpack_rgba8(pack_rgba8(rgba)) at {shape}",
+                 where="(y, x, channel)")
+
+
+def probe_pack_strided(lab, device):
+    """Pack views that are not one contiguous block: a crop, every other column, and a
+    planar (4, H, W) image seen channel-last. Runs next to the code under test because a
+    view's layout does not survive the trip to the sandbox."""
+    base = random_rgba((24, 34), seed=5).to(device)
+    planar = base.permute(2, 0, 1).contiguous()
+    views = {"a crop": base[3:17, 5:26], "every other column": base[:, ::2],
+             "a channel-last view of a planar image": planar.permute(1, 2, 0)}
+    results = {}
+    for name, view in views.items():
+        try:
+            results[name] = (lab.pack_rgba8(view).cpu(), view.cpu().contiguous())
+        except Exception as exc:  # noqa: BLE001  (reported by the test, with the view)
+            results[name] = f"{type(exc).__name__}: {exc}"
+    return results
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+def test_pack_rgba8_strided_views(impl, device):
+    for name, result in impl.probe(probe_pack_strided, device).items():
+        if isinstance(result, str):
+            pytest.fail(f"pack_rgba8 of {name} (a valid (H, W, 4) uint8 tensor that is not "
+                        f"contiguous) raised {result}. Kernels must accept any strided input; "
+                        f"a byte view of the input needs .contiguous() first.", pytrace=False)
+        packed, rgba = result
+        assert_equal(packed, formula_pack(rgba), name=f"pack_rgba8 of {name}", where="pixel")

@@ -1,0 +1,209 @@
+"""The Gradescope autograder package and the hidden graders.
+
+``rtcourse gradescope`` is built into a temporary folder, unpacked, and its
+``run_autograder`` is run the way Gradescope runs it, against a fake submission: Lab 0
+submitted correctly (under ``labs/``), Lab 1 broken at import, later labs missing. The
+current interpreter stands in for the one ``setup.sh`` would install into.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import stat
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from course.grading.catalog import lab_catalog
+from course.grading.gradescope import STUDENT_USER, build_autograder, collect_submission
+from course.grading.release import release
+from course.grading.runner import lab_test_files
+
+ROOT = Path(__file__).resolve().parents[2]
+HIDDEN = "tests/hidden/test_lab0_hidden.py"
+
+
+def _unpack(zip_path: Path, dest: Path) -> Path:
+    with zipfile.ZipFile(zip_path) as archive:
+        archive.extractall(dest)
+    return dest
+
+
+def _run_autograder(package: Path, submission: Path, results: Path, **env) -> dict:
+    env = {**os.environ, "RTCOURSE_SUBMISSION_DIR": str(submission),
+           "RTCOURSE_RESULTS_DIR": str(results), "RTCOURSE_PYTHON": sys.executable,
+           "RTCOURSE_WORKER_USER": "", "RTCOURSE_TIME_LIMIT": "60", **env}
+    proc = subprocess.run(["bash", str(package / "run_autograder")], env=env, cwd=package,
+                          capture_output=True, text=True, timeout=600, check=False)
+    out = results / "results.json"
+    assert out.is_file(), f"no results.json\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    return {"proc": proc, "data": json.loads(out.read_text())}
+
+
+def _lab_scores(data: dict) -> dict[int, tuple[float, float]]:
+    scores: dict[int, tuple[float, float]] = {}
+    for test in data["tests"]:
+        lab = int(test["number"].split(".")[0])
+        score, top = scores.get(lab, (0.0, 0.0))
+        scores[lab] = (score + test["score"], top + test["max_score"])
+    return scores
+
+
+@pytest.fixture(scope="module")
+def package(tmp_path_factory):
+    base = tmp_path_factory.mktemp("gradescope")
+    names = build_autograder(ROOT, base / "autograder.zip")
+    return {"names": names, "dir": _unpack(base / "autograder.zip", base / "unpacked"),
+            "zip": base / "autograder.zip"}
+
+
+@pytest.fixture(scope="module")
+def graded(package, tmp_path_factory):
+    base = tmp_path_factory.mktemp("submission")
+    submission = base / "submission"
+    (submission / "labs").mkdir(parents=True)
+    shutil.copy(ROOT / "solutions" / "lab0_interop.py", submission / "labs")
+    (submission / "lab1_intersect.py").write_text(
+        "import torch\n\ndef moller_trumbore(:\n    pass\n")  # a syntax error: lab 1 fails
+    (submission / "notes.txt").write_text("not a lab file")
+    return _run_autograder(package["dir"], submission, base / "results")
+
+
+def test_package_layout(package):
+    names = set(package["names"])
+    with zipfile.ZipFile(package["zip"]) as archive:
+        assert set(archive.namelist()) == names
+        modes = {i.filename: i.external_attr >> 16 for i in archive.infolist()}
+    for script in ("setup.sh", "run_autograder"):
+        assert script in names and modes[script] & stat.S_IXUSR, f"{script}: not executable"
+    assert f"rtcourse/{HIDDEN}" in names, "the hidden graders ship in the autograder"
+    assert "rtcourse/solutions/lab0_interop.py" in names, "the references ship for instructors"
+    assert "rtcourse/pyproject.toml" in names and "rtcourse/course/cli.py" in names
+    assert not any(n.startswith(("rtcourse/tests/meta/", "rtcourse/.git/")) for n in names)
+
+
+def test_scripts_parse_and_setup_installs_cpu_torch(package):
+    for script in ("setup.sh", "run_autograder"):
+        proc = subprocess.run(["bash", "-n", str(package["dir"] / script)],
+                              capture_output=True, text=True, check=False)
+        assert proc.returncode == 0, f"{script}: {proc.stderr}"
+    setup = (package["dir"] / "setup.sh").read_text()
+    assert 'TORCH_SPEC="${TORCH_SPEC:-torch==2.13.0}"' in setup
+    assert "pip install ${TORCH_INDEX:+" in setup and "pip install ./rtcourse" in setup
+    assert "useradd" in setup and STUDENT_USER in setup
+    run = (package["dir"] / "run_autograder").read_text()
+    assert "/autograder/submission" in run and "/autograder/results" in run
+    assert 'course.cli grade --impl "$WORK"' in run and '--json "$RESULTS/results.json"' in run
+
+
+def test_results_json_is_gradescope_format(graded):
+    data = graded["data"]
+    for key in ("score", "max_score", "execution_time", "output", "tests"):
+        assert key in data, f"results.json lacks {key!r}"
+    for test in data["tests"]:
+        assert set(test) >= {"name", "number", "score", "max_score", "status", "output",
+                             "visibility"}, f"malformed test entry {test}"
+        assert test["status"] in ("passed", "failed")
+        assert test["visibility"] in ("visible", "hidden", "after_due_date", "after_published")
+
+
+def test_submitted_lab_full_marks_others_zero(graded):
+    data, proc = graded["data"], graded["proc"]
+    scores = _lab_scores(data)
+    labs = lab_catalog(lab_test_files(ROOT))
+    assert set(scores) == set(labs), f"graded labs {sorted(scores)}, course has {sorted(labs)}"
+    score, top = scores[0]
+    assert top == pytest.approx(labs[0].points()) and score == pytest.approx(top), \
+        f"lab 0 (submitted correctly): {score}/{top}\n{data['output']}"
+    for lab, (score, top) in scores.items():
+        if lab != 0:
+            assert top > 0 and score == 0, f"lab {lab} (broken or missing) scored {score}/{top}"
+    assert data["score"] == pytest.approx(scores[0][0])
+    lab1 = [t["output"] for t in data["tests"] if t["number"].startswith("1.")]
+    assert all("failed to import" in o and "SyntaxError" in o for o in lab1), lab1[0][:2000]
+    assert "lab0_interop.py          found: labs/lab0_interop.py" in proc.stdout
+    missing = [t["output"] for t in data["tests"] if int(t["number"].split(".")[0]) > 1]
+    assert all("must contain the file" in o for o in missing)
+
+
+def test_hidden_tests_graded_with_their_visibility(graded):
+    hidden = [t for t in graded["data"]["tests"] if "odd_and_large_sizes" in t["name"]
+              or "strided_views" in t["name"]]
+    assert hidden, "the hidden Lab 0 tests did not run in the autograder"
+    assert all(t["visibility"] == "after_due_date" and t["status"] == "passed" for t in hidden)
+    visible = [t for t in graded["data"]["tests"] if t not in hidden]
+    assert all(t["visibility"] == "visible" for t in visible)
+
+
+def test_release_leaves_hidden_tests_out(tmp_path):
+    written = release(ROOT, tmp_path / "handout")
+    assert not (tmp_path / "handout" / "tests" / "hidden").exists()
+    assert not any(p.as_posix().startswith("tests/hidden") for p in written)
+    assert (ROOT / HIDDEN).is_file()
+
+
+def test_collect_submission_takes_lab_files_only(tmp_path):
+    sub = tmp_path / "sub"
+    (sub / "deep" / "labs").mkdir(parents=True)
+    (sub / "labs").mkdir()
+    (sub / "labs" / "lab0_interop.py").write_text("A = 1\n")
+    (sub / "deep" / "labs" / "lab0_interop.py").write_text("A = 2\n")
+    (sub / "lab1_intersect.py").symlink_to(ROOT / "solutions" / "lab1_intersect.py")
+    (sub / "helper.py").write_text("")
+    found = collect_submission(sub, tmp_path / "work", ["lab0_interop", "lab1_intersect"])
+    assert found == {"lab0_interop": Path("labs/lab0_interop.py"), "lab1_intersect": None}
+    assert (tmp_path / "work" / "lab0_interop.py").read_text() == "A = 1\n"
+    assert sorted(p.name for p in (tmp_path / "work").iterdir()) == ["lab0_interop.py"]
+
+
+def _can_run_as(user: str) -> bool:
+    if os.geteuid() != 0:
+        return False
+    try:
+        import pwd
+
+        entry = pwd.getpwnam(user)
+        return subprocess.run([sys.executable, "-c", "import torch"], user=entry.pw_uid,
+                              group=entry.pw_gid, extra_groups=[], capture_output=True,
+                              timeout=120, check=False).returncode == 0
+    except (KeyError, OSError, subprocess.SubprocessError):
+        return False
+
+
+CHEAT = '''
+from pathlib import Path
+
+import course
+from course.grading.wire import import_file
+
+_ref = import_file(Path(course.__file__).resolve().parents[1] / "solutions" / "lab0_interop.py",
+                   "stolen")
+globals().update({k: v for k, v in vars(_ref).items() if not k.startswith("__")})
+'''
+
+
+@pytest.mark.skipif(not _can_run_as("nobody"),
+                    reason="needs root and an interpreter the user 'nobody' can run")
+def test_submission_cannot_read_the_references(package):
+    # The worker user must reach the package and the submission: a world-readable copy.
+    base = Path(tempfile.mkdtemp(prefix="rtcourse-gradescope-"))
+    try:
+        base.chmod(0o755)
+        copy = _unpack(package["zip"], base / "package")
+        for path in [copy, *copy.rglob("*")]:
+            path.chmod(0o755 if path.is_dir() else 0o644)
+        sub = base / "submission"
+        sub.mkdir()
+        (sub / "lab0_interop.py").write_text(CHEAT)
+        run = _run_autograder(copy, sub, base / "results", RTCOURSE_WORKER_USER="nobody")
+        score, top = _lab_scores(run["data"])[0]
+        assert top > 0 and score == 0, f"a submission re-exporting the reference scored {score}"
+        assert "Permission denied" in run["data"]["tests"][0]["output"]
+    finally:
+        shutil.rmtree(base)

@@ -1,0 +1,78 @@
+"""The handout's ``labs/README.md`` and a student's first step with it: write one function
+pair from its docstring, and the score goes up by exactly the points of its tests."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from course.grading.catalog import lab_catalog
+from course.grading.release import LABS_README, release
+from course.grading.runner import lab_test_files
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def handout(tmp_path_factory):
+    out = tmp_path_factory.mktemp("handout")
+    release(ROOT, out)
+    return out
+
+
+def test_readme_lists_every_lab_task_and_points(handout):
+    text = (handout / LABS_README).read_text()
+    labs = lab_catalog(sorted((handout / "tests").glob("test_lab*_*.py")))
+    assert labs, "the handout has no graders"
+    for number, lab in labs.items():
+        assert f"`labs/{lab.module}.py`" in text and f"{lab.points():g} points" in text
+        for task, title in lab.tasks.items():
+            title = title.replace("|", "\\|")
+            assert f"| {task} | {title} | {lab.points(task):g} |" in text, \
+                f"lab {number} task {task} missing from labs/README.md"
+    for command in ("python -m pytest tests/test_lab", " -k ", "rtcourse grade --lab "):
+        assert command in text
+
+
+def test_readme_counts_hidden_points_without_shipping_them(handout):
+    hidden = lab_catalog([f for f in lab_test_files(ROOT) if f.parent.name == "hidden"])
+    text = (handout / LABS_README).read_text()
+    assert not (handout / "tests" / "hidden").exists()
+    for lab in hidden.values():
+        assert f"worth {lab.points():g} more point" in text
+
+
+def _function_source(path: Path, names) -> dict[str, str]:
+    source = path.read_text()
+    return {node.name: ast.get_source_segment(source, node) for node in ast.parse(source).body
+            if isinstance(node, ast.FunctionDef) and node.name in names}
+
+
+def test_one_task_raises_the_score_by_its_points(handout, tmp_path):
+    # The student writes pack_rgba8 and unpack_rgba8 (here: the reference's bodies).
+    names = ("pack_rgba8", "unpack_rgba8")
+    lab_file = handout / "labs" / "lab0_interop.py"
+    text = lab_file.read_text()
+    skeleton = _function_source(lab_file, names)
+    for name, solution in _function_source(ROOT / "solutions" / lab_file.name, names).items():
+        text = text.replace(skeleton[name], solution)
+    lab_file.write_text(text)
+
+    results = tmp_path / "results.json"
+    proc = subprocess.run([sys.executable, "-m", "course.cli", "grade", "--lab", "0",
+                           "--json", str(results)], cwd=handout, capture_output=True,
+                          text=True, timeout=600, check=False)
+    assert results.exists(), proc.stdout[-3000:] + proc.stderr[-3000:]
+    data = json.loads(results.read_text())
+    lab = lab_catalog([handout / "tests" / "test_lab0_interop.py"])[0]
+    # Tests that call only these functions (the bad-input test also needs linear_to_srgb8).
+    earned = sum(t.points for t in lab.graded() if t.calls and t.calls <= set(names))
+    assert earned > 0
+    assert data["score"] == pytest.approx(earned), proc.stdout[-3000:]
+    assert data["max_score"] == pytest.approx(lab.points())
+    assert f"lab 0: {earned:.2f} / {lab.points():.2f}" in proc.stdout
