@@ -1,0 +1,292 @@
+"""Lab 6 speed/accuracy benchmark: the compute rasterizer against ray-traced primary visibility.
+
+    python bench/lab6_raster.py --device cpu|cuda [--sizes 64 128 256] [--scene suzanne]
+                                [--repeats N] [--threads N] [--out DIR]
+
+For each square resolution it times, on the same camera and mesh,
+
+* ``raster``: the visibility buffer of the lab's pipeline (``to_clip_space``,
+  ``clip_triangles``, ``to_screen``, ``rasterize``, ids through ``source``), with 32-bit
+  (float view depth) and 24-bit (unorm window depth) keys;
+* ``raytrace``: one primary ray per pixel through Lab 1's brute-force ``closest_hit``
+  (Möller–Trumbore, float32), the course's reference tracer;
+
+reporting triangles/s and pixels/s and the **disagreement**: the fraction of pixels whose
+triangle id differs between the raster and the ray tracer (edges and silhouettes only).
+At the largest size it sweeps the knobs of the rasterizer:
+
+* ``chunk``: the memory budget of ``rasterize`` (fragments alive at once = budget / 256 B):
+  the bounding-box enumeration in a few large chunks or many small ones;
+* ``tile``: screen tiles of t x t pixels rasterized one after the other (every triangle's
+  box clamped to the tile), against the whole screen at once; the result must not change;
+* ``zfight``: two parallel quads 1 cm apart at increasing distance (near plane 0.01): the
+  fraction of the front quad's pixels where the back quad wins (it has the lower ids, so
+  it wins every tie), with 24-bit window depth against 32-bit float view depth.
+
+Writes ``lab6_raster.json`` (a ResultTable with the command line), ``lab6_raster.md``,
+``throughput.png`` (pixels/s by resolution, both methods) and ``zfighting.png`` into
+``--out``, by default ``bench/results/<device_name>/lab6/``. On the CPU only ratios between
+rows of one run mean anything; absolute numbers count on a GPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # run from a checkout without installing
+
+from course.bench import ResultTable, device_name, load_lab, time_fn
+from course.camera import Camera, primary_rays
+from course.device import default_device
+from course.scenes import load_scene
+from course.types import Mesh, Rays
+
+# The references by default, a student's labs with RTCOURSE_IMPL=labs.
+lab = load_lab("lab6_raster", os.environ.get("RTCOURSE_IMPL"))
+closest_hit = load_lab("lab1_intersect", os.environ.get("RTCOURSE_IMPL")).closest_hit
+
+SIZES = {"cpu": {"sizes": (64, 128, 256), "repeats": 7, "rt_max": 128},
+         "cuda": {"sizes": (256, 512, 1024, 2048), "repeats": 10, "rt_max": 1024}}
+BUDGETS = (2**18, 2**20, 2**24, 2**28)
+TILES = (32, 64, 128)
+ZFIGHT_DISTANCES = (3.0, 10.0, 30.0, 100.0, 300.0)
+
+
+# --------------------------------------------------------------------------------------
+# The two ways to find what each pixel sees
+# --------------------------------------------------------------------------------------
+
+def raster_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32,
+               memory_budget_bytes: int = 2**28, tile: int | None = None) -> torch.Tensor:
+    """(H, W) source-face ids of the rasterizer's visibility buffer (-1: empty)."""
+    mvp = camera.view_projection(torch.float64).to(mesh.device)
+    clip = lab.to_clip_space(mesh.vertices, mvp)
+    clipped, source, _ = lab.clip_triangles(clip[mesh.faces])
+    screen = lab.to_screen(clipped, camera.width, camera.height)
+    kwargs = {"depth_bits": depth_bits, "memory_budget_bytes": memory_budget_bytes}
+    if tile is None:
+        keys = lab.rasterize(screen, camera.width, camera.height, **kwargs)
+    else:
+        keys = tiled_keys(screen, camera.width, camera.height, tile, **kwargs)
+    k = lab.triangle_ids(keys)
+    ids = torch.where(k >= 0, source[k.clamp(min=0)], -1) if len(source) else k
+    return ids.reshape(camera.height, camera.width)
+
+
+def tiled_keys(screen, width: int, height: int, tile: int, **kwargs) -> torch.Tensor:
+    """The visibility buffer rasterized tile by tile: each tile is a small viewport, the
+    triangles shifted by its corner (integer shifts are exact), so every box is clamped to
+    the tile and the ids stay those of ``screen``."""
+    out = torch.empty(height, width, dtype=torch.int64, device=screen.device)
+    for y0 in range(0, height, tile):
+        for x0 in range(0, width, tile):
+            tw, th = min(tile, width - x0), min(tile, height - y0)
+            shifted = screen.clone()
+            shifted[..., 0] -= x0
+            shifted[..., 1] -= y0
+            out[y0:y0 + th, x0:x0 + tw] = lab.rasterize(shifted, tw, th, **kwargs).reshape(th, tw)
+    return out.reshape(-1)
+
+
+def traced_ids(mesh: Mesh, camera: Camera) -> torch.Tensor:
+    """(H, W) triangle ids of one primary ray per pixel, Lab 1's brute force in float32."""
+    rays = primary_rays(camera, device=mesh.device, dtype=mesh.dtype)
+    hits = closest_hit(Rays.create(rays.origins, rays.directions, rays.t_min, rays.t_max), mesh,
+                       "moller_trumbore", memory_budget_bytes=2**30)
+    return hits.triangle.reshape(camera.height, camera.width)
+
+
+# --------------------------------------------------------------------------------------
+# Rows
+# --------------------------------------------------------------------------------------
+
+def bench_resolutions(table: ResultTable, mesh: Mesh, camera: Camera, cfg: dict) -> None:
+    for size in cfg["sizes"]:
+        cam = dataclasses.replace(camera, width=size, height=size)
+        pixels, tris = size * size, mesh.num_faces
+        traced = traced_ids(mesh, cam) if size <= cfg["rt_max"] else None
+        for depth_bits in (32, 24):
+            ids = raster_ids(mesh, cam, depth_bits)
+            t = time_fn(raster_ids, mesh, cam, depth_bits, repeats=cfg["repeats"], warmup=1)
+            _add(table, method="raster", setting=f"{depth_bits}-bit", size=size, seconds=t.median,
+                 triangles_per_s=tris / t.median, pixels_per_s=pixels / t.median,
+                 coverage=(ids >= 0).double().mean(),
+                 disagreement=None if traced is None else (ids != traced).double().mean())
+        if traced is not None:
+            # Slow and steady: one timed run, the id pass above was its warm-up.
+            t = time_fn(traced_ids, mesh, cam, repeats=1, warmup=0)
+            _add(table, method="raytrace", setting="MT fp32 brute force", size=size,
+                 seconds=t.median, triangles_per_s=tris / t.median, pixels_per_s=pixels / t.median,
+                 coverage=(traced >= 0).double().mean(), disagreement=0.0)
+
+
+def bench_knobs(table: ResultTable, mesh: Mesh, camera: Camera, cfg: dict) -> None:
+    size = max(cfg["sizes"])
+    cam = dataclasses.replace(camera, width=size, height=size)
+    pixels, tris = size * size, mesh.num_faces
+    whole = raster_ids(mesh, cam)
+    for budget in BUDGETS:
+        t = time_fn(raster_ids, mesh, cam, 32, budget, repeats=cfg["repeats"], warmup=1)
+        ids = raster_ids(mesh, cam, 32, budget)
+        _add(table, method="chunk", setting=f"{budget >> 20} MiB" if budget >= 2**20
+             else f"{budget >> 10} KiB", size=size, seconds=t.median,
+             triangles_per_s=tris / t.median, pixels_per_s=pixels / t.median,
+             changed=(ids != whole).double().mean())
+    for tile in TILES:
+        if tile >= size:
+            continue
+        t = time_fn(raster_ids, mesh, cam, 32, 2**28, tile, repeats=cfg["repeats"], warmup=1)
+        ids = raster_ids(mesh, cam, 32, 2**28, tile)
+        _add(table, method="tile", setting=f"{tile}x{tile}", size=size, seconds=t.median,
+             triangles_per_s=tris / t.median, pixels_per_s=pixels / t.median,
+             changed=(ids != whole).double().mean())
+
+
+def zfight_scene(distance: float, gap: float, device) -> tuple[Mesh, Camera]:
+    """Two parallel quads ``gap`` apart, ``distance`` away, tilted by 30 degrees; the front
+    one (faces 2, 3) hides the back one (faces 0, 1) wherever both are drawn. The back quad
+    comes first: equal keys go to the lower id, so every depth tie shows as z-fighting."""
+    half = 0.4 * distance  # both fill a similar part of the view at every distance
+    quad = torch.tensor([[-half, -half], [half, -half], [half, half], [-half, half]],
+                        dtype=torch.float64)
+    # Tilted by 30 degrees about y: depth varies across the quads, as on real surfaces.
+    c, s = 0.8660254037844386, 0.5
+
+    def place(z):
+        x, y = quad[:, 0], quad[:, 1]
+        return torch.stack([c * x, y, -distance + s * x + z], -1)
+
+    vertices = torch.cat([place(-gap), place(0.0)])
+    faces = torch.tensor([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    camera = Camera(eye=(0.0, 0.0, 0.0), target=(0.0, 0.0, -1.0), fov_y=60.0, width=128,
+                    height=128, near=0.01, far=10 * distance + 10)
+    return Mesh(vertices.float().to(device), faces.to(device)), camera
+
+
+def bench_zfighting(table: ResultTable, device) -> None:
+    gap = 0.01
+    for distance in ZFIGHT_DISTANCES:
+        mesh, camera = zfight_scene(distance, gap, device)
+        for depth_bits in (32, 24):
+            ids = raster_ids(mesh, camera, depth_bits)
+            front = ids >= 0
+            back = (ids < 2) & front
+            _add(table, method="zfight", setting=f"{depth_bits}-bit", size=camera.width,
+                 distance=distance, gap=gap,
+                 zfight_rate=back.double().sum() / front.double().sum().clamp(min=1))
+
+
+def _add(table: ResultTable, **row) -> None:
+    row = table.add(**row)
+    shown = {k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in row.items()}
+    print(" ".join(f"{k}={v}" for k, v in shown.items()), flush=True)
+
+
+# --------------------------------------------------------------------------------------
+# Output
+# --------------------------------------------------------------------------------------
+
+def write_outputs(table: ResultTable, out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    table.to_json(out / "lab6_raster.json")
+    meta = table.metadata
+    legend = ("raster: the lab's visibility buffer (to_clip_space .. rasterize, ids through "
+              "source); raytrace: Lab 1's brute-force closest_hit, one primary ray per pixel; "
+              "disagreement: fraction of pixels whose triangle differs between the two; "
+              "chunk: rasterize's memory budget; tile: screen tiles rasterized in turn; "
+              "changed: pixels differing from the untiled, default-budget raster (must be 0); "
+              "zfight_rate: fraction of the front quad's pixels where the back quad (1 cm "
+              "behind, lower ids: it wins exact ties) shows.")
+    device = (f"Device: {meta['device']}, {meta.get('threads')} torch threads; torch "
+              f"{meta['torch']}; {meta['date']}.")
+    header = [f"# {table.name}", "", device, "", f"Command: `{meta['command']}`", "",
+              f"Scene: {meta['scene']} ({meta['triangles']} triangles).", "", legend, ""]
+    (out / "lab6_raster.md").write_text("\n".join(header) + table.to_markdown() + "\n")
+    from matplotlib.figure import Figure
+
+    series = [r for r in table.rows if r["method"] in ("raster", "raytrace")]
+    if series:
+        fig = Figure(figsize=(6.4, 4.8), layout="constrained")
+        ax = fig.add_subplot()
+        for key in dict.fromkeys((r["method"], r["setting"]) for r in series):
+            sel = [r for r in series if (r["method"], r["setting"]) == key]
+            ax.plot([r["size"] for r in sel], [r["pixels_per_s"] for r in sel], marker="o",
+                    label=" ".join(key))
+        worst = max((r["disagreement"] for r in series if r.get("disagreement") is not None),
+                    default=None)
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.set_xlabel("image size (pixels per side)")
+        ax.set_ylabel("pixels / s (primary visibility)")
+        ax.set_title("raster vs ray-traced primary visibility"
+                     + ("" if worst is None else f" (ids differ on <= {worst:.2%} of pixels)"))
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+        fig.savefig(out / "throughput.png", dpi=150)
+    zrows = [r for r in table.rows if r["method"] == "zfight"]
+    if zrows:
+        fig = Figure(figsize=(6.4, 4.8), layout="constrained")
+        ax = fig.add_subplot()
+        for setting in dict.fromkeys(r["setting"] for r in zrows):
+            sel = [r for r in zrows if r["setting"] == setting]
+            ax.plot([r["distance"] for r in sel], [r["zfight_rate"] for r in sel], marker="o",
+                    label=setting)
+        ax.set_xscale("log")
+        ax.set_xlabel("distance of two quads 1 cm apart (near plane 0.01)")
+        ax.set_ylabel("fraction of pixels where the back quad wins")
+        ax.set_title("z-fighting: 24-bit window depth vs 32-bit float view depth")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+        fig.savefig(out / "zfighting.png", dpi=150)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
+    parser.add_argument("--sizes", type=int, nargs="+", help="square image sizes in pixels")
+    parser.add_argument("--scene", default="suzanne", help="a course scene with a mesh")
+    parser.add_argument("--repeats", type=int, help="timed runs per setting (median reported)")
+    parser.add_argument("--threads", type=int, help="CPU threads of torch (default: torch's)")
+    parser.add_argument("--out", type=Path, help="output folder "
+                        "(default: bench/results/<device_name>/lab6)")
+    args = parser.parse_args(argv)
+
+    device = default_device(args.device)
+    cfg = dict(SIZES["cuda" if device.type == "cuda" else "cpu"])
+    if args.sizes:
+        cfg["sizes"] = tuple(args.sizes)
+    if args.repeats:
+        cfg["repeats"] = args.repeats
+    out = args.out or REPO / "bench" / "results" / device_name(device) / "lab6"
+    if args.threads:
+        torch.set_num_threads(args.threads)
+
+    scene = load_scene(args.scene, device=device)
+    table = ResultTable("Lab 6: compute rasterizer vs ray-traced primary visibility", device)
+    table.metadata.update(
+        command=shlex.join(["python", "bench/lab6_raster.py",
+                            *(sys.argv[1:] if argv is None else argv)]),
+        scene=args.scene, triangles=scene.mesh.num_faces, sizes=list(cfg["sizes"]),
+        repeats=cfg["repeats"], threads=torch.get_num_threads())
+    print(f"{table.metadata['device']}: {args.scene} ({scene.mesh.num_faces} triangles), "
+          f"sizes {cfg['sizes']}", flush=True)
+    started = time.perf_counter()
+    bench_resolutions(table, scene.mesh, scene.camera, cfg)
+    bench_knobs(table, scene.mesh, scene.camera, cfg)
+    bench_zfighting(table, device)
+    write_outputs(table, out)
+    print(f"done in {time.perf_counter() - started:.1f} s: {out}")
+
+
+if __name__ == "__main__":
+    main()
