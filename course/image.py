@@ -36,7 +36,8 @@ def srgb_encode(linear: torch.Tensor) -> torch.Tensor:
     """
     _require_float(linear, "linear")
     x = torch.nan_to_num(linear, nan=0.0).clamp(0.0, 1.0)
-    return torch.where(x <= 0.0031308, 12.92 * x, 1.055 * x.pow(1 / 2.4) - 0.055)
+    # 1.055 (y - 1) + 1 is 1.055 y - 0.055 rearranged so that white encodes to exactly 1.
+    return torch.where(x <= 0.0031308, 12.92 * x, 1.055 * (x.pow(1 / 2.4) - 1) + 1)
 
 
 def srgb_decode(srgb: torch.Tensor) -> torch.Tensor:
