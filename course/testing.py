@@ -153,3 +153,30 @@ def assert_fraction(bad: torch.Tensor, *, name: str, at_most: float, where: str 
             f"{name}: {int(bad.sum())} of {bad.numel()} ({frac:.2%}) fail, at most "
             f"{at_most:.2%} allowed; first at {where} {_index(flat, bad.shape)}"
         )
+
+
+def first_line(exc: BaseException) -> str:
+    """The first line of an exception's message.
+
+    Errors from a sandboxed submission carry its traceback after the first line, and a
+    traceback mentions argument names even when the message does not.
+    """
+    return str(exc).splitlines()[0] if str(exc) else ""
+
+
+def expect_error(names, fn, *args, kinds=(ValueError, TypeError), case: str = "", **kwargs):
+    """``fn(*args, **kwargs)`` must raise one of ``kinds`` whose message names one of the
+    arguments ``names`` (a name or a sequence of names). ``case`` describes the bad input."""
+    names = (names,) if isinstance(names, str) else tuple(names)
+    what = getattr(fn, "__name__", None) or getattr(fn, "_name", "the call")
+    case = case or "bad input"
+    try:
+        fn(*args, **kwargs)
+    except kinds as exc:
+        assert any(n in first_line(exc) for n in names), (
+            f"{what} with {case} raised {type(exc).__name__}({first_line(exc)!r}); the message "
+            f"should name the argument {' or '.join(map(repr, names))} and say what was expected")
+        return
+    raise AssertionError(f"{what} accepted {case} without complaint: expected "
+                         f"{' or '.join(k.__name__ for k in kinds)} naming "
+                         f"{' or '.join(map(repr, names))}")

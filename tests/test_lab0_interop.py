@@ -17,7 +17,15 @@ import pytest
 import torch
 
 from course.image import srgb_decode, srgb_encode
-from course.testing import assert_close, assert_equal, check_tensor, generator, poisoned
+from course.testing import (
+    assert_close,
+    assert_equal,
+    check_tensor,
+    expect_error,
+    first_line,
+    generator,
+    poisoned,
+)
 
 LAB_MODULE = "lab0_interop"
 TASKS = {1: "Packed framebuffers", 2: "Zero-copy sharing", 3: "The PBO analogue",
@@ -39,26 +47,6 @@ def ref_pack(rgba: torch.Tensor) -> torch.Tensor:
 def ref_unpack(packed: torch.Tensor) -> torch.Tensor:
     data = packed.cpu().numpy().astype("<i4")
     return torch.from_numpy(data.view(np.uint8).reshape(*packed.shape, 4).copy())
-
-
-def first_line(exc: BaseException) -> str:
-    # Errors from a sandboxed submission carry its traceback after the first line, and a
-    # traceback would mention argument names even when the message does not.
-    return str(exc).splitlines()[0] if str(exc) else ""
-
-
-def expect_error(name: str, fn, *args, kinds=(ValueError, TypeError), **kwargs):
-    """``fn(*args)`` must raise one of ``kinds`` whose message names argument ``name``."""
-    what = getattr(fn, "__name__", None) or getattr(fn, "_name", "the call")
-    try:
-        fn(*args, **kwargs)
-    except kinds as exc:
-        assert name in first_line(exc), (
-            f"{what} raised {type(exc).__name__}({first_line(exc)!r}), but the message should "
-            f"name the argument {name!r} and say what was expected")
-        return
-    raise AssertionError(f"{what} accepted a bad {name!r} without complaint: expected a "
-                         f"{' or '.join(k.__name__ for k in kinds)} naming {name!r}")
 
 
 def check_reported_error(report, name: str, case: str, fn_name: str):

@@ -40,7 +40,14 @@ import torch
 from course.accounting import count_ops, live_values
 from course.occupancy import PRESETS, occupancy
 from course.scenes import load_scene
-from course.testing import assert_close, assert_equal, assert_fraction, check_tensor, generator
+from course.testing import (
+    assert_close,
+    assert_equal,
+    assert_fraction,
+    check_tensor,
+    expect_error,
+    generator,
+)
 from course.types import Hits, Mesh, Rays
 
 LAB_MODULE = "lab1_intersect"
@@ -95,27 +102,6 @@ def expect_misses(variant, case, t, u, v, what="ray"):
             f"v={v.cpu()[i].item()!r}.")
     assert_equal(u, torch.zeros_like(u), name=f"{variant} ({case}): u of misses", where=what)
     assert_equal(v, torch.zeros_like(v), name=f"{variant} ({case}): v of misses", where=what)
-
-
-def first_line(exc: BaseException) -> str:
-    # A sandboxed submission's error carries its traceback after the first line.
-    return str(exc).splitlines()[0] if str(exc) else ""
-
-
-def expect_error(names, fn, *args, kinds=(ValueError, TypeError), case="", **kwargs):
-    """``fn(*args)`` must raise one of ``kinds`` naming one of the arguments ``names``."""
-    names = (names,) if isinstance(names, str) else tuple(names)
-    what = getattr(fn, "__name__", None) or getattr(fn, "_name", "the call")
-    try:
-        fn(*args, **kwargs)
-    except kinds as exc:
-        assert any(n in first_line(exc) for n in names), (
-            f"{what} with {case} raised {type(exc).__name__}({first_line(exc)!r}); the message "
-            f"should name the argument {' or '.join(map(repr, names))} and say what was expected")
-        return
-    raise AssertionError(f"{what} accepted {case} without complaint: expected "
-                         f"{' or '.join(k.__name__ for k in kinds)} naming "
-                         f"{' or '.join(map(repr, names))}")
 
 
 # ---------------------------------------------------------------------------------------

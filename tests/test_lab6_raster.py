@@ -47,6 +47,7 @@ from course.testing import (
     assert_equal,
     assert_fraction,
     check_tensor,
+    expect_error,
     generator,
     poisoned,
 )
@@ -65,27 +66,6 @@ MASK = (1 << 32) - 1
 
 # ---------------------------------------------------------------------------------------
 # Calling the lab
-
-
-def first_line(exc: BaseException) -> str:
-    # A sandboxed submission's error carries its traceback after the first line.
-    return str(exc).splitlines()[0] if str(exc) else ""
-
-
-def expect_error(names, fn, *args, kinds=(ValueError, TypeError), case="", **kwargs):
-    """``fn(*args)`` must raise one of ``kinds`` naming one of the arguments ``names``."""
-    names = (names,) if isinstance(names, str) else tuple(names)
-    what = getattr(fn, "__name__", None) or getattr(fn, "_name", "the call")
-    try:
-        fn(*args, **kwargs)
-    except kinds as exc:
-        assert any(n in first_line(exc) for n in names), (
-            f"{what} with {case} raised {type(exc).__name__}({first_line(exc)!r}); the message "
-            f"should name the argument {' or '.join(map(repr, names))} and say what was expected")
-        return
-    raise AssertionError(f"{what} accepted {case} without complaint: expected "
-                         f"{' or '.join(k.__name__ for k in kinds)} naming "
-                         f"{' or '.join(map(repr, names))}")
 
 
 def fragments(impl, screen, width, height, cull=False, device="cpu"):

@@ -81,7 +81,8 @@ def grade_mutant(mutant: Mutant, root, workdir, timeout: float = 600) -> dict:
     # The mutant is our own code: grade it in-process in the child for speed.
     cmd = [sys.executable, "-m", "course.cli", "grade", "--impl", str(workdir), "--trusted",
            "--lab", str(mutant.lab), "-k", mutant.tests, "--json", str(out)]
-    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=timeout,
+                          check=False)
     if not out.exists():
         raise RuntimeError(f"grading mutant {mutant.name} wrote no results:\n"
                            f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")

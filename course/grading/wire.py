@@ -185,7 +185,7 @@ def decode(obj, *, make_ref=None, allow_functions=False):
     if type(obj) is not dict or TAG not in obj:
         raise TypeError(f"malformed value of type {type(obj).__name__} from the other side")
     kind = obj[TAG]
-    sub = dict(make_ref=make_ref, allow_functions=allow_functions)
+    sub = {"make_ref": make_ref, "allow_functions": allow_functions}
     if kind == "tensor":
         return _decode_tensor(obj, _local_device)
     if kind == "ndarray":

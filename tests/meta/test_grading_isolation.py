@@ -32,7 +32,7 @@ def _grade(name: str, base: Path) -> dict:
                RTCOURSE_TEST_RESULTS=str(out), RTCOURSE_TEST_CWD=str(course))
     proc = subprocess.run(
         [sys.executable, "-m", "course.cli", "grade", "--impl", str(HERE / "hostile" / name),
-         "--json", str(out)], cwd=course, env=env, capture_output=True, text=True, timeout=300)
+         "--json", str(out)], cwd=course, env=env, capture_output=True, text=True, timeout=300, check=False)
     return {"proc": proc, "json": out, "cwd_json": course / "results.json"}
 
 
