@@ -132,11 +132,34 @@ class _Labs:
             worker.stop()
 
 
+_LABS_KEY = pytest.StashKey()
+
+
+def _labs(config) -> _Labs:
+    if _LABS_KEY not in config.stash:
+        config.stash[_LABS_KEY] = _Labs(config)
+    return config.stash[_LABS_KEY]
+
+
+def pytest_collection_finish(session):
+    """Start the sandboxed workers of every lab about to be graded, all at once."""
+    labs = _labs(session.config)
+    if labs.trusted:
+        return
+    names = {getattr(item.module, "LAB_MODULE", None) for item in session.items
+             if hasattr(item, "module") and "impl" in getattr(item, "fixturenames", ())}
+    for name in sorted(n for n in names if n and (labs.folder / f"{n}.py").is_file()):
+        labs.get(name)._worker.launch()
+
+
+def pytest_unconfigure(config):
+    if _LABS_KEY in config.stash:
+        config.stash[_LABS_KEY].close()
+
+
 @pytest.fixture(scope="session")
 def _rtcourse_labs(request):
-    labs = _Labs(request.config)
-    yield labs
-    labs.close()
+    return _labs(request.config)
 
 
 @pytest.fixture

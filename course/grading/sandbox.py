@@ -99,10 +99,13 @@ class Worker:
         self.startup_timeout = startup_timeout
         self.proc = None
         self.conn = None
+        self.starting = False
         self.output: list[str] = []  # what the submission printed, since the last take
 
     # -- process management
-    def start(self, deadline=None):
+    def launch(self):
+        """Start the worker process without waiting for it: starting Python and torch
+        overlaps with whatever the grader does next."""
         as_user = _as_user(os.environ.get("RTCOURSE_WORKER_USER"))
         parent, child = socket.socketpair()
         env = dict(os.environ, PYTHONUNBUFFERED="1")
@@ -114,8 +117,11 @@ class Worker:
         )
         child.close()
         self.conn = Connection(parent.detach())
-        reply = self._receive(deadline or time.monotonic() + self.startup_timeout,
-                              "starting the worker and importing the lab module")
+        self.starting = True
+
+    def _await_ready(self, deadline):
+        reply = self._receive(deadline, "starting the worker and importing the lab module")
+        self.starting = False
         self.output.append(reply.get("output", ""))
 
     def stop(self):
@@ -126,6 +132,7 @@ class Worker:
         if self.conn is not None:
             self.conn.close()
         self.proc = self.conn = None
+        self.starting = False
 
     def take_output(self) -> str:
         text = "".join(self.output)
@@ -136,8 +143,10 @@ class Worker:
     def request(self, message: dict, deadline: float, where: str) -> dict:
         if self.proc is None or self.proc.poll() is not None:
             self.stop()
+            self.launch()
+        if self.starting:
             # Starting Python and torch is the grader's cost, not the test's.
-            self.start(max(deadline, time.monotonic() + self.startup_timeout))
+            self._await_ready(max(deadline, time.monotonic() + self.startup_timeout))
         self.conn.send_bytes(wire.dumps(message))
         reply = self._receive(deadline, where)
         self.output.append(reply.get("output", ""))
