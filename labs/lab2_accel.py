@@ -1,0 +1,965 @@
+"""Lab 2: acceleration structures.
+
+Fill in every function that raises ``NotImplementedError`` (the tasks below); the helpers
+marked "provided" are given. Run the grader for this lab with
+``pytest tests/test_lab2_accel.py`` (add ``-k grid`` for one task). The tests call your
+code on the CPU and, where present, on CUDA: write device- and dtype-agnostic tensor code.
+Traversals are graded on trees the grader builds itself, builders by the structure and
+quality of what they build, so each task scores on its own.
+
+Brute force tests every ray against every triangle: ``N x F`` tests. An acceleration
+structure sorts the triangles into space once, so that a ray tests only the few near its
+path. This lab builds the lecture's three structures as flat tensors, traverses them for
+a whole batch of rays at once and **counts the work** each ray does, so that the trade
+(build time, memory, traversal steps, triangle tests) can be measured instead of guessed.
+
+Batching a traversal
+--------------------
+A GPU runs one thread per ray, each with its own loop. Here one Python loop iteration
+advances *every active ray by one step* (one grid cell, one tree node): the per-ray state
+(current cell or node, stack, closest hit) lives in tensors of the active rays, and rays
+that finish are compacted away, so an iteration costs as much as the rays still running.
+The loop runs as many iterations as the longest ray needs, never one per ray or triangle.
+
+Conventions
+-----------
+* Rays and meshes are ``course.types.Rays`` / ``Mesh`` of one float dtype and device;
+  every structure is a ``dict`` of tensors on that device (plus ``"kind"``), so it can be
+  inspected, saved and sent anywhere.
+* ``intersect(origins, directions, v0, v1, v2, t_min, t_max) -> (t, u, v)`` is the
+  ray/triangle kernel, passed in (Lab 1's contract: broadcasting, ``t = inf`` on a miss,
+  the closed interval ``[t_min, t_max]``). A structure only decides *which* pairs to test.
+* Every ``*_closest_hit`` returns ``(Hits, counters)``: the hit of each ray exactly as
+  brute force with the same ``intersect`` finds it (same triangle; among equal ``t`` the
+  lowest triangle index), and per-ray ``(N,)`` int64 counters: ``"steps"`` (cells or nodes
+  visited) and ``"tests"`` (ray/triangle tests run); the grid adds ``"skipped"`` (tests
+  its mailbox avoided).
+* Degenerate input is a case, not an error: rays with zero (``+0.0`` or ``-0.0``)
+  direction components, rays starting inside or on a cell or box boundary, NaN/inf rays
+  (they miss), one triangle, coincident triangles, flat scenes. Malformed input raises
+  ``ValueError``/``TypeError`` naming the argument.
+
+Tasks (points)
+--------------
+1. Uniform grid: ``grid_resolution``, ``build_grid``, ``grid_closest_hit`` (3D DDA,
+   mailboxing, the cell-interval test)                                         (4)
+2. BVH builds: ``morton_codes``, ``build_lbvh``, ``build_sah_bvh`` (binned SAH)  (3)
+3. BVH traversal: ``bvh_closest_hit`` (stack, near child first),
+   ``bvh_skip_indices`` and ``bvh_closest_hit_stackless``                      (3)
+4. kd-tree: ``build_kdtree`` (SAH over triangle bound planes), ``kd_pack`` /
+   ``kd_unpack`` (the 8-byte node), ``kd_closest_hit`` (early exit)            (3)
+5. ``brute_force_closest_hit`` and ``closest_hit``: the common entry point and the
+   work counters that show the trade                                          (2)
+
+What each structure buys, measured
+----------------------------------
+``bench/lab2_accel.py --device cpu --threads 1`` on a shared 2-core CPU, 48 x 48 primary
+rays; speed-ups over brute force in the same run (on a CPU only such ratios mean
+anything, and repeated runs vary by about 30%). Every row returns the brute-force hits
+exactly: the structures trade build time and memory for speed, never accuracy. The
+stackless BVH walk visits 3x the nodes of the stack traversal (23 vs 7 on the bunny).
+
+==========================  ======================  ======================  ======================
+                            uniform grid (λ = 2)    BVH: SAH / LBVH         kd-tree (SAH)
+==========================  ======================  ======================  ======================
+build, bunny (69K)          0.04 s: one sort of     1.0 s / 0.09 s          5.9 s: an event sweep
+                            (triangle, cell) pairs                          per level
+bunny: speed-up, work per   x660; 11.8 cells, 9.6   x530 / x470; 7 / 8      x310; 19 nodes, 5.6
+ray                         tests                   nodes, 1.5 tests        tests
+teapot in a stadium (3.9K)  x0.8: a ray at the      x35 / x13 (the LBVH's   x12; 18 tests
+                            teapot tests all 2.9K   Morton grid spans the
+                            of its triangles        stadium)
+repeated tests              big triangles span      none: every triangle    straddlers sit in
+                            cells: the mailbox      in one leaf             several leaves
+                            saves 20-25%
+coincident triangles        one cell, all tested    median fallback: no     one leaf: no plane
+                                                    endless split           inside the box
+axis-parallel rays, +-0.0   step 0, t_next = inf    1/+-0 = +-inf slabs     t_split = +-inf: the
+                                                                            near child
+==========================  ======================  ======================  ======================
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from course.raymath import gamma
+from course.types import Hits, Mesh, Rays
+
+STRUCTURES = ("grid", "bvh", "kd")
+"""The structures this lab builds, by their ``"kind"``."""
+
+COUNTERS = ("steps", "tests")
+"""The per-ray work counters every traversal returns (the grid adds ``"skipped"``)."""
+
+
+# =======================================================================================
+# Provided helpers (not tasks): input checks, bounds, the slab test, pairs, closest hits
+
+
+def check_trace_inputs(rays, mesh, intersect) -> None:
+    """Provided: validate the arguments every ``*_closest_hit`` takes.
+
+    Raises TypeError/ValueError naming ``rays``, ``mesh`` or ``intersect``.
+    """
+    if not isinstance(rays, Rays):
+        raise TypeError(f"rays: expected course.types.Rays, got {type(rays).__name__}")
+    check_mesh(mesh)
+    rays.validate()
+    if mesh.dtype != rays.dtype:
+        raise TypeError(f"mesh: expected vertices of dtype {rays.dtype} like rays, got {mesh.dtype}")
+    if mesh.device != rays.device:
+        raise ValueError(f"mesh: expected a mesh on {rays.device} like rays, got {mesh.device}")
+    if not callable(intersect):
+        raise TypeError("intersect: expected a callable intersect(origins, directions, v0, v1, "
+                        f"v2, t_min, t_max) -> (t, u, v), got {type(intersect).__name__}")
+
+
+def check_mesh(mesh) -> None:
+    """Provided: ``mesh`` must be a valid ``course.types.Mesh`` (TypeError/ValueError)."""
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+    mesh.validate()
+
+
+STRUCTURE_KEYS = {
+    "grid": ("lo", "hi", "resolution", "cell_start", "cell_count", "triangles",
+             "tri_cell_lo", "tri_cell_hi"),
+    "bvh": ("lo", "hi", "left", "right", "first", "count", "triangles"),
+    "kd": ("lo", "hi", "split", "axis", "left", "first", "count", "triangles"),
+}
+"""The tensors each kind of structure holds (see its ``build_*`` function)."""
+
+
+def check_structure(structure, kind: str, name: str, mesh: Mesh) -> None:
+    """Provided: ``structure`` must be a ``kind`` dict built for a mesh like ``mesh``.
+
+    Raises ValueError/TypeError naming ``name`` (the argument) and what is missing.
+    """
+    if not isinstance(structure, dict) or structure.get("kind") != kind:
+        got = structure.get("kind") if isinstance(structure, dict) else type(structure).__name__
+        raise ValueError(f"{name}: expected a dict with kind={kind!r} (from build_...), "
+                         f"got {got!r}")
+    for key in STRUCTURE_KEYS[kind]:
+        x = structure.get(key)
+        if not isinstance(x, torch.Tensor):
+            raise TypeError(f"{name}: expected a tensor under {key!r}, got {type(x).__name__}")
+        if x.device != mesh.device:
+            raise ValueError(f"{name}: {key!r} is on {x.device}, the mesh on {mesh.device}")
+    if structure["triangles"].numel() and int(structure["triangles"].max()) >= mesh.num_faces:
+        raise ValueError(f"{name}: refers to triangle {int(structure['triangles'].max())}, "
+                         f"but the mesh has {mesh.num_faces}: built for another mesh?")
+
+
+def _positive_int(value, name: str, lo: int = 1, hi: int | None = None) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (
+            hi is not None and value > hi):
+        span = f"in {lo}..{hi}" if hi is not None else f">= {lo}"
+        raise ValueError(f"{name}: expected an int {span}, got {value!r}")
+
+
+def check_grid_inputs(extent, num_triangles, density) -> list[float]:
+    """Provided: validate :func:`grid_resolution`'s arguments; returns ``extent`` as 3 floats."""
+    values = extent.tolist() if isinstance(extent, torch.Tensor) else extent
+    try:
+        values = [float(x) for x in values]
+    except (TypeError, ValueError):
+        raise ValueError(f"extent: expected 3 finite non-negative sizes, got {extent!r}") from None
+    if len(values) != 3 or not all(math.isfinite(x) and x >= 0 for x in values):
+        raise ValueError(f"extent: expected 3 finite non-negative sizes, got {extent!r}")
+    _positive_int(num_triangles, "num_triangles")
+    if not (isinstance(density, (int, float)) and math.isfinite(density) and density > 0):
+        raise ValueError(f"density: expected a positive number, got {density!r}")
+    return values
+
+
+def check_resolution(resolution) -> None:
+    """Provided: ``resolution`` must be None or 3 positive ints."""
+    if resolution is not None and (
+            not isinstance(resolution, (tuple, list)) or len(resolution) != 3
+            or not all(isinstance(r, int) and not isinstance(r, bool) and r >= 1
+                       for r in resolution)):
+        raise ValueError(f"resolution: expected 3 positive ints (rx, ry, rz), got {resolution!r}")
+
+
+def check_morton_inputs(points, lo, hi, bits) -> None:
+    """Provided: validate :func:`morton_codes`'s arguments."""
+    if not isinstance(points, torch.Tensor) or not points.is_floating_point():
+        raise TypeError(f"points: expected a float tensor of shape (N, 3), got "
+                        f"{getattr(points, 'dtype', type(points).__name__)}")
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points: expected shape (N, 3), got {tuple(points.shape)}")
+    for name, x in (("lo", lo), ("hi", hi)):
+        if not isinstance(x, torch.Tensor) or x.shape != (3,):
+            raise ValueError(f"{name}: expected a (3,) tensor, got "
+                             f"{getattr(x, 'shape', type(x).__name__)}")
+    _positive_int(bits, "bits", 1, 21)  # 3 * 21 = 63 bits fit an int64
+
+
+def check_leaf_size(leaf_size) -> None:
+    """Provided: ``leaf_size`` must be a positive int."""
+    _positive_int(leaf_size, "leaf_size")
+
+
+def check_bins(bins) -> None:
+    """Provided: ``bins`` must be an int in 2..1024."""
+    _positive_int(bins, "bins", 2, 1024)
+
+
+def check_links(bvh) -> None:
+    """Provided: ``bvh`` must hold ``left`` and ``right`` (M,) int64 tensors."""
+    if not isinstance(bvh, dict) or not all(isinstance(bvh.get(k), torch.Tensor)
+                                            for k in ("left", "right")):
+        raise ValueError("bvh: expected a BVH dict with 'left' and 'right' tensors")
+
+
+def check_kd_knobs(mesh, max_depth, traversal_cost, intersect_cost, empty_bonus) -> int:
+    """Provided: validate :func:`build_kdtree`'s knobs; returns ``max_depth`` with its
+    default ``round(8 + 1.3 log2 F)`` (pbrt's) filled in."""
+    if max_depth is None:
+        max_depth = round(8 + 1.3 * math.log2(mesh.num_faces))
+    _positive_int(max_depth, "max_depth", 0, 60)
+    for name, value in (("traversal_cost", traversal_cost), ("intersect_cost", intersect_cost)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}: expected a positive number, got {value!r}")
+    if not (isinstance(empty_bonus, (int, float)) and 0 <= empty_bonus <= 1):
+        raise ValueError(f"empty_bonus: expected a number in [0, 1], got {empty_bonus!r}")
+    return max_depth
+
+
+def check_kd_fields(tree) -> None:
+    """Provided: ``tree`` must hold the kd fields :func:`kd_pack` reads."""
+    if not isinstance(tree, dict):
+        raise TypeError(f"tree: expected a kd dict, got {type(tree).__name__}")
+    for key in ("split", "axis", "left", "first", "count"):
+        if not isinstance(tree.get(key), torch.Tensor):
+            raise TypeError(f"tree: expected a tensor under {key!r}")
+
+
+def check_packed(packed) -> None:
+    """Provided: ``packed`` must be an (M, 2) int32 tensor."""
+    if not isinstance(packed, torch.Tensor) or packed.dtype != torch.int32:
+        raise TypeError(f"packed: expected an int32 tensor of shape (M, 2), got "
+                        f"{getattr(packed, 'dtype', type(packed).__name__)}")
+    if packed.ndim != 2 or packed.shape[1] != 2:
+        raise ValueError(f"packed: expected shape (M, 2), got {tuple(packed.shape)}")
+
+
+def check_memory_budget(memory_budget_bytes) -> None:
+    """Provided: ``memory_budget_bytes`` must be a positive int."""
+    _positive_int(memory_budget_bytes, "memory_budget_bytes")
+
+
+def triangle_bounds(mesh: Mesh) -> tuple[torch.Tensor, torch.Tensor]:
+    """Provided: ``(lo, hi)``, each (F, 3): the axis-aligned bounds of every triangle."""
+    corners = mesh.triangles()
+    return corners.amin(dim=1), corners.amax(dim=1)
+
+
+def surface_area(lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
+    """Provided: ``2 (dx dy + dy dz + dz dx)`` of boxes ``(..., 3)``; 0 for empty boxes
+    (``lo > hi``, e.g. the ``+inf``/``-inf`` bounds of an empty bin)."""
+    ext = (hi - lo).clamp(min=0).nan_to_num(0.0, posinf=0.0)
+    return 2 * (ext[..., 0] * ext[..., 1] + ext[..., 1] * ext[..., 2] + ext[..., 2] * ext[..., 0])
+
+
+def slab_test(origins, inv_directions, lo, hi, t_lo, t_hi):
+    """Provided: rays against axis-aligned boxes (Lab 1's conservative slab test).
+
+    origins, inv_directions: (n, 3) with ``inv_directions = 1 / directions`` (``1/+-0 =
+    +-inf``); lo, hi: (n, 3) or (3,) boxes; t_lo, t_hi: (n,). Returns ``(t_near, t_far,
+    hit)``, each (n,): the ray's interval inside the box clipped to ``[t_lo, t_hi]``.
+
+    NaN from ``0 * inf`` (a ray in a slab plane with a zero direction component) is
+    dropped by ``fmax``/``fmin``; ``t_far`` is scaled by ``1 + 2 gamma(3)`` (Ize 2013) so
+    rounding never turns a hit into a miss; NaN/inf rays and empty boxes never hit.
+    """
+    t0 = (lo - origins) * inv_directions
+    t1 = (hi - origins) * inv_directions
+    near = torch.minimum(t0, t1)
+    far = torch.maximum(t0, t1) * (1 + 2 * gamma(3, t0.dtype))
+    t_near = torch.fmax(t_lo, torch.fmax(torch.fmax(near[..., 0], near[..., 1]), near[..., 2]))
+    t_far = torch.fmin(t_hi, torch.fmin(torch.fmin(far[..., 0], far[..., 1]), far[..., 2]))
+    valid = (torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1)
+             & (lo <= hi).all(-1))
+    return t_near, t_far, (t_near <= t_far) & (t_near < math.inf) & valid
+
+
+def expand_ranges(first: torch.Tensor, count: torch.Tensor):
+    """Provided: every element of the ranges ``[first[i], first[i] + count[i])``.
+
+    first, count: (k,) int64. Returns ``(owner, index)``, each (sum(count),) int64: range
+    ``owner[j]`` contains element ``index[j]``; owners ascending, indices ascending within
+    each range. The batched form of ``for i: for j in range(first[i], first[i] + count[i])``
+    (a cell's triangle list, a leaf's triangles, a node's primitives).
+    """
+    owner = torch.repeat_interleave(torch.arange(len(count), device=count.device), count)
+    offset = torch.cumsum(count, 0) - count
+    index = first[owner] + torch.arange(len(owner), device=count.device) - offset[owner]
+    return owner, index
+
+
+MAX_PAIRS = 2**20
+"""(ray, triangle) pairs tested at once, at most: about 256 bytes each (corners, indices and
+the kernel's temporaries), so memory stays bounded however many triangles a cell or leaf
+holds (a grid cell around a whole teapot, for every ray)."""
+
+
+def pair_chunks(first: torch.Tensor, count: torch.Tensor, max_pairs: int = MAX_PAIRS):
+    """Provided: :func:`expand_ranges` in chunks of at most ``max_pairs`` elements.
+
+    Yields ``(owner, index)`` like ``expand_ranges(first, count)``, a chunk at a time (a range
+    may be split between two chunks), so only one chunk is ever in memory.
+    """
+    end = torch.cumsum(count, 0)
+    total = int(end[-1]) if len(end) else 0
+    for p0 in range(0, total, max_pairs):
+        j = torch.arange(p0, min(total, p0 + max_pairs), device=count.device)
+        owner = torch.searchsorted(end, j, right=True)  # the first range ending after j
+        yield owner, first[owner] + j - (end - count)[owner]
+
+
+def test_ranges(intersect, rays: Rays, corners: torch.Tensor, ray: torch.Tensor,
+                first: torch.Tensor, count: torch.Tensor, triangles: torch.Tensor,
+                closest: dict, counters: dict) -> None:
+    """Provided: test ray ``ray[i]`` against ``triangles[first[i] : first[i] + count[i]]``
+    for every ``i`` (its leaf's list), in chunks, with :func:`intersect_pairs`."""
+    for owner, k in pair_chunks(first, count):
+        intersect_pairs(intersect, rays, corners, ray[owner], triangles[k], closest, counters)
+
+
+def new_closest(n: int, like: torch.Tensor) -> dict:
+    """Provided: the closest-hit state of ``n`` rays, all missed (dtype/device of ``like``)."""
+    miss = Hits.miss(n, dtype=like.dtype, device=like.device)
+    return {"t": miss.t, "triangle": miss.triangle, "u": miss.u, "v": miss.v}
+
+
+def intersect_pairs(intersect, rays: Rays, corners: torch.Tensor, ray: torch.Tensor,
+               tri: torch.Tensor, closest: dict, counters: dict) -> None:
+    """Provided: run ``intersect`` on the (ray, triangle) pairs and keep each ray's closest.
+
+    ray, tri: (P,) int64 indices into ``rays`` and ``corners`` (F, 3, 3). Updates
+    ``closest`` (from :func:`new_closest`) in place: a pair replaces a ray's hit when its
+    ``t`` is smaller, or equal with a lower triangle index (the brute-force order), and
+    adds each ray's number of pairs to ``counters["tests"]``.
+    """
+    if len(ray) == 0:
+        return
+    tri_corners = corners[tri]
+    t, u, v = intersect(rays.origins[ray], rays.directions[ray], tri_corners[:, 0],
+                        tri_corners[:, 1], tri_corners[:, 2], rays.t_min[ray], rays.t_max[ray])
+    counters["tests"].index_add_(0, ray, torch.ones_like(ray))
+    best_t, best_tri = closest["t"], closest["triangle"]
+    hit = t < math.inf
+    # The nearest t per ray over the old hit and all pairs ...
+    nearest = best_t.scatter_reduce(0, ray, t, "amin")
+    # ... and among those at that t, the lowest triangle index.
+    candidate = hit & (t == nearest[ray])
+    big = torch.iinfo(torch.int64).max
+    lowest = torch.where((best_t == nearest) & (best_tri >= 0), best_tri, big)
+    lowest = lowest.scatter_reduce(0, ray[candidate], tri[candidate], "amin")
+    win = candidate & (tri == lowest[ray])
+    winners = ray[win]
+    closest["t"][winners] = t[win]
+    closest["triangle"][winners] = tri[win]
+    closest["u"][winners] = u[win]
+    closest["v"][winners] = v[win]
+
+
+def new_counters(n: int, device, names=COUNTERS) -> dict:
+    """Provided: zeroed per-ray counters ``{name: (n,) int64}``."""
+    return {name: torch.zeros(n, dtype=torch.int64, device=device) for name in names}
+
+
+def as_hits(closest: dict) -> Hits:
+    """Provided: the closest-hit state as ``course.types.Hits``."""
+    return Hits(t=closest["t"], triangle=closest["triangle"], u=closest["u"], v=closest["v"])
+
+
+def add_count(counter: torch.Tensor, ray: torch.Tensor) -> None:
+    """Provided: ``counter[r] += 1`` for every entry ``r`` of ``ray`` (repeats count)."""
+    counter.index_add_(0, ray, torch.ones_like(ray))
+
+
+# =======================================================================================
+# Task 1: the uniform grid
+
+
+def grid_resolution(extent, num_triangles: int, density: float = 2.0,
+                    max_cells: int = 2**22) -> tuple[int, int, int]:
+    """Cells per axis for a grid over a box of size ``extent``: the classic heuristic.
+
+    extent: 3 non-negative numbers (a sequence or a (3,) tensor), the box's size;
+    num_triangles: N >= 1; density: lambda > 0, cells per triangle; max_cells: a cap.
+    Returns ``(rx, ry, rz)``, Python ints >= 1.
+
+    Aim for about ``lambda N`` cells (at most ``max_cells``) that are as close to cubes as
+    possible: with ``k`` cells per unit length, ``r_i = round(k * extent_i)`` and
+    ``k = (lambda N / prod extent_i) ** (1/3)``. A thin axis (``k * extent_i < 1``, e.g.
+    a flat scene) gets one cell and drops out: solve for ``k`` again over the other axes
+    (``k = (lambda N / prod of their extents) ** (1/d)`` for ``d`` remaining axes).
+
+    Hints: Plain Python: ``math.prod`` and a loop that drops thin axes (at most three
+    rounds).
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    extent = check_grid_inputs(extent, num_triangles, density)  # as 3 Python floats
+    raise NotImplementedError("not implemented yet: grid_resolution (task 1)")
+
+
+def build_grid(mesh: Mesh, resolution=None, density: float = 2.0) -> dict:
+    """A uniform grid over the mesh, with one triangle list per cell (CSR layout).
+
+    mesh: F triangles; resolution: ``(rx, ry, rz)`` cells, or None for
+    ``grid_resolution(hi - lo, F, density)``. Returns a dict on the mesh's device:
+
+    ==============  ===================  ===============================================
+    ``kind``        ``"grid"``
+    ``lo, hi``      (3,) float           the grid's box: the scene bounds, padded
+    ``resolution``  (3,) int64           ``(rx, ry, rz)``; cell ``(x, y, z)`` has the
+                                         linear index ``x + rx * (y + ry * z)``
+    ``cell_start``  (C,) int64           cell ``c``'s triangles are ``triangles[
+    ``cell_count``  (C,) int64           cell_start[c] : cell_start[c] + cell_count[c]]``
+    ``triangles``   (K,) int64           triangle indices, grouped by cell, ascending
+                                         within a cell
+    ``tri_cell_lo``  (F, 3) int64        the box of cells triangle ``f`` is listed in:
+    ``tri_cell_hi``  (F, 3) int64        ``tri_cell_lo[f] <= (x, y, z) <= tri_cell_hi[f]``
+    ==============  ===================  ===============================================
+
+    A triangle goes into every cell its bounds overlap: with cell size ``w = (hi - lo) /
+    r``, the cells ``floor((tri_lo - pad - lo) / w)`` to ``floor((tri_hi + pad - lo) / w)``
+    (clamped to the grid). The small ``pad`` (and the padded box) keeps rounding from
+    dropping a triangle that touches a cell boundary, and gives a flat scene a thickness.
+
+    Build without a loop over triangles or cells: the count of cells per triangle, then
+    one ``repeat_interleave`` into (triangle, cell) pairs, one stable sort by cell, and a
+    ``bincount`` for ``cell_count`` (``cell_start`` is its exclusive prefix sum).
+
+    Hints: ``triangle_bounds(mesh)`` gives the bounds; ``expand_ranges(torch.zeros_like(n), n)``
+    enumerates ``n[f]`` cells per triangle ``f``; split each local index into x, y, z with ``%``
+    and ``//``; ``torch.sort(cell_id, stable=True)`` and ``torch.bincount(cell_id,
+    minlength=C)`` make the CSR arrays.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_mesh(mesh)
+    check_resolution(resolution)
+    raise NotImplementedError("not implemented yet: build_grid (task 1)")
+
+
+def grid_closest_hit(rays: Rays, mesh: Mesh, grid: dict, intersect, mailbox: bool = True):
+    """Closest hits through a uniform grid: 3D DDA (Amanatides & Woo 1987) per ray.
+
+    rays: N rays; mesh: the grid's mesh; grid: from :func:`build_grid`; intersect: the
+    triangle kernel; mailbox: skip a triangle this ray has already tested.
+    Returns ``(Hits, counters)`` with counters ``"steps"`` (cells visited), ``"tests"``
+    and ``"skipped"`` (tests the mailbox avoided), each (N,) int64.
+
+    1. Clip each ray to the grid's box (``slab_test``): ``[t_enter, t_exit]``; rays that
+       miss it are done. The first cell is the one holding ``o + t_enter d``, computed with
+       ``floor`` and clamped into the grid (rounding may put the point just outside).
+    2. Per axis: ``step = sign(d)`` (0 for ``+0.0`` and ``-0.0``) and ``t_next``, the ``t``
+       where the ray crosses the cell's next boundary on that axis: the plane
+       ``lo + (cell + 1) w`` when stepping up, ``lo + cell w`` when stepping down, ``inf``
+       on an axis with ``step == 0`` (never ``0 * inf = NaN``). Computing ``t_next`` from
+       the cell index every step (instead of adding ``t_delta``) keeps long walks from
+       drifting off the cell boundaries.
+    3. Each iteration, every active ray visits its cell ``[t_in, t_out]``,
+       ``t_out = min(t_next, t_exit)``: it tests the cell's triangles and keeps the
+       closest hit. A hit only ends the walk if ``t <= t_out``: a triangle that spans
+       several cells can be hit *beyond* this cell, and a nearer triangle may sit in the
+       next cell (the classic grid bug is to stop at the first hit). Keep such a hit as
+       the best so far, but walk on.
+    4. Then step along the axis of the smallest ``t_next``: ``cell[axis] += step[axis]``.
+       A ray that leaves the grid or passes ``t_exit`` is done.
+
+    Mailboxing: a big triangle is listed in many cells, and without a mailbox a ray tests
+    it again in each ("7 times the same triangle in 15 voxels"). Exact and O(1) per ray:
+    a triangle's cells form a box (``tri_cell_lo..tri_cell_hi``), and a DDA walk, being
+    monotone on every axis, never re-enters a box it left; so the triangle was already
+    tested iff the ray's *previous* cell lies inside the triangle's box of cells.
+
+    Contract: the same hits as brute force with ``intersect`` (same triangle, same
+    ``t``), whatever the resolution. At most ``rx + ry + rz`` steps per ray.
+
+    Hints: Keep, per active ray, its index, origin, direction, ``1 / d``, ``t_exit``, cell
+    ``(a, 3)`` int64, step ``(a, 3)`` and previous cell ``(a, 3)`` (-1: none), and compact them
+    all with ``[keep]`` at the end of each iteration. ``expand_ranges(cell_start[c],
+    cell_count[c])`` lists the (ray, triangle) pairs of the cells; ``intersect_pairs`` tests them
+    and keeps the closest hits. Loop at most ``rx + ry + rz + 1`` times.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_trace_inputs(rays, mesh, intersect)
+    check_structure(grid, "grid", "grid", mesh)
+    raise NotImplementedError("not implemented yet: grid_closest_hit (task 1)")
+
+
+# =======================================================================================
+# Task 2: BVH builds
+
+
+def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
+                 bits: int = 10) -> torch.Tensor:
+    """Morton (Z-order) codes of points in the box ``[lo, hi]``.
+
+    points: (N, 3) float; lo, hi: (3,) float; bits: bits per axis, 1..21 (10 gives the
+    classic 30-bit code). Returns (N,) int64.
+
+    1. Quantise each coordinate to ``bits`` bits: ``q = floor((p - lo) / (hi - lo) * 2^bits)``
+       clamped to ``[0, 2^bits - 1]`` (``q = 0`` on an axis where ``hi == lo``; NaN -> 0).
+    2. Interleave, x highest: bit ``i`` of ``qx`` goes to bit ``3i + 2`` of the code, of
+       ``qy`` to ``3i + 1``, of ``qz`` to ``3i`` (Karras 2012: ``expandBits(x) * 4 +
+       expandBits(y) * 2 + expandBits(z)``).
+
+    Sorting by the code puts points that are close in space close in the array, so a
+    range of sorted triangles is a compact cluster: the whole idea of the LBVH.
+
+    Hints: ``torch.floor``, ``.clamp``, ``.long()``; interleave with a loop over the bits:
+    ``((q >> i) & 1) << (3 * i + shift)``.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_morton_inputs(points, lo, hi, bits)
+    raise NotImplementedError("not implemented yet: morton_codes (task 2)")
+
+
+def assemble_bvh(order, start, end, left, right, depth, tri_lo, tri_hi) -> dict:
+    """Provided: the flat, depth-first BVH of a tree built level by level.
+
+    order: (F,) int64, the triangles in leaf order; start, end: (M,) int64, node ``i``
+    holds ``order[start[i]:end[i]]``; left, right: (M,) int64 child ids (-1 for leaves);
+    depth: (M,) int64 (root 0). Node ids are in creation order, parents before children.
+    tri_lo, tri_hi: (F, 3) triangle bounds.
+
+    Returns the BVH dict (see :func:`build_lbvh`) with the nodes renumbered depth first
+    (pre-order: a node, its left subtree, its right subtree), the order a stackless walk
+    reads them in. Bounds come bottom-up: leaves from their triangles, parents from their
+    two children, one tree level at a time; so every box contains its children exactly.
+    """
+    m, device = len(start), start.device
+    leaf = left < 0
+    max_depth = int(depth.max())
+    levels = [(depth == k).nonzero()[:, 0] for k in range(max_depth + 1)]
+    node_lo = torch.full((m, 3), math.inf, dtype=tri_lo.dtype, device=device)
+    node_hi = torch.full((m, 3), -math.inf, dtype=tri_lo.dtype, device=device)
+    leaves = leaf.nonzero()[:, 0]
+    owner, k = expand_ranges(start[leaves], end[leaves] - start[leaves])
+    index = leaves[owner, None].expand(-1, 3)
+    node_lo.scatter_reduce_(0, index, tri_lo[order[k]], "amin")
+    node_hi.scatter_reduce_(0, index, tri_hi[order[k]], "amax")
+    size = torch.ones(m, dtype=torch.int64, device=device)
+    for nodes in reversed(levels):
+        nodes = nodes[~leaf[nodes]]
+        a, b = left[nodes], right[nodes]
+        node_lo[nodes] = torch.minimum(node_lo[a], node_lo[b])
+        node_hi[nodes] = torch.maximum(node_hi[a], node_hi[b])
+        size[nodes] = 1 + size[a] + size[b]
+    # Pre-order positions: the left child right after its parent, the right child after
+    # the whole left subtree.
+    pos = torch.zeros(m, dtype=torch.int64, device=device)
+    for nodes in levels:
+        nodes = nodes[~leaf[nodes]]
+        pos[left[nodes]] = pos[nodes] + 1
+        pos[right[nodes]] = pos[nodes] + 1 + size[left[nodes]]
+    out = {"kind": "bvh"}
+    out["lo"] = torch.empty_like(node_lo).index_copy_(0, pos, node_lo)
+    out["hi"] = torch.empty_like(node_hi).index_copy_(0, pos, node_hi)
+    minus = torch.full_like(left, -1)
+    out["left"] = minus.index_copy(0, pos, torch.where(leaf, -1, pos[left.clamp(min=0)]))
+    out["right"] = minus.index_copy(0, pos, torch.where(leaf, -1, pos[right.clamp(min=0)]))
+    out["first"] = torch.zeros_like(start).index_copy_(0, pos, torch.where(leaf, start, 0))
+    out["count"] = torch.zeros_like(start).index_copy_(0, pos, torch.where(leaf, end - start, 0))
+    out["triangles"] = order
+    return out
+
+
+class TreeLevels:
+    """Provided: the nodes of a BVH built level by level, for :func:`assemble_bvh`.
+
+    Node ``i`` holds the triangles ``order[start[i] : end[i]]`` of the build's triangle
+    order; the root (id 0) holds all ``f``. :meth:`split` gives nodes of the current level
+    their two children, :meth:`finish` assembles the flat BVH once no node splits.
+    """
+
+    def __init__(self, f: int, device):
+        zero = torch.zeros(1, dtype=torch.int64, device=device)
+        self.starts, self.ends, self.depths = [zero], [zero + f], [zero]
+        self.children = []  # per level: (parents, left ids, right ids)
+        self.count = 1
+
+    def ranges(self, nodes: torch.Tensor):
+        """``(start, end)`` of ``nodes`` (k,) int64 ids, each (k,) int64."""
+        return torch.cat(self.starts)[nodes], torch.cat(self.ends)[nodes]
+
+    def split(self, nodes: torch.Tensor, mid: torch.Tensor, depth: int) -> torch.Tensor:
+        """Split each of ``nodes`` (k,), at tree depth ``depth``, into ``[start, mid)`` and
+        ``[mid, end)``; returns the (2k,) children ids, left and right interleaved."""
+        start, end = self.ranges(nodes)
+        k = len(nodes)
+        ids = self.count + torch.arange(2 * k, device=nodes.device)
+        self.children.append((nodes, ids[0::2], ids[1::2]))
+        self.starts.append(torch.stack((start, mid), 1).reshape(-1))
+        self.ends.append(torch.stack((mid, end), 1).reshape(-1))
+        self.depths.append(torch.full((2 * k,), depth + 1, dtype=torch.int64, device=nodes.device))
+        self.count += 2 * k
+        return ids
+
+    def finish(self, order: torch.Tensor, tri_lo: torch.Tensor, tri_hi: torch.Tensor) -> dict:
+        """The BVH dict of the tree; ``order`` (F,): the triangles in their final order."""
+        start, end = torch.cat(self.starts), torch.cat(self.ends)
+        left, right = torch.full_like(start, -1), torch.full_like(start, -1)
+        for parents, a, b in self.children:
+            left[parents], right[parents] = a, b
+        return assemble_bvh(order, start, end, left, right, torch.cat(self.depths), tri_lo,
+                            tri_hi)
+
+
+def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
+    """A linear BVH (Lauterbach et al. 2009; Karras 2012): sort by Morton code, then split.
+
+    mesh: F triangles; leaf_size: a node with at most this many triangles is a leaf;
+    bits: Morton bits per axis. Returns the BVH dict (on the mesh's device):
+
+    =============  ==============  =========================================================
+    ``kind``       ``"bvh"``
+    ``lo, hi``     (M, 3) float    node bounds (contain their children and triangles)
+    ``left``       (M,) int64      left child, ``-1`` for a leaf; **depth-first layout**:
+                                   the left child of node ``i`` is ``i + 1``
+    ``right``      (M,) int64      right child (after the whole left subtree), -1 for a leaf
+    ``first``      (M,) int64      a leaf holds ``triangles[first : first + count]``
+    ``count``      (M,) int64      0 for inner nodes
+    ``triangles``  (F,) int64      triangle indices in leaf order: each exactly once
+    =============  ==============  =========================================================
+
+    1. Morton codes of the triangles' bounds centres (in the centres' bounding box), and a
+       stable sort by code: ``order`` (ties keep triangle order).
+    2. Level by level, for every node of the level at once: a node ``[s, e)`` of the
+       sorted codes with more than ``leaf_size`` triangles splits where its highest
+       differing bit flips: with ``b = highest set bit of codes[s] ^ codes[e - 1]``, the
+       first index whose code has bit ``b`` set, i.e. ``searchsorted(codes,
+       (codes[e - 1] >> b) << b)``. Equal codes (no differing bit): split in the middle.
+    3. ``TreeLevels`` (provided) records the levels and, through ``assemble_bvh``, turns
+       them into the flat depth-first layout with bounds computed bottom-up.
+
+    The tree's quality depends on the code's resolution only: a bad split wastes node
+    visits, never correctness.
+
+    Hints: ``TreeLevels`` (provided) records the levels: ``levels.ranges(nodes)`` gives their
+    ranges, ``levels.split(nodes, mid, depth)`` the children's ids, and
+    ``levels.finish(order, tri_lo, tri_hi)`` assembles the dict. ``torch.frexp(x.double()).exponent - 1`` is the highest set bit of ``x > 0``;
+    ``torch.searchsorted`` finds the first code ``>=`` a value.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_mesh(mesh)
+    check_leaf_size(leaf_size)
+    raise NotImplementedError("not implemented yet: build_lbvh (task 2)")
+
+
+def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
+    """A BVH by the binned surface area heuristic (Wald 2007), built level by level.
+
+    mesh: F triangles; leaf_size: nodes of at most this many triangles become leaves;
+    bins: candidate split positions per axis (2..1024). Returns the BVH dict of
+    :func:`build_lbvh`.
+
+    Every node of a level at once:
+
+    1. Bin each triangle by its centroid ``c`` (the centre of its bounds): on each axis,
+       ``bin = floor(bins * (c - cmin) / (cmax - cmin))`` clamped to ``[0, bins - 1]``,
+       with the node's centroid bounds ``cmin, cmax`` (bin 0 where ``cmax == cmin``).
+    2. Per (node, axis, bin): the number of triangles and the union of their **triangle
+       bounds** (``scatter_reduce`` amin/amax), then prefix (left) and suffix (right)
+       unions and counts over the bins (``cummin``/``cummax``/``cumsum``).
+    3. The cost of splitting after bin ``k``: ``A(left) N(left) + A(right) N(right)``
+       (``A`` = surface area); invalid where a side is empty. Take the cheapest (axis, k)
+       over the node; triangles with ``bin[axis] <= k`` go left (a stable partition of
+       the node's range of ``order``: ``argsort`` by (node, side), stable).
+    4. No valid split (all centroids in one bin on every axis: coincident triangles):
+       split the range in the middle instead, so the build always ends.
+
+    Hints: ``expand_ranges(start, count)`` lists each node's primitives (node, slot);
+    number the (node, axis, bin) slots ``(node * 3 + axis) * bins + bin`` for ``index_add_``
+    and ``scatter_reduce``; ``cummin``/``cummax``/``cumsum`` along the bins (and ``.flip`` for
+    the right side); ``surface_area`` is provided. ``TreeLevels`` as in :func:`build_lbvh`.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_mesh(mesh)
+    check_leaf_size(leaf_size)
+    check_bins(bins)
+    raise NotImplementedError("not implemented yet: build_sah_bvh (task 2)")
+
+
+# =======================================================================================
+# Task 3: BVH traversal
+
+
+def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
+    """Closest hits through a BVH with a per-ray stack, near child first.
+
+    rays: N rays; mesh: the BVH's mesh; bvh: from :func:`build_lbvh`/:func:`build_sah_bvh`
+    (any valid BVH: inner nodes have two children, leaves a triangle range); intersect:
+    the triangle kernel. Returns ``(Hits, counters)``: ``"steps"`` = nodes visited (popped
+    and not culled), ``"tests"`` = triangle tests.
+
+    The stack is a tensor ``(active rays, depth)`` of node ids and their entry ``t``, with
+    a stack pointer per ray (a GPU thread keeps it in local memory: 64 entries). Start with
+    the root on the stack where the ray hits the root's box. Each iteration, every active
+    ray pops one entry:
+
+    * culled: its entry ``t`` is beyond the closest hit found since it was pushed;
+    * a leaf: test its triangles (``test_ranges``);
+    * an inner node: slab-test both children against ``[t_min, min(t_max, closest t)]``
+      and push those hit, **far child first**, so the near one is popped next: the near
+      side's hit then culls the far side.
+
+    A ray with an empty stack is done. The stack grows (a new column) if a ray would
+    overflow it; a tree of depth D never needs more than D + 1 entries.
+
+    Hints: ``slab_test``, ``expand_ranges``, ``intersect_pairs``, ``new_closest``,
+    ``new_counters`` and ``as_hits`` are provided. Push with ``stack[rows, sp[rows]] = node``
+    then ``sp[rows] += 1``; a node is pushed at most once per ray, so ``2 M + 1`` iterations
+    bound the loop.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_trace_inputs(rays, mesh, intersect)
+    check_structure(bvh, "bvh", "bvh", mesh)
+    raise NotImplementedError("not implemented yet: bvh_closest_hit (task 3)")
+
+
+def bvh_skip_indices(bvh: dict) -> torch.Tensor:
+    """The stackless walk's links: where to go after node ``i``'s subtree.
+
+    bvh: a BVH dict in the depth-first layout (left child of ``i`` is ``i + 1``).
+    Returns (M,) int64: ``skip[i]`` = the first node after ``i``'s subtree in the array,
+    ``M`` (past the end) for the subtrees that end the array.
+
+    In the depth-first layout a subtree is the contiguous block ``i .. last(i)``, where
+    ``last(i)`` is its rightmost leaf (follow ``right`` from ``i`` until a leaf), so
+    ``skip[i] = last(i) + 1``. Compute ``last`` for all nodes at once by pointer jumping:
+    start with ``last = right`` (``i`` for leaves) and repeat ``last = last[last]`` until
+    nothing changes (about ``log2(depth)`` rounds): no loop over nodes.
+
+    Hints: ``torch.where(left < 0, torch.arange(M), right)``; stop when ``torch.equal``
+    says a round changed nothing.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_links(bvh)
+    raise NotImplementedError("not implemented yet: bvh_skip_indices (task 3)")
+
+
+def bvh_closest_hit_stackless(rays: Rays, mesh: Mesh, bvh: dict, intersect):
+    """Closest hits through a BVH without a stack: walk the node array left to right.
+
+    Same arguments and results as :func:`bvh_closest_hit`; ``"steps"`` counts the nodes
+    whose box the ray tested. Needs the depth-first layout (``left[i] == i + 1``).
+
+    Each ray holds one node index, starting at the root (0). Each iteration, every active
+    ray slab-tests its node's box against ``[t_min, min(t_max, closest t)]``:
+
+    * hit and inner node: go to ``i + 1`` (the left child: descend);
+    * hit and leaf: test its triangles, then go to ``skip[i]``;
+    * miss: go to ``skip[i]`` (jump over the whole subtree).
+
+    A ray whose next node is ``M`` is done. No stack at all (one register on a GPU), but no
+    near-first order either: the walk always takes the left child first, so it visits
+    more nodes than the stack traversal: the lecture's trade of memory against work.
+
+    Hints: One ``slab_test`` per iteration on ``bvh['lo'][node]``; the next node
+    is ``torch.where(hit & inner, node + 1, skip[node])``. Every step moves right, so ``M + 1``
+    iterations bound the loop.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_trace_inputs(rays, mesh, intersect)
+    check_structure(bvh, "bvh", "bvh", mesh)
+    raise NotImplementedError("not implemented yet: bvh_closest_hit_stackless (task 3)")
+
+
+# =======================================================================================
+# Task 4: the kd-tree
+
+
+def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
+                 traversal_cost: float = 1.0, intersect_cost: float = 2.0,
+                 empty_bonus: float = 0.5) -> dict:
+    """A kd-tree by the surface area heuristic over triangle bound planes, level by level.
+
+    mesh: F triangles; max_depth: default ``round(8 + 1.3 log2 F)`` (pbrt); leaf_size: a
+    node with at most this many triangles is a leaf; the SAH costs: ``traversal_cost``
+    per node, ``intersect_cost`` per triangle test, and ``empty_bonus`` (0..1) off the
+    cost of a split with an empty side. Returns a dict on the mesh's device:
+
+    =============  ==============  ==========================================================
+    ``kind``       ``"kd"``
+    ``lo, hi``     (3,) float      the root's box (the scene bounds)
+    ``split``      (M,) float      split plane position (inner nodes; 0 for leaves)
+    ``axis``       (M,) int64      split axis 0/1/2, ``-1`` for a leaf
+    ``left``       (M,) int64      the lower child (``x[axis] <= split``); the upper child
+                                   is ``left + 1``; ``-1`` for a leaf
+    ``first``      (M,) int64      a leaf holds ``triangles[first : first + count]``
+    ``count``      (M,) int64
+    ``triangles``  (K,) int64      leaf lists; a triangle straddling a split is in both
+                                   children, so ``K >= F``
+    =============  ==============  ==========================================================
+
+    For every node of a level at once, on each axis: the candidate planes are the bounds
+    of the node's triangles clipped to the node's box, as *events* (start = lower bound,
+    end = upper bound) sorted by (node, position, start before end). At event ``j`` of a
+    node with ``n`` triangles, ``N_below`` = starts before ``j`` and ``N_above`` = ends
+    after ``j`` (prefix sums over the sorted events), and
+
+        cost = traversal + intersect * (1 - bonus if a side is empty) *
+               (A_below N_below + A_above N_above) / A_node
+
+    for planes strictly inside the node's box. The node splits at its cheapest event if
+    that beats a leaf (``intersect * n``) and the node is not at ``max_depth``; a
+    triangle goes below iff its start event comes before the split event and above iff
+    its end event comes after it (so one lying in the plane goes to one side, and every
+    triangle to at least one). Coincident triangles offer no plane inside the box: a leaf.
+
+    Hints: Keep (node, triangle) pairs. Number each axis's planes once (``torch.sort`` of
+    all bounds, ``torch.searchsorted`` for each bound's number): clipping to a node's box is
+    then a clamp of integers, and one integer key ``(node * planes + plane) * 2 + is_end``
+    sorts a level's events. The inverse permutation (``slot[perm] = arange``) finds each
+    pair's events again when you partition; ``scatter_reduce(..., 'amin')`` finds each
+    node's best cost. Create children in pairs (below, above) so that ``above = left + 1``.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_mesh(mesh)
+    check_leaf_size(leaf_size)
+    max_depth = check_kd_knobs(mesh, max_depth, traversal_cost, intersect_cost, empty_bonus)
+    raise NotImplementedError("not implemented yet: build_kdtree (task 4)")
+
+
+OFFSET_BITS = 29
+"""The 8-byte kd node: word 0 = the split (float32 bits; a leaf: its triangle count);
+word 1 = leftOffset (bits 0-28) | splitAxis << 29 (bits 29-30) | leaf << 31."""
+
+
+def kd_pack(tree: dict) -> torch.Tensor:
+    """The lecture's 8-byte kd node: ``split float + leftOffset:29 + splitAxis:2 + leaf:1``.
+
+    tree: a kd dict (:func:`build_kdtree`). Returns (M, 2) int32, two 32-bit words a node:
+
+    * word 0: inner node: the bits of ``split`` as float32 (``Tensor.view(torch.int32)``);
+      leaf: its triangle ``count``.
+    * word 1, as C bit-fields are laid out on a little-endian GPU (first field lowest):
+      bits 0-28 ``leftOffset``, bits 29-30 ``splitAxis``, bit 31 ``leaf``. Inner node:
+      ``leftOffset = left - i`` (the lower child is that far ahead, the upper one right
+      after it), ``splitAxis = axis``. Leaf: ``leftOffset = first`` (where its triangle
+      list starts), ``splitAxis = 0``, ``leaf = 1``: the sign bit, so ``word1 < 0`` is the
+      leaf test.
+
+    Compute in int64 and wrap to int32 (``leaf << 31`` is ``2^31``, one more than int32
+    holds). ValueError naming ``tree`` if an offset needs more than 29 bits or a count
+    more than 31.
+
+    Hints: ``tree['split'].to(torch.float32).contiguous().view(torch.int32)``; build word 1 in
+    int64 and wrap values ``>= 2**31`` by subtracting ``2**32`` before ``.to(torch.int32)``.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_kd_fields(tree)
+    raise NotImplementedError("not implemented yet: kd_pack (task 4)")
+
+
+def kd_unpack(packed: torch.Tensor) -> dict:
+    """The fields of packed kd nodes (the inverse of :func:`kd_pack`).
+
+    packed: (M, 2) int32. Returns a dict of (M,) tensors: ``split`` float32 (0 for
+    leaves), ``axis`` int64 (-1 for leaves), ``left`` int64 (absolute index, -1 for
+    leaves), ``first`` and ``count`` int64 (0 for inner nodes). Mask before shifting:
+    ``>>`` on a negative int32 (a leaf's word) copies the sign bit.
+
+    Hints: Work on ``packed[:, 1].long() & 0xFFFFFFFF``; ``packed[:, 0].contiguous()
+    .view(torch.float32)`` reinterprets the split's bits.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_packed(packed)
+    raise NotImplementedError("not implemented yet: kd_unpack (task 4)")
+
+
+def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
+    """Closest hits through a kd-tree: stack traversal with the early exit.
+
+    rays: N rays; mesh: the tree's mesh; tree: from :func:`build_kdtree`; intersect: the
+    triangle kernel. Returns ``(Hits, counters)``: ``"steps"`` = nodes visited,
+    ``"tests"`` = triangle tests.
+
+    Per ray: the current node with the ray's interval ``[t_near, t_far]`` inside it
+    (initially the root box clipped to ``[t_min, t_max]``), and a stack of (node, t_near,
+    t_far). Each iteration, every active ray handles its node:
+
+    * inner node: ``t_split = (split - o[axis]) / d[axis]``; the near child is the lower
+      one if ``o[axis] < split`` (or ``== split`` with ``d[axis] <= 0``). If ``t_split >
+      t_far`` or ``t_split <= 0``: only the near child; if ``t_split < t_near``: only the
+      far one; else push (far, t_split, t_far) and go to (near, t_near, t_split). For
+      ``d[axis] = +-0``, ``t_split = +-inf`` selects the near child by these same rules; a
+      ray lying *in* the plane (``0 * inf = NaN``) visits both children, whole interval.
+    * leaf: test its triangles. **Early exit** only if the closest hit so far has
+      ``t <= t_far``: it lies inside this leaf's interval. A triangle straddling the
+      split sits in several leaves and can be hit beyond this leaf, where a nearer
+      triangle of a later leaf may still be waiting. Otherwise pop the next (node,
+      interval); an empty stack ends the ray.
+
+    Hints: ``rays.origins[r].gather(1, axis[:, None])`` picks each ray's component on
+    its node's axis. Handle the leaves first (test, then exit or pop), then the inner nodes
+    (descend, maybe push); ``2 M + 1`` iterations bound the loop.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_trace_inputs(rays, mesh, intersect)
+    check_structure(tree, "kd", "tree", mesh)
+    raise NotImplementedError("not implemented yet: kd_closest_hit (task 4)")
+
+
+# =======================================================================================
+# Task 5: the common entry point and the trade
+
+
+def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect,
+                            memory_budget_bytes: int = 2**27):
+    """The baseline: every ray against every triangle, in tiles.
+
+    Same results as the structures: ``(Hits, counters)`` with ``"steps" = 0`` and
+    ``"tests" = F`` for every ray. Tiles of at most ``memory_budget_bytes // 256`` (ray,
+    triangle) pairs (its corners, indices and the kernel's temporaries: about 256 bytes in
+    float32): all triangles for a chunk of rays, or chunks of triangles for one ray at a
+    time. Each tile goes through ``intersect_pairs``, which keeps ties at the lowest
+    triangle index.
+
+    Hints: ``intersect_pairs`` does the testing and the tie rule; a tile's pairs
+    are ``r.repeat_interleave(len(tri))`` and ``tri.repeat(len(r))``.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_trace_inputs(rays, mesh, intersect)
+    check_memory_budget(memory_budget_bytes)
+    raise NotImplementedError("not implemented yet: brute_force_closest_hit (task 5)")
+
+
+def build(mesh: Mesh, kind: str, **knobs) -> dict:
+    """A structure of ``kind`` for ``mesh``: ``"grid"`` (:func:`build_grid`), ``"bvh"``
+    (:func:`build_sah_bvh`; ``method="lbvh"`` for :func:`build_lbvh`) or ``"kd"``
+    (:func:`build_kdtree`); ``knobs`` go to the builder."""
+    if kind == "grid":
+        return build_grid(mesh, **knobs)
+    if kind == "bvh":
+        method = knobs.pop("method", "sah")
+        if method not in ("sah", "lbvh"):
+            raise ValueError(f"method: expected 'sah' or 'lbvh', got {method!r}")
+        return (build_sah_bvh if method == "sah" else build_lbvh)(mesh, **knobs)
+    if kind == "kd":
+        return build_kdtree(mesh, **knobs)
+    raise ValueError(f"kind: expected one of {', '.join(STRUCTURES)}, got {kind!r}")
+
+
+def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
+    """Closest hits of ``rays`` through any structure: the lab's common entry point.
+
+    structure: None (brute force), or a dict from a ``build_*`` function, dispatched on
+    its ``"kind"``: ``grid_closest_hit`` (option ``mailbox``), ``bvh_closest_hit`` or,
+    with ``stackless=True``, ``bvh_closest_hit_stackless``, and ``kd_closest_hit``.
+    Returns ``(Hits, counters)``; every structure returns the brute-force hits, so only
+    the counters (and the clock) tell them apart. ValueError naming ``structure`` for
+    anything else, or an option the structure does not take.
+
+    Hints: Check ``structure['kind']`` and the options, then call the matching function.
+    """
+    raise NotImplementedError("not implemented yet: closest_hit (task 5)")

@@ -1,0 +1,1383 @@
+"""Lab 2: acceleration structures (reference solution).
+
+Brute force tests every ray against every triangle: ``N x F`` tests. An acceleration
+structure sorts the triangles into space once, so that a ray tests only the few near its
+path. This lab builds the lecture's three structures as flat tensors, traverses them for
+a whole batch of rays at once and **counts the work** each ray does, so that the trade
+(build time, memory, traversal steps, triangle tests) can be measured instead of guessed.
+
+Batching a traversal
+--------------------
+A GPU runs one thread per ray, each with its own loop. Here one Python loop iteration
+advances *every active ray by one step* (one grid cell, one tree node): the per-ray state
+(current cell or node, stack, closest hit) lives in tensors of the active rays, and rays
+that finish are compacted away, so an iteration costs as much as the rays still running.
+The loop runs as many iterations as the longest ray needs, never one per ray or triangle.
+
+Conventions
+-----------
+* Rays and meshes are ``course.types.Rays`` / ``Mesh`` of one float dtype and device;
+  every structure is a ``dict`` of tensors on that device (plus ``"kind"``), so it can be
+  inspected, saved and sent anywhere.
+* ``intersect(origins, directions, v0, v1, v2, t_min, t_max) -> (t, u, v)`` is the
+  ray/triangle kernel, passed in (Lab 1's contract: broadcasting, ``t = inf`` on a miss,
+  the closed interval ``[t_min, t_max]``). A structure only decides *which* pairs to test.
+* Every ``*_closest_hit`` returns ``(Hits, counters)``: the hit of each ray exactly as
+  brute force with the same ``intersect`` finds it (same triangle; among equal ``t`` the
+  lowest triangle index), and per-ray ``(N,)`` int64 counters: ``"steps"`` (cells or nodes
+  visited) and ``"tests"`` (ray/triangle tests run); the grid adds ``"skipped"`` (tests
+  its mailbox avoided).
+* Degenerate input is a case, not an error: rays with zero (``+0.0`` or ``-0.0``)
+  direction components, rays starting inside or on a cell or box boundary, NaN/inf rays
+  (they miss), one triangle, coincident triangles, flat scenes. Malformed input raises
+  ``ValueError``/``TypeError`` naming the argument.
+
+Tasks (points)
+--------------
+1. Uniform grid: ``grid_resolution``, ``build_grid``, ``grid_closest_hit`` (3D DDA,
+   mailboxing, the cell-interval test)                                         (4)
+2. BVH builds: ``morton_codes``, ``build_lbvh``, ``build_sah_bvh`` (binned SAH)  (3)
+3. BVH traversal: ``bvh_closest_hit`` (stack, near child first),
+   ``bvh_skip_indices`` and ``bvh_closest_hit_stackless``                      (3)
+4. kd-tree: ``build_kdtree`` (SAH over triangle bound planes), ``kd_pack`` /
+   ``kd_unpack`` (the 8-byte node), ``kd_closest_hit`` (early exit)            (3)
+5. ``brute_force_closest_hit`` and ``closest_hit``: the common entry point and the
+   work counters that show the trade                                          (2)
+
+What each structure buys, measured
+----------------------------------
+``bench/lab2_accel.py --device cpu --threads 1`` on a shared 2-core CPU, 48 x 48 primary
+rays; speed-ups over brute force in the same run (on a CPU only such ratios mean
+anything, and repeated runs vary by about 30%). Every row returns the brute-force hits
+exactly: the structures trade build time and memory for speed, never accuracy. The
+stackless BVH walk visits 3x the nodes of the stack traversal (23 vs 7 on the bunny).
+
+==========================  ======================  ======================  ======================
+                            uniform grid (λ = 2)    BVH: SAH / LBVH         kd-tree (SAH)
+==========================  ======================  ======================  ======================
+build, bunny (69K)          0.04 s: one sort of     1.0 s / 0.09 s          5.9 s: an event sweep
+                            (triangle, cell) pairs                          per level
+bunny: speed-up, work per   x660; 11.8 cells, 9.6   x530 / x470; 7 / 8      x310; 19 nodes, 5.6
+ray                         tests                   nodes, 1.5 tests        tests
+teapot in a stadium (3.9K)  x0.8: a ray at the      x35 / x13 (the LBVH's   x12; 18 tests
+                            teapot tests all 2.9K   Morton grid spans the
+                            of its triangles        stadium)
+repeated tests              big triangles span      none: every triangle    straddlers sit in
+                            cells: the mailbox      in one leaf             several leaves
+                            saves 20-25%
+coincident triangles        one cell, all tested    median fallback: no     one leaf: no plane
+                                                    endless split           inside the box
+axis-parallel rays, +-0.0   step 0, t_next = inf    1/+-0 = +-inf slabs     t_split = +-inf: the
+                                                                            near child
+==========================  ======================  ======================  ======================
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from course.raymath import gamma
+from course.types import Hits, Mesh, Rays
+
+STRUCTURES = ("grid", "bvh", "kd")
+"""The structures this lab builds, by their ``"kind"``."""
+
+COUNTERS = ("steps", "tests")
+"""The per-ray work counters every traversal returns (the grid adds ``"skipped"``)."""
+
+
+# =======================================================================================
+# Provided helpers (not tasks): input checks, bounds, the slab test, pairs, closest hits
+
+
+def check_trace_inputs(rays, mesh, intersect) -> None:
+    """Provided: validate the arguments every ``*_closest_hit`` takes.
+
+    Raises TypeError/ValueError naming ``rays``, ``mesh`` or ``intersect``.
+    """
+    if not isinstance(rays, Rays):
+        raise TypeError(f"rays: expected course.types.Rays, got {type(rays).__name__}")
+    check_mesh(mesh)
+    rays.validate()
+    if mesh.dtype != rays.dtype:
+        raise TypeError(f"mesh: expected vertices of dtype {rays.dtype} like rays, got {mesh.dtype}")
+    if mesh.device != rays.device:
+        raise ValueError(f"mesh: expected a mesh on {rays.device} like rays, got {mesh.device}")
+    if not callable(intersect):
+        raise TypeError("intersect: expected a callable intersect(origins, directions, v0, v1, "
+                        f"v2, t_min, t_max) -> (t, u, v), got {type(intersect).__name__}")
+
+
+def check_mesh(mesh) -> None:
+    """Provided: ``mesh`` must be a valid ``course.types.Mesh`` (TypeError/ValueError)."""
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+    mesh.validate()
+
+
+STRUCTURE_KEYS = {
+    "grid": ("lo", "hi", "resolution", "cell_start", "cell_count", "triangles",
+             "tri_cell_lo", "tri_cell_hi"),
+    "bvh": ("lo", "hi", "left", "right", "first", "count", "triangles"),
+    "kd": ("lo", "hi", "split", "axis", "left", "first", "count", "triangles"),
+}
+"""The tensors each kind of structure holds (see its ``build_*`` function)."""
+
+
+def check_structure(structure, kind: str, name: str, mesh: Mesh) -> None:
+    """Provided: ``structure`` must be a ``kind`` dict built for a mesh like ``mesh``.
+
+    Raises ValueError/TypeError naming ``name`` (the argument) and what is missing.
+    """
+    if not isinstance(structure, dict) or structure.get("kind") != kind:
+        got = structure.get("kind") if isinstance(structure, dict) else type(structure).__name__
+        raise ValueError(f"{name}: expected a dict with kind={kind!r} (from build_...), "
+                         f"got {got!r}")
+    for key in STRUCTURE_KEYS[kind]:
+        x = structure.get(key)
+        if not isinstance(x, torch.Tensor):
+            raise TypeError(f"{name}: expected a tensor under {key!r}, got {type(x).__name__}")
+        if x.device != mesh.device:
+            raise ValueError(f"{name}: {key!r} is on {x.device}, the mesh on {mesh.device}")
+    if structure["triangles"].numel() and int(structure["triangles"].max()) >= mesh.num_faces:
+        raise ValueError(f"{name}: refers to triangle {int(structure['triangles'].max())}, "
+                         f"but the mesh has {mesh.num_faces}: built for another mesh?")
+
+
+def _positive_int(value, name: str, lo: int = 1, hi: int | None = None) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (
+            hi is not None and value > hi):
+        span = f"in {lo}..{hi}" if hi is not None else f">= {lo}"
+        raise ValueError(f"{name}: expected an int {span}, got {value!r}")
+
+
+def check_grid_inputs(extent, num_triangles, density) -> list[float]:
+    """Provided: validate :func:`grid_resolution`'s arguments; returns ``extent`` as 3 floats."""
+    values = extent.tolist() if isinstance(extent, torch.Tensor) else extent
+    try:
+        values = [float(x) for x in values]
+    except (TypeError, ValueError):
+        raise ValueError(f"extent: expected 3 finite non-negative sizes, got {extent!r}") from None
+    if len(values) != 3 or not all(math.isfinite(x) and x >= 0 for x in values):
+        raise ValueError(f"extent: expected 3 finite non-negative sizes, got {extent!r}")
+    _positive_int(num_triangles, "num_triangles")
+    if not (isinstance(density, (int, float)) and math.isfinite(density) and density > 0):
+        raise ValueError(f"density: expected a positive number, got {density!r}")
+    return values
+
+
+def check_resolution(resolution) -> None:
+    """Provided: ``resolution`` must be None or 3 positive ints."""
+    if resolution is not None and (
+            not isinstance(resolution, (tuple, list)) or len(resolution) != 3
+            or not all(isinstance(r, int) and not isinstance(r, bool) and r >= 1
+                       for r in resolution)):
+        raise ValueError(f"resolution: expected 3 positive ints (rx, ry, rz), got {resolution!r}")
+
+
+def check_morton_inputs(points, lo, hi, bits) -> None:
+    """Provided: validate :func:`morton_codes`'s arguments."""
+    if not isinstance(points, torch.Tensor) or not points.is_floating_point():
+        raise TypeError(f"points: expected a float tensor of shape (N, 3), got "
+                        f"{getattr(points, 'dtype', type(points).__name__)}")
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points: expected shape (N, 3), got {tuple(points.shape)}")
+    for name, x in (("lo", lo), ("hi", hi)):
+        if not isinstance(x, torch.Tensor) or x.shape != (3,):
+            raise ValueError(f"{name}: expected a (3,) tensor, got "
+                             f"{getattr(x, 'shape', type(x).__name__)}")
+    _positive_int(bits, "bits", 1, 21)  # 3 * 21 = 63 bits fit an int64
+
+
+def check_leaf_size(leaf_size) -> None:
+    """Provided: ``leaf_size`` must be a positive int."""
+    _positive_int(leaf_size, "leaf_size")
+
+
+def check_bins(bins) -> None:
+    """Provided: ``bins`` must be an int in 2..1024."""
+    _positive_int(bins, "bins", 2, 1024)
+
+
+def check_links(bvh) -> None:
+    """Provided: ``bvh`` must hold ``left`` and ``right`` (M,) int64 tensors."""
+    if not isinstance(bvh, dict) or not all(isinstance(bvh.get(k), torch.Tensor)
+                                            for k in ("left", "right")):
+        raise ValueError("bvh: expected a BVH dict with 'left' and 'right' tensors")
+
+
+def check_kd_knobs(mesh, max_depth, traversal_cost, intersect_cost, empty_bonus) -> int:
+    """Provided: validate :func:`build_kdtree`'s knobs; returns ``max_depth`` with its
+    default ``round(8 + 1.3 log2 F)`` (pbrt's) filled in."""
+    if max_depth is None:
+        max_depth = round(8 + 1.3 * math.log2(mesh.num_faces))
+    _positive_int(max_depth, "max_depth", 0, 60)
+    for name, value in (("traversal_cost", traversal_cost), ("intersect_cost", intersect_cost)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}: expected a positive number, got {value!r}")
+    if not (isinstance(empty_bonus, (int, float)) and 0 <= empty_bonus <= 1):
+        raise ValueError(f"empty_bonus: expected a number in [0, 1], got {empty_bonus!r}")
+    return max_depth
+
+
+def check_kd_fields(tree) -> None:
+    """Provided: ``tree`` must hold the kd fields :func:`kd_pack` reads."""
+    if not isinstance(tree, dict):
+        raise TypeError(f"tree: expected a kd dict, got {type(tree).__name__}")
+    for key in ("split", "axis", "left", "first", "count"):
+        if not isinstance(tree.get(key), torch.Tensor):
+            raise TypeError(f"tree: expected a tensor under {key!r}")
+
+
+def check_packed(packed) -> None:
+    """Provided: ``packed`` must be an (M, 2) int32 tensor."""
+    if not isinstance(packed, torch.Tensor) or packed.dtype != torch.int32:
+        raise TypeError(f"packed: expected an int32 tensor of shape (M, 2), got "
+                        f"{getattr(packed, 'dtype', type(packed).__name__)}")
+    if packed.ndim != 2 or packed.shape[1] != 2:
+        raise ValueError(f"packed: expected shape (M, 2), got {tuple(packed.shape)}")
+
+
+def check_memory_budget(memory_budget_bytes) -> None:
+    """Provided: ``memory_budget_bytes`` must be a positive int."""
+    _positive_int(memory_budget_bytes, "memory_budget_bytes")
+
+
+def triangle_bounds(mesh: Mesh) -> tuple[torch.Tensor, torch.Tensor]:
+    """Provided: ``(lo, hi)``, each (F, 3): the axis-aligned bounds of every triangle."""
+    corners = mesh.triangles()
+    return corners.amin(dim=1), corners.amax(dim=1)
+
+
+def surface_area(lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
+    """Provided: ``2 (dx dy + dy dz + dz dx)`` of boxes ``(..., 3)``; 0 for empty boxes
+    (``lo > hi``, e.g. the ``+inf``/``-inf`` bounds of an empty bin)."""
+    ext = (hi - lo).clamp(min=0).nan_to_num(0.0, posinf=0.0)
+    return 2 * (ext[..., 0] * ext[..., 1] + ext[..., 1] * ext[..., 2] + ext[..., 2] * ext[..., 0])
+
+
+def slab_test(origins, inv_directions, lo, hi, t_lo, t_hi):
+    """Provided: rays against axis-aligned boxes (Lab 1's conservative slab test).
+
+    origins, inv_directions: (n, 3) with ``inv_directions = 1 / directions`` (``1/+-0 =
+    +-inf``); lo, hi: (n, 3) or (3,) boxes; t_lo, t_hi: (n,). Returns ``(t_near, t_far,
+    hit)``, each (n,): the ray's interval inside the box clipped to ``[t_lo, t_hi]``.
+
+    NaN from ``0 * inf`` (a ray in a slab plane with a zero direction component) is
+    dropped by ``fmax``/``fmin``; ``t_far`` is scaled by ``1 + 2 gamma(3)`` (Ize 2013) so
+    rounding never turns a hit into a miss; NaN/inf rays and empty boxes never hit.
+    """
+    t0 = (lo - origins) * inv_directions
+    t1 = (hi - origins) * inv_directions
+    near = torch.minimum(t0, t1)
+    far = torch.maximum(t0, t1) * (1 + 2 * gamma(3, t0.dtype))
+    t_near = torch.fmax(t_lo, torch.fmax(torch.fmax(near[..., 0], near[..., 1]), near[..., 2]))
+    t_far = torch.fmin(t_hi, torch.fmin(torch.fmin(far[..., 0], far[..., 1]), far[..., 2]))
+    valid = (torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1)
+             & (lo <= hi).all(-1))
+    return t_near, t_far, (t_near <= t_far) & (t_near < math.inf) & valid
+
+
+def expand_ranges(first: torch.Tensor, count: torch.Tensor):
+    """Provided: every element of the ranges ``[first[i], first[i] + count[i])``.
+
+    first, count: (k,) int64. Returns ``(owner, index)``, each (sum(count),) int64: range
+    ``owner[j]`` contains element ``index[j]``; owners ascending, indices ascending within
+    each range. The batched form of ``for i: for j in range(first[i], first[i] + count[i])``
+    (a cell's triangle list, a leaf's triangles, a node's primitives).
+    """
+    owner = torch.repeat_interleave(torch.arange(len(count), device=count.device), count)
+    offset = torch.cumsum(count, 0) - count
+    index = first[owner] + torch.arange(len(owner), device=count.device) - offset[owner]
+    return owner, index
+
+
+MAX_PAIRS = 2**20
+"""(ray, triangle) pairs tested at once, at most: about 256 bytes each (corners, indices and
+the kernel's temporaries), so memory stays bounded however many triangles a cell or leaf
+holds (a grid cell around a whole teapot, for every ray)."""
+
+
+def pair_chunks(first: torch.Tensor, count: torch.Tensor, max_pairs: int = MAX_PAIRS):
+    """Provided: :func:`expand_ranges` in chunks of at most ``max_pairs`` elements.
+
+    Yields ``(owner, index)`` like ``expand_ranges(first, count)``, a chunk at a time (a range
+    may be split between two chunks), so only one chunk is ever in memory.
+    """
+    end = torch.cumsum(count, 0)
+    total = int(end[-1]) if len(end) else 0
+    for p0 in range(0, total, max_pairs):
+        j = torch.arange(p0, min(total, p0 + max_pairs), device=count.device)
+        owner = torch.searchsorted(end, j, right=True)  # the first range ending after j
+        yield owner, first[owner] + j - (end - count)[owner]
+
+
+def test_ranges(intersect, rays: Rays, corners: torch.Tensor, ray: torch.Tensor,
+                first: torch.Tensor, count: torch.Tensor, triangles: torch.Tensor,
+                closest: dict, counters: dict) -> None:
+    """Provided: test ray ``ray[i]`` against ``triangles[first[i] : first[i] + count[i]]``
+    for every ``i`` (its leaf's list), in chunks, with :func:`intersect_pairs`."""
+    for owner, k in pair_chunks(first, count):
+        intersect_pairs(intersect, rays, corners, ray[owner], triangles[k], closest, counters)
+
+
+def new_closest(n: int, like: torch.Tensor) -> dict:
+    """Provided: the closest-hit state of ``n`` rays, all missed (dtype/device of ``like``)."""
+    miss = Hits.miss(n, dtype=like.dtype, device=like.device)
+    return {"t": miss.t, "triangle": miss.triangle, "u": miss.u, "v": miss.v}
+
+
+def intersect_pairs(intersect, rays: Rays, corners: torch.Tensor, ray: torch.Tensor,
+               tri: torch.Tensor, closest: dict, counters: dict) -> None:
+    """Provided: run ``intersect`` on the (ray, triangle) pairs and keep each ray's closest.
+
+    ray, tri: (P,) int64 indices into ``rays`` and ``corners`` (F, 3, 3). Updates
+    ``closest`` (from :func:`new_closest`) in place: a pair replaces a ray's hit when its
+    ``t`` is smaller, or equal with a lower triangle index (the brute-force order), and
+    adds each ray's number of pairs to ``counters["tests"]``.
+    """
+    if len(ray) == 0:
+        return
+    tri_corners = corners[tri]
+    t, u, v = intersect(rays.origins[ray], rays.directions[ray], tri_corners[:, 0],
+                        tri_corners[:, 1], tri_corners[:, 2], rays.t_min[ray], rays.t_max[ray])
+    counters["tests"].index_add_(0, ray, torch.ones_like(ray))
+    best_t, best_tri = closest["t"], closest["triangle"]
+    hit = t < math.inf
+    # The nearest t per ray over the old hit and all pairs ...
+    nearest = best_t.scatter_reduce(0, ray, t, "amin")
+    # ... and among those at that t, the lowest triangle index.
+    candidate = hit & (t == nearest[ray])
+    big = torch.iinfo(torch.int64).max
+    lowest = torch.where((best_t == nearest) & (best_tri >= 0), best_tri, big)
+    lowest = lowest.scatter_reduce(0, ray[candidate], tri[candidate], "amin")
+    win = candidate & (tri == lowest[ray])
+    winners = ray[win]
+    closest["t"][winners] = t[win]
+    closest["triangle"][winners] = tri[win]
+    closest["u"][winners] = u[win]
+    closest["v"][winners] = v[win]
+
+
+def new_counters(n: int, device, names=COUNTERS) -> dict:
+    """Provided: zeroed per-ray counters ``{name: (n,) int64}``."""
+    return {name: torch.zeros(n, dtype=torch.int64, device=device) for name in names}
+
+
+def as_hits(closest: dict) -> Hits:
+    """Provided: the closest-hit state as ``course.types.Hits``."""
+    return Hits(t=closest["t"], triangle=closest["triangle"], u=closest["u"], v=closest["v"])
+
+
+def add_count(counter: torch.Tensor, ray: torch.Tensor) -> None:
+    """Provided: ``counter[r] += 1`` for every entry ``r`` of ``ray`` (repeats count)."""
+    counter.index_add_(0, ray, torch.ones_like(ray))
+
+
+# =======================================================================================
+# Task 1: the uniform grid
+
+
+def grid_resolution(extent, num_triangles: int, density: float = 2.0,
+                    max_cells: int = 2**22) -> tuple[int, int, int]:
+    """Cells per axis for a grid over a box of size ``extent``: the classic heuristic.
+
+    extent: 3 non-negative numbers (a sequence or a (3,) tensor), the box's size;
+    num_triangles: N >= 1; density: lambda > 0, cells per triangle; max_cells: a cap.
+    Returns ``(rx, ry, rz)``, Python ints >= 1.
+
+    Aim for about ``lambda N`` cells (at most ``max_cells``) that are as close to cubes as
+    possible: with ``k`` cells per unit length, ``r_i = round(k * extent_i)`` and
+    ``k = (lambda N / prod extent_i) ** (1/3)``. A thin axis (``k * extent_i < 1``, e.g.
+    a flat scene) gets one cell and drops out: solve for ``k`` again over the other axes
+    (``k = (lambda N / prod of their extents) ** (1/d)`` for ``d`` remaining axes).
+    """
+    extent = check_grid_inputs(extent, num_triangles, density)  # as 3 Python floats
+    target = min(density * num_triangles, max_cells)
+    free = [a for a in range(3) if extent[a] > 0]
+    k = 0.0
+    while free:
+        k = (target / math.prod(extent[a] for a in free)) ** (1 / len(free))
+        thin = [a for a in free if extent[a] * k < 1]
+        if not thin:
+            break
+        free = [a for a in free if a not in thin]
+    return tuple(max(1, round(extent[a] * k)) if a in free else 1 for a in range(3))
+
+
+def build_grid(mesh: Mesh, resolution=None, density: float = 2.0) -> dict:
+    """A uniform grid over the mesh, with one triangle list per cell (CSR layout).
+
+    mesh: F triangles; resolution: ``(rx, ry, rz)`` cells, or None for
+    ``grid_resolution(hi - lo, F, density)``. Returns a dict on the mesh's device:
+
+    ==============  ===================  ===============================================
+    ``kind``        ``"grid"``
+    ``lo, hi``      (3,) float           the grid's box: the scene bounds, padded
+    ``resolution``  (3,) int64           ``(rx, ry, rz)``; cell ``(x, y, z)`` has the
+                                         linear index ``x + rx * (y + ry * z)``
+    ``cell_start``  (C,) int64           cell ``c``'s triangles are ``triangles[
+    ``cell_count``  (C,) int64           cell_start[c] : cell_start[c] + cell_count[c]]``
+    ``triangles``   (K,) int64           triangle indices, grouped by cell, ascending
+                                         within a cell
+    ``tri_cell_lo``  (F, 3) int64        the box of cells triangle ``f`` is listed in:
+    ``tri_cell_hi``  (F, 3) int64        ``tri_cell_lo[f] <= (x, y, z) <= tri_cell_hi[f]``
+    ==============  ===================  ===============================================
+
+    A triangle goes into every cell its bounds overlap: with cell size ``w = (hi - lo) /
+    r``, the cells ``floor((tri_lo - pad - lo) / w)`` to ``floor((tri_hi + pad - lo) / w)``
+    (clamped to the grid). The small ``pad`` (and the padded box) keeps rounding from
+    dropping a triangle that touches a cell boundary, and gives a flat scene a thickness.
+
+    Build without a loop over triangles or cells: the count of cells per triangle, then
+    one ``repeat_interleave`` into (triangle, cell) pairs, one stable sort by cell, and a
+    ``bincount`` for ``cell_count`` (``cell_start`` is its exclusive prefix sum).
+    """
+    check_mesh(mesh)
+    check_resolution(resolution)
+    tri_lo, tri_hi = triangle_bounds(mesh)
+    lo, hi = tri_lo.amin(dim=0), tri_hi.amax(dim=0)
+    # Padding: relative to the scene's size, and a few ulps of its coordinates so that a
+    # scene far from the origin keeps its margin after rounding.
+    eps = torch.finfo(lo.dtype).eps
+    size = float((hi - lo).amax())
+    pad = 1e-4 * size + 16 * eps * float(torch.maximum(lo.abs(), hi.abs()).amax())
+    pad = pad if pad > 0 else 1.0  # a single point: any box will do
+    lo, hi = lo - pad, hi + pad
+    if resolution is None:
+        resolution = grid_resolution((hi - lo).tolist(), mesh.num_faces, density)
+    device = mesh.device
+    res = torch.tensor(resolution, dtype=torch.int64, device=device)
+    cell = (hi - lo) / res
+    top = res - 1
+    c_lo = torch.minimum(torch.floor((tri_lo - pad - lo) / cell).long().clamp(min=0), top)
+    c_hi = torch.minimum(torch.floor((tri_hi + pad - lo) / cell).long().clamp(min=0), top)
+    span = c_hi - c_lo + 1
+    per_tri = span.prod(dim=1)
+    # One (triangle, cell) pair per overlap: x fastest within each triangle's box of cells.
+    tri, local = expand_ranges(torch.zeros_like(per_tri), per_tri)
+    sx, sy = span[tri, 0], span[tri, 1]
+    x = c_lo[tri, 0] + local % sx
+    y = c_lo[tri, 1] + (local // sx) % sy
+    z = c_lo[tri, 2] + local // (sx * sy)
+    cell_id = x + res[0] * (y + res[1] * z)
+    order = torch.sort(cell_id, stable=True).indices  # stable: triangles stay ascending
+    num_cells = math.prod(resolution)
+    cell_count = torch.bincount(cell_id, minlength=num_cells)
+    return {"kind": "grid", "lo": lo, "hi": hi, "resolution": res,
+            "cell_start": torch.cumsum(cell_count, 0) - cell_count, "cell_count": cell_count,
+            "triangles": tri[order], "tri_cell_lo": c_lo, "tri_cell_hi": c_hi}
+
+
+def grid_closest_hit(rays: Rays, mesh: Mesh, grid: dict, intersect, mailbox: bool = True):
+    """Closest hits through a uniform grid: 3D DDA (Amanatides & Woo 1987) per ray.
+
+    rays: N rays; mesh: the grid's mesh; grid: from :func:`build_grid`; intersect: the
+    triangle kernel; mailbox: skip a triangle this ray has already tested.
+    Returns ``(Hits, counters)`` with counters ``"steps"`` (cells visited), ``"tests"``
+    and ``"skipped"`` (tests the mailbox avoided), each (N,) int64.
+
+    1. Clip each ray to the grid's box (``slab_test``): ``[t_enter, t_exit]``; rays that
+       miss it are done. The first cell is the one holding ``o + t_enter d``, computed with
+       ``floor`` and clamped into the grid (rounding may put the point just outside).
+    2. Per axis: ``step = sign(d)`` (0 for ``+0.0`` and ``-0.0``) and ``t_next``, the ``t``
+       where the ray crosses the cell's next boundary on that axis: the plane
+       ``lo + (cell + 1) w`` when stepping up, ``lo + cell w`` when stepping down, ``inf``
+       on an axis with ``step == 0`` (never ``0 * inf = NaN``). Computing ``t_next`` from
+       the cell index every step (instead of adding ``t_delta``) keeps long walks from
+       drifting off the cell boundaries.
+    3. Each iteration, every active ray visits its cell ``[t_in, t_out]``,
+       ``t_out = min(t_next, t_exit)``: it tests the cell's triangles and keeps the
+       closest hit. A hit only ends the walk if ``t <= t_out``: a triangle that spans
+       several cells can be hit *beyond* this cell, and a nearer triangle may sit in the
+       next cell (the classic grid bug is to stop at the first hit). Keep such a hit as
+       the best so far, but walk on.
+    4. Then step along the axis of the smallest ``t_next``: ``cell[axis] += step[axis]``.
+       A ray that leaves the grid or passes ``t_exit`` is done.
+
+    Mailboxing: a big triangle is listed in many cells, and without a mailbox a ray tests
+    it again in each ("7 times the same triangle in 15 voxels"). Exact and O(1) per ray:
+    a triangle's cells form a box (``tri_cell_lo..tri_cell_hi``), and a DDA walk, being
+    monotone on every axis, never re-enters a box it left; so the triangle was already
+    tested iff the ray's *previous* cell lies inside the triangle's box of cells.
+
+    Contract: the same hits as brute force with ``intersect`` (same triangle, same
+    ``t``), whatever the resolution. At most ``rx + ry + rz`` steps per ray.
+    """
+    check_trace_inputs(rays, mesh, intersect)
+    check_structure(grid, "grid", "grid", mesh)
+    n, device = len(rays), rays.device
+    closest = new_closest(n, rays.t_min)
+    counters = new_counters(n, device, COUNTERS + ("skipped",))
+    lo, hi, res = grid["lo"], grid["hi"], grid["resolution"]
+    width = (hi - lo) / res
+    inv = 1 / rays.directions
+    t_enter, t_exit, inside = slab_test(rays.origins, inv, lo, hi, rays.t_min, rays.t_max)
+    ray = inside.nonzero()[:, 0]
+    o, inv_r, t_end = rays.origins[ray], inv[ray], t_exit[ray]
+    start = o + t_enter[ray, None] * rays.directions[ray]
+    cell = torch.minimum(torch.floor((start - lo) / width).long().clamp(min=0), res - 1)
+    step = torch.sign(rays.directions[ray]).long()  # 0 for +-0.0; NaN rays never got here
+    prev = torch.full_like(cell, -1)  # no previous cell: nothing is in the mailbox
+    corners = mesh.triangles()
+    for _ in range(int(res.sum()) + 1):
+        if len(ray) == 0:
+            break
+        # The cell's exit: the nearest boundary ahead on each axis.
+        boundary = lo + (cell + (step > 0).long()) * width
+        t_next = torch.where(step == 0, math.inf, (boundary - o) * inv_r)
+        t_out = torch.minimum(t_next.amin(dim=1), t_end)
+        cell_id = cell[:, 0] + res[0] * (cell[:, 1] + res[1] * cell[:, 2])
+        for owner, k in pair_chunks(grid["cell_start"][cell_id], grid["cell_count"][cell_id]):
+            tri = grid["triangles"][k]
+            if mailbox:
+                seen = ((prev[owner] >= grid["tri_cell_lo"][tri])
+                        & (prev[owner] <= grid["tri_cell_hi"][tri])).all(dim=1)
+                add_count(counters["skipped"], ray[owner[seen]])
+                owner, tri = owner[~seen], tri[~seen]
+            intersect_pairs(intersect, rays, corners, ray[owner], tri, closest, counters)
+        add_count(counters["steps"], ray)
+        # Done: a hit inside this cell (or before it), or the ray left the grid / t_max.
+        done = (closest["t"][ray] <= t_out) | (t_out >= t_end)
+        axis = t_next.argmin(dim=1, keepdim=True)
+        prev = cell
+        cell = cell.scatter_add(1, axis, step.gather(1, axis))
+        done |= ((cell < 0) | (cell >= res)).any(dim=1)
+        keep = ~done
+        ray, o, inv_r, t_end = ray[keep], o[keep], inv_r[keep], t_end[keep]
+        cell, prev, step = cell[keep], prev[keep], step[keep]
+    return as_hits(closest), counters
+
+
+# =======================================================================================
+# Task 2: BVH builds
+
+
+def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
+                 bits: int = 10) -> torch.Tensor:
+    """Morton (Z-order) codes of points in the box ``[lo, hi]``.
+
+    points: (N, 3) float; lo, hi: (3,) float; bits: bits per axis, 1..21 (10 gives the
+    classic 30-bit code). Returns (N,) int64.
+
+    1. Quantise each coordinate to ``bits`` bits: ``q = floor((p - lo) / (hi - lo) * 2^bits)``
+       clamped to ``[0, 2^bits - 1]`` (``q = 0`` on an axis where ``hi == lo``; NaN -> 0).
+    2. Interleave, x highest: bit ``i`` of ``qx`` goes to bit ``3i + 2`` of the code, of
+       ``qy`` to ``3i + 1``, of ``qz`` to ``3i`` (Karras 2012: ``expandBits(x) * 4 +
+       expandBits(y) * 2 + expandBits(z)``).
+
+    Sorting by the code puts points that are close in space close in the array, so a
+    range of sorted triangles is a compact cluster: the whole idea of the LBVH.
+    """
+    check_morton_inputs(points, lo, hi, bits)
+    extent = hi - lo
+    scale = torch.where(extent > 0, 2.0**bits / extent, torch.zeros_like(extent))
+    q = torch.floor(((points - lo) * scale).nan_to_num(0.0)).clamp(0, 2**bits - 1).long()
+    code = torch.zeros(len(points), dtype=torch.int64, device=points.device)
+    for i in range(bits):
+        for axis, shift in ((0, 2), (1, 1), (2, 0)):
+            code |= ((q[:, axis] >> i) & 1) << (3 * i + shift)
+    return code
+
+
+def assemble_bvh(order, start, end, left, right, depth, tri_lo, tri_hi) -> dict:
+    """Provided: the flat, depth-first BVH of a tree built level by level.
+
+    order: (F,) int64, the triangles in leaf order; start, end: (M,) int64, node ``i``
+    holds ``order[start[i]:end[i]]``; left, right: (M,) int64 child ids (-1 for leaves);
+    depth: (M,) int64 (root 0). Node ids are in creation order, parents before children.
+    tri_lo, tri_hi: (F, 3) triangle bounds.
+
+    Returns the BVH dict (see :func:`build_lbvh`) with the nodes renumbered depth first
+    (pre-order: a node, its left subtree, its right subtree), the order a stackless walk
+    reads them in. Bounds come bottom-up: leaves from their triangles, parents from their
+    two children, one tree level at a time; so every box contains its children exactly.
+    """
+    m, device = len(start), start.device
+    leaf = left < 0
+    max_depth = int(depth.max())
+    levels = [(depth == k).nonzero()[:, 0] for k in range(max_depth + 1)]
+    node_lo = torch.full((m, 3), math.inf, dtype=tri_lo.dtype, device=device)
+    node_hi = torch.full((m, 3), -math.inf, dtype=tri_lo.dtype, device=device)
+    leaves = leaf.nonzero()[:, 0]
+    owner, k = expand_ranges(start[leaves], end[leaves] - start[leaves])
+    index = leaves[owner, None].expand(-1, 3)
+    node_lo.scatter_reduce_(0, index, tri_lo[order[k]], "amin")
+    node_hi.scatter_reduce_(0, index, tri_hi[order[k]], "amax")
+    size = torch.ones(m, dtype=torch.int64, device=device)
+    for nodes in reversed(levels):
+        nodes = nodes[~leaf[nodes]]
+        a, b = left[nodes], right[nodes]
+        node_lo[nodes] = torch.minimum(node_lo[a], node_lo[b])
+        node_hi[nodes] = torch.maximum(node_hi[a], node_hi[b])
+        size[nodes] = 1 + size[a] + size[b]
+    # Pre-order positions: the left child right after its parent, the right child after
+    # the whole left subtree.
+    pos = torch.zeros(m, dtype=torch.int64, device=device)
+    for nodes in levels:
+        nodes = nodes[~leaf[nodes]]
+        pos[left[nodes]] = pos[nodes] + 1
+        pos[right[nodes]] = pos[nodes] + 1 + size[left[nodes]]
+    out = {"kind": "bvh"}
+    out["lo"] = torch.empty_like(node_lo).index_copy_(0, pos, node_lo)
+    out["hi"] = torch.empty_like(node_hi).index_copy_(0, pos, node_hi)
+    minus = torch.full_like(left, -1)
+    out["left"] = minus.index_copy(0, pos, torch.where(leaf, -1, pos[left.clamp(min=0)]))
+    out["right"] = minus.index_copy(0, pos, torch.where(leaf, -1, pos[right.clamp(min=0)]))
+    out["first"] = torch.zeros_like(start).index_copy_(0, pos, torch.where(leaf, start, 0))
+    out["count"] = torch.zeros_like(start).index_copy_(0, pos, torch.where(leaf, end - start, 0))
+    out["triangles"] = order
+    return out
+
+
+class TreeLevels:
+    """Provided: the nodes of a BVH built level by level, for :func:`assemble_bvh`.
+
+    Node ``i`` holds the triangles ``order[start[i] : end[i]]`` of the build's triangle
+    order; the root (id 0) holds all ``f``. :meth:`split` gives nodes of the current level
+    their two children, :meth:`finish` assembles the flat BVH once no node splits.
+    """
+
+    def __init__(self, f: int, device):
+        zero = torch.zeros(1, dtype=torch.int64, device=device)
+        self.starts, self.ends, self.depths = [zero], [zero + f], [zero]
+        self.children = []  # per level: (parents, left ids, right ids)
+        self.count = 1
+
+    def ranges(self, nodes: torch.Tensor):
+        """``(start, end)`` of ``nodes`` (k,) int64 ids, each (k,) int64."""
+        return torch.cat(self.starts)[nodes], torch.cat(self.ends)[nodes]
+
+    def split(self, nodes: torch.Tensor, mid: torch.Tensor, depth: int) -> torch.Tensor:
+        """Split each of ``nodes`` (k,), at tree depth ``depth``, into ``[start, mid)`` and
+        ``[mid, end)``; returns the (2k,) children ids, left and right interleaved."""
+        start, end = self.ranges(nodes)
+        k = len(nodes)
+        ids = self.count + torch.arange(2 * k, device=nodes.device)
+        self.children.append((nodes, ids[0::2], ids[1::2]))
+        self.starts.append(torch.stack((start, mid), 1).reshape(-1))
+        self.ends.append(torch.stack((mid, end), 1).reshape(-1))
+        self.depths.append(torch.full((2 * k,), depth + 1, dtype=torch.int64, device=nodes.device))
+        self.count += 2 * k
+        return ids
+
+    def finish(self, order: torch.Tensor, tri_lo: torch.Tensor, tri_hi: torch.Tensor) -> dict:
+        """The BVH dict of the tree; ``order`` (F,): the triangles in their final order."""
+        start, end = torch.cat(self.starts), torch.cat(self.ends)
+        left, right = torch.full_like(start, -1), torch.full_like(start, -1)
+        for parents, a, b in self.children:
+            left[parents], right[parents] = a, b
+        return assemble_bvh(order, start, end, left, right, torch.cat(self.depths), tri_lo,
+                            tri_hi)
+
+
+def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
+    """A linear BVH (Lauterbach et al. 2009; Karras 2012): sort by Morton code, then split.
+
+    mesh: F triangles; leaf_size: a node with at most this many triangles is a leaf;
+    bits: Morton bits per axis. Returns the BVH dict (on the mesh's device):
+
+    =============  ==============  =========================================================
+    ``kind``       ``"bvh"``
+    ``lo, hi``     (M, 3) float    node bounds (contain their children and triangles)
+    ``left``       (M,) int64      left child, ``-1`` for a leaf; **depth-first layout**:
+                                   the left child of node ``i`` is ``i + 1``
+    ``right``      (M,) int64      right child (after the whole left subtree), -1 for a leaf
+    ``first``      (M,) int64      a leaf holds ``triangles[first : first + count]``
+    ``count``      (M,) int64      0 for inner nodes
+    ``triangles``  (F,) int64      triangle indices in leaf order: each exactly once
+    =============  ==============  =========================================================
+
+    1. Morton codes of the triangles' bounds centres (in the centres' bounding box), and a
+       stable sort by code: ``order`` (ties keep triangle order).
+    2. Level by level, for every node of the level at once: a node ``[s, e)`` of the
+       sorted codes with more than ``leaf_size`` triangles splits where its highest
+       differing bit flips: with ``b = highest set bit of codes[s] ^ codes[e - 1]``, the
+       first index whose code has bit ``b`` set, i.e. ``searchsorted(codes,
+       (codes[e - 1] >> b) << b)``. Equal codes (no differing bit): split in the middle.
+    3. ``TreeLevels`` (provided) records the levels and, through ``assemble_bvh``, turns
+       them into the flat depth-first layout with bounds computed bottom-up.
+
+    The tree's quality depends on the code's resolution only: a bad split wastes node
+    visits, never correctness.
+    """
+    check_mesh(mesh)
+    check_leaf_size(leaf_size)
+    tri_lo, tri_hi = triangle_bounds(mesh)
+    centres = (tri_lo + tri_hi) / 2
+    codes = morton_codes(centres, centres.amin(dim=0), centres.amax(dim=0), bits)
+    codes, order = torch.sort(codes, stable=True)
+    levels = TreeLevels(mesh.num_faces, mesh.device)
+    nodes = torch.zeros(1, dtype=torch.int64, device=mesh.device)
+    level = 0
+    while len(nodes):
+        start, end = levels.ranges(nodes)
+        inner = end - start > leaf_size
+        nodes, start, end = nodes[inner], start[inner], end[inner]
+        first, last = codes[start], codes[end - 1]
+        differ = first ^ last
+        # frexp: differ = m * 2^e with m in [0.5, 1), so the highest set bit is e - 1
+        # (exact: the codes fit in a double's 53-bit mantissa).
+        high = torch.frexp(differ.double()).exponent.long() - 1
+        split_code = (last >> high.clamp(min=0)) << high.clamp(min=0)
+        mid = torch.searchsorted(codes, split_code)
+        mid = torch.where(differ == 0, (start + end) // 2, mid)
+        nodes = levels.split(nodes, mid, level)
+        level += 1
+    return levels.finish(order, tri_lo, tri_hi)
+
+
+def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
+    """A BVH by the binned surface area heuristic (Wald 2007), built level by level.
+
+    mesh: F triangles; leaf_size: nodes of at most this many triangles become leaves;
+    bins: candidate split positions per axis (2..1024). Returns the BVH dict of
+    :func:`build_lbvh`.
+
+    Every node of a level at once:
+
+    1. Bin each triangle by its centroid ``c`` (the centre of its bounds): on each axis,
+       ``bin = floor(bins * (c - cmin) / (cmax - cmin))`` clamped to ``[0, bins - 1]``,
+       with the node's centroid bounds ``cmin, cmax`` (bin 0 where ``cmax == cmin``).
+    2. Per (node, axis, bin): the number of triangles and the union of their **triangle
+       bounds** (``scatter_reduce`` amin/amax), then prefix (left) and suffix (right)
+       unions and counts over the bins (``cummin``/``cummax``/``cumsum``).
+    3. The cost of splitting after bin ``k``: ``A(left) N(left) + A(right) N(right)``
+       (``A`` = surface area); invalid where a side is empty. Take the cheapest (axis, k)
+       over the node; triangles with ``bin[axis] <= k`` go left (a stable partition of
+       the node's range of ``order``: ``argsort`` by (node, side), stable).
+    4. No valid split (all centroids in one bin on every axis: coincident triangles):
+       split the range in the middle instead, so the build always ends.
+    """
+    check_mesh(mesh)
+    check_leaf_size(leaf_size)
+    check_bins(bins)
+    tri_lo, tri_hi = triangle_bounds(mesh)
+    centres = (tri_lo + tri_hi) / 2
+    device, dtype = mesh.device, tri_lo.dtype
+    order = torch.arange(mesh.num_faces, device=device)
+    levels = TreeLevels(mesh.num_faces, device)
+    nodes = torch.zeros(1, dtype=torch.int64, device=device)
+    level = 0
+    while len(nodes):
+        start, end = levels.ranges(nodes)
+        inner = end - start > leaf_size
+        nodes, start, end = nodes[inner], start[inner], end[inner]
+        k = len(nodes)
+        if k == 0:
+            break
+        count = end - start
+        seg, pos = expand_ranges(start, count)  # the node of each primitive, and its slot
+        prim = order[pos]
+        c = centres[prim]
+        inf = torch.full((k, 3), math.inf, dtype=dtype, device=device)
+        cmin = inf.scatter_reduce(0, seg[:, None].expand(-1, 3), c, "amin")
+        cmax = (-inf).scatter_reduce(0, seg[:, None].expand(-1, 3), c, "amax")
+        extent = cmax - cmin
+        scale = torch.where(extent > 0, bins / extent, torch.zeros_like(extent))
+        b = torch.floor((c - cmin[seg]) * scale[seg]).long().clamp(0, bins - 1)  # (P, 3)
+        slot = (seg[:, None] * 3 + torch.arange(3, device=device)) * bins + b  # (P, 3)
+        slot = slot.reshape(-1)
+        n_slots = k * 3 * bins
+        bin_count = torch.zeros(n_slots, dtype=torch.int64, device=device)
+        bin_count.index_add_(0, slot, torch.ones_like(slot))
+        big = torch.full((n_slots, 3), math.inf, dtype=dtype, device=device)
+        slot3 = slot[:, None].expand(-1, 3)
+        bin_lo = big.scatter_reduce(0, slot3, tri_lo[prim].repeat_interleave(3, 0), "amin")
+        bin_hi = (-big).scatter_reduce(0, slot3, tri_hi[prim].repeat_interleave(3, 0), "amax")
+        bin_count = bin_count.reshape(k, 3, bins)
+        bin_lo, bin_hi = bin_lo.reshape(k, 3, bins, 3), bin_hi.reshape(k, 3, bins, 3)
+        # Left side: bins 0..j; right side: bins j+1..bins-1.
+        left_lo = bin_lo.cummin(dim=2).values
+        left_hi = bin_hi.cummax(dim=2).values
+        left_n = bin_count.cumsum(dim=2)
+        right_lo = bin_lo.flip(2).cummin(dim=2).values.flip(2)
+        right_hi = bin_hi.flip(2).cummax(dim=2).values.flip(2)
+        right_n = bin_count.flip(2).cumsum(dim=2).flip(2)
+        n_l, n_r = left_n[..., :-1], right_n[..., 1:]
+        cost = (surface_area(left_lo[..., :-1, :], left_hi[..., :-1, :]) * n_l
+                + surface_area(right_lo[..., 1:, :], right_hi[..., 1:, :]) * n_r)
+        cost = torch.where((n_l > 0) & (n_r > 0), cost, math.inf).reshape(k, -1)
+        best_cost, best = cost.min(dim=1)
+        axis, after = best // (bins - 1), best % (bins - 1)
+        goes_left = b.gather(1, axis[seg, None])[:, 0] <= after[seg]
+        # The fallback: no valid split, so halve the range (always progress).
+        halves = (pos - start[seg]) < count[seg] // 2
+        goes_left = torch.where(torch.isfinite(best_cost)[seg], goes_left, halves)
+        # Stable partition inside each node's range: left triangles first.
+        perm = torch.sort(seg * 2 + (~goes_left).long(), stable=True).indices
+        order = order.index_copy(0, pos, prim[perm])
+        n_left = torch.zeros(k, dtype=torch.int64, device=device)
+        n_left.index_add_(0, seg, goes_left.long())
+        nodes = levels.split(nodes, start + n_left, level)
+        level += 1
+    return levels.finish(order, tri_lo, tri_hi)
+
+
+# =======================================================================================
+# Task 3: BVH traversal
+
+
+def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
+    """Closest hits through a BVH with a per-ray stack, near child first.
+
+    rays: N rays; mesh: the BVH's mesh; bvh: from :func:`build_lbvh`/:func:`build_sah_bvh`
+    (any valid BVH: inner nodes have two children, leaves a triangle range); intersect:
+    the triangle kernel. Returns ``(Hits, counters)``: ``"steps"`` = nodes visited (popped
+    and not culled), ``"tests"`` = triangle tests.
+
+    The stack is a tensor ``(active rays, depth)`` of node ids and their entry ``t``, with
+    a stack pointer per ray (a GPU thread keeps it in local memory: 64 entries). Start with
+    the root on the stack where the ray hits the root's box. Each iteration, every active
+    ray pops one entry:
+
+    * culled: its entry ``t`` is beyond the closest hit found since it was pushed;
+    * a leaf: test its triangles (``test_ranges``);
+    * an inner node: slab-test both children against ``[t_min, min(t_max, closest t)]``
+      and push those hit, **far child first**, so the near one is popped next: the near
+      side's hit then culls the far side.
+
+    A ray with an empty stack is done. The stack grows (a new column) if a ray would
+    overflow it; a tree of depth D never needs more than D + 1 entries.
+    """
+    check_trace_inputs(rays, mesh, intersect)
+    check_structure(bvh, "bvh", "bvh", mesh)
+    n, device = len(rays), rays.device
+    closest = new_closest(n, rays.t_min)
+    counters = new_counters(n, device)
+    corners = mesh.triangles()
+    inv = 1 / rays.directions
+    t_root, _, hit = slab_test(rays.origins, inv, bvh["lo"][0], bvh["hi"][0], rays.t_min,
+                               rays.t_max)
+    ray = hit.nonzero()[:, 0]
+    depth = 32
+    stack = torch.zeros((len(ray), depth), dtype=torch.int64, device=device)
+    stack_t = torch.zeros((len(ray), depth), dtype=rays.dtype, device=device)
+    stack_t[:, 0] = t_root[ray]
+    sp = torch.ones(len(ray), dtype=torch.int64, device=device)
+    left, right, lo, hi = bvh["left"], bvh["right"], bvh["lo"], bvh["hi"]
+    for _ in range(2 * len(left) + 1):  # each node is pushed at most once per ray
+        if len(ray) == 0:
+            break
+        if int(sp.max()) + 2 > depth:  # room for two pushes
+            stack = torch.cat((stack, torch.zeros_like(stack)), dim=1)
+            stack_t = torch.cat((stack_t, torch.zeros_like(stack_t)), dim=1)
+            depth *= 2
+        rows = torch.arange(len(ray), device=device)
+        sp = sp - 1
+        node, t_node = stack[rows, sp], stack_t[rows, sp]
+        live = t_node <= closest["t"][ray]
+        add_count(counters["steps"], ray[live])
+        leaf = live & (left[node] < 0)
+        test_ranges(intersect, rays, corners, ray[leaf], bvh["first"][node[leaf]],
+                    bvh["count"][node[leaf]], bvh["triangles"], closest, counters)
+        inner = (live & (left[node] >= 0)).nonzero()[:, 0]
+        r = ray[inner]
+        t_hi = torch.minimum(rays.t_max[r], closest["t"][r])
+        a, b = left[node[inner]], right[node[inner]]
+        o, iv, t_lo = rays.origins[r], inv[r], rays.t_min[r]
+        ta, _, hit_a = slab_test(o, iv, lo[a], hi[a], t_lo, t_hi)
+        tb, _, hit_b = slab_test(o, iv, lo[b], hi[b], t_lo, t_hi)
+        a_first = ta <= tb
+        near, far = torch.where(a_first, a, b), torch.where(a_first, b, a)
+        t_near, t_far = torch.where(a_first, ta, tb), torch.where(a_first, tb, ta)
+        hit_near, hit_far = torch.where(a_first, hit_a, hit_b), torch.where(a_first, hit_b, hit_a)
+        for push, t_push, ok in ((far, t_far, hit_far), (near, t_near, hit_near)):
+            rows_ok = inner[ok]
+            stack[rows_ok, sp[rows_ok]] = push[ok]
+            stack_t[rows_ok, sp[rows_ok]] = t_push[ok]
+            sp = sp.index_add(0, rows_ok, torch.ones_like(rows_ok))
+        keep = sp > 0
+        ray, stack, stack_t, sp = ray[keep], stack[keep], stack_t[keep], sp[keep]
+    return as_hits(closest), counters
+
+
+def bvh_skip_indices(bvh: dict) -> torch.Tensor:
+    """The stackless walk's links: where to go after node ``i``'s subtree.
+
+    bvh: a BVH dict in the depth-first layout (left child of ``i`` is ``i + 1``).
+    Returns (M,) int64: ``skip[i]`` = the first node after ``i``'s subtree in the array,
+    ``M`` (past the end) for the subtrees that end the array.
+
+    In the depth-first layout a subtree is the contiguous block ``i .. last(i)``, where
+    ``last(i)`` is its rightmost leaf (follow ``right`` from ``i`` until a leaf), so
+    ``skip[i] = last(i) + 1``. Compute ``last`` for all nodes at once by pointer jumping:
+    start with ``last = right`` (``i`` for leaves) and repeat ``last = last[last]`` until
+    nothing changes (about ``log2(depth)`` rounds): no loop over nodes.
+    """
+    check_links(bvh)
+    left, right = bvh["left"], bvh["right"]
+    last = torch.where(left < 0, torch.arange(len(left), device=left.device), right)
+    for _ in range(64):  # the depth doubles per round; 2^64 is more than enough
+        jumped = last[last]
+        if torch.equal(jumped, last):
+            break
+        last = jumped
+    return last + 1
+
+
+def bvh_closest_hit_stackless(rays: Rays, mesh: Mesh, bvh: dict, intersect):
+    """Closest hits through a BVH without a stack: walk the node array left to right.
+
+    Same arguments and results as :func:`bvh_closest_hit`; ``"steps"`` counts the nodes
+    whose box the ray tested. Needs the depth-first layout (``left[i] == i + 1``).
+
+    Each ray holds one node index, starting at the root (0). Each iteration, every active
+    ray slab-tests its node's box against ``[t_min, min(t_max, closest t)]``:
+
+    * hit and inner node: go to ``i + 1`` (the left child: descend);
+    * hit and leaf: test its triangles, then go to ``skip[i]``;
+    * miss: go to ``skip[i]`` (jump over the whole subtree).
+
+    A ray whose next node is ``M`` is done. No stack at all (one register on a GPU), but no
+    near-first order either: the walk always takes the left child first, so it visits
+    more nodes than the stack traversal: the lecture's trade of memory against work.
+    """
+    check_trace_inputs(rays, mesh, intersect)
+    check_structure(bvh, "bvh", "bvh", mesh)
+    n, device = len(rays), rays.device
+    closest = new_closest(n, rays.t_min)
+    counters = new_counters(n, device)
+    corners = mesh.triangles()
+    skip = bvh_skip_indices(bvh)
+    m = len(skip)
+    inv = 1 / rays.directions
+    ray = torch.arange(n, device=device)
+    node = torch.zeros(n, dtype=torch.int64, device=device)
+    leaf_of = bvh["left"] < 0
+    for _ in range(m + 1):  # every step moves right: at most M steps
+        if len(ray) == 0:
+            break
+        t_hi = torch.minimum(rays.t_max[ray], closest["t"][ray])
+        _, _, hit = slab_test(rays.origins[ray], inv[ray], bvh["lo"][node], bvh["hi"][node],
+                              rays.t_min[ray], t_hi)
+        add_count(counters["steps"], ray)
+        leaf = hit & leaf_of[node]
+        test_ranges(intersect, rays, corners, ray[leaf], bvh["first"][node[leaf]],
+                    bvh["count"][node[leaf]], bvh["triangles"], closest, counters)
+        node = torch.where(hit & ~leaf_of[node], node + 1, skip[node])
+        keep = node < m
+        ray, node = ray[keep], node[keep]
+    return as_hits(closest), counters
+
+
+# =======================================================================================
+# Task 4: the kd-tree
+
+
+def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
+                 traversal_cost: float = 1.0, intersect_cost: float = 2.0,
+                 empty_bonus: float = 0.5) -> dict:
+    """A kd-tree by the surface area heuristic over triangle bound planes, level by level.
+
+    mesh: F triangles; max_depth: default ``round(8 + 1.3 log2 F)`` (pbrt); leaf_size: a
+    node with at most this many triangles is a leaf; the SAH costs: ``traversal_cost``
+    per node, ``intersect_cost`` per triangle test, and ``empty_bonus`` (0..1) off the
+    cost of a split with an empty side. Returns a dict on the mesh's device:
+
+    =============  ==============  ==========================================================
+    ``kind``       ``"kd"``
+    ``lo, hi``     (3,) float      the root's box (the scene bounds)
+    ``split``      (M,) float      split plane position (inner nodes; 0 for leaves)
+    ``axis``       (M,) int64      split axis 0/1/2, ``-1`` for a leaf
+    ``left``       (M,) int64      the lower child (``x[axis] <= split``); the upper child
+                                   is ``left + 1``; ``-1`` for a leaf
+    ``first``      (M,) int64      a leaf holds ``triangles[first : first + count]``
+    ``count``      (M,) int64
+    ``triangles``  (K,) int64      leaf lists; a triangle straddling a split is in both
+                                   children, so ``K >= F``
+    =============  ==============  ==========================================================
+
+    For every node of a level at once, on each axis: the candidate planes are the bounds
+    of the node's triangles clipped to the node's box, as *events* (start = lower bound,
+    end = upper bound) sorted by (node, position, start before end). At event ``j`` of a
+    node with ``n`` triangles, ``N_below`` = starts before ``j`` and ``N_above`` = ends
+    after ``j`` (prefix sums over the sorted events), and
+
+        cost = traversal + intersect * (1 - bonus if a side is empty) *
+               (A_below N_below + A_above N_above) / A_node
+
+    for planes strictly inside the node's box. The node splits at its cheapest event if
+    that beats a leaf (``intersect * n``) and the node is not at ``max_depth``; a
+    triangle goes below iff its start event comes before the split event and above iff
+    its end event comes after it (so one lying in the plane goes to one side, and every
+    triangle to at least one). Coincident triangles offer no plane inside the box: a leaf.
+    """
+    check_mesh(mesh)
+    check_leaf_size(leaf_size)
+    max_depth = check_kd_knobs(mesh, max_depth, traversal_cost, intersect_cost, empty_bonus)
+    f, device = mesh.num_faces, mesh.device
+    tri_lo, tri_hi = triangle_bounds(mesh)
+    dtype = tri_lo.dtype
+    # Every candidate plane is a triangle bound: number each axis's bounds once (sorted,
+    # equal values share a number). Node faces are such planes too, so clipping a bound to
+    # a node's box is a clamp of plane numbers (exact), and one integer sort per axis and
+    # level orders the events.
+    planes = [torch.sort(torch.cat((tri_lo[:, a], tri_hi[:, a]))).values for a in range(3)]
+    start_plane = torch.stack([torch.searchsorted(planes[a], tri_lo[:, a].contiguous())
+                               for a in range(3)], dim=1)
+    end_plane = torch.stack([torch.searchsorted(planes[a], tri_hi[:, a].contiguous())
+                             for a in range(3)], dim=1)
+    # Per level: the nodes' boxes (as plane numbers); per created node: split, axis, left.
+    box_lo, box_hi = start_plane.amin(0, keepdim=True), end_plane.amax(0, keepdim=True)
+    root = [torch.stack([planes[a][box[0, a]] for a in range(3)]) for box in (box_lo, box_hi)]
+    split = [torch.zeros(1, dtype=dtype, device=device)]
+    axis = [torch.full((1,), -1, dtype=torch.int64, device=device)]
+    left = [torch.full((1,), -1, dtype=torch.int64, device=device)]
+    leaf_node, leaf_tri = [], []
+    base = 0  # id of the first node of the current level
+    pair_node = torch.zeros(f, dtype=torch.int64, device=device)  # (node, triangle) pairs
+    pair_tri = torch.arange(f, device=device)
+    for depth in range(max_depth + 1):
+        k = len(box_lo)
+        seg = pair_node - base
+        n = torch.bincount(seg, minlength=k)
+        best_cost = torch.full((k,), math.inf, dtype=dtype, device=device)
+        best_axis = torch.zeros(k, dtype=torch.int64, device=device)
+        best_plane = torch.zeros(k, dtype=torch.int64, device=device)
+        best_event = torch.zeros(k, dtype=torch.int64, device=device)
+        slot_start, slot_end = [], []
+        p = len(seg)
+        if depth < max_depth and p > 0:
+            for a in range(3):
+                cost, plane, owner, slot = _kd_sweep(
+                    a, seg, n, box_lo, box_hi, start_plane[pair_tri, a], end_plane[pair_tri, a],
+                    planes, traversal_cost, intersect_cost, empty_bonus)
+                slot_start.append(slot[:p])
+                slot_end.append(slot[p:])
+                axis_best = torch.full((k,), math.inf, dtype=dtype, device=device)
+                axis_best = axis_best.scatter_reduce(0, owner, cost, "amin")
+                events = torch.arange(2 * p, device=device)
+                at_best = (cost == axis_best[owner]) & torch.isfinite(cost)
+                event = torch.full((k,), 2 * p - 1, dtype=torch.int64, device=device)
+                event = event.scatter_reduce(0, owner[at_best], events[at_best], "amin")
+                better = axis_best < best_cost
+                best_cost = torch.where(better, axis_best, best_cost)
+                best_axis = torch.where(better, a, best_axis)
+                best_event = torch.where(better, event, best_event)
+                best_plane = torch.where(better, plane[event], best_plane)
+        do_split = (n > leaf_size) & (best_cost < intersect_cost * n)
+        # Leaves of this level keep their pairs.
+        is_leaf_pair = ~do_split[seg]
+        leaf_node.append(pair_node[is_leaf_pair])
+        leaf_tri.append(pair_tri[is_leaf_pair])
+        splitting = do_split.nonzero()[:, 0]
+        child = torch.full((k,), -1, dtype=torch.int64, device=device)
+        next_base = base + k
+        child[splitting] = next_base + 2 * torch.arange(len(splitting), device=device)
+        value = torch.stack([planes[a][best_plane] for a in range(3)]).gather(
+            0, best_axis[None])[0]
+        split[-1] = torch.where(do_split, value, split[-1])
+        axis[-1] = torch.where(do_split, best_axis, axis[-1])
+        left[-1] = child
+        if len(splitting) == 0:
+            break
+        # Pairs of splitting nodes go below, above or both, by their events' slots.
+        sel = do_split[seg]
+        s, t = seg[sel], pair_tri[sel]
+        ax = best_axis[s]
+        r_start = torch.stack(slot_start)[:, sel].gather(0, ax[None])[0]
+        r_end = torch.stack(slot_end)[:, sel].gather(0, ax[None])[0]
+        below, above = r_start < best_event[s], r_end > best_event[s]
+        pair_node = torch.cat((child[s[below]], child[s[above]] + 1))
+        pair_tri = torch.cat((t[below], t[above]))
+        # Children's boxes: the parent's, cut at the plane.
+        plo, phi = box_lo[splitting], box_hi[splitting]
+        rows = torch.arange(len(splitting), device=device)
+        below_hi, above_lo = phi.clone(), plo.clone()
+        below_hi[rows, best_axis[splitting]] = best_plane[splitting]
+        above_lo[rows, best_axis[splitting]] = best_plane[splitting]
+        box_lo = torch.stack((plo, above_lo), 1).reshape(-1, 3)
+        box_hi = torch.stack((below_hi, phi), 1).reshape(-1, 3)
+        m = 2 * len(splitting)
+        split.append(torch.zeros(m, dtype=dtype, device=device))
+        axis.append(torch.full((m,), -1, dtype=torch.int64, device=device))
+        left.append(torch.full((m,), -1, dtype=torch.int64, device=device))
+        base = next_base
+    leaf_node, leaf_tri = torch.cat(leaf_node), torch.cat(leaf_tri)
+    order = torch.sort(leaf_node, stable=True).indices
+    num_nodes = sum(len(x) for x in axis)
+    count = torch.bincount(leaf_node, minlength=num_nodes)
+    return {"kind": "kd", "lo": root[0], "hi": root[1], "split": torch.cat(split),
+            "axis": torch.cat(axis), "left": torch.cat(left),
+            "first": torch.cumsum(count, 0) - count, "count": count,
+            "triangles": leaf_tri[order]}
+
+
+def _kd_sweep(a, seg, n, box_lo, box_hi, starts, ends, planes, traversal_cost, intersect_cost,
+              empty_bonus):
+    """The SAH sweep of one level on axis ``a``: the cost of splitting at every event.
+
+    seg: (P,) the node (of this level) of each (node, triangle) pair; n: (k,) pairs per
+    node; box_lo, box_hi: (k, 3) node boxes and starts, ends: (P,) the triangles' bounds on
+    axis a, all as plane numbers: indices into ``planes[a]``, the sorted bound positions.
+    Returns ``(cost, plane, owner, slot)``: per sorted event (2P,) its cost (inf where the
+    plane is not strictly inside the box), plane number and node; and the slot (2P,) of
+    each pair's start (``slot[:P]``) and end (``slot[P:]``) event in the sorted order.
+    """
+    p, device = len(seg), seg.device
+    lo_a, hi_a = box_lo[:, a], box_hi[:, a]
+    plane = torch.cat((torch.minimum(torch.maximum(starts, lo_a[seg]), hi_a[seg]),
+                       torch.minimum(torch.maximum(ends, lo_a[seg]), hi_a[seg])))
+    is_end = (torch.arange(2 * p, device=device) >= p).long()
+    owner = torch.cat((seg, seg))
+    # One key orders by (node, plane, start before end).
+    perm = torch.sort((owner * len(planes[a]) + plane) * 2 + is_end).indices
+    plane, owner, is_end = plane[perm], owner[perm], is_end[perm]
+    slot = torch.empty_like(perm)
+    slot[perm] = torch.arange(2 * p, device=device)
+    first = (torch.cumsum(2 * n, 0) - 2 * n).clamp(max=2 * p - 1)  # each node's first event
+    starts_before = torch.cumsum(1 - is_end, 0) - (1 - is_end)
+    ends_before = torch.cumsum(is_end, 0) - is_end
+    n_below = starts_before - starts_before[first][owner]
+    n_above = n[owner] - (ends_before + is_end - ends_before[first][owner])
+    # Areas: only the extent along `a` changes, 2 (e1 e2 + x (e1 + e2)).
+    nlo = torch.stack([planes[b][box_lo[:, b]] for b in range(3)], dim=1)
+    nhi = torch.stack([planes[b][box_hi[:, b]] for b in range(3)], dim=1)
+    ext = nhi - nlo
+    e1, e2 = ext[:, (a + 1) % 3], ext[:, (a + 2) % 3]
+    cap, rim = (e1 * e2)[owner], (e1 + e2)[owner]
+    value = planes[a][plane]
+    area_below = 2 * (cap + (value - nlo[owner, a]) * rim)
+    area_above = 2 * (cap + (nhi[owner, a] - value) * rim)
+    empty = (n_below == 0) | (n_above == 0)
+    cost = traversal_cost + intersect_cost * (1 - empty_bonus * empty) * (
+        area_below * n_below + area_above * n_above) / surface_area(nlo, nhi)[owner]
+    inside = (plane > lo_a[owner]) & (plane < hi_a[owner])
+    return torch.where(inside, cost, math.inf), plane, owner, slot
+
+
+OFFSET_BITS = 29
+"""The 8-byte kd node: word 0 = the split (float32 bits; a leaf: its triangle count);
+word 1 = leftOffset (bits 0-28) | splitAxis << 29 (bits 29-30) | leaf << 31."""
+
+
+def kd_pack(tree: dict) -> torch.Tensor:
+    """The lecture's 8-byte kd node: ``split float + leftOffset:29 + splitAxis:2 + leaf:1``.
+
+    tree: a kd dict (:func:`build_kdtree`). Returns (M, 2) int32, two 32-bit words a node:
+
+    * word 0: inner node: the bits of ``split`` as float32 (``Tensor.view(torch.int32)``);
+      leaf: its triangle ``count``.
+    * word 1, as C bit-fields are laid out on a little-endian GPU (first field lowest):
+      bits 0-28 ``leftOffset``, bits 29-30 ``splitAxis``, bit 31 ``leaf``. Inner node:
+      ``leftOffset = left - i`` (the lower child is that far ahead, the upper one right
+      after it), ``splitAxis = axis``. Leaf: ``leftOffset = first`` (where its triangle
+      list starts), ``splitAxis = 0``, ``leaf = 1``: the sign bit, so ``word1 < 0`` is the
+      leaf test.
+
+    Compute in int64 and wrap to int32 (``leaf << 31`` is ``2^31``, one more than int32
+    holds). ValueError naming ``tree`` if an offset needs more than 29 bits or a count
+    more than 31.
+    """
+    check_kd_fields(tree)
+    m = len(tree["axis"])
+    leaf = tree["axis"] < 0
+    index = torch.arange(m, device=tree["axis"].device)
+    offset = torch.where(leaf, tree["first"], tree["left"] - index)
+    if m and (int(offset.min()) < 0 or int(offset.max()) >= 2**OFFSET_BITS):
+        raise ValueError(f"tree: a leftOffset of {int(offset.max())} does not fit in "
+                         f"{OFFSET_BITS} bits (or is negative)")
+    if m and int(tree["count"].max()) >= 2**31:
+        raise ValueError("tree: a leaf count does not fit in 31 bits")
+    split_bits = tree["split"].to(torch.float32).contiguous().view(torch.int32).long()
+    word0 = torch.where(leaf, tree["count"], split_bits)
+    word1 = offset | (tree["axis"].clamp(min=0) << OFFSET_BITS) | (leaf.long() << 31)
+    packed = torch.stack((word0, word1), dim=1)
+    return torch.where(packed >= 2**31, packed - 2**32, packed).to(torch.int32)
+
+
+def kd_unpack(packed: torch.Tensor) -> dict:
+    """The fields of packed kd nodes (the inverse of :func:`kd_pack`).
+
+    packed: (M, 2) int32. Returns a dict of (M,) tensors: ``split`` float32 (0 for
+    leaves), ``axis`` int64 (-1 for leaves), ``left`` int64 (absolute index, -1 for
+    leaves), ``first`` and ``count`` int64 (0 for inner nodes). Mask before shifting:
+    ``>>`` on a negative int32 (a leaf's word) copies the sign bit.
+    """
+    check_packed(packed)
+    word0, word1 = packed[:, 0], packed[:, 1].long() & 0xFFFFFFFF
+    leaf = (word1 >> 31) == 1
+    offset = word1 & (2**OFFSET_BITS - 1)
+    axis = (word1 >> OFFSET_BITS) & 3
+    index = torch.arange(len(packed), device=packed.device)
+    zero = torch.zeros_like(offset)
+    return {"split": torch.where(leaf, 0.0, word0.contiguous().view(torch.float32)),
+            "axis": torch.where(leaf, -1, axis), "left": torch.where(leaf, -1, index + offset),
+            "first": torch.where(leaf, offset, zero),
+            "count": torch.where(leaf, word0.long(), zero)}
+
+
+def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
+    """Closest hits through a kd-tree: stack traversal with the early exit.
+
+    rays: N rays; mesh: the tree's mesh; tree: from :func:`build_kdtree`; intersect: the
+    triangle kernel. Returns ``(Hits, counters)``: ``"steps"`` = nodes visited,
+    ``"tests"`` = triangle tests.
+
+    Per ray: the current node with the ray's interval ``[t_near, t_far]`` inside it
+    (initially the root box clipped to ``[t_min, t_max]``), and a stack of (node, t_near,
+    t_far). Each iteration, every active ray handles its node:
+
+    * inner node: ``t_split = (split - o[axis]) / d[axis]``; the near child is the lower
+      one if ``o[axis] < split`` (or ``== split`` with ``d[axis] <= 0``). If ``t_split >
+      t_far`` or ``t_split <= 0``: only the near child; if ``t_split < t_near``: only the
+      far one; else push (far, t_split, t_far) and go to (near, t_near, t_split). For
+      ``d[axis] = +-0``, ``t_split = +-inf`` selects the near child by these same rules; a
+      ray lying *in* the plane (``0 * inf = NaN``) visits both children, whole interval.
+    * leaf: test its triangles. **Early exit** only if the closest hit so far has
+      ``t <= t_far``: it lies inside this leaf's interval. A triangle straddling the
+      split sits in several leaves and can be hit beyond this leaf, where a nearer
+      triangle of a later leaf may still be waiting. Otherwise pop the next (node,
+      interval); an empty stack ends the ray.
+    """
+    check_trace_inputs(rays, mesh, intersect)
+    check_structure(tree, "kd", "tree", mesh)
+    n, device, dtype = len(rays), rays.device, rays.dtype
+    closest = new_closest(n, rays.t_min)
+    counters = new_counters(n, device)
+    corners = mesh.triangles()
+    inv = 1 / rays.directions
+    t_enter, t_exit, hit = slab_test(rays.origins, inv, tree["lo"], tree["hi"], rays.t_min,
+                                     rays.t_max)
+    ray = hit.nonzero()[:, 0]
+    node = torch.zeros(len(ray), dtype=torch.int64, device=device)
+    t_near, t_far = t_enter[ray], t_exit[ray]
+    depth = 32
+    stack = torch.zeros((len(ray), depth), dtype=torch.int64, device=device)
+    stack_near = torch.zeros((len(ray), depth), dtype=dtype, device=device)
+    stack_far = torch.zeros((len(ray), depth), dtype=dtype, device=device)
+    sp = torch.zeros(len(ray), dtype=torch.int64, device=device)
+    axis_of, left_of, split_of = tree["axis"], tree["left"], tree["split"]
+    for _ in range(2 * len(axis_of) + 1):
+        if len(ray) == 0:
+            break
+        if int(sp.max()) + 1 > depth:
+            stack, stack_near, stack_far = (torch.cat((x, torch.zeros_like(x)), dim=1)
+                                            for x in (stack, stack_near, stack_far))
+            depth *= 2
+        add_count(counters["steps"], ray)
+        axis = axis_of[node]
+        leaf = axis < 0
+        done = torch.zeros_like(leaf)
+        # Leaves: test, then exit early or pop.
+        test_ranges(intersect, rays, corners, ray[leaf], tree["first"][node[leaf]],
+                    tree["count"][node[leaf]], tree["triangles"], closest, counters)
+        exit_early = leaf & (closest["t"][ray] <= t_far)
+        pop = leaf & ~exit_early & (sp > 0)
+        done |= leaf & ~pop
+        rows = pop.nonzero()[:, 0]
+        sp = sp - pop.long()
+        node = node.index_put((rows,), stack[rows, sp[rows]])
+        t_near = t_near.index_put((rows,), stack_near[rows, sp[rows]])
+        t_far = t_far.index_put((rows,), stack_far[rows, sp[rows]])
+        # Inner nodes: descend to the near child, maybe push the far one.
+        inner = (~leaf).nonzero()[:, 0]
+        a = axis[inner]
+        r = ray[inner]
+        o_a = rays.origins[r].gather(1, a[:, None])[:, 0]
+        d_a = rays.directions[r].gather(1, a[:, None])[:, 0]
+        inv_a = inv[r].gather(1, a[:, None])[:, 0]
+        plane = split_of[node[inner]]
+        t_split = (plane - o_a) * inv_a
+        lower = left_of[node[inner]]
+        below_first = (o_a < plane) | ((o_a == plane) & (d_a <= 0))
+        near = torch.where(below_first, lower, lower + 1)
+        far = torch.where(below_first, lower + 1, lower)
+        tn, tf = t_near[inner], t_far[inner]
+        in_plane = torch.isnan(t_split)
+        near_only = ~in_plane & ((t_split > tf) | (t_split <= 0))
+        far_only = ~in_plane & ~near_only & (t_split < tn)
+        both = ~near_only & ~far_only
+        push = inner[both]
+        stack[push, sp[push]] = far[both]
+        stack_near[push, sp[push]] = torch.where(in_plane, tn, t_split)[both]
+        stack_far[push, sp[push]] = tf[both]
+        sp = sp.index_add(0, push, torch.ones_like(push))
+        node[inner] = torch.where(far_only, far, near)
+        t_far[inner] = torch.where(both & ~in_plane, t_split, tf)
+        keep = ~done
+        ray, node, t_near, t_far, sp = ray[keep], node[keep], t_near[keep], t_far[keep], sp[keep]
+        stack, stack_near, stack_far = stack[keep], stack_near[keep], stack_far[keep]
+    return as_hits(closest), counters
+
+
+# =======================================================================================
+# Task 5: the common entry point and the trade
+
+
+def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect,
+                            memory_budget_bytes: int = 2**27):
+    """The baseline: every ray against every triangle, in tiles.
+
+    Same results as the structures: ``(Hits, counters)`` with ``"steps" = 0`` and
+    ``"tests" = F`` for every ray. Tiles of at most ``memory_budget_bytes // 256`` (ray,
+    triangle) pairs (its corners, indices and the kernel's temporaries: about 256 bytes in
+    float32): all triangles for a chunk of rays, or chunks of triangles for one ray at a
+    time. Each tile goes through ``intersect_pairs``, which keeps ties at the lowest
+    triangle index.
+    """
+    check_trace_inputs(rays, mesh, intersect)
+    check_memory_budget(memory_budget_bytes)
+    n, f, device = len(rays), mesh.num_faces, rays.device
+    closest = new_closest(n, rays.t_min)
+    counters = new_counters(n, device)
+    corners = mesh.triangles()
+    pairs = max(1, memory_budget_bytes // 256)
+    tri_chunk = min(f, pairs)
+    ray_chunk = max(1, pairs // tri_chunk)
+    for r0 in range(0, n, ray_chunk):
+        r = torch.arange(r0, min(n, r0 + ray_chunk), device=device)
+        for f0 in range(0, f, tri_chunk):
+            tri = torch.arange(f0, min(f, f0 + tri_chunk), device=device)
+            intersect_pairs(intersect, rays, corners, r.repeat_interleave(len(tri)),
+                       tri.repeat(len(r)), closest, counters)
+    return as_hits(closest), counters
+
+
+def build(mesh: Mesh, kind: str, **knobs) -> dict:
+    """A structure of ``kind`` for ``mesh``: ``"grid"`` (:func:`build_grid`), ``"bvh"``
+    (:func:`build_sah_bvh`; ``method="lbvh"`` for :func:`build_lbvh`) or ``"kd"``
+    (:func:`build_kdtree`); ``knobs`` go to the builder."""
+    if kind == "grid":
+        return build_grid(mesh, **knobs)
+    if kind == "bvh":
+        method = knobs.pop("method", "sah")
+        if method not in ("sah", "lbvh"):
+            raise ValueError(f"method: expected 'sah' or 'lbvh', got {method!r}")
+        return (build_sah_bvh if method == "sah" else build_lbvh)(mesh, **knobs)
+    if kind == "kd":
+        return build_kdtree(mesh, **knobs)
+    raise ValueError(f"kind: expected one of {', '.join(STRUCTURES)}, got {kind!r}")
+
+
+def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
+    """Closest hits of ``rays`` through any structure: the lab's common entry point.
+
+    structure: None (brute force), or a dict from a ``build_*`` function, dispatched on
+    its ``"kind"``: ``grid_closest_hit`` (option ``mailbox``), ``bvh_closest_hit`` or,
+    with ``stackless=True``, ``bvh_closest_hit_stackless``, and ``kd_closest_hit``.
+    Returns ``(Hits, counters)``; every structure returns the brute-force hits, so only
+    the counters (and the clock) tell them apart. ValueError naming ``structure`` for
+    anything else, or an option the structure does not take.
+    """
+    if structure is None:
+        return brute_force_closest_hit(rays, mesh, intersect, **options)
+    kind = structure.get("kind") if isinstance(structure, dict) else None
+    if kind not in STRUCTURES:
+        raise ValueError(f"structure: expected None or a dict with kind in "
+                         f"{', '.join(STRUCTURES)}, got "
+                         f"{kind if kind is not None else type(structure).__name__!r}")
+    allowed = {"grid": {"mailbox"}, "bvh": {"stackless"}, "kd": set()}[kind]
+    extra = set(options) - allowed
+    if extra:
+        raise ValueError(f"structure: a {kind} takes the options {sorted(allowed)}, "
+                         f"got {sorted(extra)}")
+    if kind == "grid":
+        return grid_closest_hit(rays, mesh, structure, intersect, **options)
+    if kind == "bvh":
+        traverse = bvh_closest_hit_stackless if options.get("stackless") else bvh_closest_hit
+        return traverse(rays, mesh, structure, intersect)
+    return kd_closest_hit(rays, mesh, structure, intersect)

@@ -1,0 +1,89 @@
+"""Lab 2 mutants: typical mistakes in acceleration structures, each applied to the
+reference solution. Every one must lose points on the tests its ``tests`` expression selects.
+
+Only mistakes the grader can see are listed: a wrong hit (compared with brute force), a
+wrong count, a wrong bit, or a tree whose SAH cost or traversal work is measurably worse.
+(A correct but slower variant, such as SAH bins bounded by centroids instead of triangle
+bounds, costs about 5% and is not a mutant.)
+"""
+
+from course.grading.mutants import Mutant
+
+M = "lab2_accel"
+GRID = "grid_closest_hit or grid_dda or grid_mailboxing"
+
+MUTANTS = [
+    Mutant(name="dda_lower_face_when_stepping_up", module=M, function="grid_closest_hit",
+           find="boundary = lo + (cell + (step > 0).long()) * width",
+           replace="boundary = lo + cell * width", tests=GRID,
+           why="off by one cell: stepping up, the next boundary is the cell's upper face "
+               "lo + (cell + 1) w, not its lower face"),
+    Mutant(name="dda_step_sign_of_x", module=M, function="grid_closest_hit",
+           find="cell = cell.scatter_add(1, axis, step.gather(1, axis))",
+           replace="cell = cell.scatter_add(1, axis, step[:, :1])", tests=GRID,
+           why="steps the chosen axis with the x axis's direction: the walk leaves the ray"),
+    Mutant(name="grid_first_hit_ends_walk", module=M, function="grid_closest_hit",
+           find='done = (closest["t"][ray] <= t_out) | (t_out >= t_end)',
+           replace='done = (closest["t"][ray] < math.inf) | (t_out >= t_end)', tests=GRID,
+           why="the classic grid bug: a triangle spanning cells is hit beyond the current "
+               "cell, and stopping there misses a nearer triangle in the next cell"),
+    Mutant(name="mailbox_never_updated", module=M, function="grid_closest_hit",
+           find="        prev = cell\n", replace="", tests=GRID,
+           why="the mailbox (the previous cell) is never updated: every cell re-tests the "
+               "triangles it shares with the last one"),
+    Mutant(name="morton_z_highest", module=M, function="morton_codes",
+           find="for axis, shift in ((0, 2), (1, 1), (2, 0)):",
+           replace="for axis, shift in ((0, 0), (1, 1), (2, 2)):", tests="morton",
+           why="interleaves z into the highest bit of each triple instead of x"),
+    Mutant(name="morton_no_clamp", module=M, function="morton_codes",
+           find=".clamp(0, 2**bits - 1)", replace="", tests="morton",
+           why="a point on the box's upper face quantises to 2^bits and carries into the "
+               "next axis's bit"),
+    Mutant(name="lbvh_split_in_the_middle", module=M, function="build_lbvh",
+           find="mid = torch.where(differ == 0, (start + end) // 2, mid)",
+           replace="mid = (start + end) // 2", tests="lbvh",
+           why="halves every range instead of splitting at the highest differing Morton bit: "
+               "valid, but the boxes overlap and the SAH cost grows 40-70%"),
+    Mutant(name="sah_cost_without_counts", module=M, function="build_sah_bvh",
+           find="cost = (surface_area(left_lo[..., :-1, :], left_hi[..., :-1, :]) * n_l\n"
+                "                + surface_area(right_lo[..., 1:, :], right_hi[..., 1:, :]) * n_r)",
+           replace="cost = (surface_area(left_lo[..., :-1, :], left_hi[..., :-1, :])\n"
+                   "                + surface_area(right_lo[..., 1:, :], right_hi[..., 1:, :]))",
+           tests="sah_bvh",
+           why="minimises the children's areas without weighting them by their triangle "
+               "counts: splits off slivers, a much deeper and costlier tree"),
+    Mutant(name="bvh_far_child_first", module=M, function="bvh_closest_hit",
+           find="for push, t_push, ok in ((far, t_far, hit_far), (near, t_near, hit_near)):",
+           replace="for push, t_push, ok in ((near, t_near, hit_near), (far, t_far, hit_far)):",
+           tests="bvh_stack_traversal",
+           why="pushes the near child first, so the far one is popped first: still correct, "
+               "but the far side is searched before the hit that would cull it"),
+    Mutant(name="stackless_skip_off_by_one", module=M, function="bvh_skip_indices",
+           find="return last + 1", replace="return last + 2",
+           tests="stackless or bvh_traversal_extremes",
+           why="the skip link jumps one node too far: it skips the next sibling subtree"),
+    Mutant(name="kd_early_exit_anywhere", module=M, function="kd_closest_hit",
+           find='exit_early = leaf & (closest["t"][ray] <= t_far)',
+           replace='exit_early = leaf & (closest["t"][ray] < math.inf)',
+           tests="kd_closest_hit or kdtree_build",
+           why="stops at the first leaf with a hit, even one beyond the leaf: a straddling "
+               "triangle hides a nearer one in the next leaf"),
+    Mutant(name="kd_plane_behind_ignored", module=M, function="kd_closest_hit",
+           find="near_only = ~in_plane & ((t_split > tf) | (t_split <= 0))",
+           replace="near_only = ~in_plane & (t_split > tf)",
+           tests="kd_closest_hit or kdtree_build",
+           why="a plane behind the ray (or at t = -inf for d = -0.0) sends it to the far child "
+               "only: it never visits the side it is on"),
+    Mutant(name="kd_straddler_one_side", module=M, function="build_kdtree",
+           find="below, above = r_start < best_event[s], r_end > best_event[s]",
+           replace="below, above = r_start < best_event[s], r_start >= best_event[s]",
+           tests="kdtree_build",
+           why="a triangle straddling the plane goes below only: rays in the upper child "
+               "miss it"),
+    Mutant(name="kd_pack_leaf_in_bit_zero", module=M, function="kd_pack",
+           find='word1 = offset | (tree["axis"].clamp(min=0) << OFFSET_BITS) | (leaf.long() << 31)',
+           replace='word1 = (offset << 3) | (tree["axis"].clamp(min=0) << 1) | leaf.long()',
+           tests="kd_pack",
+           why="packs the fields in the opposite order (leaf in bit 0): another layout than "
+               "the C bit-fields the GPU code reads"),
+]

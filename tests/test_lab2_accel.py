@@ -1,0 +1,1120 @@
+"""Grader for Lab 2: acceleration structures.
+
+Every traversal is judged against brute force computed here, on the CPU, with this module's
+own triangle kernel (``mt64``: Möller–Trumbore in float64, rounded once to the input dtype),
+which is also the ``intersect`` callable the lab receives. With the same kernel on the same
+(ray, triangle) pair the lab and the reference compute bit-identical ``t``, so a structure
+must return *the* brute-force hit: same triangle (among equal ``t`` the lowest index), same
+``t``, ``u``, ``v``. A different triangle is accepted only if it is hit at the same ``t`` to
+within rounding (a tie at a shared edge).
+
+Traversals are graded on trees built *here* (an object-median BVH, a spatial-median
+kd-tree with straddling triangles), so a task is graded on its own: a broken builder
+does not cost the traversal's points, and the other way round. The builders are judged by
+structure (every triangle in a leaf, boxes that contain their children and triangles, the
+depth-first layout) and by quality (the SAH cost of the tree, computed here).
+
+Scenes: random soups, "shards" (big random triangles that span many cells and straddle
+splits, among small ones), an icosphere (closed: rays from outside must find the near
+side), and a slice of the teapot in a stadium (Suzanne, 968 triangles, inside a room a
+thousand times larger: the case that defeats a uniform grid). Extremes: rays parallel to the
+axes with +0.0 and -0.0 components, rays starting inside the scene, on cell boundaries and
+in split planes, rays that miss the scene, NaN/inf rays, a single triangle, coincident
+triangles, a scene translated by 1e5, and t_min/t_max clipping.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+
+import pytest
+import torch
+
+from course.scenes import load_scene
+from course.testing import assert_close, assert_equal, check_tensor, generator
+from course.types import Hits, Mesh, Rays
+
+LAB_MODULE = "lab2_accel"
+TASKS = {1: "Uniform grid: build, 3D DDA, mailboxing", 2: "BVH builds: LBVH and binned SAH",
+         3: "BVH traversal: stack and stackless", 4: "kd-tree: SAH build, packing, traversal",
+         5: "The common entry point and the work counters"}
+
+INF = math.inf
+F32, F64 = torch.float32, torch.float64
+
+
+# ---------------------------------------------------------------------------------------
+# The triangle kernel handed to the lab (module level: it travels by reference)
+
+
+def mt64(origins, directions, v0, v1, v2, t_min=0.0, t_max=INF):
+    """Möller–Trumbore in float64, results rounded to the inputs' dtype.
+
+    Broadcasts like Lab 1's kernels; ``(t, u, v)`` with ``t = inf`` (and u = v = 0) on a
+    miss; the interval ``[t_min, t_max]`` is closed and compared in float64.
+    """
+    dtype, device = origins.dtype, origins.device
+    o, d, a, b, c = (x.to(F64) for x in (origins, directions, v0, v1, v2))
+    t_min = torch.as_tensor(t_min, device=device).to(F64)
+    t_max = torch.as_tensor(t_max, device=device).to(F64)
+    e1, e2 = b - a, c - a
+    p = torch.linalg.cross(d, e2, dim=-1)
+    det = (e1 * p).sum(-1)
+    inv = 1 / det
+    s = o - a
+    q = torch.linalg.cross(s, e1, dim=-1)
+    u = (s * p).sum(-1) * inv
+    v = (d * q).sum(-1) * inv
+    t = (e2 * q).sum(-1) * inv
+    hit = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= t_min) & (t <= t_max)
+    inf = torch.full((), INF, dtype=F64, device=device)
+    zero = torch.zeros((), dtype=F64, device=device)
+    return (torch.where(hit, t, inf).to(dtype), torch.where(hit, u, zero).to(dtype),
+            torch.where(hit, v, zero).to(dtype))
+
+
+# ---------------------------------------------------------------------------------------
+# Scenes (float64 geometry rounded once to float32, on the CPU; moved per test)
+
+
+def mesh_of(corners: torch.Tensor, dtype=F32, device="cpu") -> Mesh:
+    """A triangle soup (F, 3, 3) as a Mesh."""
+    corners = corners.to(dtype)
+    return Mesh(vertices=corners.reshape(-1, 3).to(device),
+                faces=torch.arange(3 * len(corners), device=device).reshape(-1, 3))
+
+
+@functools.cache
+def scene(name: str) -> Mesh:
+    """The named test scene (float32, CPU)."""
+    if name == "soup":
+        return load_scene("random_soup", device="cpu", n=200, seed=7).mesh
+    if name == "shards":
+        # 24 big triangles (edges up to ~0.8) among 96 small ones: spans and straddlers.
+        g = generator(21)
+        centre = 0.2 + 0.6 * torch.rand(24, 1, 3, generator=g, dtype=F64)
+        big = centre + 0.4 * (2 * torch.rand(24, 3, 3, generator=g, dtype=F64) - 1)
+        small = load_scene("random_soup", device="cpu", dtype=F64, n=96, seed=22).mesh
+        return mesh_of(torch.cat((big, small.vertices[small.faces])))
+    if name == "ico":
+        return load_scene("icosphere", device="cpu", level=3).mesh
+    if name == "teapot":
+        return load_scene("teapot_in_stadium", device="cpu", subdivisions=0).mesh
+    if name == "slabs":
+        # Six big triangles through the unit cube: every one spans many cells.
+        g = generator(31)
+        return mesh_of(torch.rand(6, 3, 3, generator=g, dtype=F64) * 1.4 - 0.2)
+    if name == "far":
+        soup = load_scene("random_soup", device="cpu", dtype=F64, n=120, seed=41).mesh
+        return mesh_of(soup.vertices[soup.faces] + 1e5)
+    if name == "single":
+        return mesh_of(torch.tensor([[[0.1, 0.2, 0.5], [0.9, 0.3, 0.5], [0.4, 0.8, 0.5]]],
+                                    dtype=F64))
+    if name == "coincident":
+        one = torch.tensor([[0.1, 0.2, 0.3], [0.9, 0.3, 0.6], [0.4, 0.8, 0.4]], dtype=F64)
+        return mesh_of(one.expand(40, 3, 3))
+    raise KeyError(name)
+
+
+def on(mesh: Mesh, device) -> Mesh:
+    return Mesh(vertices=mesh.vertices.to(device), faces=mesh.faces.to(device))
+
+
+def bounds(mesh: Mesh):
+    v = mesh.vertices.to("cpu", F64)
+    return v.amin(0), v.amax(0)
+
+
+def rays_around(mesh: Mesh, n: int, seed: int, inside: float = 0.25, clip: float = 0.15,
+                dtype=F32) -> Rays:
+    """n rays at the scene: most from a sphere around its bounds aimed at random points in
+    them, a fraction ``inside`` starting inside the bounds in random directions; a fraction
+    ``clip`` gets a random t_max (some hits lie beyond it), a few a t_min > 0."""
+    g = generator(seed)
+    lo, hi = bounds(mesh)
+    centre, radius = (lo + hi) / 2, float((hi - lo).norm()) / 2 + 1e-3
+    out = torch.randn(n, 3, generator=g, dtype=F64)
+    origins = centre + 1.5 * radius * out / out.norm(dim=1, keepdim=True)
+    targets = lo + (hi - lo) * torch.rand(n, 3, generator=g, dtype=F64)
+    directions = targets - origins
+    starts_inside = torch.rand(n, generator=g, dtype=F64) < inside
+    inner = lo + (hi - lo) * torch.rand(n, 3, generator=g, dtype=F64)
+    origins = torch.where(starts_inside[:, None], inner, origins)
+    directions = torch.where(starts_inside[:, None], torch.randn(n, 3, generator=g, dtype=F64),
+                             directions)
+    t_max = torch.where(torch.rand(n, generator=g, dtype=F64) < clip,
+                        torch.rand(n, generator=g, dtype=F64) * 1.2, torch.full((n,), INF,
+                                                                            dtype=F64))
+    t_min = torch.where(torch.rand(n, generator=g, dtype=F64) < 0.05, 0.3, 0.0)
+    return Rays.create(origins.to(dtype), directions.to(dtype), t_min.to(dtype),
+                       t_max.to(dtype))
+
+
+def teapot_rays(n: int, seed: int) -> Rays:
+    """Rays in the stadium: 3/4 aimed at the teapot from a few units away, 1/4 anywhere."""
+    g = generator(seed)
+    mesh = scene("teapot")
+    teapot = mesh.vertices[mesh.faces[:968]].reshape(-1, 3).to(F64)
+    lo, hi = teapot.amin(0), teapot.amax(0)
+    out = torch.randn(n, 3, generator=g, dtype=F64)
+    origins = (lo + hi) / 2 + 2.0 * out / out.norm(dim=1, keepdim=True)
+    origins[:, 1] = origins[:, 1].abs() + lo[1]  # above the floor
+    targets = lo + (hi - lo) * torch.rand(n, 3, generator=g, dtype=F64)
+    anywhere = torch.randn(n, 3, generator=g, dtype=F64)
+    directions = torch.where(torch.arange(n)[:, None] % 4 == 3, anywhere, targets - origins)
+    return Rays.create(origins.float(), directions.float())
+
+
+def axis_rays(mesh: Mesh, seed: int, per_axis: int = 24, dtype=F32) -> Rays:
+    """Rays parallel to the axes, in both directions, their zero components +0.0 or -0.0
+    (mixed), from outside and from inside the bounds."""
+    g = generator(seed)
+    lo, hi = bounds(mesh)
+    rays_o, rays_d = [], []
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            o = lo + (hi - lo) * torch.rand(per_axis, 3, generator=g, dtype=F64)
+            outside = torch.arange(per_axis) % 2 == 0
+            o[outside, axis] = (lo[axis] - 0.5) if sign > 0 else (hi[axis] + 0.5)
+            d = torch.zeros(per_axis, 3, dtype=F64)
+            d[:, axis] = sign
+            negative_zero = torch.rand(per_axis, 3, generator=g) < 0.5
+            d = torch.where(negative_zero & (d == 0), torch.tensor(-0.0, dtype=F64), d)
+            rays_o.append(o)
+            rays_d.append(d)
+    return Rays.create(torch.cat(rays_o).to(dtype), torch.cat(rays_d).to(dtype))
+
+
+def cat_rays(*batches: Rays) -> Rays:
+    return Rays(*(torch.cat([getattr(r, f) for r in batches]) for f in
+                  ("origins", "directions", "t_min", "t_max")))
+
+
+def bad_rays(n_each: int = 3) -> Rays:
+    """NaN and inf origins and directions, and a zero direction: all must miss."""
+    nan, inf = math.nan, INF
+    o = [[nan, 0.5, 0.5], [0.5, inf, 0.5], [-2.0, 0.5, 0.5], [-2.0, 0.5, 0.5], [0.5, 0.5, 0.5],
+         [-2.0, 0.4, 0.6]]
+    d = [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [nan, 0.0, 0.0], [inf, 1.0, 0.0], [0.0, 0.0, 0.0],
+         [1.0, nan, 0.0]]
+    return Rays.create(torch.tensor(o), torch.tensor(d))
+
+
+# ---------------------------------------------------------------------------------------
+# The reference: brute force with mt64 (CPU), and the comparison
+
+
+def reference(rays: Rays, mesh: Mesh):
+    """(t, triangle, u, v) of the nearest hit per ray, ties to the lowest index (CPU)."""
+    o, d = rays.origins.cpu(), rays.directions.cpu()
+    t_lo, t_hi = rays.t_min.cpu(), rays.t_max.cpu()
+    tri = mesh.triangles().cpu()
+    n = len(o)
+    out_t = torch.full((n,), INF, dtype=rays.dtype)
+    out_i = torch.full((n,), -1, dtype=torch.int64)
+    out_u, out_v = torch.zeros(n, dtype=rays.dtype), torch.zeros(n, dtype=rays.dtype)
+    chunk = max(1, 2**18 // len(tri))
+    for r0 in range(0, n, chunk):
+        s = slice(r0, r0 + chunk)
+        t, u, v = mt64(o[s, None], d[s, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2],
+                       t_lo[s, None], t_hi[s, None])
+        best = t.argmin(dim=1, keepdim=True)  # the first of equal minima: the lowest index
+        tb = t.gather(1, best)[:, 0]
+        hit = tb < INF
+        out_t[s] = tb
+        out_i[s] = torch.where(hit, best[:, 0], -1)
+        out_u[s], out_v[s] = u.gather(1, best)[:, 0], v.gather(1, best)[:, 0]
+    return out_t, out_i, out_u, out_v
+
+
+def describe(rays: Rays, i: int) -> str:
+    o, d = rays.origins[i].tolist(), rays.directions[i].tolist()
+    return (f"origin {[float(f'{x:.6g}') for x in o]}, direction "
+            f"{[float(f'{x:.6g}') for x in d]}, t in [{rays.t_min[i].item():.4g}, "
+            f"{rays.t_max[i].item():.4g}]")
+
+
+def check_result(result, n: int, dtype, device, what: str, counters=("steps", "tests")):
+    """The ``(Hits, counters)`` pair, each part checked for type, shape, dtype, device."""
+    if not (isinstance(result, tuple) and len(result) == 2):
+        raise AssertionError(f"{what}: expected a tuple (Hits, counters), got "
+                             f"{type(result).__name__}")
+    hits, count = result
+    assert isinstance(hits, Hits), \
+        f"{what}: expected course.types.Hits first, got {type(hits).__name__}"
+    for name in ("t", "u", "v"):
+        check_tensor(getattr(hits, name), f"{what}: Hits.{name}", shape=(n,), dtype=dtype,
+                     device=device)
+    check_tensor(hits.triangle, f"{what}: Hits.triangle", shape=(n,), dtype=torch.int64,
+                 device=device)
+    assert isinstance(count, dict), \
+        f"{what}: expected a dict of counters second, got {type(count).__name__}"
+    for name in counters:
+        if name not in count:
+            raise AssertionError(f"{what}: counters lack {name!r} (got {sorted(count)})")
+        check_tensor(count[name], f"{what}: counters[{name!r}]", shape=(n,), dtype=torch.int64,
+                     device=device)
+        if (count[name] < 0).any():
+            raise AssertionError(f"{what}: counters[{name!r}] has negative entries")
+    return hits, {k: v.cpu() for k, v in count.items()}
+
+
+def compare(result, rays: Rays, mesh: Mesh, what: str, counters=("steps", "tests"), ref=None,
+            walks=True):
+    """The structure's hits must be brute force's; returns the counters (CPU). ``walks``:
+    the method visits cells or nodes (every ray that tests a triangle took a step)."""
+    hits, count = check_result(result, len(rays), rays.dtype, rays.device, what, counters)
+    rays, mesh = rays.to("cpu"), on(mesh, "cpu")
+    ref_t, ref_i, ref_u, ref_v = reference(rays, mesh) if ref is None else ref
+    t, tri, u, v = (x.cpu() for x in (hits.t, hits.triangle, hits.u, hits.v))
+    wrong = (tri >= 0) != (ref_i >= 0)
+    if wrong.any():
+        i = int(wrong.nonzero()[0, 0])
+        if ref_i[i] >= 0:
+            detail = (f"brute force hits triangle {int(ref_i[i])} at t={ref_t[i].item():.9g}, "
+                      f"you report a miss")
+        else:
+            detail = (f"brute force finds no hit in [t_min, t_max], you report triangle "
+                      f"{int(tri[i])} at t={t[i].item():.9g}")
+        raise AssertionError(f"{what}: {int(wrong.sum())} of {len(rays)} rays hit where brute "
+                             f"force misses or the other way round. First: ray {i} ({describe(rays, i)}): "
+                             f"{detail}.")
+    other = (tri != ref_i) & (ref_i >= 0)
+    if other.any():
+        # Another triangle is fine only as a tie: hit by the same ray at the same t.
+        i = other.nonzero()[:, 0]
+        corners = mesh.triangles()[tri[i].clamp(min=0)]
+        t_other, _, _ = mt64(rays.origins[i], rays.directions[i], corners[:, 0], corners[:, 1],
+                             corners[:, 2], rays.t_min[i], rays.t_max[i])
+        tol = 4 * torch.finfo(rays.dtype).eps * ref_t[i].abs()
+        bad = ~((t_other - ref_t[i]).abs() <= tol) | ~((t[i] - ref_t[i]).abs() <= tol)
+        if bad.any():
+            j = int(i[bad.nonzero()[0, 0]])
+            raise AssertionError(
+                f"{what}: {int(bad.sum())} rays report another triangle than brute force. First: "
+                f"ray {j} ({describe(rays, j)}): expected triangle {int(ref_i[j])} at "
+                f"t={ref_t[j].item():.9g}, got triangle {int(tri[j])} at t={t[j].item():.9g} "
+                f"(that triangle is hit at t={t_other[bad][0].item():.9g}). A nearer hit was "
+                f"missed: a cell, node or leaf skipped, or the walk stopped too early.")
+    same = tri == ref_i
+    tol = 1e-6
+    assert_close(t[same], ref_t[same], rtol=tol, name=f"{what}: t of the hits", where="hit")
+    assert_close(u[same], ref_u[same], rtol=tol, atol=tol, name=f"{what}: u", where="hit")
+    assert_close(v[same], ref_v[same], rtol=tol, atol=tol, name=f"{what}: v", where="hit")
+    missed = tri < 0
+    assert_equal(t[missed], torch.full((int(missed.sum()),), INF, dtype=t.dtype),
+                 name=f"{what}: t of misses (inf)", where="miss")
+    assert_equal(u[missed], torch.zeros(int(missed.sum()), dtype=u.dtype),
+                 name=f"{what}: u of misses (0)", where="miss")
+    # Work: a hit needs a triangle test, and a triangle test needs a visited cell or node.
+    hit = tri >= 0
+    if "tests" in count and (count["tests"][hit] < 1).any():
+        i = int((hit & (count["tests"] < 1)).nonzero()[0, 0])
+        raise AssertionError(f"{what}: ray {i} hits a triangle but counters['tests'] is "
+                             f"{int(count['tests'][i])}: count every ray/triangle test")
+    if walks and (count["steps"][count["tests"] > 0] < 1).any():
+        raise AssertionError(f"{what}: rays with triangle tests but counters['steps'] == 0: "
+                             f"count every cell or node a ray visits")
+    return count
+
+
+def first_line(exc: BaseException) -> str:
+    return str(exc).splitlines()[0] if str(exc) else ""
+
+
+def expect_error(names, fn, *args, case="", **kwargs):
+    """``fn(*args)`` must raise ValueError/TypeError naming one of ``names``."""
+    names = (names,) if isinstance(names, str) else tuple(names)
+    what = getattr(fn, "__name__", None) or getattr(fn, "_name", "the call")
+    try:
+        fn(*args, **kwargs)
+    except (ValueError, TypeError) as exc:
+        assert any(n in first_line(exc) for n in names), (
+            f"{what} with {case} raised {type(exc).__name__}({first_line(exc)!r}); the message "
+            f"should name the argument {' or '.join(map(repr, names))}")
+        return
+    raise AssertionError(f"{what} accepted {case}: expected ValueError or TypeError naming "
+                         f"{' or '.join(map(repr, names))}")
+
+
+# ---------------------------------------------------------------------------------------
+# Trees built here, independent of the lab's builders
+
+
+def median_bvh(mesh: Mesh, leaf_size: int = 2) -> dict:
+    """An object-median BVH in the lab's depth-first layout (recursive; small meshes)."""
+    corners = mesh.triangles().cpu()
+    tri_lo, tri_hi = corners.amin(1), corners.amax(1)
+    centre = (tri_lo + tri_hi) / 2
+    nodes: list[list] = []
+    order: list[int] = []
+
+    def build(ids):
+        i = len(nodes)
+        nodes.append([tri_lo[ids].amin(0), tri_hi[ids].amax(0), -1, -1, 0, 0])
+        if len(ids) <= leaf_size:
+            nodes[i][4:] = [len(order), len(ids)]
+            order.extend(ids.tolist())
+            return i
+        spread = centre[ids].amax(0) - centre[ids].amin(0)
+        axis = int(spread.argmax())
+        ids = ids[torch.sort(centre[ids, axis], stable=True).indices]
+        nodes[i][2] = build(ids[:len(ids) // 2])
+        nodes[i][3] = build(ids[len(ids) // 2:])
+        return i
+
+    build(torch.arange(mesh.num_faces))
+    device = mesh.device
+    col = list(zip(*nodes))
+    return {"kind": "bvh", "lo": torch.stack(col[0]).to(device),
+            "hi": torch.stack(col[1]).to(device),
+            **{k: torch.tensor(col[j], dtype=torch.int64, device=device)
+               for j, k in ((2, "left"), (3, "right"), (4, "first"), (5, "count"))},
+            "triangles": torch.tensor(order, dtype=torch.int64, device=device)}
+
+
+def median_kdtree(mesh: Mesh, max_depth: int = 10, leaf_size: int = 3) -> dict:
+    """A spatial-median kd-tree: split the longest axis of the node's box in the middle;
+    a triangle whose bounds reach the plane goes to both sides (recursive; small meshes)."""
+    corners = mesh.triangles().cpu()
+    tri_lo, tri_hi = corners.amin(1), corners.amax(1)
+    lo, hi = tri_lo.amin(0), tri_hi.amax(0)
+    split, axis, left, lists = [0.0], [-1], [-1], [None]
+
+    def build(i, box_lo, box_hi, ids, depth):
+        if len(ids) <= leaf_size or depth == max_depth:
+            lists[i] = ids
+            return
+        a = int((box_hi - box_lo).argmax())
+        s = float((box_lo[a] + box_hi[a]) / 2)
+        s = float(torch.tensor(s, dtype=box_lo.dtype))  # representable in the mesh dtype
+        child = len(split)
+        split[i], axis[i], left[i] = s, a, child
+        split.extend([0.0, 0.0])
+        axis.extend([-1, -1])
+        left.extend([-1, -1])
+        lists.extend([None, None])
+        below_hi, above_lo = box_hi.clone(), box_lo.clone()
+        below_hi[a] = above_lo[a] = s
+        build(child, box_lo, below_hi, ids[tri_lo[ids, a] <= s], depth + 1)
+        build(child + 1, above_lo, box_hi, ids[tri_hi[ids, a] >= s], depth + 1)
+
+    build(0, lo, hi, torch.arange(mesh.num_faces), 0)
+    count = [0 if x is None else len(x) for x in lists]
+    first = [0, *itertools.accumulate(count)][:-1]
+    device = mesh.device
+    flat = torch.cat([x for x in lists if x is not None]) if any(count) else torch.zeros(0)
+    return {"kind": "kd", "lo": lo.to(device), "hi": hi.to(device),
+            "split": torch.tensor(split, dtype=mesh.dtype, device=device),
+            "axis": torch.tensor(axis, dtype=torch.int64, device=device),
+            "left": torch.tensor(left, dtype=torch.int64, device=device),
+            "first": torch.tensor(first, dtype=torch.int64, device=device),
+            "count": torch.tensor(count, dtype=torch.int64, device=device),
+            "triangles": flat.to(torch.int64).to(device)}
+
+
+# ---------------------------------------------------------------------------------------
+# Structure checks and the SAH cost
+
+
+def field(structure, key, what, shape, dtype, device):
+    assert isinstance(structure, dict), f"{what}: expected a dict, got {type(structure).__name__}"
+    if key not in structure:
+        raise AssertionError(f"{what}: no {key!r} in the dict (keys: {sorted(structure)})")
+    return check_tensor(structure[key], f"{what}[{key!r}]", shape=shape, dtype=dtype,
+                        device=device).cpu()
+
+
+def check_bvh(bvh, mesh: Mesh, what: str, leaf_size: int | None = None) -> None:
+    """Structure of a BVH dict: a binary tree in depth-first layout, every triangle in
+    exactly one leaf, every box containing its children and its triangles."""
+    device, f = mesh.device, mesh.num_faces
+    if bvh.get("kind") != "bvh":
+        raise AssertionError(f"{what}: expected kind 'bvh', got {bvh.get('kind')!r}")
+    lo = field(bvh, "lo", what, (None, 3), mesh.dtype, device)
+    m = len(lo)
+    hi = field(bvh, "hi", what, (m, 3), mesh.dtype, device)
+    left, right, first, count = (field(bvh, k, what, (m,), torch.int64, device)
+                                 for k in ("left", "right", "first", "count"))
+    tris = field(bvh, "triangles", what, (f,), torch.int64, device)
+    leaf = left < 0
+    inner = (~leaf).nonzero()[:, 0]
+    assert_equal(left[inner], inner + 1, name=f"{what}: left child of inner node i (the "
+                 "depth-first layout puts it at i + 1)", where="inner node")
+    bad = (right[inner] <= inner + 1) | (right[inner] >= m)
+    assert not bad.any(), (f"{what}: inner node {int(inner[bad][0])} has right child "
+                           f"{int(right[inner][bad][0])}: expected after its left subtree, < {m}")
+    children = torch.sort(torch.cat((left[inner], right[inner]))).values
+    assert_equal(children, torch.arange(1, m), name=f"{what}: the children of all inner nodes "
+                 "(every node but the root exactly once)", where="position")
+    assert (right[leaf] == -1).all(), f"{what}: leaves must have right == -1"
+    assert (count[leaf] >= 1).all(), f"{what}: a leaf with no triangles"
+    if leaf_size is not None and (count[leaf] > leaf_size).any():
+        raise AssertionError(f"{what}: a leaf holds {int(count[leaf].max())} triangles, "
+                             f"more than leaf_size={leaf_size}")
+    leaves = leaf.nonzero()[:, 0]
+    starts = first[leaves].sort()
+    ends = starts.values + count[leaves][starts.indices]
+    covers = (starts.values[0] == 0) and bool((starts.values[1:] == ends[:-1]).all()) \
+        and int(ends[-1]) == f
+    assert covers, f"{what}: the leaves' ranges [first, first + count) must tile 0..{f}"
+    assert_equal(tris.sort().values, torch.arange(f), name=f"{what}: sorted triangles (each "
+                 "triangle exactly once)", where="position")
+    # Bounds: parents contain children, leaves their triangles (exact comparisons).
+    for child in (left[inner], right[inner]):
+        inside = (lo[inner] <= lo[child]).all(1) & (hi[inner] >= hi[child]).all(1)
+        if not inside.all():
+            i = int(inner[~inside][0])
+            raise AssertionError(f"{what}: node {i}'s box [{lo[i].tolist()}, {hi[i].tolist()}] "
+                                 f"does not contain its child's box")
+    owner = torch.repeat_interleave(leaves, count[leaves])
+    k = torch.repeat_interleave(first[leaves], count[leaves]) + torch.arange(len(owner)) - \
+        torch.repeat_interleave(torch.cumsum(count[leaves], 0) - count[leaves], count[leaves])
+    corners = mesh.triangles().cpu()[tris[k]]
+    inside = (lo[owner] <= corners.amin(1)).all(1) & (hi[owner] >= corners.amax(1)).all(1)
+    if not inside.all():
+        j = int((~inside).nonzero()[0, 0])
+        raise AssertionError(f"{what}: leaf {int(owner[j])} does not contain its triangle "
+                             f"{int(tris[k][j])}")
+
+
+def sah_cost(bvh) -> float:
+    """The SAH cost of a BVH, relative to its root: one unit per inner node and per
+    triangle test, each weighted by the probability A(node) / A(root) of visiting it."""
+    lo, hi = bvh["lo"].cpu().double(), bvh["hi"].cpu().double()
+    ext = (hi - lo).clamp(min=0)
+    area = 2 * (ext[:, 0] * ext[:, 1] + ext[:, 1] * ext[:, 2] + ext[:, 2] * ext[:, 0])
+    leaf = bvh["left"].cpu() < 0
+    return float((area[~leaf].sum() + (area[leaf] * bvh["count"].cpu()[leaf]).sum()) / area[0])
+
+
+def check_kdtree(tree, mesh: Mesh, what: str) -> None:
+    """Structure of a kd dict: children in pairs, planes inside their boxes, every
+    triangle in some leaf, every leaf's triangles touching its box."""
+    device = mesh.device
+    if tree.get("kind") != "kd":
+        raise AssertionError(f"{what}: expected kind 'kd', got {tree.get('kind')!r}")
+    lo = field(tree, "lo", what, (3,), mesh.dtype, device)
+    hi = field(tree, "hi", what, (3,), mesh.dtype, device)
+    split = field(tree, "split", what, (None,), mesh.dtype, device)
+    m = len(split)
+    axis, left, first, count = (field(tree, k, what, (m,), torch.int64, device)
+                                for k in ("axis", "left", "first", "count"))
+    tris = field(tree, "triangles", what, (None,), torch.int64, device)
+    leaf = axis < 0
+    inner = (~leaf).nonzero()[:, 0]
+    assert ((axis >= -1) & (axis <= 2)).all(), f"{what}: axis must be -1 (leaf), 0, 1 or 2"
+    assert (left[leaf] == -1).all(), f"{what}: leaves must have left == -1"
+    children = torch.sort(torch.cat((left[inner], left[inner] + 1))).values
+    assert_equal(children, torch.arange(1, m), name=f"{what}: the children (left, left + 1) "
+                 "of all inner nodes (every node but the root exactly once)", where="position")
+    # Boxes top-down, one tree level at a time.
+    box_lo, box_hi = lo.expand(m, 3).clone(), hi.expand(m, 3).clone()
+    level = torch.zeros(1, dtype=torch.int64)
+    while len(level):
+        level = level[axis[level] >= 0]
+        a, s = axis[level], split[level]
+        bad = (s < box_lo[level, a]) | (s > box_hi[level, a])
+        if bad.any():
+            i = int(level[bad][0])
+            raise AssertionError(f"{what}: node {i} splits axis {int(axis[i])} at "
+                                 f"{split[i].item()!r}, outside its box")
+        below, above = left[level], left[level] + 1
+        box_lo[below], box_hi[below] = box_lo[level], box_hi[level]
+        box_lo[above], box_hi[above] = box_lo[level], box_hi[level]
+        box_hi[below, a] = s
+        box_lo[above, a] = s
+        level = torch.cat((below, above))
+    leaves = leaf.nonzero()[:, 0]
+    if (first[leaves] < 0).any() or (first[leaves] + count[leaves] > len(tris)).any():
+        raise AssertionError(f"{what}: a leaf's range [first, first + count) runs outside "
+                             f"triangles (length {len(tris)})")
+    owner = torch.repeat_interleave(leaves, count[leaves])
+    k = torch.repeat_interleave(first[leaves], count[leaves]) + torch.arange(len(owner)) - \
+        torch.repeat_interleave(torch.cumsum(count[leaves], 0) - count[leaves], count[leaves])
+    listed = tris[k]
+    assert ((listed >= 0) & (listed < mesh.num_faces)).all(), f"{what}: bad triangle index"
+    missing = torch.ones(mesh.num_faces, dtype=torch.bool)
+    missing[listed] = False
+    assert not missing.any(), (f"{what}: triangle {int(missing.nonzero()[0, 0])} is in no leaf "
+                               f"({int(missing.sum())} triangles missing)")
+    corners = mesh.triangles().cpu()[listed]
+    touch = (corners.amin(1) <= box_hi[owner]).all(1) & (corners.amax(1) >= box_lo[owner]).all(1)
+    if not touch.all():
+        j = int((~touch).nonzero()[0, 0])
+        raise AssertionError(f"{what}: leaf {int(owner[j])} lists triangle {int(listed[j])}, "
+                             f"whose bounds do not reach the leaf's box")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 1: the uniform grid
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(1)
+def test_grid_resolution_and_build(impl, device):
+    # The heuristic: about lambda N cells, nearly cubic; thin axes get one cell.
+    for extent, n, lam in (((1, 1, 1), 1000, 2.0), ((4, 1, 2), 500, 3.0), ((1, 1, 0), 800, 2.0),
+                           ((10, 0.01, 10), 5000, 1.0), ((1, 1, 1), 1, 2.0)):
+        res = impl.grid_resolution(extent, n, lam)
+        assert isinstance(res, tuple) and len(res) == 3 and all(
+            isinstance(r, int) and r >= 1 for r in res), (
+            f"grid_resolution{extent, n, lam}: expected a tuple of 3 ints >= 1, got {res!r}")
+        cells = math.prod(res)
+        assert lam * n / 2.5 <= cells <= lam * n * 2.5 or lam * n < 8, (
+            f"grid_resolution(extent={extent}, N={n}, density={lam}) = {res}: {cells} cells, "
+            f"expected about lambda N = {lam * n:g}")
+        widths = [e / r for e, r in zip(extent, res) if r > 1]
+        assert not widths or max(widths) <= 2.0 * min(widths), (
+            f"grid_resolution(extent={extent}, ...) = {res}: cell sizes {widths} are far from "
+            f"cubes")
+        for e, r in zip(extent, res):
+            if e == 0:
+                assert r == 1, f"grid_resolution(extent={extent}, ...) = {res}: a flat axis " \
+                               f"needs one cell"
+    expect_error("density", impl.grid_resolution, (1, 1, 1), 10, -1.0, case="density=-1")
+    expect_error("extent", impl.grid_resolution, (1, 1), 10, case="a 2-element extent")
+    # The build: CSR lists that are exactly each triangle's box of cells, and that box is
+    # conservative (every cell the triangle's bounds touch) and tight (no farther).
+    for name, resolution in (("soup", None), ("teapot", None), ("shards", (7, 3, 5)),
+                             ("single", None)):
+        mesh = on(scene(name), device)
+        grid = impl.build_grid(mesh, resolution)
+        what = f"build_grid({name}, resolution={resolution})"
+        assert isinstance(grid, dict) and grid.get("kind") == "grid", \
+            f"{what}: expected a dict with kind 'grid'"
+        f = mesh.num_faces
+        lo = field(grid, "lo", what, (3,), mesh.dtype, device)
+        hi = field(grid, "hi", what, (3,), mesh.dtype, device)
+        res = field(grid, "resolution", what, (3,), torch.int64, device)
+        if resolution is not None:
+            assert res.tolist() == list(resolution), f"{what}: resolution {res.tolist()}"
+        c = int(res.prod())
+        start = field(grid, "cell_start", what, (c,), torch.int64, device)
+        count = field(grid, "cell_count", what, (c,), torch.int64, device)
+        tris = field(grid, "triangles", what, (None,), torch.int64, device)
+        c_lo = field(grid, "tri_cell_lo", what, (f, 3), torch.int64, device)
+        c_hi = field(grid, "tri_cell_hi", what, (f, 3), torch.int64, device)
+        v_lo, v_hi = bounds(mesh)
+        assert (lo.double() <= v_lo).all() and (hi.double() >= v_hi).all(), \
+            f"{what}: the grid's box [{lo.tolist()}, {hi.tolist()}] must contain the scene"
+        assert_equal(start, torch.cumsum(count, 0) - count, name=f"{what}: cell_start (the "
+                     "exclusive prefix sum of cell_count)", where="cell")
+        assert int(count.sum()) == len(tris), f"{what}: cell_count sums to {int(count.sum())}, " \
+                                              f"but triangles has {len(tris)} entries"
+        # Expected (triangle, cell) pairs from the declared boxes of cells.
+        span = c_hi - c_lo + 1
+        assert (span >= 1).all() and (c_lo >= 0).all() and (c_hi < res).all(), \
+            f"{what}: tri_cell_lo/hi must be boxes inside the grid"
+        pairs = []
+        for t in range(f):
+            xs, ys, zs = (torch.arange(int(c_lo[t, a]), int(c_hi[t, a]) + 1) for a in range(3))
+            z, y, x = torch.meshgrid(zs, ys, xs, indexing="ij")
+            cid = (x + res[0] * (y + res[1] * z)).reshape(-1)
+            pairs.append(torch.stack((cid, torch.full_like(cid, t)), 1))
+        want = torch.cat(pairs)
+        want = want[torch.argsort(want[:, 0] * f + want[:, 1])]
+        cell_of = torch.repeat_interleave(torch.arange(c), count)
+        got = torch.stack((cell_of, tris), 1)
+        got = got[torch.argsort(got[:, 0] * f + got[:, 1])]
+        assert got.shape == want.shape and torch.equal(got, want), (
+            f"{what}: the cell lists must hold exactly the (cell, triangle) pairs of each "
+            f"triangle's box tri_cell_lo..tri_cell_hi ({len(want)} pairs), got {len(got)}")
+        # Conservative and tight against the triangles' bounds.
+        width = (hi.double() - lo.double()) / res
+        corners = mesh.triangles().cpu().double()
+        first = torch.floor((corners.amin(1) - lo.double()) / width).long().clamp(min=0)
+        last = torch.minimum(torch.floor((corners.amax(1) - lo.double()) / width).long(), res - 1)
+        assert ((c_lo <= first) & (c_hi >= last)).all(), (
+            f"{what}: a triangle's box of cells misses a cell its bounds overlap")
+        assert ((c_lo >= first - 1) & (c_hi <= last + 1)).all(), (
+            f"{what}: a triangle is listed in cells more than one cell beyond its bounds")
+    expect_error("resolution", impl.build_grid, on(scene("soup"), device), (0, 4, 4),
+                 case="resolution (0, 4, 4)")
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(1)
+def test_grid_closest_hit_matches_brute_force(impl, device):
+    for name, resolution in (("soup", None), ("shards", None), ("shards", (16, 16, 16)),
+                             ("shards", (1, 1, 1)), ("shards", (7, 2, 11)), ("ico", None),
+                             ("teapot", None)):
+        mesh = on(scene(name), device)
+        rays = teapot_rays(200, 3) if name == "teapot" else rays_around(mesh, 240, 5)
+        rays = rays.to(device)
+        grid = impl.build_grid(mesh, resolution)
+        compare(impl.grid_closest_hit(rays, mesh, grid, mt64), rays, mesh,
+                f"grid_closest_hit({name}, resolution={resolution})",
+                counters=("steps", "tests", "skipped"))
+
+
+def boundary_scene():
+    """Two tiny triangles in opposite corners of the unit cube (the grid's bounds) and a
+    big one in the plane x = 0.8 covering only y, z in [0.6, 1]."""
+    tiny = torch.tensor([[[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]],
+                         [[1.0, 1.0, 1.0], [0.99, 1.0, 1.0], [1.0, 0.99, 1.0]],
+                         [[0.8, 0.6, 0.6], [0.8, 1.0, 0.6], [0.8, 0.6, 1.0]]], dtype=F64)
+    return mesh_of(tiny)
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(1)
+def test_grid_dda_extremes(impl, device):
+    # Exact step counts along an empty row of an 8 x 8 x 8 grid (y, z = 0.47, 0.53 avoid
+    # every triangle), with -0.0 and +0.0 in the zero components.
+    mesh = on(boundary_scene(), device)
+    grid = impl.build_grid(mesh, (8, 8, 8))
+    o = torch.tensor([[-1.0, 0.47, 0.53], [2.0, 0.47, 0.53], [0.4, 0.47, 0.53],
+                      [0.4, 0.47, 0.53], [0.47, -1.0, 0.53], [0.47, 0.53, 2.0],
+                      [-1.0, 2.0, 0.5], [0.4, 0.47, 0.53]])
+    d = torch.tensor([[1.0, 0.0, -0.0], [-1.0, -0.0, 0.0], [1.0, -0.0, -0.0], [-1.0, 0.0, 0.0],
+                      [0.0, 1.0, -0.0], [-0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    t_max = torch.tensor([INF] * 7 + [0.2])  # the last stops at x = 0.6: cells 3 and 4
+    rays = Rays.create(o, d, 0.0, t_max).to(device)
+    hits, count = check_result(impl.grid_closest_hit(rays, mesh, grid, mt64), len(rays), F32,
+                               device, "grid_closest_hit (axis rays, 8^3 grid)")
+    want = [8, 8, 5, 4, 8, 8, 0, 2]  # cells 0..7; 7..0; 3..7; 3..0; ...; misses the grid; 3..4
+    got = count["steps"].tolist()
+    if got != want:
+        i = next(j for j in range(len(want)) if got[j] != want[j])
+        raise AssertionError(
+            f"grid_closest_hit: ray {i} ({describe(rays.to('cpu'), i)}) runs along an empty row "
+            f"of the 8 x 8 x 8 grid over the unit cube and must visit {want[i]} cells, visited "
+            f"{got[i]} (all steps: {got}, expected {want}). Check the first cell, t_next for "
+            f"step +1 (the cell's upper face) and -1 (its lower face), t_next = inf for zero "
+            f"components (+0.0 and -0.0), and the exit at t_max / the grid's far side.")
+    assert (hits.triangle.cpu() == -1).all(), "grid_closest_hit: these rays hit nothing"
+    assert (count["tests"] == 0).all(), "grid_closest_hit: empty cells hold nothing to test"
+    # Rays starting exactly on cell boundaries, in the plane of the big triangle, and
+    # axis-parallel rays with mixed zeros: brute force decides.
+    lo, hi, res = grid["lo"].cpu().double(), grid["hi"].cpu().double(), grid["resolution"].cpu()
+    w = (hi - lo) / res
+    on_plane = (lo + 5 * w).float()  # boundary planes of cell 5 on each axis
+    g = generator(51)
+    p = torch.rand(40, 3, generator=g) * 0.3 + 0.65
+    axis = torch.arange(40) % 3
+    p[torch.arange(40), axis] = on_plane[axis]
+    d = torch.zeros(40, 3)
+    d[torch.arange(40), axis] = torch.where(torch.arange(40) % 2 == 0, 1.0, -1.0)
+    d = torch.where(d == 0, torch.where(torch.rand(40, 3, generator=g) < 0.5, -0.0, 0.0), d)
+    d[::4] += torch.rand(10, 3, generator=g) * 0.2  # some slanted
+    boundary = Rays.create(p, d)
+    rays = cat_rays(boundary, axis_rays(mesh, 52, 8), bad_rays())
+    compare(impl.grid_closest_hit(rays.to(device), mesh, grid, mt64), rays.to(device), mesh,
+            "grid_closest_hit (rays on cell boundaries, axis-parallel, NaN/inf)",
+            counters=("steps", "tests", "skipped"))
+    # Axis-parallel rays in a real scene, a single flat triangle, far from the origin,
+    # coincident triangles.
+    for name in ("shards", "single", "far", "coincident"):
+        mesh = on(scene(name), device)
+        rays = cat_rays(axis_rays(mesh, 53, 6), rays_around(mesh, 80, 54)).to(device)
+        compare(impl.grid_closest_hit(rays, mesh, impl.build_grid(mesh), mt64), rays, mesh,
+                f"grid_closest_hit({name}: axis-parallel and random rays)",
+                counters=("steps", "tests", "skipped"))
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(1)
+def test_grid_mailboxing(impl, device):
+    # Six big triangles, each listed in many of the 12^3 cells: without a mailbox a ray tests
+    # one triangle once per cell it shares with it.
+    mesh = on(scene("slabs"), device)
+    grid = impl.build_grid(mesh, (12, 12, 12))
+    rays = rays_around(mesh, 300, 61, clip=0.0).to(device)
+    ref = reference(rays.to("cpu"), on(mesh, "cpu"))
+    with_box = compare(impl.grid_closest_hit(rays, mesh, grid, mt64, mailbox=True), rays, mesh,
+                       "grid_closest_hit(mailbox=True)", ("steps", "tests", "skipped"), ref)
+    without = compare(impl.grid_closest_hit(rays, mesh, grid, mt64, mailbox=False), rays, mesh,
+                      "grid_closest_hit(mailbox=False)", ("steps", "tests", "skipped"), ref)
+    most = int(with_box["tests"].max())
+    assert most <= mesh.num_faces, (
+        f"grid_closest_hit(mailbox=True): a ray ran {most} triangle tests in a scene of "
+        f"{mesh.num_faces} triangles: the mailbox must stop every repeated test of a triangle")
+    assert int(without["tests"].sum()) > 2 * int(with_box["tests"].sum()), (
+        "grid_closest_hit(mailbox=False) should repeat tests of triangles that span cells: "
+        f"{int(without['tests'].sum())} tests without the mailbox, "
+        f"{int(with_box['tests'].sum())} with it")
+    assert_equal(with_box["steps"], without["steps"], name="grid_closest_hit: steps with and "
+                 "without the mailbox (it must not change the walk)", where="ray")
+    assert_equal(with_box["tests"] + with_box["skipped"], without["tests"],
+                 name="grid_closest_hit: tests + skipped with the mailbox == tests without it",
+                 where="ray")
+    assert (without["skipped"] == 0).all(), "grid_closest_hit(mailbox=False) skipped tests"
+
+
+# ---------------------------------------------------------------------------------------
+# Task 2: BVH builds
+
+
+def interleave(q: torch.Tensor, bits: int) -> torch.Tensor:
+    """The expected code: bit i of x, y, z at bits 3i + 2, 3i + 1, 3i (one bit at a time)."""
+    code = torch.zeros(len(q), dtype=torch.int64)
+    for i in range(bits):
+        for axis in range(3):
+            code += ((q[:, axis] >> i) & 1) << (3 * i + 2 - axis)
+    return code
+
+
+@pytest.mark.task(2)
+@pytest.mark.points(1)
+def test_morton_codes(impl, device):
+    g = generator(71)
+    for bits in (10, 4, 1, 16):
+        q = torch.randint(0, 2**bits, (300, 3), generator=g)
+        q[:3] = torch.tensor([[0, 0, 0], [2**bits - 1] * 3, [1, 0, 2**bits - 1]]) % 2**bits
+        lo = torch.tensor([-2.0, 0.5, 10.0], dtype=F64)
+        size = torch.tensor([4.0, 1.0, 0.25], dtype=F64)
+        points = lo + (q.double() + 0.5) / 2**bits * size  # cell centres: no rounding doubt
+        codes = impl.morton_codes(points.float().to(device), lo.float().to(device),
+                                  (lo + size).float().to(device), bits)
+        check_tensor(codes, f"morton_codes(bits={bits})", shape=(300,), dtype=torch.int64,
+                     device=device)
+        assert_equal(codes.cpu(), interleave(q, bits), name=f"morton_codes(bits={bits}) of cell "
+                     "centres (x's bit i at code bit 3i+2, y's at 3i+1, z's at 3i)", where="point")
+    # The box's corners and beyond clamp; a flat axis quantises to 0.
+    lo, hi = torch.zeros(3, device=device), torch.ones(3, device=device)
+    edge = torch.tensor([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [-5.0, 2.0, 0.5]], device=device)
+    codes = impl.morton_codes(edge, lo, hi, 10).cpu()
+    assert codes.tolist()[:2] == [0, 2**30 - 1], (
+        f"morton_codes: the box's corners lo and hi must get codes 0 and 2^30 - 1, got "
+        f"{codes.tolist()[:2]} (clamp q to [0, 2^bits - 1])")
+    assert codes[2] == interleave(torch.tensor([[0, 1023, 512]]), 10)[0], \
+        "morton_codes: points outside the box clamp to its faces"
+    flat = impl.morton_codes(torch.tensor([[0.3, 0.7, 5.0]], device=device), lo,
+                             torch.tensor([1.0, 1.0, 0.0], device=device), 10).cpu()
+    assert flat[0] == interleave(torch.tensor([[307, 716, 0]]), 10)[0], \
+        "morton_codes: an axis with hi == lo quantises to 0"
+    expect_error("bits", impl.morton_codes, edge, lo, hi, 22, case="bits=22 (66-bit codes)")
+    expect_error("points", impl.morton_codes, edge[:, :2], lo, hi, case="points of shape (3, 2)")
+
+
+@pytest.mark.task(2)
+@pytest.mark.points(1)
+def test_lbvh_structure_and_quality(impl, device):
+    for name in ("soup", "ico", "teapot", "shards", "single", "coincident"):
+        mesh = on(scene(name), device)
+        for leaf_size in (1, 4):
+            bvh = impl.build_lbvh(mesh, leaf_size)
+            check_bvh(bvh, mesh, f"build_lbvh({name}, leaf_size={leaf_size})", leaf_size)
+    # Quality: splitting at the highest differing Morton bit clusters space about as well as
+    # an object-median split does (the SAH cost of a middle-of-the-range split is far worse).
+    for name in ("soup", "ico"):
+        mesh = on(scene(name), device)
+        got, median = sah_cost(impl.build_lbvh(mesh, 4)), sah_cost(median_bvh(mesh, 4))
+        assert got <= 1.25 * median, (
+            f"build_lbvh({name}): SAH cost {got:.1f}, an object-median BVH costs {median:.1f}: "
+            f"split each range where the highest differing bit of its Morton codes flips")
+    expect_error("leaf_size", impl.build_lbvh, on(scene("soup"), device), 0, case="leaf_size=0")
+
+
+@pytest.mark.task(2)
+@pytest.mark.points(1)
+def test_sah_bvh_structure_and_quality(impl, device):
+    for name in ("soup", "ico", "teapot", "shards", "single", "coincident", "far"):
+        mesh = on(scene(name), device)
+        for leaf_size, bins in ((1, 8), (4, 16)):
+            bvh = impl.build_sah_bvh(mesh, leaf_size, bins)
+            check_bvh(bvh, mesh, f"build_sah_bvh({name}, leaf_size={leaf_size}, bins={bins})",
+                      leaf_size)
+    # Quality: the SAH beats the object median, by far in the teapot in a stadium.
+    for name, factor in (("soup", 1.0), ("ico", 1.0), ("teapot", 0.5)):
+        mesh = on(scene(name), device)
+        got, median = sah_cost(impl.build_sah_bvh(mesh, 4, 16)), sah_cost(median_bvh(mesh, 4))
+        assert got <= factor * median, (
+            f"build_sah_bvh({name}): SAH cost {got:.1f}, expected at most {factor} x the "
+            f"{median:.1f} of an object-median BVH. The cost of a split is A(left) N(left) + "
+            f"A(right) N(right) with A the area of the union of the *triangle* bounds per side")
+    mesh = on(scene("soup"), device)
+    expect_error("leaf_size", impl.build_sah_bvh, mesh, 0, case="leaf_size=0")
+    expect_error("bins", impl.build_sah_bvh, mesh, 4, 1, case="bins=1")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 3: BVH traversal (on BVHs built here)
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(1)
+def test_bvh_stack_traversal(impl, device):
+    for name, leaf_size in (("soup", 1), ("shards", 3), ("ico", 2), ("teapot", 4)):
+        mesh = on(scene(name), device)
+        rays = (teapot_rays(200, 81) if name == "teapot" else rays_around(mesh, 240, 82))
+        rays = rays.to(device)
+        bvh = median_bvh(mesh, leaf_size)
+        count = compare(impl.bvh_closest_hit(rays, mesh, bvh, mt64), rays, mesh,
+                        f"bvh_closest_hit({name}, median BVH, leaf_size={leaf_size})")
+        if name == "ico":
+            # From outside a closed sphere, the near side holds the hit: near child first
+            # tests about 4 triangles per ray here; far child first about 9.
+            mean = count["tests"].double().mean().item()
+            assert mean <= 6.0, (
+                f"bvh_closest_hit: {mean:.2f} triangle tests per ray into a closed icosphere; "
+                f"visiting the near child first (pop it first: push it last) and culling nodes "
+                f"beyond the closest hit needs about 4")
+    # Rays that miss the root box visit nothing.
+    mesh = on(scene("soup"), device)
+    away = Rays.create(torch.full((5, 3), 3.0), torch.tensor([[1.0, 0, 0]] * 5)).to(device)
+    _, count = check_result(impl.bvh_closest_hit(away, mesh, median_bvh(mesh), mt64), 5, F32,
+                            device, "bvh_closest_hit (rays away from the scene)")
+    assert (count["tests"] == 0).all(), "bvh_closest_hit: rays that miss the root test nothing"
+
+
+def skip_reference(bvh) -> list[int]:
+    """Next node after each subtree, by recursion over the depth-first layout."""
+    left, right = bvh["left"].tolist(), bvh["right"].tolist()
+    end = [0] * len(left)
+
+    def walk(i):
+        end[i] = i + 1 if left[i] < 0 else (walk(left[i]), walk(right[i]))[1]
+        return end[i]
+
+    walk(0)
+    return end
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(1)
+def test_bvh_stackless_traversal(impl, device):
+    # A hand-made tree: 0 -> (1, 4), 1 -> (2, 3), 4 -> (5, 6).
+    tree = {"left": torch.tensor([1, 2, -1, -1, 5, -1, -1], device=device),
+            "right": torch.tensor([4, 3, -1, -1, 6, -1, -1], device=device)}
+    got = impl.bvh_skip_indices(tree)
+    check_tensor(got, "bvh_skip_indices", shape=(7,), dtype=torch.int64, device=device)
+    assert got.tolist() == [7, 4, 3, 4, 7, 6, 7], (
+        f"bvh_skip_indices of the tree 0 -> (1, 4), 1 -> (2, 3), 4 -> (5, 6): expected "
+        f"[7, 4, 3, 4, 7, 6, 7] (the node after each subtree, 7 = past the end), got "
+        f"{got.tolist()}")
+    for name, leaf_size in (("soup", 1), ("shards", 3), ("ico", 2), ("teapot", 4)):
+        mesh = on(scene(name), device)
+        bvh = median_bvh(mesh, leaf_size)
+        assert impl.bvh_skip_indices(bvh).tolist() == skip_reference(bvh), \
+            f"bvh_skip_indices({name}): wrong links"
+        rays = (teapot_rays(200, 91) if name == "teapot" else rays_around(mesh, 240, 92))
+        rays = rays.to(device)
+        stackless = compare(impl.bvh_closest_hit_stackless(rays, mesh, bvh, mt64), rays, mesh,
+                            f"bvh_closest_hit_stackless({name}, median BVH)")
+        hit_root = stackless["steps"] >= 1
+        assert hit_root.any(), "bvh_closest_hit_stackless: count a step per node visited"
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(1)
+def test_bvh_traversal_extremes(impl, device):
+    cases = []
+    for name in ("single", "coincident", "far", "shards"):
+        mesh = on(scene(name), device)
+        rays = cat_rays(axis_rays(mesh, 101, 6), rays_around(mesh, 60, 102), bad_rays())
+        cases.append((name, mesh, median_bvh(mesh, 2), rays))
+    # Rays in the planes of the root box's faces, along them (0 * inf = NaN in the slabs).
+    mesh = on(scene("soup"), device)
+    lo, hi = bounds(mesh)
+    g = generator(103)
+    p = lo + (hi - lo) * torch.rand(30, 3, generator=g, dtype=F64)
+    p[:10, 0], p[10:20, 1], p[20:, 2] = lo[0], hi[1], lo[2]
+    d = torch.randn(30, 3, generator=g, dtype=F64)
+    d[:10, 0], d[10:20, 1], d[20:, 2] = 0.0, -0.0, 0.0
+    faces = Rays.create(p.float(), d.float())
+    cases.append(("soup, rays in the root's face planes", mesh, median_bvh(mesh, 2),
+                  cat_rays(faces, axis_rays(mesh, 104, 6))))
+    # float64 rays and mesh.
+    m64 = Mesh(vertices=scene("shards").vertices.double().to(device),
+               faces=scene("shards").faces.to(device))
+    cases.append(("shards, float64", m64, median_bvh(m64, 3), rays_around(m64, 80, 105,
+                                                                          dtype=F64)))
+    for name, mesh, bvh, rays in cases:
+        rays = rays.to(device)
+        ref = reference(rays.to("cpu"), on(mesh, "cpu"))
+        for fn in (impl.bvh_closest_hit, impl.bvh_closest_hit_stackless):
+            label = getattr(fn, "__name__", None) or getattr(fn, "_name", "traversal")
+            compare(fn(rays, mesh, bvh, mt64), rays, mesh, f"{label}({name})", ref=ref)
+    # Coincident triangles: the tie goes to the lowest index, whatever leaf it sits in.
+    mesh = on(scene("coincident"), device)
+    rays = Rays.create(torch.tensor([[0.4, 0.4, -1.0], [0.45, 0.4, 2.0]]),
+                       torch.tensor([[0.0, 0.0, 1.0], [-0.0, 0.0, -1.0]]))
+    for fn in (impl.bvh_closest_hit, impl.bvh_closest_hit_stackless):
+        hits, _ = fn(rays.to(device), mesh, median_bvh(mesh, 3), mt64)
+        assert hits.triangle.tolist() == [0, 0], (
+            f"BVH traversal: 40 coincident triangles, the rays hit all at the same t: the "
+            f"lowest index (0) must win for both rays, got {hits.triangle.tolist()}")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 4: the kd-tree
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(1)
+def test_kd_pack_unpack(impl, device):
+    # Node 0 splits x at 0.25 (children 1, 2); node 1 is a leaf of 3 triangles from 0; node
+    # 2 splits z at -1.5 (children 3, 4); leaves 3 and 4 hold 2 and 0 triangles from 3.
+    tree = {"split": torch.tensor([0.25, 0.0, -1.5, 0.0, 0.0], device=device),
+            "axis": torch.tensor([0, -1, 2, -1, -1], device=device),
+            "left": torch.tensor([1, -1, 3, -1, -1], device=device),
+            "first": torch.tensor([0, 0, 0, 3, 5], device=device),
+            "count": torch.tensor([0, 3, 0, 2, 0], device=device)}
+    packed = impl.kd_pack(tree)
+    check_tensor(packed, "kd_pack", shape=(5, 2), dtype=torch.int32, device=device)
+    words = packed.cpu().long() & 0xFFFFFFFF
+    split_bits = torch.tensor([0.25, -1.5]).view(torch.int32).long() & 0xFFFFFFFF
+    assert words[[0, 2], 0].tolist() == split_bits.tolist(), (
+        "kd_pack: word 0 of an inner node must hold the float32 bits of split "
+        "(split.view(torch.int32))")
+    assert words[[1, 3, 4], 0].tolist() == [3, 2, 0], "kd_pack: word 0 of a leaf is its count"
+    want = [1 | 0 << 29, 0 | 1 << 31, 1 | 2 << 29, 3 | 1 << 31, 5 | 1 << 31]
+    got = words[:, 1].tolist()
+    assert got == want, (
+        "kd_pack: word 1 = leftOffset (bits 0-28) | splitAxis << 29 | leaf << 31, with "
+        "leftOffset = left - i for inner nodes and first for leaves: expected "
+        f"{[hex(w) for w in want]}, got {[hex(w) for w in got]}")
+    assert (packed[:, 1].cpu() < 0).tolist() == [False, True, False, True, True], \
+        "kd_pack: the leaf bit is the sign bit of word 1 as int32"
+    back = impl.kd_unpack(packed)
+    for key, dtype in (("split", F32), ("axis", torch.int64), ("left", torch.int64),
+                       ("first", torch.int64), ("count", torch.int64)):
+        check_tensor(back[key], f"kd_unpack(...)[{key!r}]", shape=(5,), dtype=dtype,
+                     device=device)
+    leaf = tree["axis"].cpu() < 0
+    assert_equal(back["axis"].cpu(), tree["axis"].cpu(), name="kd_unpack: axis", where="node")
+    assert_equal(back["left"].cpu(), tree["left"].cpu(), name="kd_unpack: left", where="node")
+    assert_equal(back["split"].cpu()[~leaf], tree["split"].cpu()[~leaf],
+                 name="kd_unpack: split", where="inner node")
+    assert_equal(back["first"].cpu()[leaf], tree["first"].cpu()[leaf], name="kd_unpack: first",
+                 where="leaf")
+    assert_equal(back["count"].cpu()[leaf], tree["count"].cpu()[leaf], name="kd_unpack: count",
+                 where="leaf")
+    # A round trip through a real tree, and an offset too big for 29 bits.
+    kd = median_kdtree(on(scene("soup"), device))
+    back = impl.kd_unpack(impl.kd_pack(kd))
+    for key in ("axis", "left"):
+        assert_equal(back[key].cpu(), kd[key].cpu(), name=f"kd_unpack(kd_pack(tree))[{key!r}]",
+                     where="node")
+    big = dict(tree, first=torch.tensor([0, 2**29, 0, 3, 5], device=device))
+    expect_error("tree", impl.kd_pack, big, case="a leaf starting at 2^29 (needs 30 bits)")
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(1)
+def test_kd_closest_hit(impl, device):
+    # Trees built here: spatial-median planes, straddling triangles in both children. A hit
+    # found in a leaf may lie beyond it; only a hit inside the leaf's interval ends the walk.
+    for name, depth in (("shards", 10), ("soup", 8), ("ico", 10), ("teapot", 12),
+                        ("slabs", 6)):
+        mesh = on(scene(name), device)
+        rays = (teapot_rays(200, 111) if name == "teapot" else rays_around(mesh, 240, 112))
+        rays = cat_rays(rays, axis_rays(mesh, 113, 4)).to(device)
+        tree = median_kdtree(mesh, depth)
+        compare(impl.kd_closest_hit(rays, mesh, tree, mt64), rays, mesh,
+                f"kd_closest_hit({name}, spatial-median tree of depth {depth})")
+    # Rays lying in the root's split plane with a zero component there (0 * inf = NaN).
+    mesh = on(scene("shards"), device)
+    tree = median_kdtree(mesh, 10)
+    a, s = int(tree["axis"][0]), tree["split"][0].item()
+    g = generator(114)
+    p = torch.rand(40, 3, generator=g)
+    p[:, a] = s
+    d = torch.randn(40, 3, generator=g)
+    d[:, a] = torch.where(torch.arange(40) % 2 == 0, 0.0, -0.0)
+    rays = cat_rays(Rays.create(p, d), bad_rays()).to(device)
+    compare(impl.kd_closest_hit(rays, mesh, tree, mt64), rays, mesh,
+            "kd_closest_hit (rays in the root's split plane, NaN/inf rays)")
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(1)
+def test_kdtree_build(impl, device):
+    for name in ("soup", "shards", "ico", "teapot", "single", "coincident", "far"):
+        mesh = on(scene(name), device)
+        tree = impl.build_kdtree(mesh)
+        what = f"build_kdtree({name})"
+        check_kdtree(tree, mesh, what)
+        rays = (teapot_rays(150, 121) if name == "teapot" else
+                cat_rays(rays_around(mesh, 150, 122), axis_rays(mesh, 123, 3)))
+        rays = rays.to(device)
+        count = compare(impl.kd_closest_hit(rays, mesh, tree, mt64), rays, mesh,
+                        f"kd_closest_hit on {what}")
+        if name == "teapot":
+            at_teapot = torch.arange(len(rays)) % 4 != 3
+            mean = count["tests"][at_teapot].double().mean().item()
+            assert mean <= 0.05 * mesh.num_faces, (
+                f"{what}: rays at the teapot run {mean:.1f} triangle tests on average, "
+                f"{mean / mesh.num_faces:.1%} of the scene: the SAH should cut the empty "
+                f"stadium away and the teapot into small leaves")
+    mesh = on(scene("soup"), device)
+    leaf = impl.build_kdtree(mesh, max_depth=0)
+    check_kdtree(leaf, mesh, "build_kdtree(max_depth=0)")
+    assert len(leaf["axis"]) == 1, "build_kdtree(max_depth=0): expected a single leaf"
+    expect_error("max_depth", impl.build_kdtree, mesh, -1, case="max_depth=-1")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 5: the common entry point and the trade
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(1)
+def test_closest_hit_entry_point(impl, device):
+    mesh = on(scene("shards"), device)
+    rays = rays_around(mesh, 150, 131).to(device)
+    ref = reference(rays.to("cpu"), on(mesh, "cpu"))
+    count = compare(impl.brute_force_closest_hit(rays, mesh, mt64), rays, mesh,
+                    "brute_force_closest_hit", ref=ref, walks=False)
+    assert (count["tests"] == mesh.num_faces).all(), \
+        "brute_force_closest_hit: every ray tests every triangle (counters['tests'] == F)"
+    compare(impl.brute_force_closest_hit(rays, mesh, mt64, 2**12), rays, mesh,
+            "brute_force_closest_hit(memory_budget_bytes=4096)", ref=ref, walks=False)
+    structures = {"grid": impl.build_grid(mesh), "bvh": median_bvh(mesh, 2),
+                  "kd": median_kdtree(mesh)}
+    for kind, options in (("grid", {}), ("grid", {"mailbox": False}), ("bvh", {}),
+                          ("bvh", {"stackless": True}), ("kd", {})):
+        compare(impl.closest_hit(rays, mesh, structures[kind], mt64, **options), rays, mesh,
+                f"closest_hit({kind}, {options})", ref=ref)
+    compare(impl.closest_hit(rays, mesh, None, mt64), rays, mesh, "closest_hit(None)", ref=ref,
+            walks=False)
+    # Bad input, named.
+    expect_error("structure", impl.closest_hit, rays, mesh, {"kind": "octree"}, mt64,
+                 case="structure={'kind': 'octree'}")
+    expect_error("rays", impl.closest_hit, (rays.origins, rays.directions), mesh, None, mt64,
+                 case="a tuple instead of Rays")
+    m64 = Mesh(vertices=mesh.vertices.double(), faces=mesh.faces)
+    expect_error("mesh", impl.bvh_closest_hit, rays, m64, structures["bvh"], mt64,
+                 case="a float64 mesh with float32 rays")
+    expect_error("intersect", impl.grid_closest_hit, rays, mesh, structures["grid"], "mt",
+                 case="intersect='mt' (not callable)")
+    expect_error("bvh", impl.bvh_closest_hit, rays, mesh, structures["grid"], mt64,
+                 case="a grid passed as the bvh")
+    expect_error("memory_budget_bytes", impl.brute_force_closest_hit, rays, mesh, mt64, 0,
+                 case="memory_budget_bytes=0")
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(1)
+def test_counters_show_the_trade(impl, device):
+    # The teapot in a stadium: a uniform grid sized for the whole room puts the teapot into
+    # a cell or two, so its rays test hundreds of triangles; a BVH adapts. (So does an SAH
+    # kd-tree: test_kdtree_build; a spatial-median one would not.)
+    mesh = on(scene("teapot"), device)
+    rays = teapot_rays(160, 141).to(device)
+    at_teapot = torch.arange(len(rays)) % 4 != 3
+    ref = reference(rays.to("cpu"), on(mesh, "cpu"))
+    mean = {}
+    for kind, structure, options in (("grid", impl.build_grid(mesh), {}),
+                                     ("bvh", median_bvh(mesh, 4), {}),
+                                     ("bvh stackless", median_bvh(mesh, 4), {"stackless": True})):
+        count = compare(impl.closest_hit(rays, mesh, structure, mt64, **options), rays, mesh,
+                        f"closest_hit({kind}) on the teapot in a stadium", ref=ref)
+        mean[kind] = {k: count[k][at_teapot].double().mean().item() for k in ("steps", "tests")}
+    f = mesh.num_faces
+    assert mean["grid"]["tests"] >= 0.1 * f, (
+        f"grid: rays at the teapot run {mean['grid']['tests']:.1f} tests on average; with "
+        f"about 2 cells per triangle over the whole stadium the teapot fills one or two "
+        f"cells, so they should test a good part of its {f - 12} triangles. Count every test.")
+    for kind in ("bvh", "bvh stackless"):
+        assert mean[kind]["tests"] <= 0.05 * f, (
+            f"{kind}: rays at the teapot run {mean[kind]['tests']:.1f} triangle tests on average "
+            f"(of {f} triangles); a tree adapts to the teapot and needs far fewer")
+    assert mean["bvh stackless"]["steps"] > mean["bvh"]["steps"], (
+        "BVH: the stackless walk (always left first, no culling by a near hit) should visit "
+        f"more nodes than the stack traversal: {mean['bvh stackless']['steps']:.1f} vs "
+        f"{mean['bvh']['steps']:.1f}")
