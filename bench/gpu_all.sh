@@ -6,7 +6,8 @@
 #   OUT=/some/dir PART=tests bash bench/gpu_all.sh     (steps 1-2)
 #   OUT=/some/dir PART=bench bash bench/gpu_all.sh     (steps 3-4)
 #   OUT=/some/dir bash bench/gpu_all.sh                (all)
-# DRIVERS="bench/lab1_intersect.py ..." picks bench drivers; GALLERY=0 skips the gallery.
+# DRIVERS="bench/lab1_intersect.py ..." picks bench drivers (DRIVER_TIMEOUT seconds each,
+# default 150); GALLERY=0 skips the gallery.
 #
 # 1. every grader and course test on cpu+cuda, against the references, in-process;
 # 2. the same graders against a copy of the references through the sandboxed worker
@@ -41,7 +42,7 @@ log="$OUT/gpu_${PART:-all}.log"
     for driver in ${DRIVERS:-bench/lab*_*.py}; do
         name=$(basename "$driver" .py)
         echo "-- $driver"
-        timeout 150 python3 "$driver" --device cuda --out "$OUT/run/$name" 2>&1 | tail -8
+        timeout "${DRIVER_TIMEOUT:-150}" python3 "$driver" --device cuda --out "$OUT/run/$name" 2>&1 | tail -8
     done
     [ "${GALLERY:-1}" = 1 ] && echo "== 4. gallery" && timeout 120 python3 -m course.cli demo --device cuda --out "$OUT/run/gallery" 2>&1 | tail -12
     fi

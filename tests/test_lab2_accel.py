@@ -33,7 +33,13 @@ import pytest
 import torch
 
 from course.scenes import load_scene
-from course.testing import assert_close, assert_equal, check_tensor, generator
+from course.testing import (
+    assert_close,
+    assert_equal,
+    check_tensor,
+    expect_error,
+    generator,
+)
 from course.types import Hits, Mesh, Rays
 
 LAB_MODULE = "lab2_accel"
@@ -318,25 +324,6 @@ def compare(result, rays: Rays, mesh: Mesh, what: str, counters=("steps", "tests
         raise AssertionError(f"{what}: rays with triangle tests but counters['steps'] == 0: "
                              f"count every cell or node a ray visits")
     return count
-
-
-def first_line(exc: BaseException) -> str:
-    return str(exc).splitlines()[0] if str(exc) else ""
-
-
-def expect_error(names, fn, *args, case="", **kwargs):
-    """``fn(*args)`` must raise ValueError/TypeError naming one of ``names``."""
-    names = (names,) if isinstance(names, str) else tuple(names)
-    what = getattr(fn, "__name__", None) or getattr(fn, "_name", "the call")
-    try:
-        fn(*args, **kwargs)
-    except (ValueError, TypeError) as exc:
-        assert any(n in first_line(exc) for n in names), (
-            f"{what} with {case} raised {type(exc).__name__}({first_line(exc)!r}); the message "
-            f"should name the argument {' or '.join(map(repr, names))}")
-        return
-    raise AssertionError(f"{what} accepted {case}: expected ValueError or TypeError naming "
-                         f"{' or '.join(map(repr, names))}")
 
 
 # ---------------------------------------------------------------------------------------
