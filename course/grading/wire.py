@@ -54,10 +54,13 @@ def loads_plain(data: bytes):
 def _tensor_bytes(t: torch.Tensor) -> bytes:
     # Strip any subclass behaviour before touching the data.
     with torch._C.DisableTorchFunctionSubclass():
-        t = torch.Tensor.detach(t).to("cpu").contiguous()
+        t = torch.Tensor.detach(t).to("cpu")
         if t.numel() == 0:
             return b""
-        return t.reshape(-1).view(torch.uint8).numpy().tobytes()
+        # A fresh dense buffer: contiguous() keeps stride 0 on expanded size-1 dims,
+        # which cannot be reinterpreted as bytes.
+        flat = torch.empty(t.numel(), dtype=t.dtype).copy_(t.reshape(-1))
+        return flat.view(torch.uint8).numpy().tobytes()
 
 
 def encode(obj, refs=None):

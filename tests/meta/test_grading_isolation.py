@@ -18,6 +18,9 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
+import torch
+
+from course.grading import wire
 
 HERE = Path(__file__).parent
 HOSTILE = sorted(p.name for p in (HERE / "hostile").iterdir() if p.is_dir())
@@ -111,3 +114,16 @@ def test_student_output_is_captured_not_mixed(tmp_path):
         assert noise not in proc.stdout + proc.stderr, "student output leaked into the grader's"
     tests = {t["number"]: t for t in json.loads(out.read_text())["tests"]}
     assert "NORMS-NOISE" in tests["9.2"]["output"], "the failing test should show what it printed"
+
+
+@pytest.mark.parametrize("tensor", [
+    torch.tensor(0.5).expand(1).contiguous(),          # stride 0 on a size-1 dim
+    torch.arange(6.0).reshape(2, 3).T,                 # non-contiguous
+    torch.tensor(3, dtype=torch.int64),                # 0-d
+    torch.ones(2, 2, dtype=torch.bfloat16),            # no numpy dtype
+    torch.empty(0, 3),                                 # empty
+], ids=["stride0", "transposed", "scalar", "bf16", "empty"])
+def test_tensors_cross_the_wire_unchanged(tensor):
+    back = wire.decode(wire.loads_plain(wire.dumps(wire.encode(tensor))))
+    assert type(back) is torch.Tensor and back.dtype == tensor.dtype
+    assert back.shape == tensor.shape and torch.equal(back, tensor)
