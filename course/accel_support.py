@@ -1,0 +1,385 @@
+"""Input checks and tree plumbing shared by Lab 2's skeleton and reference.
+
+Given code, not exercises: the lab's skeleton and its reference import these, so
+there is one copy of them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from course.raymath import gamma
+from course.types import Hits, Mesh, Rays
+
+STRUCTURES = ("grid", "bvh", "kd")
+COUNTERS = ("steps", "tests")
+STRUCTURE_KEYS = {
+    "grid": ("lo", "hi", "resolution", "cell_start", "cell_count", "triangles",
+             "tri_cell_lo", "tri_cell_hi"),
+    "bvh": ("lo", "hi", "left", "right", "first", "count", "triangles"),
+    "kd": ("lo", "hi", "split", "axis", "left", "first", "count", "triangles"),
+}
+MAX_PAIRS = 2**20
+OFFSET_BITS = 29
+
+
+def check_trace_inputs(rays, mesh, intersect) -> None:
+    """Provided: validate the arguments every ``*_closest_hit`` takes.
+
+    Raises TypeError/ValueError naming ``rays``, ``mesh`` or ``intersect``.
+    """
+    if not isinstance(rays, Rays):
+        raise TypeError(f"rays: expected course.types.Rays, got {type(rays).__name__}")
+    check_mesh(mesh)
+    rays.validate()
+    if mesh.dtype != rays.dtype:
+        raise TypeError(f"mesh: expected vertices of dtype {rays.dtype} like rays, got {mesh.dtype}")
+    if mesh.device != rays.device:
+        raise ValueError(f"mesh: expected a mesh on {rays.device} like rays, got {mesh.device}")
+    if not callable(intersect):
+        raise TypeError("intersect: expected a callable intersect(origins, directions, v0, v1, "
+                        f"v2, t_min, t_max) -> (t, u, v), got {type(intersect).__name__}")
+
+
+def check_mesh(mesh) -> None:
+    """Provided: ``mesh`` must be a valid ``course.types.Mesh`` (TypeError/ValueError)."""
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+    mesh.validate()
+
+
+def check_structure(structure, kind: str, name: str, mesh: Mesh) -> None:
+    """Provided: ``structure`` must be a ``kind`` dict built for a mesh like ``mesh``.
+
+    Raises ValueError/TypeError naming ``name`` (the argument) and what is missing.
+    """
+    if not isinstance(structure, dict) or structure.get("kind") != kind:
+        got = structure.get("kind") if isinstance(structure, dict) else type(structure).__name__
+        raise ValueError(f"{name}: expected a dict with kind={kind!r} (from build_...), "
+                         f"got {got!r}")
+    for key in STRUCTURE_KEYS[kind]:
+        x = structure.get(key)
+        if not isinstance(x, torch.Tensor):
+            raise TypeError(f"{name}: expected a tensor under {key!r}, got {type(x).__name__}")
+        if x.device != mesh.device:
+            raise ValueError(f"{name}: {key!r} is on {x.device}, the mesh on {mesh.device}")
+    if structure["triangles"].numel() and int(structure["triangles"].max()) >= mesh.num_faces:
+        raise ValueError(f"{name}: refers to triangle {int(structure['triangles'].max())}, "
+                         f"but the mesh has {mesh.num_faces}: built for another mesh?")
+
+
+def _positive_int(value, name: str, lo: int = 1, hi: int | None = None) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (
+            hi is not None and value > hi):
+        span = f"in {lo}..{hi}" if hi is not None else f">= {lo}"
+        raise ValueError(f"{name}: expected an int {span}, got {value!r}")
+
+
+def check_grid_inputs(extent, num_triangles, density) -> list[float]:
+    """Provided: validate :func:`grid_resolution`'s arguments; returns ``extent`` as 3 floats."""
+    values = extent.tolist() if isinstance(extent, torch.Tensor) else extent
+    try:
+        values = [float(x) for x in values]
+    except (TypeError, ValueError):
+        raise ValueError(f"extent: expected 3 finite non-negative sizes, got {extent!r}") from None
+    if len(values) != 3 or not all(math.isfinite(x) and x >= 0 for x in values):
+        raise ValueError(f"extent: expected 3 finite non-negative sizes, got {extent!r}")
+    _positive_int(num_triangles, "num_triangles")
+    if not (isinstance(density, (int, float)) and math.isfinite(density) and density > 0):
+        raise ValueError(f"density: expected a positive number, got {density!r}")
+    return values
+
+
+def check_resolution(resolution) -> None:
+    """Provided: ``resolution`` must be None or 3 positive ints."""
+    if resolution is not None and (
+            not isinstance(resolution, (tuple, list)) or len(resolution) != 3
+            or not all(isinstance(r, int) and not isinstance(r, bool) and r >= 1
+                       for r in resolution)):
+        raise ValueError(f"resolution: expected 3 positive ints (rx, ry, rz), got {resolution!r}")
+
+
+def check_morton_inputs(points, lo, hi, bits) -> None:
+    """Provided: validate :func:`morton_codes`'s arguments."""
+    if not isinstance(points, torch.Tensor) or not points.is_floating_point():
+        raise TypeError(f"points: expected a float tensor of shape (N, 3), got "
+                        f"{getattr(points, 'dtype', type(points).__name__)}")
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points: expected shape (N, 3), got {tuple(points.shape)}")
+    for name, x in (("lo", lo), ("hi", hi)):
+        if not isinstance(x, torch.Tensor) or x.shape != (3,):
+            raise ValueError(f"{name}: expected a (3,) tensor, got "
+                             f"{getattr(x, 'shape', type(x).__name__)}")
+    _positive_int(bits, "bits", 1, 21)  # 3 * 21 = 63 bits fit an int64
+
+
+def check_leaf_size(leaf_size) -> None:
+    """Provided: ``leaf_size`` must be a positive int."""
+    _positive_int(leaf_size, "leaf_size")
+
+
+def check_bins(bins) -> None:
+    """Provided: ``bins`` must be an int in 2..1024."""
+    _positive_int(bins, "bins", 2, 1024)
+
+
+def check_links(bvh) -> None:
+    """Provided: ``bvh`` must hold ``left`` and ``right`` (M,) int64 tensors."""
+    if not isinstance(bvh, dict) or not all(isinstance(bvh.get(k), torch.Tensor)
+                                            for k in ("left", "right")):
+        raise ValueError("bvh: expected a BVH dict with 'left' and 'right' tensors")
+
+
+def check_kd_knobs(mesh, max_depth, traversal_cost, intersect_cost, empty_bonus) -> int:
+    """Provided: validate :func:`build_kdtree`'s knobs; returns ``max_depth`` with its
+    default ``round(8 + 1.3 log2 F)`` (pbrt's) filled in."""
+    if max_depth is None:
+        max_depth = round(8 + 1.3 * math.log2(mesh.num_faces))
+    _positive_int(max_depth, "max_depth", 0, 60)
+    for name, value in (("traversal_cost", traversal_cost), ("intersect_cost", intersect_cost)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}: expected a positive number, got {value!r}")
+    if not (isinstance(empty_bonus, (int, float)) and 0 <= empty_bonus <= 1):
+        raise ValueError(f"empty_bonus: expected a number in [0, 1], got {empty_bonus!r}")
+    return max_depth
+
+
+def check_kd_fields(tree) -> None:
+    """Provided: ``tree`` must hold the kd fields :func:`kd_pack` reads."""
+    if not isinstance(tree, dict):
+        raise TypeError(f"tree: expected a kd dict, got {type(tree).__name__}")
+    for key in ("split", "axis", "left", "first", "count"):
+        if not isinstance(tree.get(key), torch.Tensor):
+            raise TypeError(f"tree: expected a tensor under {key!r}")
+
+
+def check_packed(packed) -> None:
+    """Provided: ``packed`` must be an (M, 2) int32 tensor."""
+    if not isinstance(packed, torch.Tensor) or packed.dtype != torch.int32:
+        raise TypeError(f"packed: expected an int32 tensor of shape (M, 2), got "
+                        f"{getattr(packed, 'dtype', type(packed).__name__)}")
+    if packed.ndim != 2 or packed.shape[1] != 2:
+        raise ValueError(f"packed: expected shape (M, 2), got {tuple(packed.shape)}")
+
+
+def check_memory_budget(memory_budget_bytes) -> None:
+    """Provided: ``memory_budget_bytes`` must be a positive int."""
+    _positive_int(memory_budget_bytes, "memory_budget_bytes")
+
+
+def triangle_bounds(mesh: Mesh) -> tuple[torch.Tensor, torch.Tensor]:
+    """Provided: ``(lo, hi)``, each (F, 3): the axis-aligned bounds of every triangle."""
+    corners = mesh.triangles()
+    return corners.amin(dim=1), corners.amax(dim=1)
+
+
+def surface_area(lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
+    """Provided: ``2 (dx dy + dy dz + dz dx)`` of boxes ``(..., 3)``; 0 for empty boxes
+    (``lo > hi``, e.g. the ``+inf``/``-inf`` bounds of an empty bin)."""
+    ext = (hi - lo).clamp(min=0).nan_to_num(0.0, posinf=0.0)
+    return 2 * (ext[..., 0] * ext[..., 1] + ext[..., 1] * ext[..., 2] + ext[..., 2] * ext[..., 0])
+
+
+def slab_test(origins, inv_directions, lo, hi, t_lo, t_hi):
+    """Provided: rays against axis-aligned boxes (Lab 1's conservative slab test).
+
+    origins, inv_directions: (n, 3) with ``inv_directions = 1 / directions`` (``1/+-0 =
+    +-inf``); lo, hi: (n, 3) or (3,) boxes; t_lo, t_hi: (n,). Returns ``(t_near, t_far,
+    hit)``, each (n,): the ray's interval inside the box clipped to ``[t_lo, t_hi]``.
+
+    NaN from ``0 * inf`` (a ray in a slab plane with a zero direction component) is
+    dropped by ``fmax``/``fmin``; ``t_far`` is scaled by ``1 + 2 gamma(3)`` (Ize 2013) so
+    rounding never turns a hit into a miss; NaN/inf rays and empty boxes never hit.
+    """
+    t0 = (lo - origins) * inv_directions
+    t1 = (hi - origins) * inv_directions
+    near = torch.minimum(t0, t1)
+    far = torch.maximum(t0, t1) * (1 + 2 * gamma(3, t0.dtype))
+    t_near = torch.fmax(t_lo, torch.fmax(torch.fmax(near[..., 0], near[..., 1]), near[..., 2]))
+    t_far = torch.fmin(t_hi, torch.fmin(torch.fmin(far[..., 0], far[..., 1]), far[..., 2]))
+    valid = (torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1)
+             & (lo <= hi).all(-1))
+    return t_near, t_far, (t_near <= t_far) & (t_near < math.inf) & valid
+
+
+def expand_ranges(first: torch.Tensor, count: torch.Tensor):
+    """Provided: every element of the ranges ``[first[i], first[i] + count[i])``.
+
+    first, count: (k,) int64. Returns ``(owner, index)``, each (sum(count),) int64: range
+    ``owner[j]`` contains element ``index[j]``; owners ascending, indices ascending within
+    each range. The batched form of ``for i: for j in range(first[i], first[i] + count[i])``
+    (a cell's triangle list, a leaf's triangles, a node's primitives).
+    """
+    owner = torch.repeat_interleave(torch.arange(len(count), device=count.device), count)
+    offset = torch.cumsum(count, 0) - count
+    index = first[owner] + torch.arange(len(owner), device=count.device) - offset[owner]
+    return owner, index
+
+
+def pair_chunks(first: torch.Tensor, count: torch.Tensor, max_pairs: int = MAX_PAIRS):
+    """Provided: :func:`expand_ranges` in chunks of at most ``max_pairs`` elements.
+
+    Yields ``(owner, index)`` like ``expand_ranges(first, count)``, a chunk at a time (a range
+    may be split between two chunks), so only one chunk is ever in memory.
+    """
+    end = torch.cumsum(count, 0)
+    total = int(end[-1]) if len(end) else 0
+    for p0 in range(0, total, max_pairs):
+        j = torch.arange(p0, min(total, p0 + max_pairs), device=count.device)
+        owner = torch.searchsorted(end, j, right=True)  # the first range ending after j
+        yield owner, first[owner] + j - (end - count)[owner]
+
+
+def test_ranges(intersect, rays: Rays, corners: torch.Tensor, ray: torch.Tensor,
+                first: torch.Tensor, count: torch.Tensor, triangles: torch.Tensor,
+                closest: dict, counters: dict) -> None:
+    """Provided: test ray ``ray[i]`` against ``triangles[first[i] : first[i] + count[i]]``
+    for every ``i`` (its leaf's list), in chunks, with :func:`intersect_pairs`."""
+    for owner, k in pair_chunks(first, count):
+        intersect_pairs(intersect, rays, corners, ray[owner], triangles[k], closest, counters)
+
+
+def new_closest(n: int, like: torch.Tensor) -> dict:
+    """Provided: the closest-hit state of ``n`` rays, all missed (dtype/device of ``like``)."""
+    miss = Hits.miss(n, dtype=like.dtype, device=like.device)
+    return {"t": miss.t, "triangle": miss.triangle, "u": miss.u, "v": miss.v}
+
+
+def intersect_pairs(intersect, rays: Rays, corners: torch.Tensor, ray: torch.Tensor,
+               tri: torch.Tensor, closest: dict, counters: dict) -> None:
+    """Provided: run ``intersect`` on the (ray, triangle) pairs and keep each ray's closest.
+
+    ray, tri: (P,) int64 indices into ``rays`` and ``corners`` (F, 3, 3). Updates
+    ``closest`` (from :func:`new_closest`) in place: a pair replaces a ray's hit when its
+    ``t`` is smaller, or equal with a lower triangle index (the brute-force order), and
+    adds each ray's number of pairs to ``counters["tests"]``.
+    """
+    if len(ray) == 0:
+        return
+    tri_corners = corners[tri]
+    t, u, v = intersect(rays.origins[ray], rays.directions[ray], tri_corners[:, 0],
+                        tri_corners[:, 1], tri_corners[:, 2], rays.t_min[ray], rays.t_max[ray])
+    counters["tests"].index_add_(0, ray, torch.ones_like(ray))
+    best_t, best_tri = closest["t"], closest["triangle"]
+    hit = t < math.inf
+    # The nearest t per ray over the old hit and all pairs ...
+    nearest = best_t.scatter_reduce(0, ray, t, "amin")
+    # ... and among those at that t, the lowest triangle index.
+    candidate = hit & (t == nearest[ray])
+    big = torch.iinfo(torch.int64).max
+    lowest = torch.where((best_t == nearest) & (best_tri >= 0), best_tri, big)
+    lowest = lowest.scatter_reduce(0, ray[candidate], tri[candidate], "amin")
+    win = candidate & (tri == lowest[ray])
+    winners = ray[win]
+    closest["t"][winners] = t[win]
+    closest["triangle"][winners] = tri[win]
+    closest["u"][winners] = u[win]
+    closest["v"][winners] = v[win]
+
+
+def new_counters(n: int, device, names=COUNTERS) -> dict:
+    """Provided: zeroed per-ray counters ``{name: (n,) int64}``."""
+    return {name: torch.zeros(n, dtype=torch.int64, device=device) for name in names}
+
+
+def as_hits(closest: dict) -> Hits:
+    """Provided: the closest-hit state as ``course.types.Hits``."""
+    return Hits(t=closest["t"], triangle=closest["triangle"], u=closest["u"], v=closest["v"])
+
+
+def add_count(counter: torch.Tensor, ray: torch.Tensor) -> None:
+    """Provided: ``counter[r] += 1`` for every entry ``r`` of ``ray`` (repeats count)."""
+    counter.index_add_(0, ray, torch.ones_like(ray))
+
+
+def assemble_bvh(order, start, end, left, right, depth, tri_lo, tri_hi) -> dict:
+    """Provided: the flat, depth-first BVH of a tree built level by level.
+
+    order: (F,) int64, the triangles in leaf order; start, end: (M,) int64, node ``i``
+    holds ``order[start[i]:end[i]]``; left, right: (M,) int64 child ids (-1 for leaves);
+    depth: (M,) int64 (root 0). Node ids are in creation order, parents before children.
+    tri_lo, tri_hi: (F, 3) triangle bounds.
+
+    Returns the BVH dict (see :func:`build_lbvh`) with the nodes renumbered depth first
+    (pre-order: a node, its left subtree, its right subtree), the order a stackless walk
+    reads them in. Bounds come bottom-up: leaves from their triangles, parents from their
+    two children, one tree level at a time; so every box contains its children exactly.
+    """
+    m, device = len(start), start.device
+    leaf = left < 0
+    max_depth = int(depth.max())
+    levels = [(depth == k).nonzero()[:, 0] for k in range(max_depth + 1)]
+    node_lo = torch.full((m, 3), math.inf, dtype=tri_lo.dtype, device=device)
+    node_hi = torch.full((m, 3), -math.inf, dtype=tri_lo.dtype, device=device)
+    leaves = leaf.nonzero()[:, 0]
+    owner, k = expand_ranges(start[leaves], end[leaves] - start[leaves])
+    index = leaves[owner, None].expand(-1, 3)
+    node_lo.scatter_reduce_(0, index, tri_lo[order[k]], "amin")
+    node_hi.scatter_reduce_(0, index, tri_hi[order[k]], "amax")
+    size = torch.ones(m, dtype=torch.int64, device=device)
+    for nodes in reversed(levels):
+        nodes = nodes[~leaf[nodes]]
+        a, b = left[nodes], right[nodes]
+        node_lo[nodes] = torch.minimum(node_lo[a], node_lo[b])
+        node_hi[nodes] = torch.maximum(node_hi[a], node_hi[b])
+        size[nodes] = 1 + size[a] + size[b]
+    # Pre-order positions: the left child right after its parent, the right child after
+    # the whole left subtree.
+    pos = torch.zeros(m, dtype=torch.int64, device=device)
+    for nodes in levels:
+        nodes = nodes[~leaf[nodes]]
+        pos[left[nodes]] = pos[nodes] + 1
+        pos[right[nodes]] = pos[nodes] + 1 + size[left[nodes]]
+    out = {"kind": "bvh"}
+    out["lo"] = torch.empty_like(node_lo).index_copy_(0, pos, node_lo)
+    out["hi"] = torch.empty_like(node_hi).index_copy_(0, pos, node_hi)
+    minus = torch.full_like(left, -1)
+    out["left"] = minus.index_copy(0, pos, torch.where(leaf, -1, pos[left.clamp(min=0)]))
+    out["right"] = minus.index_copy(0, pos, torch.where(leaf, -1, pos[right.clamp(min=0)]))
+    out["first"] = torch.zeros_like(start).index_copy_(0, pos, torch.where(leaf, start, 0))
+    out["count"] = torch.zeros_like(start).index_copy_(0, pos, torch.where(leaf, end - start, 0))
+    out["triangles"] = order
+    return out
+
+
+class TreeLevels:
+    """Provided: the nodes of a BVH built level by level, for :func:`assemble_bvh`.
+
+    Node ``i`` holds the triangles ``order[start[i] : end[i]]`` of the build's triangle
+    order; the root (id 0) holds all ``f``. :meth:`split` gives nodes of the current level
+    their two children, :meth:`finish` assembles the flat BVH once no node splits.
+    """
+
+    def __init__(self, f: int, device):
+        zero = torch.zeros(1, dtype=torch.int64, device=device)
+        self.starts, self.ends, self.depths = [zero], [zero + f], [zero]
+        self.children = []  # per level: (parents, left ids, right ids)
+        self.count = 1
+
+    def ranges(self, nodes: torch.Tensor):
+        """``(start, end)`` of ``nodes`` (k,) int64 ids, each (k,) int64."""
+        return torch.cat(self.starts)[nodes], torch.cat(self.ends)[nodes]
+
+    def split(self, nodes: torch.Tensor, mid: torch.Tensor, depth: int) -> torch.Tensor:
+        """Split each of ``nodes`` (k,), at tree depth ``depth``, into ``[start, mid)`` and
+        ``[mid, end)``; returns the (2k,) children ids, left and right interleaved."""
+        start, end = self.ranges(nodes)
+        k = len(nodes)
+        ids = self.count + torch.arange(2 * k, device=nodes.device)
+        self.children.append((nodes, ids[0::2], ids[1::2]))
+        self.starts.append(torch.stack((start, mid), 1).reshape(-1))
+        self.ends.append(torch.stack((mid, end), 1).reshape(-1))
+        self.depths.append(torch.full((2 * k,), depth + 1, dtype=torch.int64, device=nodes.device))
+        self.count += 2 * k
+        return ids
+
+    def finish(self, order: torch.Tensor, tri_lo: torch.Tensor, tri_hi: torch.Tensor) -> dict:
+        """The BVH dict of the tree; ``order`` (F,): the triangles in their final order."""
+        start, end = torch.cat(self.starts), torch.cat(self.ends)
+        left, right = torch.full_like(start, -1), torch.full_like(start, -1)
+        for parents, a, b in self.children:
+            left[parents], right[parents] = a, b
+        return assemble_bvh(order, start, end, left, right, torch.cat(self.depths), tri_lo,
+                            tri_hi)
