@@ -14,15 +14,23 @@ from course.raymath import gamma
 from course.types import Hits, Mesh, Rays
 
 STRUCTURES = ("grid", "bvh", "kd")
+"""The structures this lab builds, by their ``"kind"``."""
 COUNTERS = ("steps", "tests")
+"""The per-ray work counters every traversal returns (the grid adds ``"skipped"``)."""
 STRUCTURE_KEYS = {
     "grid": ("lo", "hi", "resolution", "cell_start", "cell_count", "triangles",
              "tri_cell_lo", "tri_cell_hi"),
     "bvh": ("lo", "hi", "left", "right", "first", "count", "triangles"),
     "kd": ("lo", "hi", "split", "axis", "left", "first", "count", "triangles"),
 }
+"""The tensors each kind of structure holds (see its ``build_*`` function)."""
 MAX_PAIRS = 2**20
+"""(ray, triangle) pairs tested at once, at most: about 256 bytes each (corners, indices and
+the kernel's temporaries), so memory stays bounded however many triangles a cell or leaf
+holds (a grid cell around a whole teapot, for every ray)."""
 OFFSET_BITS = 29
+"""The 8-byte kd node: word 0 = the split (float32 bits; a leaf: its triangle count);
+word 1 = leftOffset (bits 0-28) | splitAxis << 29 (bits 29-30) | leaf << 31."""
 
 
 def check_trace_inputs(rays, mesh, intersect) -> None:

@@ -11,7 +11,10 @@ import torch
 from course.raymath import check_inputs
 
 INTEGRATORS = ("exact", "riemann")
+"""Per-step integrators of :func:`segment_integral` (the accuracy knob of the marchers)."""
 MISS, HIT, UNSURE = 0, 1, 2
+"""Status codes of :func:`sphere_trace`: the ray escaped (``t > t_max``), found a surface,
+or ran out of steps before deciding (a grazing ray)."""
 
 
 def check_rays(origins, directions, names=("origins", "directions")):

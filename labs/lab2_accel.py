@@ -119,21 +119,12 @@ from course.accel_support import (  # noqa: F401  (given helpers)
 )
 from course.types import Mesh, Rays
 
-"""The structures this lab builds, by their ``"kind"``."""
-
-"""The per-ray work counters every traversal returns (the grid adds ``"skipped"``)."""
-
-
 # =======================================================================================
 # Provided helpers (not tasks): input checks, bounds, the slab test, pairs, closest hits
 
 
-"""The tensors each kind of structure holds (see its ``build_*`` function)."""
 
 
-"""(ray, triangle) pairs tested at once, at most: about 256 bytes each (corners, indices and
-the kernel's temporaries), so memory stays bounded however many triangles a cell or leaf
-holds (a grid cell around a whole teapot, for every ray)."""
 
 
 # =======================================================================================
@@ -492,8 +483,6 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
     raise NotImplementedError("not implemented yet: build_kdtree (task 4)")
 
 
-"""The 8-byte kd node: word 0 = the split (float32 bits; a leaf: its triangle count);
-word 1 = leftOffset (bits 0-28) | splitAxis << 29 (bits 29-30) | leaf << 31."""
 
 
 def kd_pack(tree: dict) -> torch.Tensor:

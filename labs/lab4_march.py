@@ -115,12 +115,6 @@ from course.march_support import (  # noqa: F401  (given helpers)
 )
 from course.raymath import check_inputs, dot  # noqa: F401  (dot: given, for the tasks)
 
-"""Per-step integrators of :func:`segment_integral` (the accuracy knob of the marchers)."""
-
-"""Status codes of :func:`sphere_trace`: the ray escaped (``t > t_max``), found a surface,
-or ran out of steps before deciding (a grazing ray)."""
-
-
 # ---------------------------------------------------------------------------------------
 # Provided helpers (not tasks): input checks, field evaluation, SDF primitives. Each task
 # starts with one check_* call that raises ValueError/TypeError naming a bad argument.

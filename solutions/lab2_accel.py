@@ -114,21 +114,12 @@ from course.accel_support import (  # noqa: F401  (given helpers)
 )
 from course.types import Mesh, Rays
 
-"""The structures this lab builds, by their ``"kind"``."""
-
-"""The per-ray work counters every traversal returns (the grid adds ``"skipped"``)."""
-
-
 # =======================================================================================
 # Provided helpers (not tasks): input checks, bounds, the slab test, pairs, closest hits
 
 
-"""The tensors each kind of structure holds (see its ``build_*`` function)."""
 
 
-"""(ray, triangle) pairs tested at once, at most: about 256 bytes each (corners, indices and
-the kernel's temporaries), so memory stays bounded however many triangles a cell or leaf
-holds (a grid cell around a whole teapot, for every ray)."""
 
 
 # =======================================================================================
@@ -813,8 +804,6 @@ def _kd_sweep(a, seg, n, box_lo, box_hi, starts, ends, planes, traversal_cost, i
     return torch.where(inside, cost, math.inf), plane, owner, slot
 
 
-"""The 8-byte kd node: word 0 = the split (float32 bits; a leaf: its triangle count);
-word 1 = leftOffset (bits 0-28) | splitAxis << 29 (bits 29-30) | leaf << 31."""
 
 
 def kd_pack(tree: dict) -> torch.Tensor:
