@@ -13,13 +13,17 @@ import torch
 from course.raymath import gamma
 from course.types import Hits, Mesh, Rays
 
-STRUCTURES = ("grid", "bvh", "kd")
+STRUCTURES = ("grid", "grid2", "bvh", "kd")
 """The structures this lab builds, by their ``"kind"``."""
 COUNTERS = ("steps", "tests")
 """The per-ray work counters every traversal returns (the grid adds ``"skipped"``)."""
 STRUCTURE_KEYS = {
     "grid": ("lo", "hi", "resolution", "cell_start", "cell_count", "triangles",
              "tri_cell_lo", "tri_cell_hi"),
+    "grid2": ("lo", "hi", "resolution", "cell_start", "cell_count", "triangles",
+              "tri_cell_lo", "tri_cell_hi", "big", "sub_of", "sub_lo", "sub_hi",
+              "sub_resolution", "sub_cell_base", "sub_cell_start", "sub_cell_count",
+              "sub_triangles", "sub_tri_cell_lo", "sub_tri_cell_hi"),
     "bvh": ("lo", "hi", "left", "right", "first", "count", "triangles"),
     "kd": ("lo", "hi", "split", "axis", "left", "first", "count", "triangles"),
 }
@@ -224,6 +228,30 @@ def expand_ranges(first: torch.Tensor, count: torch.Tensor):
     offset = torch.cumsum(count, 0) - count
     index = first[owner] + torch.arange(len(owner), device=count.device) - offset[owner]
     return owner, index
+
+
+def grid_resolutions(extent: torch.Tensor, num_triangles: torch.Tensor, density: float = 2.0,
+                     max_cells: int = 2**22) -> torch.Tensor:
+    """Provided: Lab 2's ``grid_resolution`` heuristic for many boxes at once (sub-grids).
+
+    extent: (S, 3) float, non-negative box sizes; num_triangles: (S,) int64 >= 1.
+    Returns (S, 3) int64 resolutions >= 1: about ``density * n`` cells per box (at most
+    ``max_cells``), as close to cubes as possible, one cell on a thin axis.
+
+    The thin-axis rule of ``grid_resolution`` without a loop over boxes: solve for
+    ``k`` over the free axes in logs, drop the axes with ``k * extent < 1``, and repeat;
+    three rounds suffice (each round drops an axis or changes nothing).
+    """
+    target = (density * num_triangles.double()).clamp(max=max_cells)
+    ext = extent.double()
+    free = ext > 0
+    k = torch.zeros_like(target)
+    for _ in range(3):
+        n_free = free.sum(dim=1)
+        log_volume = torch.where(free, ext.clamp(min=1e-300).log(), 0.0).sum(dim=1)
+        k = torch.where(n_free > 0, ((target.log() - log_volume) / n_free.clamp(min=1)).exp(), 0.0)
+        free = free & (ext * k[:, None] >= 1)
+    return torch.where(free, torch.round(ext * k[:, None]), 1.0).long().clamp(min=1)
 
 
 def pair_chunks(first: torch.Tensor, count: torch.Tensor, max_pairs: int = MAX_PAIRS):

@@ -45,7 +45,9 @@ from course.types import Hits, Mesh, Rays
 LAB_MODULE = "lab2_accel"
 TASKS = {1: "Uniform grid: build, 3D DDA, mailboxing", 2: "BVH builds: LBVH and binned SAH",
          3: "BVH traversal: stack and stackless", 4: "kd-tree: SAH build, packing, traversal",
-         5: "The common entry point and the work counters"}
+         5: "The common entry point and the work counters",
+         6: "The two-level grid: teapot in a stadium",
+         7: "Sync-free BVH traversal: fixed shapes, any-hit"}
 
 INF = math.inf
 F32, F64 = torch.float32, torch.float64
@@ -1105,3 +1107,325 @@ def test_counters_show_the_trade(impl, device):
         "BVH: the stackless walk (always left first, no culling by a near hit) should visit "
         f"more nodes than the stack traversal: {mean['bvh stackless']['steps']:.1f} vs "
         f"{mean['bvh']['steps']:.1f}")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 6: the two-level grid
+
+
+def simple_two_level(mesh: Mesh, top_res=(3, 3, 3), sub_res=(5, 4, 3), min_triangles=6) -> dict:
+    """A two-level grid in the lab's layout, built here with loops over cells (small scenes):
+    a fixed top resolution, a fixed sub-grid resolution, generous padding."""
+    corners = mesh.triangles().cpu()
+    dtype = corners.dtype
+    tri_lo, tri_hi = corners.amin(1), corners.amax(1)
+    eps = torch.finfo(dtype).eps
+
+    def padding(lo, hi):
+        pad = 1e-3 * float((hi - lo).amax()) + 64 * eps * float(torch.maximum(lo.abs(),
+                                                                              hi.abs()).amax())
+        return pad if pad > 0 else 1.0
+
+    pad = padding(tri_lo.amin(0), tri_hi.amax(0))
+    lo, hi = tri_lo.amin(0) - pad, tri_hi.amax(0) + pad
+    res = torch.tensor(top_res)
+    w = (hi - lo) / res
+    c_lo = torch.minimum(torch.floor((tri_lo - pad - lo) / w).long().clamp(min=0), res - 1)
+    c_hi = torch.minimum(torch.floor((tri_hi + pad - lo) / w).long().clamp(min=0), res - 1)
+    big = (tri_hi - tri_lo).amax(1) >= w.amin()
+    sres = torch.tensor(sub_res)
+    direct, sub_of, boxes, cell_lists, entry_lo, entry_hi = [], [], [], [], [], []
+    for cid in range(math.prod(top_res)):
+        c = torch.tensor([cid % res[0], (cid // res[0]) % res[1], cid // (res[0] * res[1])])
+        ids = ((c_lo <= c) & (c_hi >= c)).all(1).nonzero()[:, 0]
+        small = ids[~big[ids]]
+        if len(small) <= min_triangles:
+            direct.append(ids)
+            sub_of.append(-1)
+            continue
+        direct.append(ids[big[ids]])
+        sub_of.append(len(boxes))
+        blo = torch.maximum(tri_lo[small].amin(0), lo + c * w)
+        bhi = torch.minimum(tri_hi[small].amax(0), lo + (c + 1) * w)
+        spad = padding(blo, bhi)
+        blo, bhi = blo - spad, bhi + spad
+        boxes.append((blo, bhi))
+        sw = (bhi - blo) / sres
+        s_lo = torch.minimum(torch.floor((tri_lo[small] - spad - blo) / sw).long().clamp(min=0),
+                             sres - 1)
+        s_hi = torch.minimum(torch.floor((tri_hi[small] + spad - blo) / sw).long().clamp(min=0),
+                             sres - 1)
+        for sid in range(math.prod(sub_res)):
+            q = torch.tensor([sid % sres[0], (sid // sres[0]) % sres[1], sid // (sres[0] * sres[1])])
+            inside = ((s_lo <= q) & (s_hi >= q)).all(1)
+            cell_lists.append(small[inside])
+            entry_lo.append(s_lo[inside])
+            entry_hi.append(s_hi[inside])
+    count = torch.tensor([len(x) for x in direct], dtype=torch.int64)
+    sub_count = torch.tensor([len(x) for x in cell_lists], dtype=torch.int64)
+    n_sub = len(boxes)
+    dev = mesh.device
+    empty3 = torch.zeros((0, 3), dtype=torch.int64)
+    out = {"kind": "grid2", "lo": lo, "hi": hi, "resolution": res,
+           "cell_start": torch.cumsum(count, 0) - count, "cell_count": count,
+           "triangles": torch.cat(direct).long(), "tri_cell_lo": c_lo, "tri_cell_hi": c_hi,
+           "big": big, "sub_of": torch.tensor(sub_of, dtype=torch.int64),
+           "sub_lo": torch.stack([b[0] for b in boxes]) if n_sub else torch.zeros((0, 3), dtype=dtype),
+           "sub_hi": torch.stack([b[1] for b in boxes]) if n_sub else torch.zeros((0, 3), dtype=dtype),
+           "sub_resolution": sres.expand(n_sub, 3).clone(),
+           "sub_cell_base": torch.arange(n_sub, dtype=torch.int64) * math.prod(sub_res),
+           "sub_cell_start": torch.cumsum(sub_count, 0) - sub_count, "sub_cell_count": sub_count,
+           "sub_triangles": torch.cat(cell_lists).long() if cell_lists else torch.zeros(0, dtype=torch.int64),
+           "sub_tri_cell_lo": torch.cat(entry_lo) if entry_lo else empty3,
+           "sub_tri_cell_hi": torch.cat(entry_hi) if entry_hi else empty3}
+    return {k: v.to(dev) if isinstance(v, torch.Tensor) else v for k, v in out.items()}
+
+
+GRID2_COUNTERS = ("steps", "tests", "skipped")
+
+
+def check_two_level(g, mesh: Mesh, what: str, density: float) -> None:
+    """Structure of a two-level grid: the top lists and sub-grids together list every
+    triangle in every top cell its bounds reach, sub-grids sit in their cells and cover
+    their triangles, and each sub-grid's resolution follows the density heuristic."""
+    device, f = mesh.device, mesh.num_faces
+    assert isinstance(g, dict) and g.get("kind") == "grid2", \
+        f"{what}: expected a dict with kind 'grid2'"
+    lo = field(g, "lo", what, (3,), mesh.dtype, device).double()
+    hi = field(g, "hi", what, (3,), mesh.dtype, device).double()
+    res = field(g, "resolution", what, (3,), torch.int64, device)
+    c = int(res.prod())
+    start, count = (field(g, k, what, (c,), torch.int64, device) for k in ("cell_start",
+                                                                          "cell_count"))
+    tris = field(g, "triangles", what, (None,), torch.int64, device)
+    c_lo, c_hi = (field(g, k, what, (f, 3), torch.int64, device) for k in ("tri_cell_lo",
+                                                                           "tri_cell_hi"))
+    big = field(g, "big", what, (f,), torch.bool, device)
+    sub_of = field(g, "sub_of", what, (c,), torch.int64, device)
+    s = int((sub_of >= 0).sum())
+    sub_lo = field(g, "sub_lo", what, (s, 3), mesh.dtype, device).double()
+    sub_hi = field(g, "sub_hi", what, (s, 3), mesh.dtype, device).double()
+    sres = field(g, "sub_resolution", what, (s, 3), torch.int64, device)
+    base = field(g, "sub_cell_base", what, (s,), torch.int64, device)
+    sc = int(sres.prod(1).sum()) if s else 0
+    s_start, s_count = (field(g, k, what, (sc,), torch.int64, device) for k in
+                        ("sub_cell_start", "sub_cell_count"))
+    s_tris = field(g, "sub_triangles", what, (None,), torch.int64, device)
+    k2 = len(s_tris)
+    e_lo, e_hi = (field(g, k, what, (k2, 3), torch.int64, device) for k in ("sub_tri_cell_lo",
+                                                                            "sub_tri_cell_hi"))
+    assert_equal(sub_of[sub_of >= 0].sort().values, torch.arange(s), name=f"{what}: sub_of "
+                 "(each sub-grid belongs to exactly one top cell)", where="position")
+    assert_equal(base, torch.cumsum(sres.prod(1), 0) - sres.prod(1), name=f"{what}: "
+                 "sub_cell_base (the exclusive prefix sum of the sub-grids' cell counts)",
+                 where="sub-grid")
+    assert_equal(start, torch.cumsum(count, 0) - count, name=f"{what}: cell_start", where="cell")
+    assert_equal(s_start, torch.cumsum(s_count, 0) - s_count, name=f"{what}: sub_cell_start",
+                 where="sub cell")
+    assert int(count.sum()) == len(tris) and int(s_count.sum()) == k2, \
+        f"{what}: the cell counts must sum to the lengths of the triangle lists"
+    width = (hi - lo) / res
+    corners = mesh.triangles().cpu().double()
+    t_lo, t_hi = corners.amin(1), corners.amax(1)
+    assert ((lo <= t_lo.amin(0)) & (hi >= t_hi.amax(0))).all(), \
+        f"{what}: the top grid's box must contain the scene"
+    first = torch.floor((t_lo - lo) / width).long().clamp(min=0)
+    last = torch.minimum(torch.floor((t_hi - lo) / width).long(), res - 1)
+    assert ((c_lo <= first) & (c_hi >= last) & (c_lo >= first - 1) & (c_hi <= last + 1)).all(), (
+        f"{what}: tri_cell_lo/hi must be each triangle's box of top cells (all the cells its "
+        f"bounds overlap, at most one more)")
+    wide = (t_hi - t_lo).amax(1) >= 1.001 * width.amin()
+    assert big[wide].all(), (f"{what}: a triangle at least one top cell wide must be big "
+                             f"(listed directly, never in a sub-grid): {int((wide & ~big).sum())} "
+                             f"are not")
+    # Every (triangle, top cell) overlap: in the cell's direct list, or (small triangles of
+    # a cell with a sub-grid) in that sub-grid.
+    cell_of = torch.repeat_interleave(torch.arange(c), count)
+    listed = set(zip(cell_of.tolist(), tris.tolist()))
+    sub_cell_owner = torch.repeat_interleave(torch.arange(s), sres.prod(1)) if s else \
+        torch.zeros(0, dtype=torch.int64)
+    entry_sub_cell = torch.repeat_interleave(torch.arange(sc), s_count)
+    entry_sub = sub_cell_owner[entry_sub_cell]
+    in_sub = set(zip(entry_sub.tolist(), s_tris.tolist()))
+    for t in range(f):
+        for x in range(int(c_lo[t, 0]), int(c_hi[t, 0]) + 1):
+            for y in range(int(c_lo[t, 1]), int(c_hi[t, 1]) + 1):
+                for z in range(int(c_lo[t, 2]), int(c_hi[t, 2]) + 1):
+                    cid = x + int(res[0]) * (y + int(res[1]) * z)
+                    sg = int(sub_of[cid])
+                    ok = (cid, t) in listed or (sg >= 0 and not big[t] and (sg, t) in in_sub)
+                    if not ok:
+                        raise AssertionError(
+                            f"{what}: triangle {t} overlaps top cell {(x, y, z)} but is neither "
+                            f"in its direct list nor in its sub-grid")
+    dense_direct = sub_of[cell_of] >= 0
+    assert big[tris[dense_direct]].all(), (
+        f"{what}: a cell with a sub-grid lists only its big triangles directly (the small ones "
+        f"are in the sub-grid)")
+    assert not big[s_tris].any(), f"{what}: a big triangle sits in a sub-grid"
+    # Sub-grids: inside their top cell (to within padding), covering their triangles.
+    if s == 0:
+        return
+    owner_cell = torch.zeros(s, dtype=torch.int64)
+    owner_cell[sub_of[sub_of >= 0]] = (sub_of >= 0).nonzero()[:, 0]
+    cc = torch.stack((owner_cell % res[0], (owner_cell // res[0]) % res[1],
+                      owner_cell // (res[0] * res[1])), 1)
+    slack = 1e-3 * width.amax() + 64 * torch.finfo(mesh.dtype).eps * float(
+        torch.maximum(lo.abs(), hi.abs()).amax())  # the padding: relative, and a few ulps
+    cell_lo, cell_hi = lo + cc * width, lo + (cc + 1) * width
+    assert ((sub_lo >= cell_lo - slack) & (sub_hi <= cell_hi + slack) & (sub_lo < sub_hi)).all(), (
+        f"{what}: a sub-grid's box must lie inside its top cell: it holds what of its "
+        f"triangles lies in that cell")
+    sw = (sub_hi - sub_lo) / sres
+    clip_lo = torch.maximum(t_lo[s_tris], cell_lo[entry_sub])
+    clip_hi = torch.minimum(t_hi[s_tris], cell_hi[entry_sub])
+    box_first = torch.floor((clip_lo - sub_lo[entry_sub]) / sw[entry_sub]).long()
+    box_last = torch.floor((clip_hi - sub_lo[entry_sub]) / sw[entry_sub]).long()
+    ok = ((box_first >= -1) & (box_last <= sres[entry_sub]))
+    assert ok.all(), f"{what}: a sub-grid's box does not cover its triangles (clipped to the cell)"
+    top_cell = sres[entry_sub] - 1
+    box_first = torch.minimum(box_first.clamp(min=0), top_cell)
+    box_last = torch.minimum(box_last.clamp(min=0), top_cell)
+    # Tight: at most one cell, or the padding (a few ulps: many cells far from the origin), more.
+    loose_first = torch.minimum(torch.floor((clip_lo - slack - sub_lo[entry_sub]) /
+                                            sw[entry_sub]).long().clamp(min=0), top_cell)
+    loose_last = torch.minimum(torch.floor((clip_hi + slack - sub_lo[entry_sub]) /
+                                           sw[entry_sub]).long().clamp(min=0), top_cell)
+    assert ((e_lo <= box_first) & (e_hi >= box_last) & (e_lo >= loose_first - 1)
+            & (e_hi <= loose_last + 1)).all(), (
+        f"{what}: sub_tri_cell_lo/hi must be each entry's box of sub cells (the cells its "
+        f"bounds overlap inside the sub-grid, no more than padding needs)")
+    local = entry_sub_cell - base[entry_sub]
+    rx, ry = sres[entry_sub, 0], sres[entry_sub, 1]
+    q = torch.stack((local % rx, (local // rx) % ry, local // (rx * ry)), 1)
+    assert ((e_lo <= q) & (q <= e_hi)).all(), \
+        f"{what}: an entry of a sub cell's list lies outside its own sub_tri_cell_lo..hi box"
+    pairs = (e_hi - e_lo + 1).prod(1)
+    per = {}
+    for sg, t, p in zip(entry_sub.tolist(), s_tris.tolist(), pairs.tolist()):
+        per[(sg, t)] = per.get((sg, t), 0) + 1
+        assert per[(sg, t)] <= p, f"{what}: a triangle listed twice in one sub cell"
+    counts = torch.zeros(s, dtype=torch.int64)
+    for sg, _ in per:
+        counts[sg] += 1
+    cells = sres.prod(1).double()
+    ok = (cells <= density * counts * 2.5 + 8) & ((cells >= density * counts / 2.5)
+                                                 | (density * counts < 8))
+    if not ok.all():
+        i = int((~ok).nonzero()[0, 0])
+        raise AssertionError(f"{what}: sub-grid {i} holds {int(counts[i])} triangles in "
+                             f"{sres[i].tolist()} cells: expected about density x n = "
+                             f"{density * int(counts[i]):g} (the heuristic of grid_resolution)")
+
+
+@pytest.mark.task(6)
+@pytest.mark.points(1)
+def test_two_level_build(impl, device):
+    for name in ("teapot", "soup", "shards", "far", "single", "coincident"):
+        mesh = on(scene(name), device)
+        g = impl.build_two_level_grid(mesh)
+        check_two_level(g, mesh, f"build_two_level_grid({name})", 2.0)
+    # The teapot sits in crowded top cells: their sub-grids must hold (nearly) all of it, in
+    # boxes about its size, not the stadium's.
+    mesh = on(scene("teapot"), device)
+    g = impl.build_two_level_grid(mesh, top_density=1 / 16, density=2.0, min_triangles=16)
+    in_sub = torch.unique(g["sub_triangles"].cpu())
+    teapot = int((in_sub < 968).sum())
+    assert teapot >= 0.95 * 968, (
+        f"build_two_level_grid(teapot in a stadium): only {teapot} of the teapot's 968 "
+        f"triangles are in sub-grids: its top cells are crowded and need them")
+    extent = (g["sub_hi"] - g["sub_lo"]).cpu().double().amax(1)
+    assert float(extent.max()) <= 1.0, (
+        f"build_two_level_grid(teapot in a stadium): a sub-grid {float(extent.max()):.3g} "
+        f"across, for a teapot 0.2 across: bound each sub-grid by its *small* triangles "
+        f"(the stadium's floor runs under the teapot: keep it out as a big triangle)")
+    g8 = impl.build_two_level_grid(mesh, density=8.0)
+    check_two_level(g8, mesh, "build_two_level_grid(teapot, density=8)", 8.0)
+    expect_error("min_triangles", impl.build_two_level_grid, mesh, 1 / 16, 2.0, -1,
+                 case="min_triangles=-1")
+    expect_error("density", impl.build_two_level_grid, mesh, 1 / 16, 0.0, case="density=0")
+
+
+@pytest.mark.task(6)
+@pytest.mark.points(2)
+def test_two_level_matches_brute_force(impl, device):
+    # Two-level grids built here (fixed resolutions), so the traversal is graded on its own.
+    cases = [("teapot", (3, 3, 3), (6, 5, 4), 6), ("shards", (2, 3, 2), (5, 4, 3), 6),
+             ("soup", (3, 3, 3), (4, 4, 4), 4), ("ico", (2, 2, 2), (5, 5, 5), 8),
+             ("far", (2, 2, 3), (4, 3, 5), 4), ("coincident", (2, 2, 2), (3, 3, 3), 4),
+             ("single", (2, 2, 2), (3, 3, 3), 0)]
+    for name, top, sub, min_tri in cases:
+        mesh = on(scene(name), device)
+        g = simple_two_level(mesh, top, sub, min_tri)
+        if name == "teapot":
+            rays = cat_rays(teapot_rays(200, 151), axis_rays(mesh, 152, 4))
+        else:
+            rays = cat_rays(rays_around(mesh, 160, 153), axis_rays(mesh, 154, 4), bad_rays())
+        rays = rays.to(device)
+        compare(impl.two_level_closest_hit(rays, mesh, g, mt64), rays, mesh,
+                f"two_level_closest_hit({name}, top {top}, sub-grids {sub})",
+                counters=GRID2_COUNTERS)
+    # Rays along the top cells' boundary planes and through their corners.
+    mesh = on(scene("shards"), device)
+    g = simple_two_level(mesh, (3, 3, 3), (4, 4, 4), 4)
+    lo, hi = g["lo"].cpu().double(), g["hi"].cpu().double()
+    w = (hi - lo) / 3
+    gen = generator(155)
+    p = lo + (hi - lo) * torch.rand(60, 3, generator=gen, dtype=F64)
+    axis = torch.arange(60) % 3
+    p[torch.arange(60), axis] = (lo + w)[axis]  # in a boundary plane between top cells
+    d = torch.randn(60, 3, generator=gen, dtype=F64)
+    d[torch.arange(60), axis] = torch.where(torch.arange(60) % 2 == 0, 0.0, -0.0).double()
+    corner = lo + w * torch.tensor([1.0, 2.0, 1.0], dtype=F64)  # a corner of 8 top cells
+    through = corner - torch.randn(20, 3, generator=gen, dtype=F64).abs() * 2
+    rays = cat_rays(Rays.create(p.float(), d.float()),
+                    Rays.create(through.float(), (corner - through).float())).to(device)
+    compare(impl.two_level_closest_hit(rays, mesh, g, mt64), rays, mesh,
+            "two_level_closest_hit (rays in top-cell boundary planes and through corners)",
+            counters=GRID2_COUNTERS)
+    # The lab's own build, far from the origin and on the teapot.
+    for name in ("far", "teapot"):
+        mesh = on(scene(name), device)
+        rays = (teapot_rays(160, 156) if name == "teapot" else
+                cat_rays(rays_around(mesh, 120, 157), axis_rays(mesh, 158, 4)))
+        rays = rays.to(device)
+        compare(impl.two_level_closest_hit(rays, mesh, impl.build_two_level_grid(mesh), mt64),
+                rays, mesh, f"two_level_closest_hit on build_two_level_grid({name})",
+                counters=GRID2_COUNTERS)
+
+
+@pytest.mark.task(6)
+@pytest.mark.points(1)
+def test_two_level_mailboxing_and_work(impl, device):
+    # Mailboxing changes the tests, never the walk or the hits.
+    mesh = on(scene("shards"), device)
+    g = simple_two_level(mesh, (3, 3, 3), (6, 6, 6), 4)
+    rays = rays_around(mesh, 200, 161, clip=0.0).to(device)
+    ref = reference(rays.to("cpu"), on(mesh, "cpu"))
+    with_box = compare(impl.two_level_closest_hit(rays, mesh, g, mt64, mailbox=True), rays,
+                       mesh, "two_level_closest_hit(mailbox=True)", GRID2_COUNTERS, ref)
+    without = compare(impl.two_level_closest_hit(rays, mesh, g, mt64, mailbox=False), rays,
+                      mesh, "two_level_closest_hit(mailbox=False)", GRID2_COUNTERS, ref)
+    assert_equal(with_box["steps"], without["steps"], name="two_level_closest_hit: steps with "
+                 "and without the mailbox (it must not change the walk)", where="ray")
+    assert_equal(with_box["tests"] + with_box["skipped"], without["tests"],
+                 name="two_level_closest_hit: tests + skipped with the mailbox == tests "
+                 "without it", where="ray")
+    assert int(without["tests"].sum()) > 1.3 * int(with_box["tests"].sum()), (
+        "two_level_closest_hit(mailbox=True): big triangles span top cells and sub cells; "
+        f"the mailbox should avoid their repeats: {int(with_box['tests'].sum())} tests with "
+        f"it, {int(without['tests'].sum())} without")
+    # The point of it all: rays at the teapot test a few triangles, not the whole teapot.
+    mesh = on(scene("teapot"), device)
+    rays = teapot_rays(160, 162).to(device)
+    at_teapot = torch.arange(len(rays)) % 4 != 3
+    count = compare(impl.closest_hit(rays, mesh, impl.build_two_level_grid(mesh), mt64), rays,
+                    mesh, "closest_hit(two-level grid) on the teapot in a stadium",
+                    GRID2_COUNTERS)
+    mean = count["tests"][at_teapot].double().mean().item()
+    steps = count["steps"][at_teapot].double().mean().item()
+    assert mean <= 0.05 * mesh.num_faces, (
+        f"two-level grid: rays at the teapot run {mean:.1f} triangle tests on average "
+        f"({mean / mesh.num_faces:.1%} of the scene): the teapot's sub-grids should give it "
+        f"cells its own size (a uniform grid tests most of it)")
+    assert steps <= 100, f"two-level grid: {steps:.0f} cells per ray at the teapot: too many"

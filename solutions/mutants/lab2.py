@@ -86,4 +86,28 @@ MUTANTS = [
            tests="kd_pack",
            why="packs the fields in the opposite order (leaf in bit 0): another layout than "
                "the C bit-fields the GPU code reads"),
+    Mutant(name="two_level_big_triangles_in_sub_grids", module=M,
+           function="build_two_level_grid",
+           find="big = (tri_hi - tri_lo).amax(dim=1) >= width.amin()",
+           replace="big = torch.zeros(mesh.num_faces, dtype=torch.bool, device=device)",
+           tests="two_level",
+           why="puts the stadium's floor into the teapot's sub-grid: its box becomes the whole "
+               "floor of the top cell, and the teapot falls into one or two sub cells again"),
+    Mutant(name="two_level_mailbox_after_crowded_cell", module=M,
+           function="two_level_closest_hit",
+           find="                seen &= prev_plain[owner] | big[tri]\n", replace="",
+           tests="two_level",
+           why="trusts the mailbox after a crowded top cell: a small triangle whose sub cells "
+               "the ray did not cross there was never tested, and is skipped here"),
+    Mutant(name="two_level_sub_walk_stops_at_any_hit", module=M, function="_walk_sub_grids",
+           find='done = (closest["t"][ray] <= t_out) | (t_out >= s_out)',
+           replace='done = (closest["t"][ray] < math.inf) | (t_out >= s_out)',
+           tests="two_level",
+           why="the classic grid bug, one level down: a hit found in a sub cell may lie "
+               "beyond it, with a nearer triangle in the next sub cell"),
+    Mutant(name="two_level_sub_cell_without_base", module=M, function="_walk_sub_grids",
+           find="cell_id = base + cell[:, 0] + res[:, 0] * (cell[:, 1] + res[:, 1] * cell[:, 2])",
+           replace="cell_id = cell[:, 0] + res[:, 0] * (cell[:, 1] + res[:, 1] * cell[:, 2])",
+           tests="two_level",
+           why="indexes every sub-grid's cells from 0: all sub-grids read the first one's lists"),
 ]
