@@ -21,6 +21,13 @@ analytic or exact reference computed in float64 on the same rays:
   (nearest) with 8 .. 256 steps.
 * ``trace``: ``sphere_trace`` of a sphere, a box and a ground plane over ``epsilon``,
   ``max_steps`` and ``relaxation``: error of t on clear hits, UNSURE rays, steps per ray.
+* ``frame``: the issue's target, a single-scattering volume filling a 1080p frame
+  (``--frame``; 1920 x 1080 rays on a GPU, a smaller frame on the CPU) with 128 view
+  steps, sun light, a 128^3 density grid (64^3 on the CPU): the lab's
+  ``march_single_scatter`` (a shadow march per sample), the same light baked once into a
+  transmittance grid then ``march_box`` over the baked source, and the fused
+  ``course.triton_march`` kernel over the baked source (CUDA only), each against a
+  high-step reference on every 61st pixel. The bake's own time is a separate row.
 
 Writes ``lab4_march.json`` (a ResultTable with the command line), ``lab4_march.md``, the
 convergence plot (error against steps) and Pareto plots (seconds against error) into
@@ -53,10 +60,12 @@ except ImportError:  # the student handout has no solutions/: measure the studen
 F64 = torch.float64
 # Per device: rays of the marching sweeps, of the sphere-tracing sweep, the voxel grid's
 # resolution, the largest step count, timed runs per setting (after one untimed call).
+# The frame's size and grid resolution. The CUDA sweeps use 2^18 rays and at most 256
+# steps: at 2^20 rays and 1024 steps the eager sweeps alone took longer than four minutes.
 SIZES = {"cpu": {"rays": 1024, "trace_rays": 1024, "grid": 24, "max_steps": 128,
-                 "repeats": 2},
-         "cuda": {"rays": 1 << 20, "trace_rays": 1 << 20, "grid": 128, "max_steps": 1024,
-                  "repeats": 10}}
+                 "repeats": 2, "frame": (96, 54), "frame_grid": 32},
+         "cuda": {"rays": 1 << 18, "trace_rays": 1 << 20, "grid": 128, "max_steps": 256,
+                  "repeats": 5, "frame": (1920, 1080), "frame_grid": 128}}
 
 
 # --------------------------------------------------------------------------------------
@@ -366,6 +375,96 @@ def bench_trace(table, device, cfg):
 # Output
 # --------------------------------------------------------------------------------------
 
+def frame_scene(res: int, device):
+    """The target frame's medium: a (res, res, res) cloud of Gaussian blobs in a box."""
+    g = torch.Generator().manual_seed(5)
+    x = (torch.arange(res, dtype=torch.float32) + 0.5) / res
+    p = torch.stack(torch.meshgrid(x, x, x, indexing="ij"), -1)
+    density = torch.zeros(res, res, res)
+    for c, r in zip(0.25 + 0.5 * torch.rand(12, 3, generator=g),
+                    0.08 + 0.12 * torch.rand(12, generator=g)):
+        density += 6.0 * torch.exp(-(p - c).square().sum(-1) / r ** 2)
+    return density.to(device)
+
+
+def bench_frame(table, device, cfg):
+    """The 1080p single-scattering target: per-sample shadow marches against a baked light."""
+    from course.camera import Camera, primary_rays
+
+    width, height = cfg["frame"]
+    steps, shadow_steps = 128, 32
+    lo, hi = (-1.0, -1.0, -1.0), (1.0, 1.0, 1.0)
+    albedo, irradiance, gg = 0.9, 3.0, 0.5
+    light = torch.tensor([0.5, 0.8, -0.3])
+    light = (light / light.norm()).to(device)
+    density = frame_scene(cfg["frame_grid"], device)
+    camera = Camera(eye=(0.0, 0.3, 3.2), target=(0.0, 0.0, 0.0), fov_y=48.0, width=width,
+                    height=height)
+    rays = primary_rays(camera, device=device)
+    o, d = rays.origins.float(), rays.directions.float()
+    n = len(o)
+    phase = lab.henyey_greenstein((d / d.norm(dim=1, keepdim=True)) @ light, gg)
+
+    def bake():  # transmittance to the sun at every voxel centre: the volumetric shadow map
+        res = density.shape[0]
+        centres = (torch.arange(res, device=device, dtype=torch.float32) + 0.5) / res * 2 - 1
+        grid = torch.stack(torch.meshgrid(centres, centres, centres, indexing="ij"), -1)
+        lit = lab.shadow_transmittance(grid.reshape(-1, 3), light, lo, hi, density,
+                                       shadow_steps).reshape(density.shape)
+        return albedo * irradiance * density * lit
+
+    # High-accuracy reference on a subset of pixels: 4x the view and shadow steps, float64.
+    pick = torch.arange(0, n, 61, device=device)
+    ref = lab.march_single_scatter(o[pick].double(), d[pick].double(), lo, hi,
+                                   density.double(), albedo, light.double(), irradiance, gg,
+                                   4 * steps, 4 * shadow_steps)["radiance"]
+
+    def err(radiance):
+        return ((radiance[pick].double() - ref).abs().max() / ref.abs().max()).item()
+
+    def row(setting, seconds, radiance, **extra):
+        table.add(series="frame", setting=setting, steps=steps, shadow_steps=shadow_steps,
+                  dtype="fp32", rays=n, seconds=seconds, rays_per_s=n / seconds,
+                  ms_per_frame=1e3 * seconds,
+                  error=None if radiance is None else err(radiance), **extra)
+        print(f"  frame {setting}: {1e3 * seconds:.2f} ms", flush=True)
+
+    source, seconds = timed(cfg, bake)
+    row("bake the sun's transmittance grid", seconds, None, grid=cfg["frame_grid"])
+    result, seconds = timed(cfg, lambda: lab.march_box(o, d, lo, hi, density, source, steps)
+                            ["radiance"] * phase)
+    row("baked light, march_box (eager torch)", seconds, result, grid=cfg["frame_grid"])
+    if device.type == "cuda":
+        from course.triton_march import march_grid_triton
+
+        def fused():
+            return march_grid_triton(o, d, lo, hi, density, source, steps)
+
+        out = fused()
+        kernel = out["kernel"]
+        _, seconds = timed(cfg, fused)
+        row("baked light, fused Triton kernel", seconds, out["radiance"] * phase,
+            grid=cfg["frame_grid"], n_regs=kernel.n_regs, n_spills=kernel.n_spills)
+        _, seconds = timed(cfg, lambda: march_grid_triton(o, d, lo, hi, density, bake(),
+                                                          steps)["radiance"] * phase)
+        row("bake + fused Triton kernel (whole frame)", seconds, out["radiance"] * phase,
+            grid=cfg["frame_grid"])
+    # The per-sample shadow march: steps * (shadow_steps + 2) density reads per ray. A
+    # quarter of the frame on the GPU is plenty to time it.
+    part = slice(0, n if device.type == "cpu" else n // 4)
+    _, seconds = timed(dict(cfg, repeats=1), lab.march_single_scatter, o[part], d[part], lo, hi,
+                       density, albedo, light, irradiance, gg, steps, shadow_steps)
+    seconds *= n / len(range(n)[part])
+    full = lab.march_single_scatter(o[pick], d[pick], lo, hi, density, albedo, light,
+                                    irradiance, gg, steps, shadow_steps)["radiance"]
+    table.add(series="frame", setting="per-sample shadow march (eager torch)", steps=steps,
+              shadow_steps=shadow_steps, dtype="fp32", rays=n, seconds=seconds,
+              rays_per_s=n / seconds, ms_per_frame=1e3 * seconds,
+              error=((full.double() - ref).abs().max() / ref.abs().max()).item(),
+              grid=cfg["frame_grid"])
+    print(f"  frame per-sample shadow march: {1e3 * seconds:.1f} ms", flush=True)
+
+
 def convergence_plot(table: ResultTable, path: Path) -> None:
     """Error against steps, log-log, with reference slopes 1 and 2."""
     from matplotlib.figure import Figure
@@ -408,13 +507,17 @@ def write_outputs(table: ResultTable, out: Path) -> None:
     header = [f"# {table.name}", "", device, "", f"Command: `{meta['command']}`", "", legend,
               ""]
     (out / "lab4_march.md").write_text("\n".join(header) + table.to_markdown() + "\n")
-    convergence_plot(table, out / "convergence.png")
-    for series, title in (("march", "march_box: seconds against error"),
+    if any(r["series"] == "march" for r in table.rows):
+        convergence_plot(table, out / "convergence.png")
+    for series, title in (("frame", "single scattering frame: seconds against error"),
+                          ("march", "march_box: seconds against error"),
                           ("scatter", "march_single_scatter: seconds against error"),
                           ("voxels", "voxel_walk (exact) against march_box on voxels"),
                           ("trace", "sphere_trace: seconds against error of t")):
         rows = [r for r in table.rows if r["series"] == series and r.get("error") is not None]
-        group = {"march": "integrator", "scatter": "medium", "voxels": "method",
+        if not rows:  # not run (--only, or a run cut short)
+            continue
+        group = {"frame": "grid", "march": "integrator", "scatter": "medium", "voxels": "method",
                  "trace": "relaxation"}[series]
         pareto_plot(rows, x="seconds", y="error", label="setting", group=group, title=title,
                     path=out / f"pareto_{series}.png")
@@ -428,6 +531,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--trace-rays", type=int, help="rays of the sphere-tracing sweep")
     parser.add_argument("--grid", type=int, help="voxel grid resolution")
     parser.add_argument("--max-steps", type=int, help="largest step count of the sweeps")
+    parser.add_argument("--only", nargs="+", choices=SERIES, help="run only these series")
     parser.add_argument("--threads", type=int, default=1,
                         help="CPU threads for torch (default 1: batches this small gain nothing "
                              "from intra-op threads, and on a shared machine waking the thread "
@@ -452,14 +556,14 @@ def main(argv: list[str] | None = None) -> None:
         sizes=cfg, lab=lab.__name__, threads=torch.get_num_threads())
     print(f"{table.metadata['device']}: {cfg}", flush=True)
     started = time.perf_counter()
-    bench_march(table, device, cfg)
-    bench_early_exit(table, device, cfg)
-    bench_scatter(table, device, cfg)
-    bench_voxels(table, device, cfg)
-    bench_trace(table, device, cfg)
-    write_outputs(table, out)
+    for series in args.only or SERIES:
+        SERIES[series](table, device, cfg)
+        write_outputs(table, out)  # after every series: a run cut short keeps what it measured
     print(f"wrote {out} ({time.perf_counter() - started:.1f} s)")
 
+
+SERIES = {"frame": bench_frame, "march": bench_march, "early_exit": bench_early_exit,
+          "scatter": bench_scatter, "voxels": bench_voxels, "trace": bench_trace}
 
 if __name__ == "__main__":
     main()
