@@ -23,6 +23,16 @@ At the largest size it sweeps the knobs of the rasterizer:
   fraction of the front quad's pixels where the back quad wins (it has the lower ids, so
   it wins every tie), with 24-bit window depth against 32-bit float view depth.
 
+Then, for every scene of ``--scenes`` (suzanne, bunny, bunny_x4, bunny_x16 on a GPU) and
+frame of ``--frames`` (512x512, 1920x1080, 3840x2160 on a GPU), the ``frame`` series:
+
+* ``raster``: ``rasterize_mesh`` (visibility + perspective-correct barycentrics);
+* ``raytrace``: ``traced_visibility`` through ``course.flat_bvh.trace_bvh`` (a binned-SAH
+  BVH, Triton traversal on CUDA; its build time is reported apart, ``build_s``), the
+  fair competitor at scale where brute force is hopeless;
+* ``hybrid``: raster visibility + Lambert shading + ``hybrid_shadows`` (one BVH shadow ray
+  per lit pixel), against ``traced``: ``traced_shadows`` (primary and shadow rays traced).
+
 Writes ``lab6_raster.json`` (a ResultTable with the command line), ``lab6_raster.md``,
 ``throughput.png`` (pixels/s by resolution, both methods) and ``zfighting.png`` into
 ``--out``, by default ``bench/results/<device_name>/lab6/``. On the CPU only ratios between
@@ -54,8 +64,12 @@ from course.types import Mesh, Rays
 lab = load_lab("lab6_raster", os.environ.get("RTCOURSE_IMPL"))
 closest_hit = load_lab("lab1_intersect", os.environ.get("RTCOURSE_IMPL")).closest_hit
 
-SIZES = {"cpu": {"sizes": (64, 128, 256), "repeats": 7, "rt_max": 128},
-         "cuda": {"sizes": (256, 512, 1024, 2048), "repeats": 10, "rt_max": 1024}}
+SIZES = {"cpu": {"sizes": (64, 128, 256), "repeats": 7, "rt_max": 128,
+                 "scenes": ("suzanne", "bunny"), "frames": ((128, 128), (192, 108))},
+         "cuda": {"sizes": (256, 512, 1024, 2048), "repeats": 10, "rt_max": 1024,
+                  "scenes": ("suzanne", "bunny", "bunny_x4", "bunny_x16"),
+                  "frames": ((512, 512), (1920, 1080), (3840, 2160))}}
+SUN = (0.4, 0.8, 0.45)
 BUDGETS = (2**18, 2**20, 2**24, 2**28)
 TILES = (32, 64, 128)
 ZFIGHT_DISTANCES = (3.0, 10.0, 30.0, 100.0, 300.0)
@@ -185,6 +199,56 @@ def bench_zfighting(table: ResultTable, device) -> None:
                  zfight_rate=back.double().sum() / front.double().sum().clamp(min=1))
 
 
+def bench_frames(table: ResultTable, device, cfg: dict) -> None:
+    """Raster vs BVH-traced visibility and the hybrid frame, per scene and frame size."""
+    import functools
+
+    from course.flat_bvh import flat_bvh_for, trace_bvh
+
+    sun = torch.tensor(SUN, device=device)
+    for name in cfg["scenes"]:
+        scene = load_scene(name, device=device)
+        mesh = scene.mesh
+        started = time.perf_counter()
+        flat_bvh_for(mesh)
+        build_s = time.perf_counter() - started
+        trace = functools.partial(trace_bvh, mesh)
+        for width, height in cfg["frames"]:
+            cam = dataclasses.replace(scene.camera, width=width, height=height)
+            common = {"scene": name, "triangles": mesh.num_faces, "frame": f"{width}x{height}",
+                      "size": width, "pixels": width * height}
+            face, _ = lab.rasterize_mesh(mesh, cam)
+            t = time_fn(lab.rasterize_mesh, mesh, cam, repeats=cfg["repeats"], warmup=1)
+            traced = lab.traced_visibility(trace, cam, device=device)
+            # traced_visibility's own ``device`` goes positionally; time_fn's by keyword.
+            t_rt = time_fn(lab.traced_visibility, trace, cam, device, repeats=cfg["repeats"],
+                           warmup=1, device=device)
+            covered = (face >= 0) | (traced >= 0)
+            differ = ((face != traced) & covered).double().sum() / covered.double().sum()
+            _add(table, method="frame", setting="raster visibility", seconds=t.median,
+                 ms_per_frame=1e3 * t.median, pixels_per_s=width * height / t.median,
+                 disagreement=differ, **common)
+            _add(table, method="frame", setting="BVH-traced visibility", seconds=t_rt.median,
+                 ms_per_frame=1e3 * t_rt.median, pixels_per_s=width * height / t_rt.median,
+                 build_s=build_s, raster_speedup=t_rt.median / t.median, **common)
+
+            def hybrid(mesh=mesh, cam=cam, trace=trace):
+                face, bary = lab.rasterize_mesh(mesh, cam)
+                lambert = lab.shade(mesh, face, bary, sun, True)
+                lit = torch.where(lambert > 0, face, -1)  # no shadow rays where it is dark
+                return lab.hybrid_shadows(trace, mesh, lit, bary, sun)
+
+            t_h = time_fn(hybrid, repeats=cfg["repeats"], warmup=1, device=device)
+            t_t = time_fn(lab.traced_shadows, trace, mesh, cam, sun, repeats=cfg["repeats"],
+                          warmup=1)
+            _add(table, method="frame", setting="hybrid: raster + traced shadows",
+                 seconds=t_h.median, ms_per_frame=1e3 * t_h.median,
+                 pixels_per_s=width * height / t_h.median, **common)
+            _add(table, method="frame", setting="traced: primary + shadow rays",
+                 seconds=t_t.median, ms_per_frame=1e3 * t_t.median,
+                 pixels_per_s=width * height / t_t.median, **common)
+
+
 def _add(table: ResultTable, **row) -> None:
     row = table.add(**row)
     shown = {k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in row.items()}
@@ -213,6 +277,22 @@ def write_outputs(table: ResultTable, out: Path) -> None:
     (out / "lab6_raster.md").write_text("\n".join(header) + table.to_markdown() + "\n")
     from matplotlib.figure import Figure
 
+    frames = [r for r in table.rows if r["method"] == "frame"]
+    if frames:
+        fig = Figure(figsize=(7.2, 4.8), layout="constrained")
+        ax = fig.add_subplot()
+        for key in dict.fromkeys((r["setting"], r["frame"]) for r in frames):
+            sel = [r for r in frames if (r["setting"], r["frame"]) == key]
+            ax.plot([r["triangles"] for r in sel], [r["ms_per_frame"] for r in sel],
+                    marker="o", label=f"{key[0]}, {key[1]}")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("triangles (suzanne, bunny, bunny_x4, bunny_x16)")
+        ax.set_ylabel("ms per frame")
+        ax.set_title("raster vs ray-traced visibility and the hybrid frame")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=6)
+        fig.savefig(out / "frames.png", dpi=150)
     series = [r for r in table.rows if r["method"] in ("raster", "raytrace")]
     if series:
         fig = Figure(figsize=(6.4, 4.8), layout="constrained")
@@ -254,7 +334,12 @@ def main(argv: list[str] | None = None) -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
     parser.add_argument("--sizes", type=int, nargs="+", help="square image sizes in pixels")
-    parser.add_argument("--scene", default="suzanne", help="a course scene with a mesh")
+    parser.add_argument("--scene", default="suzanne", help="the scene of the resolution and "
+                        "knob sweeps")
+    parser.add_argument("--scenes", nargs="+", help="scenes of the frame series")
+    parser.add_argument("--frames", nargs="+", help="frame sizes WxH of the frame series")
+    parser.add_argument("--only", nargs="+", choices=("sizes", "knobs", "zfight", "frames"),
+                        help="run only these parts")
     parser.add_argument("--repeats", type=int, help="timed runs per setting (median reported)")
     parser.add_argument("--threads", type=int, help="CPU threads of torch (default: torch's)")
     parser.add_argument("--out", type=Path, help="output folder "
@@ -267,6 +352,10 @@ def main(argv: list[str] | None = None) -> None:
         cfg["sizes"] = tuple(args.sizes)
     if args.repeats:
         cfg["repeats"] = args.repeats
+    if args.scenes:
+        cfg["scenes"] = tuple(args.scenes)
+    if args.frames:
+        cfg["frames"] = tuple(tuple(int(x) for x in f.lower().split("x")) for f in args.frames)
     out = args.out or REPO / "bench" / "results" / device_name(device) / "lab6"
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -277,14 +366,18 @@ def main(argv: list[str] | None = None) -> None:
         command=shlex.join(["python", "bench/lab6_raster.py",
                             *(sys.argv[1:] if argv is None else argv)]),
         scene=args.scene, triangles=scene.mesh.num_faces, sizes=list(cfg["sizes"]),
+        scenes=list(cfg["scenes"]), frames=[f"{w}x{h}" for w, h in cfg["frames"]],
         repeats=cfg["repeats"], threads=torch.get_num_threads())
     print(f"{table.metadata['device']}: {args.scene} ({scene.mesh.num_faces} triangles), "
           f"sizes {cfg['sizes']}", flush=True)
     started = time.perf_counter()
-    bench_resolutions(table, scene.mesh, scene.camera, cfg)
-    bench_knobs(table, scene.mesh, scene.camera, cfg)
-    bench_zfighting(table, device)
-    write_outputs(table, out)
+    parts = {"sizes": lambda: bench_resolutions(table, scene.mesh, scene.camera, cfg),
+             "knobs": lambda: bench_knobs(table, scene.mesh, scene.camera, cfg),
+             "zfight": lambda: bench_zfighting(table, device),
+             "frames": lambda: bench_frames(table, device, cfg)}
+    for part in args.only or parts:
+        parts[part]()
+        write_outputs(table, out)  # after every part: a run cut short keeps what it measured
     print(f"done in {time.perf_counter() - started:.1f} s: {out}")
 
 
