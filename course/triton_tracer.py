@@ -1,0 +1,597 @@
+"""BVH traversal and a whole Whitted frame as Triton kernels (given, not an exercise).
+
+Lab 3 compares ways of organising a tracer. These kernels are the GPU end of that
+comparison: ``trace_flat_triton`` is a closest-hit / any-hit BVH walk (what the separate
+kernels of a wavefront tracer launch once per bounce), ``render_whitted_triton`` the
+lecture's **uber kernel**: each lane runs its pixel's whole Whitted recursion, the
+TRAVERSE -> INTERSECT -> SHADE state machine, in one launch, with no rays written to memory
+between the stages.
+
+How "one ray per thread" maps onto Triton. A Triton program works on a block of lanes in
+lock step; control flow is per program, not per lane. So each kernel is a loop that runs
+while *any* lane of the program still has work (``tl.max`` of the lanes' alive flags), and
+every step is written with per-lane masks: a lane that is done, or has nothing of that
+kind to do this step, just has its loads and stores masked off. This is what a CUDA warp
+does with divergent branches anyway; the default launch (32 lanes, one warp per program)
+makes a program exactly one warp, so the loop condition is a warp vote and the lanes of
+different warps never wait for each other.
+
+Each step of the walk does, per lane (see course.flat_bvh for the layouts and the contract):
+
+1. POP: a lane with no node and no leaf work pops its stack (or finishes when it is empty);
+2. TRAVERSE: a lane at a node reads it; at an interior node it tests both children's boxes,
+   goes to the nearer hit child and pushes the farther; at a leaf it takes its triangle
+   range as pending work;
+3. INTERSECT: a lane with pending leaf work tests one triangle (Möller–Trumbore).
+
+The stack. Triton has no per-lane arrays with dynamic indices in registers, so each lane's
+stack is a column of a scratch buffer in global memory, ``stack[level, lane]``: entries of
+one level of neighbouring lanes are neighbours, so pushes and pops of a warp at similar
+depths touch few cache lines (the interleaving CUDA gives local memory). It is what the
+CUDA kernel's local-memory stack is, too: both live in L1/L2-cached device memory. A lane
+owns its column for the program's lifetime, so nothing needs synchronising.
+
+Accuracy contract: that of course.flat_bvh (float32 slab test with NaN-safe zero
+directions and Ize's widened exit, float32 Möller–Trumbore with IEEE division, closed
+``[t_min, t_max]``, ties to the lower triangle index, NaN/inf/zero rays miss, not
+watertight). The uber kernel shades by the contract of course.whitted_support, in float32.
+
+Runs compiled on CUDA, or in Triton's CPU interpreter under ``TRITON_INTERPRET=1`` (set
+before ``triton`` is imported; slow, for tiny tests). Importing this module without
+Triton works; calling a kernel then raises ImportError.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import dataclass
+
+import torch
+
+from course.flat_bvh import EXIT_SCALE, STACK_DEPTH, FlatBVH, check_rays, flat_bvh_for, valid_rays
+from course.types import Hits
+
+try:
+    import triton
+    import triton.language as tl
+except ImportError as _err:  # the rest of the course works without Triton
+    triton = tl = None
+    _TRITON_IMPORT_ERROR: ImportError | None = _err
+
+    def _jit(fn):
+        return fn
+else:
+    _TRITON_IMPORT_ERROR = None
+    _jit = triton.jit
+
+__all__ = [
+    "TracerKernelInfo",
+    "interpreting",
+    "render_whitted_triton",
+    "trace_flat_triton",
+    "triton_available",
+]
+
+DEFAULT_BLOCK = 32
+DEFAULT_NUM_WARPS = 1
+INT_MAX = 2**31 - 1
+
+
+# --------------------------------------------------------------------------------------
+# Device functions
+# --------------------------------------------------------------------------------------
+
+@_jit
+def _nan_to(x, value):
+    """``x`` with NaN replaced by ``value`` (NaN is the only float not ``>= -inf``)."""
+    return tl.where(x >= -float("inf"), x, value)
+
+
+@_jit
+def _slab(ox, oy, oz, ix, iy, iz, lx, ly, lz, hx, hy, hz, t_lo, t_hi, EXIT: tl.constexpr):
+    """Rays against one box each: (entry distance, hit?). NaN from ``0 * inf`` (a ray in a
+    slab plane, parallel to it) means "inside this slab": near -inf, far +inf."""
+    t0 = (lx - ox) * ix
+    t1 = (hx - ox) * ix
+    nx = tl.minimum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
+    fx = tl.maximum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
+    t0 = (ly - oy) * iy
+    t1 = (hy - oy) * iy
+    ny = tl.minimum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
+    fy = tl.maximum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
+    t0 = (lz - oz) * iz
+    t1 = (hz - oz) * iz
+    nz = tl.minimum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
+    fz = tl.maximum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
+    nx = _nan_to(nx, -float("inf"))
+    ny = _nan_to(ny, -float("inf"))
+    nz = _nan_to(nz, -float("inf"))
+    fx = _nan_to(fx, float("inf"))
+    fy = _nan_to(fy, float("inf"))
+    fz = _nan_to(fz, float("inf"))
+    enter = tl.maximum(tl.maximum(t_lo, nx), tl.maximum(ny, nz))
+    leave = tl.minimum(t_hi, tl.minimum(fx, tl.minimum(fy, fz)) * EXIT)
+    return enter, enter <= leave
+
+
+@_jit
+def _box(ptr, node, mask):
+    """lo.xyz, hi.xyz of nodes ``node`` (per-lane) from the (M, 8) float node array."""
+    base = ptr + node * 8
+    return (tl.load(base + 0, mask=mask, other=0.0), tl.load(base + 1, mask=mask, other=0.0),
+            tl.load(base + 2, mask=mask, other=0.0), tl.load(base + 3, mask=mask, other=0.0),
+            tl.load(base + 4, mask=mask, other=0.0), tl.load(base + 5, mask=mask, other=0.0))
+
+
+@_jit
+def _trace(nodes_f, nodes_i, tris_f, tris_i, stack_ptr, slot, stride,
+           ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT: tl.constexpr,
+           EXIT: tl.constexpr):
+    """Walk the BVH for every lane with ``alive`` set: the POP/TRAVERSE/INTERSECT loop.
+
+    Returns ``(t, row, u, v)``: row (int32) of the hit in the triangle layout, -1 on a miss.
+    """
+    one = tl.full(ox.shape, 1.0, tl.float32)
+    ix = tl.math.div_rn(one, dx)  # IEEE: 1/+-0 = +-inf, which the slab test expects
+    iy = tl.math.div_rn(one, dy)
+    iz = tl.math.div_rn(one, dz)
+    zero_i = tl.zeros(ox.shape, tl.int32)
+    best_t = t_hi
+    best_row = zero_i - 1
+    best_tri = zero_i + 2147483647  # original index, for the tie rule
+    best_u = tl.zeros(ox.shape, tl.float32)
+    best_v = tl.zeros(ox.shape, tl.float32)
+    lx, ly, lz, hx, hy, hz = _box(nodes_f, zero_i, alive)
+    _, root = _slab(ox, oy, oz, ix, iy, iz, lx, ly, lz, hx, hy, hz, t_lo, t_hi, EXIT)
+    alive = alive & root
+    node = zero_i  # the node to visit next; -1: pop one
+    sp = zero_i
+    cur = zero_i  # pending leaf rows [cur, end)
+    end = zero_i
+    while tl.max(alive.to(tl.int32), axis=0) > 0:
+        # 1. POP
+        idle = alive & (cur >= end) & (node < 0)
+        alive = alive & ~(idle & (sp == 0))
+        pop = idle & (sp > 0)
+        sp = sp - pop.to(tl.int32)
+        node = tl.where(pop, tl.load(stack_ptr + sp * stride + slot, mask=pop, other=0), node)
+        # 2. TRAVERSE
+        visit = alive & (cur >= end) & (node >= 0)
+        word6 = tl.load(nodes_i + node * 8 + 6, mask=visit, other=0)
+        count = tl.load(nodes_i + node * 8 + 7, mask=visit, other=0)
+        leaf = visit & (count > 0)
+        cur = tl.where(leaf, word6, cur)
+        end = tl.where(leaf, word6 + count, end)
+        inner = visit & (count == 0)
+        child_a = node + 1
+        lx, ly, lz, hx, hy, hz = _box(nodes_f, child_a, inner)
+        ta, ha = _slab(ox, oy, oz, ix, iy, iz, lx, ly, lz, hx, hy, hz, t_lo, best_t, EXIT)
+        lx, ly, lz, hx, hy, hz = _box(nodes_f, word6, inner)
+        tb, hb = _slab(ox, oy, oz, ix, iy, iz, lx, ly, lz, hx, hy, hz, t_lo, best_t, EXIT)
+        ha = ha & inner
+        hb = hb & inner
+        b_first = hb & (~ha | (tb < ta))
+        both = ha & hb
+        tl.store(stack_ptr + sp * stride + slot, tl.where(b_first, child_a, word6), mask=both)
+        sp = sp + both.to(tl.int32)
+        near = tl.where(b_first, word6, child_a)
+        node = tl.where(ha | hb, near, tl.where(visit, -1, node))
+        # 3. INTERSECT one triangle of the pending leaf
+        test = alive & (cur < end)
+        base = tris_f + cur * 12
+        v0x = tl.load(base + 0, mask=test, other=0.0)
+        v0y = tl.load(base + 1, mask=test, other=0.0)
+        v0z = tl.load(base + 2, mask=test, other=0.0)
+        tri = tl.load(tris_i + cur * 12 + 3, mask=test, other=0)
+        e1x = tl.load(base + 4, mask=test, other=0.0)
+        e1y = tl.load(base + 5, mask=test, other=0.0)
+        e1z = tl.load(base + 6, mask=test, other=0.0)
+        e2x = tl.load(base + 8, mask=test, other=0.0)
+        e2y = tl.load(base + 9, mask=test, other=0.0)
+        e2z = tl.load(base + 10, mask=test, other=0.0)
+        px = dy * e2z - dz * e2y
+        py = dz * e2x - dx * e2z
+        pz = dx * e2y - dy * e2x
+        det = e1x * px + e1y * py + e1z * pz
+        inv = tl.math.div_rn(one, det)
+        sx = ox - v0x
+        sy = oy - v0y
+        sz = oz - v0z
+        u = (sx * px + sy * py + sz * pz) * inv
+        qx = sy * e1z - sz * e1y
+        qy = sz * e1x - sx * e1z
+        qz = sx * e1y - sy * e1x
+        v = (dx * qx + dy * qy + dz * qz) * inv
+        t = (e2x * qx + e2y * qy + e2z * qz) * inv
+        hit = (test & (det != 0.0) & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t >= t_lo)
+               & (t <= best_t) & ((t < best_t) | (tri < best_tri)))
+        best_t = tl.where(hit, t, best_t)
+        best_row = tl.where(hit, cur, best_row)
+        best_tri = tl.where(hit, tri, best_tri)
+        best_u = tl.where(hit, u, best_u)
+        best_v = tl.where(hit, v, best_v)
+        cur = cur + test.to(tl.int32)
+        if ANY_HIT:
+            alive = alive & ~hit
+    return best_t, best_row, best_u, best_v
+
+
+@_jit
+def _trace_kernel(o_ptr, d_ptr, tlo_ptr, thi_ptr, nodes_f, nodes_i, tris_f, tris_i, stack_ptr,
+                  t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
+                  BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr):
+    slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    live = slot < n_rays
+    ox = tl.load(o_ptr + slot * 3 + 0, mask=live, other=0.0)
+    oy = tl.load(o_ptr + slot * 3 + 1, mask=live, other=0.0)
+    oz = tl.load(o_ptr + slot * 3 + 2, mask=live, other=0.0)
+    dx = tl.load(d_ptr + slot * 3 + 0, mask=live, other=1.0)
+    dy = tl.load(d_ptr + slot * 3 + 1, mask=live, other=1.0)
+    dz = tl.load(d_ptr + slot * 3 + 2, mask=live, other=1.0)
+    t_lo = tl.load(tlo_ptr + slot, mask=live, other=0.0)
+    t_hi = tl.load(thi_ptr + slot, mask=live, other=0.0)
+    # Invalid rays (NaN/inf, zero direction, t_max < t_min) arrive from the launcher with
+    # the empty interval [inf, -inf].
+    alive = live & (t_lo <= t_hi)
+    t, row, u, v = _trace(nodes_f, nodes_i, tris_f, tris_i, stack_ptr, slot, stride,
+                          ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT)
+    hit = row >= 0
+    tri = tl.load(tris_i + row * 12 + 3, mask=hit, other=-1)
+    tl.store(t_ptr + slot, tl.where(hit, t, float("inf")), mask=live)
+    tl.store(id_ptr + slot, tri.to(tl.int64), mask=live)
+    tl.store(u_ptr + slot, tl.where(hit, u, 0.0), mask=live)
+    tl.store(v_ptr + slot, tl.where(hit, v, 0.0), mask=live)
+
+
+@_jit
+def _pow(x, s):
+    """``x ** s`` for x >= 0 as torch computes it (``0 ** 0 = 1``, ``0 ** s = 0``)."""
+    safe = tl.where(x > 0.0, x, 1.0)
+    return tl.where(x > 0.0, tl.exp2(s * tl.log2(safe)), tl.where(s == 0.0, 1.0, 0.0))
+
+
+@_jit
+def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, nodes_f, nodes_i, tris_f, tris_i, stack_ptr,
+                    stride, mat_id_ptr, mat_ptr, light_ptr, n_lights, max_depth,
+                    amb_r, amb_g, amb_b, bg_r, bg_g, bg_b, offset,
+                    BLOCK: tl.constexpr, EXIT: tl.constexpr):
+    """The uber kernel: per lane, primary ray -> (closest hit -> shade with shadow rays ->
+    mirror bounce) up to ``max_depth`` bounces; the radiance recursion unrolled into a
+    loop with a throughput weight (``L += kr * radiance(...)`` becomes ``weight *= kr``)."""
+    slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    live = slot < n_rays
+    ox = tl.load(o_ptr + slot * 3 + 0, mask=live, other=0.0)
+    oy = tl.load(o_ptr + slot * 3 + 1, mask=live, other=0.0)
+    oz = tl.load(o_ptr + slot * 3 + 2, mask=live, other=0.0)
+    dx = tl.load(d_ptr + slot * 3 + 0, mask=live, other=1.0)
+    dy = tl.load(d_ptr + slot * 3 + 1, mask=live, other=1.0)
+    dz = tl.load(d_ptr + slot * 3 + 2, mask=live, other=1.0)
+    zero = tl.zeros([BLOCK], tl.float32)
+    inf = zero + float("inf")
+    # A primary ray with a NaN/inf component or a zero direction misses: background.
+    finite = ((tl.abs(ox) < inf) & (tl.abs(oy) < inf) & (tl.abs(oz) < inf)
+              & (tl.abs(dx) < inf) & (tl.abs(dy) < inf) & (tl.abs(dz) < inf)
+              & ((dx != 0.0) | (dy != 0.0) | (dz != 0.0)))
+    w_r = zero + 1.0
+    w_g = zero + 1.0
+    w_b = zero + 1.0
+    c_r = tl.where(finite, zero, bg_r)
+    c_g = tl.where(finite, zero, bg_g)
+    c_b = tl.where(finite, zero, bg_b)
+    active = live & finite
+    inv_pi = 0.3183098861837907
+    for depth in range(max_depth + 1):
+        t, row, _u, _v = _trace(nodes_f, nodes_i, tris_f, tris_i, stack_ptr, slot, stride,
+                                ox, oy, oz, dx, dy, dz, zero, inf, active, False, EXIT)
+        hit = active & (row >= 0)
+        miss = active & (row < 0)
+        c_r += tl.where(miss, w_r * bg_r, 0.0)
+        c_g += tl.where(miss, w_g * bg_g, 0.0)
+        c_b += tl.where(miss, w_b * bg_b, 0.0)
+        active = hit
+        # SHADE: geometric normal from the stored edges, facing the ray.
+        base = tris_f + row * 12
+        e1x = tl.load(base + 4, mask=hit, other=0.0)
+        e1y = tl.load(base + 5, mask=hit, other=0.0)
+        e1z = tl.load(base + 6, mask=hit, other=1.0)
+        e2x = tl.load(base + 8, mask=hit, other=0.0)
+        e2y = tl.load(base + 9, mask=hit, other=1.0)
+        e2z = tl.load(base + 10, mask=hit, other=0.0)
+        tri = tl.load(tris_i + row * 12 + 3, mask=hit, other=0)
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        n_len = tl.sqrt(nx * nx + ny * ny + nz * nz)
+        flip = tl.where(nx * dx + ny * dy + nz * dz > 0.0, -1.0, 1.0) / n_len
+        nx = nx * flip
+        ny = ny * flip
+        nz = nz * flip
+        px = ox + t * dx
+        py = oy + t * dy
+        pz = oz + t * dz
+        scale = offset * tl.maximum(tl.maximum(tl.abs(px), tl.abs(py)),
+                                    tl.maximum(tl.abs(pz), 1.0))
+        px = px + nx * scale
+        py = py + ny * scale
+        pz = pz + nz * scale
+        m = tl.load(mat_id_ptr + tri, mask=hit, other=0)
+        mb = mat_ptr + m * 12
+        kd_r = tl.load(mb + 0, mask=hit, other=0.0)
+        kd_g = tl.load(mb + 1, mask=hit, other=0.0)
+        kd_b = tl.load(mb + 2, mask=hit, other=0.0)
+        ks_r = tl.load(mb + 3, mask=hit, other=0.0)
+        ks_g = tl.load(mb + 4, mask=hit, other=0.0)
+        ks_b = tl.load(mb + 5, mask=hit, other=0.0)
+        kr_r = tl.load(mb + 6, mask=hit, other=0.0)
+        kr_g = tl.load(mb + 7, mask=hit, other=0.0)
+        kr_b = tl.load(mb + 8, mask=hit, other=0.0)
+        shin = tl.load(mb + 9, mask=hit, other=0.0)
+        spec_norm = (shin + 8.0) * (0.125 * inv_pi)
+        c_r += tl.where(hit, w_r * amb_r * kd_r, 0.0)
+        c_g += tl.where(hit, w_g * amb_g * kd_g, 0.0)
+        c_b += tl.where(hit, w_b * amb_b * kd_b, 0.0)
+        for li in range(n_lights):
+            lb = light_ptr + li * 8
+            lpx = tl.load(lb + 0)
+            lpy = tl.load(lb + 1)
+            lpz = tl.load(lb + 2)
+            is_point = tl.load(lb + 3) > 0.5
+            e_r = tl.load(lb + 4)
+            e_g = tl.load(lb + 5)
+            e_b = tl.load(lb + 6)
+            light_reach = tl.load(lb + 7)  # point: OFFSET max(1, |P|inf); directional: unused
+            tox = lpx - px
+            toy = lpy - py
+            toz = lpz - pz
+            dist = tl.sqrt(tox * tox + toy * toy + toz * toz)
+            lx = tl.where(is_point, tox / dist, lpx)
+            ly = tl.where(is_point, toy / dist, lpy)
+            lz = tl.where(is_point, toz / dist, lpz)
+            falloff = tl.where(is_point, 1.0 / (dist * dist), 1.0)
+            s_max = tl.where(is_point, dist - light_reach, inf)
+            ndl = nx * lx + ny * ly + nz * lz
+            want = hit & (ndl > 0.0)
+            _t, occluder, _u2, _v2 = _trace(nodes_f, nodes_i, tris_f, tris_i, stack_ptr, slot,
+                                            stride, px, py, pz, lx, ly, lz, zero, s_max, want,
+                                            True, EXIT)
+            lit = want & (occluder < 0)
+            hx = lx - dx
+            hy = ly - dy
+            hz = lz - dz
+            h_len = tl.sqrt(hx * hx + hy * hy + hz * hz)
+            ndh = tl.maximum((nx * hx + ny * hy + nz * hz) / h_len, 0.0)
+            spec = spec_norm * _pow(ndh, shin)
+            g = falloff * ndl
+            c_r += tl.where(lit, w_r * e_r * g * (kd_r * inv_pi + ks_r * spec), 0.0)
+            c_g += tl.where(lit, w_g * e_g * g * (kd_g * inv_pi + ks_g * spec), 0.0)
+            c_b += tl.where(lit, w_b * e_b * g * (kd_b * inv_pi + ks_b * spec), 0.0)
+        # Mirror bounce: the next iteration traces r = normalize(d - 2 (d.n) n) from p_off.
+        active = hit & ((kr_r > 0.0) | (kr_g > 0.0) | (kr_b > 0.0))
+        dn2 = 2.0 * (dx * nx + dy * ny + dz * nz)
+        dx = dx - dn2 * nx
+        dy = dy - dn2 * ny
+        dz = dz - dn2 * nz
+        r_len = tl.sqrt(dx * dx + dy * dy + dz * dz)  # renormalised, as the contract says
+        dx = dx / r_len
+        dy = dy / r_len
+        dz = dz / r_len
+        ox = px
+        oy = py
+        oz = pz
+        w_r = w_r * kr_r
+        w_g = w_g * kr_g
+        w_b = w_b * kr_b
+    tl.store(out_ptr + slot * 3 + 0, c_r, mask=live)
+    tl.store(out_ptr + slot * 3 + 1, c_g, mask=live)
+    tl.store(out_ptr + slot * 3 + 2, c_b, mask=live)
+
+
+# --------------------------------------------------------------------------------------
+# Launchers
+# --------------------------------------------------------------------------------------
+
+def triton_available() -> bool:
+    return triton is not None
+
+
+def _require_triton() -> None:
+    if triton is None:
+        raise ImportError("the Triton kernels need the `triton` package (pip install triton; "
+                          "it ships with torch's CUDA wheels on Linux)") from _TRITON_IMPORT_ERROR
+
+
+def interpreting() -> bool:
+    """True when the kernels run in Triton's CPU interpreter (``TRITON_INTERPRET=1``)."""
+    _require_triton()
+    return type(_trace_kernel).__name__ == "InterpretedFunction"
+
+
+def _ieee_quiet():
+    """The kernels divide by zero on purpose (1/+-0 = +-inf for axis-parallel rays, a
+    degenerate det); the interpreter evaluates them with numpy, which would warn."""
+    if interpreting():
+        import numpy as np
+
+        return np.errstate(divide="ignore", invalid="ignore", over="ignore")
+    return contextlib.nullcontext()
+
+
+def _check_launch(block: int, num_warps: int) -> None:
+    for name, x in (("block", block), ("num_warps", num_warps)):
+        if isinstance(x, bool) or not isinstance(x, int) or x < 1 or x & (x - 1):
+            raise ValueError(f"{name}: expected a power of two, got {x!r}")
+    if block < 32 * num_warps:
+        raise ValueError(f"block: expected at least 32 lanes per warp ({32 * num_warps} for "
+                         f"num_warps={num_warps}), got {block}")
+
+
+def _device_check(device: torch.device) -> None:
+    if not interpreting() and device.type != "cuda":
+        raise ValueError(f"origins: the compiled Triton kernels need CUDA tensors, got {device} "
+                         "(for the CPU, set TRITON_INTERPRET=1 before importing triton, or use "
+                         "course.flat_bvh.trace_flat_torch)")
+
+
+def _stack(n: int, block: int, device) -> tuple[torch.Tensor, int]:
+    """The per-lane stacks: (STACK_DEPTH, lanes) int32, lanes = n rounded up to blocks."""
+    lanes = max(block, -(-n // block) * block)
+    return torch.empty(STACK_DEPTH, lanes, dtype=torch.int32, device=device), lanes
+
+
+@dataclass(frozen=True)
+class TracerKernelInfo:
+    """Resources of one compiled tracer kernel: registers, spills, static shared memory
+    (None under the interpreter), the launch's warps and lanes per program."""
+
+    name: str
+    n_regs: int | None
+    n_spills: int | None
+    shared_bytes: int | None
+    num_warps: int
+    block: int
+
+    def occupancy(self, arch=None):
+        """``course.occupancy.occupancy`` of this launch (Hopper preset by default: H100
+        and H200 share the SM), or None when the registers are unknown."""
+        from course.occupancy import HOPPER_H100, occupancy
+
+        if self.n_regs is None:
+            return None
+        return occupancy(arch or HOPPER_H100, self.n_regs, 32 * self.num_warps,
+                         self.shared_bytes or 0)
+
+
+def _info(name: str, handle, num_warps: int, block: int) -> TracerKernelInfo:
+    def field(obj, key):
+        if obj is None:
+            return None
+        return obj.get(key) if isinstance(obj, dict) else getattr(obj, key, None)
+
+    if handle is not None and field(handle, "n_regs") is None:
+        init = getattr(handle, "_init_handles", None)  # binaries load lazily in recent Tritons
+        if callable(init):
+            init()
+    return TracerKernelInfo(name, field(handle, "n_regs"), field(handle, "n_spills"),
+                            field(field(handle, "metadata"), "shared"), num_warps, block)
+
+
+def _bvh_args(bvh: FlatBVH, device):
+    if not isinstance(bvh, FlatBVH):
+        raise TypeError(f"bvh: expected a course.flat_bvh.FlatBVH, got {type(bvh).__name__}")
+    if bvh.nodes.device != device:
+        raise ValueError(f"bvh: expected a BVH on {device} like the rays (bvh.to(device)), "
+                         f"got {bvh.nodes.device}")
+    return bvh.nodes, bvh.node_ints, bvh.triangles, bvh.triangle_ints
+
+
+def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf, *,
+                      any_hit: bool = False, block: int = DEFAULT_BLOCK,
+                      num_warps: int = DEFAULT_NUM_WARPS, return_info: bool = False):
+    """Closest (or any) hit of each ray by the Triton BVH walk (one ray per lane).
+
+    bvh: ``build_flat_bvh(...)`` on the rays' device; origins, directions: (N, 3) float
+    (traced in float32); t_min, t_max: numbers or (N,) tensors; any_hit: stop at the first
+    hit; block: lanes per program (a power of two, >= 32 num_warps).
+    Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
+    """
+    _require_triton()
+    o, d, t_lo, t_hi = check_rays(origins, directions, t_min, t_max)
+    _check_launch(block, num_warps)
+    n, device = o.shape[0], o.device
+    _device_check(device)
+    nodes_f, nodes_i, tris_f, tris_i = _bvh_args(bvh, device)
+    # Rays that cannot hit (NaN/inf, zero direction, t_max < t_min) get an empty interval,
+    # which the kernel reads as "not alive": they never walk the tree.
+    ok = valid_rays(o, d, t_lo, t_hi)
+    t_lo = torch.where(ok, t_lo, math.inf)
+    t_hi = torch.where(ok, t_hi, -math.inf)
+    out_t = torch.empty(n, dtype=torch.float32, device=device)
+    out_id = torch.empty(n, dtype=torch.int64, device=device)
+    out_u = torch.empty(n, dtype=torch.float32, device=device)
+    out_v = torch.empty(n, dtype=torch.float32, device=device)
+    handle = None
+    if n:
+        stack, lanes = _stack(n, block, device)
+        with _ieee_quiet():
+            handle = _trace_kernel[(lanes // block,)](
+                o, d, t_lo, t_hi, nodes_f, nodes_i, tris_f, tris_i, stack,
+                out_t, out_id, out_u, out_v, n, lanes,
+                BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE, num_warps=num_warps)
+    hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
+    if return_info:
+        name = "any_hit" if any_hit else "closest_hit"
+        return hits, _info(name, handle, num_warps, block)
+    return hits
+
+
+# --------------------------------------------------------------------------------------
+# The uber kernel
+# --------------------------------------------------------------------------------------
+
+def _scene_tables(scene, device, offset: float):
+    """Per-face material ids (F,) int32, materials (M, 12) float32 ``kd ks kr shininess``,
+    lights (L, 8) float32 ``xyz, is_point, rgb, OFFSET max(1, |P|inf)`` of a WhittedScene."""
+    names = ("vertices", "faces", "material", "kd", "ks", "shininess", "kr", "point_positions",
+             "point_intensities", "dir_directions", "dir_irradiance", "ambient", "background")
+    for name in names:
+        if not isinstance(getattr(scene, name, None), torch.Tensor):
+            raise TypeError(f"scene: expected a WhittedScene with a {name!r} tensor, "
+                            f"got {type(scene).__name__}")
+    f32 = {"dtype": torch.float32, "device": device}
+    mats = torch.zeros(scene.kd.shape[0], 12, **f32)
+    mats[:, 0:3], mats[:, 3:6], mats[:, 6:9] = scene.kd, scene.ks, scene.kr
+    mats[:, 9] = scene.shininess
+    pp = scene.point_positions.to(**f32)
+    reach = offset * pp.abs().amax(1).clamp(min=1.0) if len(pp) else pp[:, 0]
+    point = torch.cat([pp, torch.ones(len(pp), 1, **f32), scene.point_intensities.to(**f32),
+                       reach[:, None]], 1)
+    dd = scene.dir_directions.to(**f32)
+    direc = torch.cat([dd, torch.zeros(len(dd), 1, **f32), scene.dir_irradiance.to(**f32),
+                       torch.zeros(len(dd), 1, **f32)], 1)
+    lights = torch.cat([point, direc], 0).contiguous()
+    if not len(lights):
+        lights = torch.zeros(1, 8, **f32)  # never read: n_lights = 0
+    return (scene.material.to(device, torch.int32).contiguous(), mats.contiguous(), lights,
+            len(pp) + len(dd))
+
+
+def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
+                          offset: float | None = None, block: int = DEFAULT_BLOCK,
+                          num_warps: int = DEFAULT_NUM_WARPS, bvh: FlatBVH | None = None,
+                          return_info: bool = False):
+    """Radiance along each primary ray by the Whitted contract, in one kernel launch.
+
+    scene: a ``course.whitted_support.WhittedScene`` (its BVH is cached per scene object
+    unless ``bvh`` is given); origins, directions: (N, 3) float primary rays (unit
+    directions, e.g. ``course.camera.primary_rays``); max_depth: mirror bounces (2: up to
+    two reflected rays); offset: the contract's OFFSET (default: whitted_support's).
+    Returns (N, 3) float32 linear RGB, or ``(rgb, TracerKernelInfo)`` with ``return_info``.
+    """
+    _require_triton()
+    if isinstance(max_depth, bool) or not isinstance(max_depth, int) or max_depth < 0:
+        raise ValueError(f"max_depth: expected an int >= 0, got {max_depth!r}")
+    o, d, _, _ = check_rays(origins, directions, 0.0, math.inf)
+    _check_launch(block, num_warps)
+    n, device = o.shape[0], o.device
+    _device_check(device)
+    if offset is None:
+        from course.whitted_support import OFFSET as offset
+    if bvh is None:
+        bvh = flat_bvh_for(scene).to(device)
+    nodes_f, nodes_i, tris_f, tris_i = _bvh_args(bvh, device)
+    mat_id, mats, lights, n_lights = _scene_tables(scene, device, float(offset))
+    amb = [float(x) for x in scene.ambient.tolist()]
+    bg = [float(x) for x in scene.background.tolist()]
+    out = torch.empty(n, 3, dtype=torch.float32, device=device)
+    handle = None
+    if n:
+        stack, lanes = _stack(n, block, device)
+        with _ieee_quiet():
+            handle = _whitted_kernel[(lanes // block,)](
+                o, d, out, n, nodes_f, nodes_i, tris_f, tris_i, stack, lanes, mat_id, mats,
+                lights, n_lights, max_depth, *amb, *bg, float(offset),
+                BLOCK=block, EXIT=EXIT_SCALE, num_warps=num_warps)
+    if return_info:
+        return out, _info("whitted_uber", handle, num_warps, block)
+    return out

@@ -1,0 +1,188 @@
+"""course.triton_tracer: the Triton BVH walk and the Whitted uber kernel.
+
+On the CPU the kernels run in Triton's interpreter (TRITON_INTERPRET=1, which must be set
+before triton is imported, hence a subprocess) at tiny sizes; on CUDA the compiled kernels
+run at moderate sizes and report their registers and spills. Both are held to
+course.flat_bvh's contract by the float64 rules of tests/test_flat_bvh.py, and the uber
+kernel to course.whitted_support.render_reference.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+for path in (REPO, REPO / "tests"):
+    if str(path) not in sys.path:
+        sys.path.insert(0, str(path))
+
+from test_flat_bvh import (
+    axis_parallel_case,
+    brute_force64,
+    check_axis_parallel,
+    check_hits,
+    make_case,
+)
+
+HAVE_TRITON = importlib.util.find_spec("triton") is not None
+needs_triton = pytest.mark.skipif(not HAVE_TRITON, reason="triton is not installed")
+
+
+def render_cases(size: int) -> dict:
+    from course.camera import primary_rays
+    from course.whitted_support import whitted_camera
+
+    out = {}
+    for name in ("cornell_mirror", "mirror_corridor"):
+        rays = primary_rays(whitted_camera(name, size, size), "cpu")
+        o, d = rays.origins.clone(), rays.directions.clone()
+        o[0, 0] = math.nan  # an invalid primary ray sees the background
+        out[name] = (o, d)
+    return out
+
+
+def run_kernels(case: dict, renders: dict, device: str) -> dict:
+    """Every kernel on the cases, results on the CPU, plus kernel infos."""
+    from course import triton_tracer as tt
+    from course.flat_bvh import build_flat_bvh
+    from course.whitted_support import whitted_scene
+
+    out: dict = {"interpreting": tt.interpreting(), "info": {}}
+    bvh = build_flat_bvh(case["vertices"].to(device), case["faces"].to(device))
+    args = [case[k].to(device) for k in ("origins", "directions", "t_min", "t_max")]
+    for any_hit in (False, True):
+        hits, info = tt.trace_flat_triton(bvh, *args, any_hit=any_hit, return_info=True)
+        out["any" if any_hit else "closest"] = hits.to("cpu")
+        out["info"][info.name] = info
+    v, f, o, d = axis_parallel_case()
+    out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
+                                       o.to(device), d.to(device)).to("cpu")
+    out["render"] = {}
+    for name, (o, d) in renders.items():
+        scene = whitted_scene(name, device=device)
+        rgb, info = tt.render_whitted_triton(scene, o.to(device), d.to(device), return_info=True)
+        out["render"][name] = rgb.cpu()
+        out["info"][info.name] = info
+    empty = torch.zeros(0, 3, device=device)
+    out["empty"] = len(tt.trace_flat_triton(bvh, empty, empty))
+    return out
+
+
+def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
+    from course.whitted_support import render_reference, whitted_scene
+
+    ref = brute_force64(case)
+    check_hits(case, out["closest"], f"{label} closest hit", ref=ref)
+    check_hits(case, out["any"], f"{label} any hit", any_hit=True, ref=ref)
+    assert torch.equal(out["any"].hit, out["closest"].hit), (
+        f"{label}: any hit and closest hit disagree on occlusion for rays "
+        f"{(out['any'].hit != out['closest'].hit).nonzero()[:, 0].tolist()}")
+    check_axis_parallel(out["axis"], label)
+    assert out["empty"] == 0
+    for name, (o, d) in renders.items():
+        scene = whitted_scene(name, device="cpu")
+        want = render_reference(scene, o, d)
+        got = out["render"][name].double()
+        assert torch.isfinite(got).all(), f"{label} {name}: non-finite radiance"
+        assert torch.equal(got[0], scene.background.double()), (
+            f"{label} {name}: a NaN primary ray must see the background, got {got[0].tolist()}")
+        err = (got - want).abs().amax(1) / want.abs().amax(1).clamp(min=1e-3)
+        # float32 vs float64: pixels may differ where a shadow or a mirror edge falls
+        # between the two roundings; everywhere else they agree to ~1e-5.
+        bad = (err > 1e-3).float().mean().item()
+        assert bad <= 0.02, (
+            f"{label} {name}: {bad:.1%} of the pixels differ from render_reference by more "
+            f"than 0.1% (worst {err.max().item():.3g} at pixel {int(err.argmax())})")
+
+
+@needs_triton
+def test_interpreted_kernels_follow_the_contract(tmp_path):
+    case = make_case(n_tris=80, n_rays=64, seed=5)
+    renders = render_cases(6)
+    inputs, outputs = tmp_path / "in.pt", tmp_path / "out.pt"
+    torch.save({"case": case, "renders": renders}, inputs)
+    env = dict(os.environ, TRITON_INTERPRET="1",
+               PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
+    proc = subprocess.run([sys.executable, __file__, str(inputs), str(outputs)], env=env,
+                          capture_output=True, text=True, timeout=300, check=False)
+    if proc.returncode != 0:
+        pytest.fail(f"the interpreter subprocess failed (exit {proc.returncode}):\n"
+                    f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    out = torch.load(outputs, weights_only=False)
+    assert out["interpreting"], "the subprocess did not run Triton's interpreter"
+    check_all(case, renders, out, "interpreted")
+    for info in out["info"].values():
+        assert info.n_regs is None and info.occupancy() is None
+
+
+@needs_triton
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_compiled_kernels_follow_the_contract():
+    from course import triton_tracer as tt
+
+    if tt.interpreting():
+        pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
+    case = make_case(n_tris=2000, n_rays=3000, seed=7)
+    out = run_kernels(case, render_cases(48), "cuda")
+    check_all(case, render_cases(48), out, "compiled")
+    for info in out["info"].values():
+        assert isinstance(info.n_regs, int) and info.n_regs > 0, f"{info.name}: {info.n_regs}"
+        assert isinstance(info.n_spills, int) and info.n_spills >= 0
+        occ = info.occupancy()
+        print(f"{info.name}: {info.n_regs} registers, {info.n_spills} spills, "
+              f"occupancy {occ.occupancy:.0%} ({occ.limiter})")
+
+
+@needs_triton
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_compiled_bunny_matches_torch_traversal():
+    from course import triton_tracer as tt
+    from course.camera import primary_rays
+    from course.flat_bvh import flat_bvh_for, trace_flat_torch
+    from course.whitted_support import whitted_camera, whitted_scene
+
+    if tt.interpreting():
+        pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
+    scene = whitted_scene("bunny_mirror", device="cpu")
+    bvh = flat_bvh_for(scene)
+    rays = primary_rays(whitted_camera("bunny_mirror", 96, 96), "cpu")
+    want = trace_flat_torch(bvh, rays.origins, rays.directions)
+    got = tt.trace_flat_triton(bvh.to("cuda"), rays.origins.cuda(), rays.directions.cuda())
+    same = (got.triangle.cpu() == want.triangle).float().mean().item()
+    assert same >= 0.999, f"only {same:.2%} of the bunny's rays agree with the torch walk"
+
+
+@needs_triton
+def test_bad_arguments_raise_clear_errors():
+    from course import triton_tracer as tt
+    from course.flat_bvh import build_flat_bvh
+
+    case = make_case(n_tris=20, n_rays=64, seed=1)
+    bvh = build_flat_bvh(case["vertices"], case["faces"])
+    o, d = case["origins"], case["directions"]
+    for kwargs, word in [({"origins": o[:, :2]}, "origins"), ({"directions": d[:2]}, "directions"),
+                         ({"block": 48}, "block"), ({"num_warps": 3}, "num_warps"),
+                         ({"block": 32, "num_warps": 2}, "block"), ({"bvh": "x"}, "bvh"),
+                         ({"t_min": torch.zeros(7)}, "t_min")]:
+        args = {"bvh": bvh, "origins": o, "directions": d, **kwargs}
+        with pytest.raises((ValueError, TypeError), match=word):
+            tt.trace_flat_triton(args.pop("bvh"), args.pop("origins"), args.pop("directions"),
+                                 **args)
+    if not tt.interpreting():
+        with pytest.raises(ValueError, match="CUDA"):
+            tt.trace_flat_triton(bvh, o, d)  # CPU tensors, compiled kernels
+    with pytest.raises(ValueError, match="max_depth"):
+        tt.render_whitted_triton(None, o, d, max_depth=-1)
+
+
+if __name__ == "__main__":  # the interpreter subprocess: python THIS INPUTS OUTPUTS
+    data = torch.load(sys.argv[1], weights_only=False)
+    torch.save(run_kernels(data["case"], data["renders"], "cpu"), sys.argv[2])
