@@ -58,8 +58,10 @@ TypeError rather than rendered with acne.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -333,6 +335,17 @@ def face_normals(scene: WhittedScene) -> torch.Tensor:
 # The brute-force tracer
 
 
+def pair_tiles(n: int, f: int):
+    """Tiles of (ray, triangle) pairs within ``MEMORY_BUDGET_BYTES``: yields ``(rows,
+    tiles)``, a slice of the N rays and a generator of slices of the F triangles; all
+    triangles at once for many rays, or a few rays against chunks of the triangles."""
+    pairs = max(1, MEMORY_BUDGET_BYTES // BYTES_PER_PAIR)
+    ray_tile = max(1, min(n, pairs // max(f, 1)))
+    tri_tile = max(1, min(f, pairs // ray_tile))
+    for r0 in range(0, n, ray_tile):
+        yield slice(r0, r0 + ray_tile), (slice(f0, f0 + tri_tile) for f0 in range(0, f, tri_tile))
+
+
 def trace_brute_force(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
                       t_min: torch.Tensor, t_max: torch.Tensor, any_hit: bool = False) -> Hits:
     """Every ray against every triangle (Möller-Trumbore in the scene's dtype), in tiles.
@@ -354,16 +367,12 @@ def trace_brute_force(scene: WhittedScene, origins: torch.Tensor, directions: to
     hits = Hits.miss(n, dtype=origins.dtype, device=origins.device)
     valid = (torch.isfinite(origins).all(1) & torch.isfinite(directions).all(1)
              & (directions != 0).any(1) & ~(t_min > t_max))
-    pairs = max(1, MEMORY_BUDGET_BYTES // BYTES_PER_PAIR)
-    ray_tile = max(1, min(n, pairs // f)) if n else 1
-    tri_tile = max(1, min(f, pairs // ray_tile))
     t_out, i_out, u_out, v_out = hits.t, hits.triangle, hits.u, hits.v
-    for r0 in range(0, n, ray_tile):
-        rows = slice(r0, r0 + ray_tile)
+    for rows, tiles in pair_tiles(n, f):
         o, d = origins[rows, None], directions[rows, None]
         lo, hi, ok = t_min[rows, None], t_max[rows, None], valid[rows, None]
-        for f0 in range(0, f, tri_tile):
-            cols = slice(f0, f0 + tri_tile)
+        for cols in tiles:
+            f0 = cols.start
             p = torch.linalg.cross(d, e2[None, cols], dim=-1)
             det = (e1[None, cols] * p).sum(-1)
             inv = 1 / det
@@ -382,7 +391,7 @@ def trace_brute_force(scene: WhittedScene, origins: torch.Tensor, directions: to
             u_out[rows] = torch.where(better, u.gather(1, best)[:, 0], u_out[rows])
             v_out[rows] = torch.where(better, v.gather(1, best)[:, 0], v_out[rows])
             if any_hit and bool((t_out[rows] < math.inf).all()):
-                break
+                break  # every ray of this tile is blocked: the shadow test is decided
     return hits
 
 
@@ -394,18 +403,22 @@ def render_reference(scene: WhittedScene, origins: torch.Tensor, directions: tor
                      max_depth: int = MAX_DEPTH) -> torch.Tensor:
     """The slow, obvious Whitted renderer every organisation is compared with.
 
-    scene: any dtype; origins, directions: (N, 3), directions unit. Returns (N, 3) float64
-    radiance. Everything in float64 with :func:`trace_brute_force`; the recursion is the
-    contract written out plainly, one bounce level at a time, one light at a time, a
-    shadow ray for every (hit, light) pair.
+    scene: float32 or float64; origins, directions: (N, 3), directions unit. Returns (N, 3)
+    float64 radiance. Everything is computed in float64 with :func:`trace_brute_force`,
+    but with the secondary-ray offset of the *scene's* dtype (:func:`offset_scale`): the
+    same contract as a renderer working in that dtype, so what remains between the two is
+    the renderer's rounding. The recursion is the contract written out plainly, one bounce
+    level at a time, one light at a time, a shadow ray for every (hit, light) pair.
     """
+    check_scene(scene)
     check_max_depth(max_depth)
+    eps = offset_scale(scene.dtype)
     scene = scene.to(torch.float64)
     return _radiance(scene, origins.to(scene.device, torch.float64),
-                     directions.to(scene.device, torch.float64), 0, max_depth)
+                     directions.to(scene.device, torch.float64), 0, max_depth, eps)
 
 
-def _radiance(scene: WhittedScene, o, d, depth: int, max_depth: int) -> torch.Tensor:
+def _radiance(scene: WhittedScene, o, d, depth: int, max_depth: int, eps: float):
     n_rays = o.shape[0]
     zeros = torch.zeros(n_rays, dtype=o.dtype, device=o.device)
     hits = trace_brute_force(scene, o, d, zeros, zeros + math.inf, any_hit=False)
@@ -418,7 +431,6 @@ def _radiance(scene: WhittedScene, o, d, depth: int, max_depth: int) -> torch.Te
     p = o + t[:, None] * d
     n = face_normals(scene)[tri]
     n = torch.where(dot(n, d)[:, None] > 0, -n, n)
-    eps = offset_scale(scene.dtype)
     p_off = p + n * eps * p.abs().amax(1, keepdim=True).clamp(min=1)
     v = -d
     kd, ks, s, kr = scene.kd[m], scene.ks[m], scene.shininess[m], scene.kr[m]
@@ -445,7 +457,7 @@ def _radiance(scene: WhittedScene, o, d, depth: int, max_depth: int) -> torch.Te
     mirror = (kr > 0).any(1)
     if depth < max_depth and mirror.any():
         r = normalize(d - 2 * dot(d, n)[:, None] * n)
-        bounce = _radiance(scene, p_off[mirror], r[mirror], depth + 1, max_depth)
+        bounce = _radiance(scene, p_off[mirror], r[mirror], depth + 1, max_depth, eps)
         radiance[mirror] = radiance[mirror] + kr[mirror] * bounce
     result[h] = radiance
     return result
@@ -540,6 +552,45 @@ def check_surface_inputs(scene, points, normals, directions, material, trace) ->
     return n
 
 
+LAYOUTS = {"indexed": "vertices", "float4": "triangles", "woop": "transforms"}
+"""The geometry layouts of Lab 3's task 5, each with the tensor that carries its dtype."""
+
+
+def check_order(order, mesh: Mesh) -> torch.Tensor:
+    """Provided: ``order`` must be None or an int64 permutation of the F triangles; returns
+    it (``arange(F)`` for None) on the mesh's device."""
+    f = mesh.num_faces
+    if order is None:
+        return torch.arange(f, device=mesh.device)
+    if not isinstance(order, torch.Tensor) or order.dtype != torch.int64 or order.shape != (f,):
+        raise ValueError(f"order: expected an int64 permutation of shape ({f},), got "
+                         f"{getattr(order, 'dtype', type(order).__name__)} of shape "
+                         f"{tuple(getattr(order, 'shape', ()))}")
+    if not torch.equal(torch.sort(order).values.cpu(), torch.arange(f)):
+        raise ValueError(f"order: expected a permutation of 0..{f - 1}")
+    return order.to(mesh.device)
+
+
+def check_layout_inputs(layout, origins, directions, t_min, t_max) -> tuple[str, int]:
+    """Provided: validate :func:`intersect_layout`'s arguments; returns ``(kind, F)``."""
+    if not isinstance(layout, dict) or layout.get("kind") not in LAYOUTS:
+        got = layout.get("kind") if isinstance(layout, dict) else type(layout).__name__
+        raise ValueError(f"layout: expected a dict from layout_indexed/layout_float4/"
+                         f"layout_woop (kind {'/'.join(LAYOUTS)}), got {got!r}")
+    kind = layout["kind"]
+    like = layout.get(LAYOUTS[kind])
+    if not isinstance(like, torch.Tensor):
+        raise TypeError(f"layout: a {kind!r} layout needs a tensor under {LAYOUTS[kind]!r}")
+    n = check_vectors(like, origins=origins, directions=directions)
+    for name, x in (("t_min", t_min), ("t_max", t_max)):
+        if not isinstance(x, torch.Tensor) or x.shape != (n,) or x.dtype != like.dtype:
+            raise ValueError(f"{name}: expected a ({n},) {like.dtype} tensor, got "
+                             f"{getattr(x, 'dtype', type(x).__name__)} of shape "
+                             f"{tuple(getattr(x, 'shape', ()))}")
+    f = len(layout["faces"]) if kind == "indexed" else len(like)
+    return kind, f
+
+
 def check_mesh(mesh) -> None:
     """Provided: ``mesh`` must be a valid course.types.Mesh of float32/float64."""
     if not isinstance(mesh, Mesh):
@@ -547,3 +598,44 @@ def check_mesh(mesh) -> None:
     mesh.validate()
     if mesh.dtype not in DTYPES:
         raise TypeError(f"mesh: expected float32 or float64 vertices, got {mesh.dtype}")
+
+
+# ---------------------------------------------------------------------------------------
+# Stage timing and the float4 layout's index word
+
+
+class StageClock:
+    """Seconds spent per named stage: ``with clock("trace"): ...`` adds to
+    ``clock.seconds["trace"]``. On CUDA it synchronises around each stage, so the time is
+    the stage's work and not its launch (the price: no overlap between stages)."""
+
+    def __init__(self, device) -> None:
+        self.device = torch.device(device)
+        self.seconds: dict[str, float] = {}
+
+    @contextlib.contextmanager
+    def __call__(self, name: str):
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            if self.device.type == "cuda":
+                torch.cuda.synchronize(self.device)
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - start
+
+
+_INDEX_BITS = {torch.float32: torch.int32, torch.float64: torch.int64}
+
+
+def index_as_float(index: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
+    """Integer indices stored bit for bit in floats of ``dtype`` (CUDA's ``__int_as_float``):
+    int32 bits in float32, int64 bits in float64. Exact for every index, unlike a value
+    conversion (float32 holds integers exactly only up to 2^24)."""
+    return index.to(_INDEX_BITS[dtype]).contiguous().view(dtype)
+
+
+def float_as_index(word: torch.Tensor) -> torch.Tensor:
+    """The inverse of :func:`index_as_float`: int64 indices from their float bits."""
+    return word.contiguous().view(_INDEX_BITS[word.dtype]).to(torch.int64)
