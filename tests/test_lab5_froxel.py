@@ -1,0 +1,1154 @@
+"""Grader for Lab 5: the Frostbite froxel pipeline.
+
+Every reference is computed here in float64, never stored, and none of them uses froxels
+the way the lab does:
+
+=======================  ================================================================
+stage                    reference
+=======================  ================================================================
+grid                     ``near (far / near)^(k / S)``; pixel rays from the camera's axes
+V-buffer                 ``course.froxel_reference.media`` at the froxel sample points
+phase functions          closed forms; normalisation and mean cosine by quadrature over
+                         cos theta (200001 points, enough for the g = 0.99 peak)
+light lists              thousands of points sampled inside each tile's frustum
+lighting                 closed-form irradiance of each light at the froxel sample points
+volumetric shadows       exact optical depth of a constant-extinction box (slab test)
+temporal                 a field linear in the previous grid's froxel coordinates
+integration              ``S (1 - e^(-sigma D)) / sigma`` per column; ``q = c sigma`` media
+                         must not emit more than ``c (1 - T)`` (energy conservation)
+whole frames             closed form for a homogeneous medium lit by the sun; otherwise
+                         ``course.froxel_reference.reference_render`` (brute force, per
+                         pixel, exact shadows)
+=======================  ================================================================
+
+Tolerances of whole frames come from the froxel resolution: a tile of 8 pixels spans about
+1.6 degrees here (256 pixels over 50 x 89 degrees), across which the phase function, the
+path length per view depth (up to 1.25x at the corners) and the medium's edges are
+interpolated linearly; 16 exponential slices from 0.1 to 30 m are 43% deep each, across
+which ``L(z)`` is interpolated in the slice coordinate. Measured on the reference solution:
+max error 0.5% (homogeneous, g = 0) to 2% (g = 0.3, height fog) of the largest radiance;
+shadow edges and the fog volume's silhouette cost up to one tile of blur (max 9%, mean 1%).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+import torch
+
+from course.camera import Camera
+from course.froxel_reference import media as ref_media
+from course.froxel_reference import phase_value, reference_render
+from course.froxel_support import (
+    Box,
+    ConstantFog,
+    DirectionalLight,
+    FogVolume,
+    FroxelGrid,
+    HeightFog,
+    LightVolume,
+    PointLight,
+    Scene,
+    SpotLight,
+    frame_jitter,
+    frustum_bounds,
+    ray_boxes,
+)
+from course.testing import (
+    assert_close,
+    assert_equal,
+    assert_fraction,
+    check_tensor,
+    expect_error,
+    generator,
+    poisoned,
+)
+
+LAB_MODULE = "lab5_froxel"
+TASKS = {1: "Froxel grid and exponential slicing", 2: "V-buffer voxelisation",
+         3: "Lighting: phase functions, light lists, sun shadows",
+         4: "Volumetric shadow maps", 5: "Temporal integration", 6: "Final integration",
+         7: "Application and the whole frame"}
+
+F64, F32 = torch.float64, torch.float32
+INF = math.inf
+
+# The test view: 256 x 144 pixels, 8-pixel tiles, 16 slices: a 32 x 18 x 16 froxel volume.
+W, H, TILE, SLICES, NEAR, FAR = 256, 144, 8, 16, 0.1, 30.0
+CAMERA = Camera(eye=(0.0, 1.5, 0.0), target=(0.0, 1.5, -10.0), fov_y=50.0, width=W, height=H)
+GRID = FroxelGrid(CAMERA, TILE, SLICES, NEAR, FAR)
+SUN = DirectionalLight(direction=(0.3, 0.6, -1.0), irradiance=(2.0, 2.0, 2.0))
+OPAQUE = 0.3
+
+
+def small_grid(**changes):
+    """A 64 x 36 view with 8-pixel tiles: 8 x 5 tiles (the last row half off screen)."""
+    cam = Camera(eye=(0.5, 1.0, 2.0), target=(0.0, 0.8, -6.0), fov_y=55.0, width=64,
+                 height=36)
+    return dataclasses.replace(FroxelGrid(cam, 8, 12, 0.2, 25.0), **changes)
+
+
+# ---------------------------------------------------------------------------------------
+# Float64 references of the grid
+
+
+def ref_depths(near, far, slices):
+    k = torch.arange(slices + 1, dtype=F64)
+    return near * (far / near) ** (k / slices)
+
+
+def ref_dirs(grid, x, y):
+    """Directions with unit view depth through froxel coordinates x, y (float64)."""
+    _, right, up, fwd, (hw, hh) = grid.axes()
+    ndc_x = 2 * x * grid.tile / grid.camera.width - 1
+    ndc_y = 1 - 2 * y * grid.tile / grid.camera.height
+    return fwd + (ndc_x * hw)[..., None] * right + (ndc_y * hh)[..., None] * up
+
+
+def ref_points(grid, coords):
+    """World points (..., 3) of froxel coordinates (..., 3), float64."""
+    coords = coords.double()
+    eye = grid.axes()[0]
+    depth = grid.near * (grid.far / grid.near) ** (coords[..., 2] / grid.slices)
+    return eye + depth[..., None] * ref_dirs(grid, coords[..., 0], coords[..., 1])
+
+
+def sample_coords(grid, jitter):
+    k = torch.arange(grid.slices, dtype=F64) + jitter
+    j = torch.arange(grid.ny, dtype=F64) + 0.5
+    i = torch.arange(grid.nx, dtype=F64) + 0.5
+    kk, jj, ii = torch.meshgrid(k, j, i, indexing="ij")
+    return torch.stack([ii, jj, kk], -1)
+
+
+def pixel_dirs(camera):
+    """(H, W, 3) float64 directions with unit view depth through the pixel centres."""
+    grid = FroxelGrid(camera, 1, 1, 0.1, 1.0)
+    rows = torch.arange(camera.height, dtype=F64) + 0.5
+    cols = torch.arange(camera.width, dtype=F64) + 0.5
+    return ref_dirs(grid, cols[None, :].expand(camera.height, -1),
+                    rows[:, None].expand(-1, camera.width))
+
+
+def hg(cos, g):
+    return (1 - g * g) / (4 * math.pi * (1 + g * g - 2 * g * cos) ** 1.5)
+
+
+def images(depth_value=12.0, sky_cols=W // 3, dtype=F32, device="cpu"):
+    """A depth image (opaque wall at ``depth_value``, sky on the left third) and a grey
+    opaque image."""
+    depth = torch.full((H, W), depth_value, dtype=dtype)
+    depth[:, :sky_cols] = INF
+    return depth.to(device), torch.full((H, W, 3), OPAQUE, dtype=dtype, device=device)
+
+
+def no_nan(what, **tensors):
+    for name, x in tensors.items():
+        bad = ~torch.isfinite(x.detach().cpu().double())
+        if bad.any():
+            i = tuple(bad.nonzero()[0].tolist())
+            raise AssertionError(f"{what}: {int(bad.sum())} non-finite values in {name}, first "
+                                 f"at {i} ({x.detach().cpu()[i].item()!r})")
+
+
+def cpu_agrees(device, what, got, fn, *args, rtol=1e-5, atol=1e-6, **kwargs):
+    """On a GPU the same call on the CPU must agree."""
+    if torch.device(device).type == "cpu":
+        return
+    moved = [a.cpu() if isinstance(a, torch.Tensor) else a for a in args]
+    ref = fn(*moved, **{k: v.cpu() if isinstance(v, torch.Tensor) else v
+                        for k, v in kwargs.items()})
+    ref = ref[0] if isinstance(ref, tuple) else ref
+    assert_close(got, ref, rtol=rtol, atol=atol, name=f"{what} on {device} vs on the CPU")
+
+
+# Media and scenes
+HOMOGENEOUS = Scene(media=(ConstantFog(scattering=(0.05, 0.04, 0.03), extinction=0.06,
+                                       g=0.3),), lights=(SUN,))
+HEIGHT = Scene(media=(HeightFog(scattering=(0.1, 0.1, 0.1), extinction=0.12, base=0.0,
+                                falloff=0.4),), lights=(SUN,), ambient=(0.2, 0.2, 0.3))
+SHADOW = Scene(media=(ConstantFog(scattering=(0.08, 0.08, 0.08), extinction=0.09),),
+               lights=(DirectionalLight(direction=(0.2, 1.0, -0.1), irradiance=(3, 3, 3)),),
+               occluders=(Box((-1.0, 4.0, -9.0), (1.0, 4.5, -6.0)),))
+
+
+def blob_texture(n=8):
+    """A soft blob: 0 on the texture's border voxels, 1 in the middle."""
+    x = (torch.arange(n, dtype=F64) + 0.5) / n * 2 - 1
+    r2 = sum(t.square() for t in torch.meshgrid(x, x, x, indexing="ij"))
+    return (1 - r2).clamp(min=0) ** 2
+
+
+def fog_box_scene(dtype=F64):
+    box = FogVolume(center=(0.0, 0.8, -8.0), half_size=(2.0, 0.8, 2.0),
+                    scattering=(0.3, 0.25, 0.2), extinction=0.35,
+                    density=blob_texture().to(dtype))
+    return Scene(media=(box,), lights=(PointLight(position=(0.5, 3.5, -7.5),
+                                                  intensity=(5.0, 5.0, 5.0), range=10.0),))
+
+
+# ---------------------------------------------------------------------------------------
+# Task 1: the froxel grid
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+def test_slice_depths_exponential(impl, device):
+    for near, far, slices in ((0.1, 100.0, 64), (1e-6, 50.0, 16), (2.0, 3.0, 1)):
+        for dtype, rtol in ((F64, 1e-12), (F32, 1e-6)):
+            z = check_tensor(impl.slice_depths(near, far, slices, dtype, device),
+                             f"slice_depths({near}, {far}, {slices})", shape=(slices + 1,),
+                             dtype=dtype, device=device)
+            assert_close(z, ref_depths(near, far, slices), rtol=rtol,
+                         name=f"slice_depths({near}, {far}, {slices}, {dtype}): boundary z_k "
+                              f"must be near * (far/near)^(k/slices) (exponential, not linear)",
+                         where="boundary")
+            assert z[0].item() == pytest.approx(near, rel=1e-7) and \
+                z[-1].item() == pytest.approx(far, rel=1e-7), \
+                "slice_depths: the first boundary is near and the last far"
+    expect_error("slices", impl.slice_depths, 0.1, 10.0, 0, case="0 slices")
+    expect_error("far", impl.slice_depths, 1.0, 1.0, 8, case="far == near")
+    expect_error("near", impl.slice_depths, 0.0, 1.0, 8, case="near = 0 (log(0))")
+    expect_error("dtype", impl.slice_depths, 0.1, 1.0, 8, torch.float16, device,
+                 kinds=(TypeError,), case="float16")
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+def test_depth_to_slice_exact_inverse(impl, device):
+    g = generator(1)
+    for near, far, slices in ((0.1, 100.0, 64), (1e-6, 40.0, 32)):
+        k = torch.rand(500, generator=g, dtype=F64) * slices
+        depth = near * (far / near) ** (k / slices)
+        for dtype, atol in ((F64, 1e-9), (F32, 3e-5 * slices)):
+            got = impl.depth_to_slice(depth.to(dtype).to(device), near, far, slices)
+            check_tensor(got, "depth_to_slice", shape=(500,), dtype=dtype, device=device)
+            assert_close(got, k, atol=atol, name=f"depth_to_slice (near={near}, {dtype}): the "
+                         f"slice coordinate of depth near*(far/near)^(k/slices) is k",
+                         where="depth")
+    edge = torch.tensor([0.1, 100.0, 200.0, INF, 0.05], dtype=F64, device=device)
+    got = impl.depth_to_slice(edge, 0.1, 100.0, 64).cpu()
+    assert got[0].abs() < 1e-9 and abs(got[1] - 64) < 1e-9, \
+        f"depth_to_slice: near -> 0 and far -> slices, got {got[:2].tolist()}"
+    assert got[2] > 64 and got[3] == INF and got[4] < 0, (
+        f"depth_to_slice: beyond far > slices, +inf -> +inf, before near < 0; got "
+        f"{got[2:].tolist()}")
+    expect_error("depth", impl.depth_to_slice, torch.ones(3, dtype=torch.int64), 0.1, 1.0, 4,
+                 kinds=(TypeError,), case="int64 depths")
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(1)
+def test_world_to_froxel_roundtrip(impl, device):
+    g = generator(2)
+    for grid in (GRID, small_grid(near=1e-4)):
+        coords = torch.rand(400, 3, generator=g, dtype=F64) * torch.tensor(
+            [grid.nx, grid.ny, grid.slices], dtype=F64)
+        want = ref_points(grid, coords)
+        for dtype, tol in ((F64, 1e-9), (F32, 2e-4)):
+            p = impl.froxel_to_world(grid, coords.to(dtype).to(device))
+            check_tensor(p, "froxel_to_world", shape=(400, 3), dtype=dtype, device=device)
+            # float32 world coordinates carry the eye's rounding (|eye| * 6e-8).
+            eye = torch.tensor(grid.camera.eye, dtype=F64)
+            scale = (want - eye).norm(dim=-1, keepdim=True) + 1e-3 * eye.norm()
+            assert_close((p.cpu().double() - want) / scale, torch.zeros_like(want), atol=tol,
+                         name=f"froxel_to_world ({dtype}, near={grid.near}): point error "
+                              f"relative to its distance from the eye", where="froxel")
+            back = impl.world_to_froxel(grid, want.to(dtype).to(device))
+            check_tensor(back, "world_to_froxel", shape=(400, 3), dtype=dtype, device=device)
+            assert_close(back, coords, atol=tol * 50,
+                         name=f"world_to_froxel(froxel_to_world(c)) = c ({dtype}, near="
+                              f"{grid.near})", where="froxel")
+    # A point on the ray through pixel (row, col) maps to x = (col + 0.5) / tile.
+    dirs = pixel_dirs(CAMERA)
+    eye = torch.tensor(CAMERA.eye, dtype=F64)
+    p = eye + 7.0 * dirs[[0, 71, 143], [255, 128, 0]]
+    got = impl.world_to_froxel(GRID, p.to(device)).cpu()
+    want = torch.tensor([[255.5 / 8, 0.5 / 8], [128.5 / 8, 71.5 / 8], [0.5 / 8, 143.5 / 8]],
+                        dtype=F64)
+    assert_close(got[:, :2], want, atol=1e-9, name="world_to_froxel: (x, y) of points on "
+                 "pixel rays (row 0 at the top)", where="point")
+    behind = impl.world_to_froxel(GRID, (eye + torch.tensor([[0.0, 0.0, 3.0]], dtype=F64))
+                                  .to(device)).cpu()
+    assert torch.isnan(behind).any(), \
+        f"world_to_froxel: a point behind the camera has no froxel (NaN), got {behind.tolist()}"
+    expect_error("coords", impl.froxel_to_world, GRID, torch.zeros(4, 2, device=device),
+                 case="coords of shape (N, 2)")
+    expect_error("grid", impl.world_to_froxel, "grid", torch.zeros(4, 3, device=device),
+                 kinds=(TypeError,), case="a string for the grid")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 2: the V-buffer
+
+
+def mixed_scene(dtype=F64):
+    tex = torch.rand(5, 4, 6, generator=generator(3), dtype=F64).to(dtype)
+    c, s = math.cos(0.5), math.sin(0.5)
+    return Scene(media=(
+        ConstantFog(scattering=(0.01, 0.02, 0.03), extinction=0.04, g=-0.2),
+        HeightFog(scattering=(0.05, 0.05, 0.05), extinction=0.08, g=0.6, base=0.5,
+                  falloff=0.7, emissive=(0.01, 0.0, 0.0)),
+        FogVolume(center=(0.3, 1.0, -5.0), half_size=(1.5, 0.7, 2.0),
+                  scattering=(0.4, 0.3, 0.2), extinction=0.5, g=0.8,
+                  rotation=((c, 0, -s), (0, 1, 0), (s, 0, c)), density=tex),
+        FogVolume(center=(-1.0, 1.2, -3.0), half_size=(0.8, 0.8, 0.8), shape="ellipsoid",
+                  scattering=(0.2, 0.2, 0.2), extinction=0.2, emissive=(0.0, 0.1, 0.0)),
+    ), lights=(SUN,))
+
+
+@pytest.mark.task(2)
+@pytest.mark.points(1)
+def test_media_at_sums_media(impl, device):
+    g = generator(4)
+    points = torch.rand(3000, 3, generator=g, dtype=F64) * torch.tensor([6.0, 3.0, 8.0]) \
+        - torch.tensor([3.0, 0.0, 8.5])
+    scene = mixed_scene()
+    want = dict(zip(("scattering", "extinction", "emissive", "g"), ref_media(scene, points)))
+    for dtype, rtol in ((F64, 1e-9), (F32, 2e-5)):
+        got = impl.media_at(mixed_scene(dtype), points.to(dtype).to(device))
+        assert isinstance(got, dict), "media_at: return a dict"
+        for key, shape in (("scattering", (3000, 3)), ("extinction", (3000,)),
+                           ("emissive", (3000, 3)), ("g", (3000,))):
+            check_tensor(got.get(key), f"media_at[{key!r}]", shape=shape, dtype=dtype,
+                         device=device)
+            assert_close(got[key], want[key], rtol=rtol, atol=rtol,
+                         name=f"media_at[{key!r}] ({dtype}): media summed linearly, g averaged "
+                              f"by scattering weight, boxes rotated, texture trilinear",
+                         where="point")
+    inside = ref_media(Scene(media=scene.media[2:3]), points)[1] > 0
+    assert 100 < int(inside.sum()) < 2900, "test set-up: points inside and outside the box"
+    empty = impl.media_at(Scene(), points[:10].to(device))
+    assert_equal(empty["extinction"], torch.zeros(10, dtype=F64),
+                 name="media_at without media: extinction")
+    expect_error("points", impl.media_at, scene, torch.zeros(5, 2, dtype=F64, device=device),
+                 case="points of shape (N, 2)")
+    expect_error("scene", impl.media_at, [ConstantFog()], points[:5].to(device),
+                 kinds=(TypeError,), case="a list instead of a Scene")
+
+
+@pytest.mark.task(2)
+@pytest.mark.points(1)
+def test_voxelize_samples_froxel_points(impl, device):
+    grid = small_grid()
+    scene = mixed_scene()
+    for jitter in (0.5, 0.125):
+        want = ref_media(scene, ref_points(grid, sample_coords(grid, jitter)).reshape(-1, 3))
+        vb = impl.voxelize(scene, grid, jitter, F64, device)
+        for key, value in zip(("scattering", "extinction", "emissive", "g"), want):
+            shape = (*grid.shape, 3) if value.ndim == 2 else grid.shape
+            got = check_tensor(vb[key], f"voxelize[{key!r}]", shape=shape, dtype=F64,
+                               device=device)
+            assert_close(got.reshape(value.shape), value, rtol=1e-7, atol=1e-9,
+                         name=f"voxelize[{key!r}] (jitter={jitter}): media at froxel "
+                              f"(i + 0.5, j + 0.5, k + jitter), volumes indexed [k, j, i]",
+                         where="froxel (flat k*ny*nx + j*nx + i)")
+    vb = impl.voxelize(scene, grid, 0.5, F32, device)
+    check_tensor(vb["extinction"], "voxelize float32 extinction", shape=grid.shape, dtype=F32,
+                 device=device)
+    expect_error("jitter", impl.voxelize, scene, grid, 1.0, F32, device, case="jitter = 1")
+    expect_error("dtype", impl.voxelize, scene, grid, 0.5, torch.bfloat16, device,
+                 kinds=(TypeError,), case="bfloat16")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 3: lighting
+
+
+def quadrature(fn, g):
+    """(integral over the sphere, mean cosine) of a phase function: the trapezoid rule in t
+    with cos = sin(pi t / 2)."""
+    t = torch.linspace(-1, 1, 200001, dtype=F64)
+    c = torch.sin(math.pi / 2 * t)  # nodes crowd toward cos = +-1, where the peaks are
+    p = fn(c, g).double().cpu()
+    w = torch.full_like(c, 2 / 200000) * math.pi / 2 * torch.cos(math.pi / 2 * t)
+    w[0] = w[-1] = 0.0
+    return (2 * math.pi * (p * w).sum()).item(), (2 * math.pi * (p * c * w).sum()).item()
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.5)
+def test_henyey_greenstein_normalised(impl, device):
+    c = torch.linspace(-1, 1, 41, dtype=F64)
+    for g in (-0.99, -0.5, 0.0, 0.3, 0.99):
+        got = impl.henyey_greenstein(c.to(device), g)
+        check_tensor(got, f"henyey_greenstein(g={g})", shape=(41,), dtype=F64, device=device)
+        assert_close(got, hg(c, g), rtol=1e-10, name=f"henyey_greenstein(cos, g={g}) with "
+                     f"(1 - g^2) / (4 pi (1 + g^2 - 2 g cos)^1.5)", where="cos index")
+        total, mean = quadrature(lambda x, gg: impl.henyey_greenstein(x.to(device), gg), g)
+        assert abs(total - 1) < 2e-3 and abs(mean - g) < 2e-3, (
+            f"henyey_greenstein(g={g}): integral over the sphere {total:.5f} (want 1), mean "
+            f"cosine {mean:.5f} (want g)")
+    fwd = impl.henyey_greenstein(torch.tensor([1.0, -1.0], dtype=F32, device=device), 0.7).cpu()
+    assert fwd[0] > 10 * fwd[1], (
+        f"henyey_greenstein(g=0.7): forward (cos = +1) must dominate, got {fwd.tolist()}")
+    gt = torch.tensor([0.2, -0.4], dtype=F64, device=device)
+    assert_close(impl.henyey_greenstein(torch.tensor([0.5, 0.5], dtype=F64, device=device), gt),
+                 hg(torch.tensor(0.5, dtype=F64), gt.cpu()), rtol=1e-10,
+                 name="henyey_greenstein with a tensor g")
+    expect_error("g", impl.henyey_greenstein, c.to(device), 1.0, case="g = 1")
+    expect_error("cos_theta", impl.henyey_greenstein, torch.ones(3, dtype=torch.int64), 0.1,
+                 kinds=(TypeError,), case="int64 cos_theta")
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.5)
+def test_schlick_phase_clamped(impl, device):
+    for g in (-0.99, 0.0, 0.5, 0.9, 0.99, 0.9999):
+        c = torch.linspace(-1, 1, 101, dtype=F64, device=device)
+        got = impl.schlick_phase(c, g).cpu()
+        no_nan(f"schlick_phase(g={g})", p=got)
+        assert (got > 0).all(), f"schlick_phase(g={g}): must be positive, got min {got.min()}"
+        total, mean = quadrature(lambda x, gg: impl.schlick_phase(x.to(device), gg), g)
+        assert abs(total - 1) < 5e-3, (
+            f"schlick_phase(g={g}): integral over the sphere {total:.5f}, want 1. k = 1.55 g - "
+            f"0.55 g^3 exceeds 1 above g = 0.9986: clamp |k| to SCHLICK_K_MAX")
+        if abs(g) <= 0.5:
+            assert abs(mean - g) < 0.06, (
+                f"schlick_phase(g={g}): mean cosine {mean:.4f} should approximate g")
+    k = 1.55 * 0.5 - 0.55 * 0.125
+    c = torch.tensor([0.3], dtype=F64, device=device)
+    assert_close(impl.schlick_phase(c, 0.5), (1 - k * k) / (4 * math.pi * (1 - k * 0.3) ** 2)
+                 * torch.ones(1, dtype=F64), rtol=1e-10,
+                 name="schlick_phase(0.3, g=0.5) = (1 - k^2) / (4 pi (1 - k cos)^2)")
+
+
+def tile_samples(grid, per_axis=6, depths=24):
+    """World points (ny, nx, M, 3) inside every tile's frustum, M = per_axis^2 * depths."""
+    f = (torch.arange(per_axis, dtype=F64) + 0.5) / per_axis
+    zs = torch.linspace(0, grid.slices, depths, dtype=F64)
+    j = torch.arange(grid.ny, dtype=F64)
+    i = torch.arange(grid.nx, dtype=F64)
+    jj, ii, fy, fx, zz = torch.meshgrid(j, i, f, f, zs, indexing="ij")
+    coords = torch.stack([ii + fx, jj + fy, zz], -1).reshape(grid.ny, grid.nx, -1, 3)
+    return ref_points(grid, coords)
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(1)
+def test_cull_lights_keeps_every_touched_tile(impl, device):
+    grid = small_grid()
+    g = generator(5)
+    eye = torch.tensor(grid.camera.eye, dtype=F64)
+    lights = [SUN]
+    # Lights near tile borders, in front of and behind the camera, large and small.
+    for n in range(24):
+        c = torch.rand(3, generator=g, dtype=F64) * torch.tensor([grid.nx, grid.ny, 10.0])
+        c[0], c[1] = c[0].round() + 0.02 * (n % 3 - 1), c[1].round()
+        p = ref_points(grid, c) if n % 6 else eye + torch.tensor([0.0, 0.3, 1.5 + n / 10])
+        lights.append(PointLight(position=tuple(p.tolist()), intensity=(1, 1, 1),
+                                 range=0.3 + 2.5 * float(torch.rand(1, generator=g))))
+    lights.append(SpotLight(position=(0.0, 3.0, -40.0), range=3.0))  # beyond far + range
+    got = check_tensor(impl.cull_lights(grid, lights, device), "cull_lights",
+                       shape=(len(lights), grid.ny, grid.nx), dtype=torch.bool,
+                       device=device).cpu()
+    pts = tile_samples(grid)
+    for n, light in enumerate(lights):
+        if isinstance(light, DirectionalLight):
+            assert got[n].all(), "cull_lights: the sun reaches every tile"
+            continue
+        reach = ((pts - torch.tensor(light.position, dtype=F64)).norm(dim=-1)
+                 < light.range).any(-1)
+        missed = reach & ~got[n]
+        if missed.any():
+            j, i = missed.nonzero()[0].tolist()
+            raise AssertionError(
+                f"cull_lights: light {n} (position {light.position}, range {light.range:.2f}) "
+                f"reaches tile (row {j}, column {i}) but is not in its list ({int(missed.sum())} "
+                f"tiles dropped). Test the sphere against each tile plane with distance >= "
+                f"-range, so spheres straddling a tile border are kept.")
+    assert not got[-1].any(), "cull_lights: a light beyond far + range reaches no tile"
+    touched = sum(int(((pts - torch.tensor(x.position, dtype=F64)).norm(dim=-1)
+                       < x.range).any(-1).sum()) for x in lights[1:])
+    listed = int(got[1:].sum())
+    assert listed <= 2 * touched + 4 * len(lights), (
+        f"cull_lights: {listed} light-tile pairs listed for {touched} touched: culling "
+        f"should drop tiles the light cannot reach")
+    expect_error("lights", impl.cull_lights, grid, [ConstantFog()], device, kinds=(TypeError,),
+                 case="a medium in the light list")
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.5)
+def test_shadow_map_matches_exact_shadow_rays(impl, device):
+    light = SHADOW.lights[0]
+    smap = impl.build_shadow_map(SHADOW, light, (0.0, 2.0, -7.0), 8.0, 128, F64, device)
+    assert isinstance(smap, LightVolume) and smap.kind == "ortho", \
+        "build_shadow_map: return an 'ortho' LightVolume"
+    check_tensor(smap.data, "build_shadow_map data", shape=(128, 128), dtype=F64, device=device)
+    g = generator(6)
+    points = torch.rand(4000, 3, generator=g, dtype=F64) * torch.tensor([6.0, 3.9, 8.0]) \
+        + torch.tensor([-3.0, 0.0, -11.0])
+    vis = check_tensor(impl.shadow_lookup(smap, points.to(device)), "shadow_lookup",
+                       shape=(4000,), dtype=F64, device=device).cpu()
+    exact = torch.isinf(ray_boxes(points, torch.tensor(light.direction, dtype=F64).expand(
+        4000, 3), SHADOW.occluders)).to(F64)
+    assert 0.1 < exact.mean() < 0.9, "test set-up: lit and shadowed points"
+    assert_fraction(vis != exact, name="shadow_lookup vs exact shadow rays (texels of 12.5 cm "
+                    "blur the shadow's edge)", at_most=0.03, where="point")
+    far_away = impl.shadow_lookup(smap, torch.tensor([[50.0, 0.0, 0.0]], dtype=F64,
+                                                     device=device)).cpu()
+    assert far_away.item() == 1, "shadow_lookup: points outside the map are lit"
+
+
+def uniform_vbuffer(grid, sigma_s, sigma_t, g, dtype, device, mask=None):
+    shape = grid.shape
+    m = torch.ones(shape, dtype=dtype) if mask is None else mask.to(dtype)
+    return {"scattering": (m[..., None] * torch.tensor(sigma_s, dtype=dtype)).to(device),
+            "extinction": (m * sigma_t).to(device),
+            "emissive": torch.zeros(*shape, 3, dtype=dtype, device=device),
+            "g": (m * g).to(device)}
+
+
+def expected_source(grid, scene, jitter, sigma_s, g):
+    """Lit source at every froxel (S, ny, nx, 3), float64, no shadows."""
+    p = ref_points(grid, sample_coords(grid, jitter))
+    eye = torch.tensor(grid.camera.eye, dtype=F64)
+    v = (p - eye) / (p - eye).norm(dim=-1, keepdim=True)
+    total = torch.tensor(scene.ambient, dtype=F64).expand(*p.shape[:-1], 3).clone()
+    for light in scene.lights:
+        if isinstance(light, DirectionalLight):
+            to = torch.tensor(light.direction, dtype=F64).expand_as(p)
+            e = torch.tensor(light.irradiance, dtype=F64) * torch.ones_like(p)
+        else:
+            rel = torch.tensor(light.position, dtype=F64) - p
+            d = rel.norm(dim=-1, keepdim=True)
+            to = rel / d
+            e = torch.tensor(light.intensity, dtype=F64) / d.square() * (d < light.range)
+            if isinstance(light, SpotLight):
+                c = -(to @ torch.tensor(light.direction, dtype=F64))
+                lo, hi = (math.cos(math.radians(x)) for x in (light.outer_deg, light.inner_deg))
+                s = ((c - lo) / (hi - lo)).clamp(0, 1)
+                e = e * (s * s * (3 - 2 * s))[..., None]
+        total = total + e * hg((v * to).sum(-1), g)[..., None]
+    return torch.tensor(sigma_s, dtype=F64) * total
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(1)
+def test_light_froxels_matches_closed_form(impl, device):
+    grid = small_grid()
+    scene = Scene(media=(ConstantFog(),), ambient=(0.1, 0.2, 0.3), lights=(
+        SUN, PointLight(position=(0.3, 1.2, -4.0), intensity=(4.0, 3.0, 2.0), range=6.0),
+        SpotLight(position=(-0.5, 3.0, -6.0), direction=(0.2, -1.0, 0.1), range=9.0,
+                  inner_deg=20.0, outer_deg=35.0)))
+    sigma_s, g = (0.05, 0.04, 0.03), 0.4
+    for jitter in (0.5, 0.2):
+        vb = uniform_vbuffer(grid, sigma_s, 0.06, g, F64, device)
+        src, report = impl.light_froxels(scene, grid, vb, jitter, volumetric_shadows=False)
+        check_tensor(src, "light_froxels source", shape=(*grid.shape, 3), dtype=F64,
+                     device=device)
+        assert_close(src, expected_source(grid, scene, jitter, sigma_s, g), rtol=1e-7,
+                     atol=1e-12, name=f"light_froxels (jitter={jitter}): sigma_s (ambient + "
+                     f"sum phase(v.l) E) at froxel (i + 0.5, j + 0.5, k + jitter)",
+                     where="froxel [k, j, i, rgb]")
+        assert report["froxels_lit"] == math.prod(grid.shape), \
+            f"light_froxels: every froxel holds fog here, report says {report['froxels_lit']}"
+    # Media in a few tiles only: the others are not lit (only their emission remains).
+    mask = torch.zeros(grid.shape, dtype=torch.bool)
+    mask[3:9, 1:3, 2:5] = True
+    vb = uniform_vbuffer(grid, sigma_s, 0.06, g, F32, device, mask)
+    vb["emissive"][-1, -1, -1] = 0.5  # an emitting froxel in an otherwise empty tile
+    src, report = impl.light_froxels(scene, grid, vb, 0.5, volumetric_shadows=False)
+    lit = src.cpu().abs().amax(-1) > 0
+    assert not (lit & ~mask).reshape(-1)[:-1].any(), \
+        "light_froxels: froxels without scattering medium must receive no light"
+    assert src.cpu()[-1, -1, -1].tolist() == [0.5, 0.5, 0.5], \
+        "light_froxels: emission is added where there is no light"
+    assert report["froxels_lit"] == int(mask.sum()), (
+        f"light_froxels: report['froxels_lit'] = {report['froxels_lit']}, want the "
+        f"{int(mask.sum())} froxels with scattering medium")
+    assert report["light_evaluations"] <= len(scene.lights) * int(mask.sum()), \
+        "light_froxels: light_evaluations counts froxel-light pairs actually evaluated"
+    # A light inside the fog, on a froxel's sample point: finite.
+    p = ref_points(grid, torch.tensor([4.5, 2.5, 6.5], dtype=F64))
+    inside = Scene(media=(ConstantFog(),), lights=(PointLight(position=tuple(p.tolist())),))
+    src, _ = impl.light_froxels(inside, grid, uniform_vbuffer(grid, sigma_s, 0.06, g, F32,
+                                                              device), 0.5)
+    no_nan("light_froxels (a point light on a froxel's sample point)", source=src)
+    expect_error("phase", impl.light_froxels, scene, grid, vb, 0.5, phase="rayleigh",
+                 case="an unknown phase function")
+    expect_error("vbuffer", impl.light_froxels, scene, grid, {"scattering": 1}, 0.5,
+                 kinds=(TypeError, ValueError), case="an incomplete V-buffer")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 4: volumetric shadows
+
+
+def slab_depth(points, to_light, lo, hi, sigma):
+    """Exact optical depth toward the light through a constant-extinction box."""
+    lo, hi = torch.tensor(lo, dtype=F64), torch.tensor(hi, dtype=F64)
+    inv = 1 / to_light
+    a, b = (lo - points) * inv, (hi - points) * inv
+    t0 = torch.minimum(a, b).amax(-1).clamp(min=0)
+    t1 = torch.maximum(a, b).amin(-1)
+    return sigma * (t1 - t0).clamp(min=0)
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(1)
+def test_transmittance_volume_sun(impl, device):
+    lo, hi, sigma, n = (-4.0, 0.0, -12.0), (4.0, 4.0, -2.0), 0.15, 24
+    scene = Scene(media=(ConstantFog(scattering=(0.1,) * 3, extinction=sigma),))
+    ext = check_tensor(impl.extinction_volume(scene, lo, hi, n, F64, device),
+                       "extinction_volume", shape=(n, n, n), dtype=F64, device=device)
+    assert_close(ext, torch.full((n, n, n), sigma, dtype=F64), rtol=1e-12,
+                 name="extinction_volume of constant fog")
+    light = DirectionalLight(direction=(0.4, 1.0, 0.3))
+    tv = impl.transmittance_volume(ext, lo, hi, light, 48)
+    assert isinstance(tv, LightVolume) and tv.data.ndim == 3, \
+        "transmittance_volume: return a LightVolume with (R, R, K) data"
+    g = generator(7)
+    pts = torch.tensor(lo, dtype=F64) + torch.rand(2000, 3, generator=g, dtype=F64) * (
+        torch.tensor(hi, dtype=F64) - torch.tensor(lo, dtype=F64))
+    got = impl.sample_light_volume(tv, pts.to(device))
+    check_tensor(got, "sample_light_volume", shape=(2000,), dtype=F64, device=device)
+    to = torch.tensor(light.direction, dtype=F64).expand(2000, 3)
+    want = torch.exp(-slab_depth(pts, to, lo, hi, sigma))
+    # Texels of 0.3 m and depth steps of 0.14 m: the box's faces are resolved to ~0.2 m,
+    # 3% of transmittance at sigma = 0.15.
+    assert_close(got, want, atol=0.03, name="sample_light_volume (sun, constant-extinction "
+                 "box): exp(-sigma * length inside the box toward the sun)", where="point")
+    assert (got.cpu() - want).abs().mean() < 0.006, "sample_light_volume (sun): mean error"
+    # A region an order of magnitude denser than fp32's exp can represent: T = 0, no NaN.
+    dense = impl.extinction_volume(Scene(media=(ConstantFog(scattering=(1e3,) * 3,
+                                                            extinction=1e6),)),
+                                   lo, hi, 16, F32, device)
+    tv = impl.transmittance_volume(dense, lo, hi, light, 16)
+    deep = slab_depth(pts, to, lo, hi, 1.0) > 4.0  # 4 m of medium toward the sun
+    t = impl.sample_light_volume(tv, pts.float().to(device)).cpu()
+    no_nan("sample_light_volume (sigma_t = 1e6)", transmittance=t)
+    assert deep.sum() > 50, "test set-up: deep points"
+    # Texels of 0.8 m blend in rays along the box's sides: most deep points are exactly dark.
+    assert t[deep].max() < 0.05 and t[deep].median() < 1e-6, (
+        f"sample_light_volume: points 4 m deep inside sigma_t = 1e6 toward the sun are dark, "
+        f"got up to {t[deep].max():.3g} (median {t[deep].median():.3g})")
+    expect_error("light", impl.transmittance_volume, ext, lo, hi, PointLight(), 8,
+                 kinds=(TypeError,), case="a point light")
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(0.5)
+def test_transmittance_volume_spot(impl, device):
+    lo, hi, sigma = (-3.0, 0.0, -10.0), (3.0, 3.0, -2.0), 0.3
+    ext = torch.full((16, 16, 16), sigma, dtype=F64, device=device)
+    spot = SpotLight(position=(0.0, 5.0, -6.0), direction=(0.0, -1.0, 0.1), range=10.0,
+                     outer_deg=30.0)
+    tv = impl.transmittance_volume(ext, lo, hi, spot, 48)
+    assert tv.kind == "persp", "transmittance_volume: a spot light gets a 'persp' volume"
+    g = generator(8)
+    pts = torch.tensor([-1.5, 0.0, -7.5], dtype=F64) + torch.rand(1000, 3, generator=g,
+                                                                    dtype=F64) * 3
+    rel = torch.tensor(spot.position, dtype=F64) - pts
+    cone = (-rel / rel.norm(dim=-1, keepdim=True)) @ torch.tensor(spot.direction, dtype=F64) \
+        > math.cos(math.radians(27))
+    got = impl.sample_light_volume(tv, pts.to(device)).cpu()
+    want = torch.exp(-slab_depth(pts, rel / rel.norm(dim=-1, keepdim=True), lo, hi, sigma))
+    assert cone.sum() > 200, "test set-up: points inside the cone"
+    assert_close(got[cone], want[cone], atol=0.04, name="sample_light_volume (spot light, "
+                 "perspective volume): exp(-sigma * length inside the box toward the light)",
+                 where="point in the cone")
+    behind = impl.sample_light_volume(tv, torch.tensor([[0.0, 8.0, -6.0]], dtype=F64,
+                                                       device=device)).cpu()
+    assert behind.item() == 1, "sample_light_volume: behind a spot light T = 1"
+
+
+# ---------------------------------------------------------------------------------------
+# Task 5: temporal integration
+
+
+def linear_field(grid, coeff=(0.3, -0.2, 0.15, 1.0)):
+    """(S, ny, nx, 2): channel 0 linear in the froxel centre coordinates, channel 1 = 1."""
+    c = sample_coords(grid, 0.5)
+    f = coeff[0] * c[..., 0] + coeff[1] * c[..., 1] + coeff[2] * c[..., 2] + coeff[3]
+    return torch.stack([f, torch.ones_like(f)], -1)
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(1)
+def test_reproject_follows_the_camera(impl, device):
+    prev = small_grid()
+    history = linear_field(prev)
+    values, valid = impl.reproject(history.to(device), prev, prev)
+    check_tensor(values, "reproject values", shape=history.shape, dtype=F64, device=device)
+    check_tensor(valid, "reproject valid", shape=prev.shape, dtype=torch.bool, device=device)
+    assert valid.all(), "reproject: a static camera keeps all its history"
+    assert_close(values, history, atol=1e-9, name="reproject (static camera): the history "
+                 "itself", where="froxel [k, j, i, c]")
+    # The camera steps sideways: each froxel reads the previous volume where its centre was.
+    cam = dataclasses.replace(prev.camera, eye=(0.9, 1.0, 2.0), target=(0.4, 0.8, -6.0))
+    grid = dataclasses.replace(prev, camera=cam)
+    values, valid = impl.reproject(history.to(device), prev, grid)
+    p = ref_points(grid, sample_coords(grid, 0.5))
+    eye, right, up, fwd, (hw, hh) = prev.axes()
+    rel = p - eye
+    z = rel @ fwd
+    ref_coords = torch.stack([((rel @ right) / (z * hw) + 1) * prev.camera.width / 16,
+                              (1 - (rel @ up) / (z * hh)) * prev.camera.height / 16,
+                              prev.slices * torch.log(z / prev.near) / math.log(
+                                  prev.far / prev.near)], -1)
+    limits = torch.tensor([prev.nx, prev.ny, prev.slices], dtype=F64)
+    inside = ((ref_coords >= 0) & (ref_coords <= limits)).all(-1)
+    # Away from the border clamp (half a froxel) trilinear reproduces a linear field.
+    where = ((ref_coords >= 0.5) & (ref_coords <= limits - 0.5)).all(-1)
+    assert 0.2 < inside.double().mean() < 0.98, "test set-up: some history leaves the frustum"
+    assert_equal(valid.cpu(), inside, name="reproject valid: inside the previous frustum",
+                 where="froxel [k, j, i]")
+    want = 0.3 * ref_coords[..., 0] - 0.2 * ref_coords[..., 1] + 0.15 * ref_coords[..., 2] + 1
+    assert_close(values.cpu()[..., 0][where], want[where], atol=1e-6,
+                 name="reproject values (camera moved): history at the froxel centre's "
+                      "previous froxel coordinates", where="kept froxel")
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(0.5)
+def test_reproject_rejects_history_outside(impl, device):
+    prev = small_grid()
+    cam = dataclasses.replace(prev.camera, target=(1.0, 1.0, 10.0))  # turned around
+    grid = dataclasses.replace(prev, camera=cam)
+    history = linear_field(prev)[..., 0].contiguous().to(device)
+    values, valid = impl.reproject(history, prev, grid)
+    assert not valid.cpu().any(), (
+        f"reproject: the camera turned around, no froxel saw this space before, yet "
+        f"{int(valid.sum())} keep history. Drop history outside the previous frustum.")
+    current = torch.rand(prev.shape, generator=generator(9), dtype=F64).to(device)
+    blended = impl.temporal_blend(current, values, valid)
+    assert_equal(blended, current.cpu(), name="temporal_blend with all history rejected: "
+                 "the current frame", where="froxel")
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(0.5)
+def test_temporal_blend_exponential(impl, device):
+    g = generator(10)
+    cur = torch.rand(4, 3, 5, 3, generator=g, dtype=F64)
+    his = torch.rand(4, 3, 5, 3, generator=g, dtype=F64)
+    valid = torch.rand(4, 3, 5, generator=g) < 0.7
+    got = impl.temporal_blend(cur.to(device), his.to(device), valid.to(device))
+    want = torch.where(valid[..., None], 0.95 * his + 0.05 * cur, cur)
+    assert_close(got, want, rtol=1e-12, atol=1e-15, name="temporal_blend: 5% of the new frame "
+                 "where the history is valid", where="froxel [k, j, i, c]")
+    got = impl.temporal_blend(cur[..., 0].contiguous().to(device),
+                              his[..., 0].contiguous().to(device), valid.to(device), 0.5)
+    assert_close(got, torch.where(valid, (his + cur)[..., 0] / 2, cur[..., 0]), rtol=1e-12,
+                 name="temporal_blend(alpha=0.5) of a scalar volume")
+    expect_error("alpha", impl.temporal_blend, cur, his, valid, 0.0, case="alpha = 0")
+    expect_error("valid", impl.temporal_blend, cur, his, valid.long(), case="int64 valid",
+                 kinds=(TypeError, ValueError))
+
+
+# ---------------------------------------------------------------------------------------
+# Task 6: final integration
+
+
+def phi64(x):
+    return torch.where(x > 0, -torch.expm1(-x) / x.clamp(min=1e-300), torch.ones_like(x))
+
+
+@pytest.mark.task(6)
+@pytest.mark.points(1)
+def test_slice_integral_limits(impl, device):
+    g = generator(11)
+    s = torch.rand(200, 3, generator=g, dtype=F64) * 2
+    sigma = 10 ** (torch.rand(200, generator=g, dtype=F64) * 12 - 9)
+    d = 10 ** (torch.rand(200, generator=g, dtype=F64) * 4 - 2)
+    sigma[:4] = torch.tensor([0.0, 1e-8, 1e6, 1e3])
+    d[3] = 100.0  # optical depth 1e5: e^-tau underflows even in float64
+    for dtype, rtol in ((F64, 1e-12), (F32, 2e-6)):
+        integral, trans = impl.slice_integral(s.to(dtype).to(device), sigma.to(dtype).to(device),
+                                              d.to(dtype).to(device))
+        check_tensor(integral, "slice_integral integral", shape=(200, 3), dtype=dtype,
+                     device=device)
+        check_tensor(trans, "slice_integral transmittance", shape=(200,), dtype=dtype,
+                     device=device)
+        no_nan(f"slice_integral ({dtype})", integral=integral, transmittance=trans)
+        sig = sigma.to(dtype).double()
+        tau = sig * d.to(dtype).double()
+        want = s.to(dtype).double() * (d.to(dtype).double() * phi64(tau))[:, None]
+        assert_close(integral, want, rtol=rtol * 4, atol=1e-30,
+                     name=f"slice_integral ({dtype}): (S - S e^(-sigma D)) / sigma, = S D at "
+                          f"sigma = 0 and 1e-8, S / sigma at 1e6", where="element")
+        # Below the dtype's smallest normal number, 0 is as good as any value.
+        assert_close(trans, torch.exp(-tau), rtol=rtol * 4, atol=torch.finfo(dtype).tiny,
+                     name=f"slice_integral ({dtype}) transmittance e^(-sigma D)", where="element")
+        assert trans.cpu()[2].item() == 0 and trans.cpu()[3].item() == 0, \
+            "slice_integral: optical depths of 1e6 and 1e5 leave T = 0"
+    # Gradient at sigma = 0: d/dsigma [S D phi(sigma D)] = -S D^2 / 2, finite.
+    for value in (0.0, 1e-8):
+        sg = torch.tensor([value], dtype=F64, device=device, requires_grad=True)
+        out, _ = impl.slice_integral(torch.ones(1, 1, dtype=F64, device=device), sg,
+                                     torch.full((1,), 2.0, dtype=F64, device=device))
+        (grad,) = torch.autograd.grad(out.sum(), sg)
+        assert torch.isfinite(grad).all() and abs(grad.item() + 2.0) < 1e-6, (
+            f"slice_integral: the gradient at sigma = {value} must be finite, -S D^2 / 2 = -2, "
+            f"got {grad.item()} (a (1 - e^-x)/x with a 0/0 branch poisons autograd: use a "
+            f"series for small x, and a safe denominator in the other branch)")
+
+
+def column_lengths(grid):
+    z = ref_depths(grid.near, grid.far, grid.slices)
+    j = torch.arange(grid.ny, dtype=F64) + 0.5
+    i = torch.arange(grid.nx, dtype=F64) + 0.5
+    jj, ii = torch.meshgrid(j, i, indexing="ij")
+    return (z[1:] - z[:-1])[:, None, None] * ref_dirs(grid, ii, jj).norm(dim=-1)
+
+
+@pytest.mark.task(6)
+@pytest.mark.points(1)
+def test_integrate_froxels_homogeneous_and_energy(impl, device):
+    for slices in (8, 16, 32):
+        grid = small_grid(slices=slices)
+        src = torch.tensor([0.02, 0.05, 0.1], dtype=F64).expand(*grid.shape, 3)
+        ext = torch.full(grid.shape, 0.08, dtype=F64)
+        L, T = impl.integrate_froxels(src.to(device), ext.to(device), grid)
+        check_tensor(L, "integrate_froxels inscatter", shape=(*grid.shape, 3), dtype=F64,
+                     device=device)
+        check_tensor(T, "integrate_froxels transmittance", shape=grid.shape, dtype=F64,
+                     device=device)
+        dist = column_lengths(grid).cumsum(0)  # path length to each slice's far boundary
+        want = src * (dist * phi64(0.08 * dist))[..., None]
+        assert_close(L, want, rtol=1e-9, name=f"integrate_froxels ({slices} slices, "
+                     f"homogeneous): S (1 - e^(-sigma s)) / sigma at each far boundary, "
+                     f"independent of the slice count", where="froxel [k, j, i, rgb]")
+        assert_close(T, torch.exp(-0.08 * dist), rtol=1e-9,
+                     name="integrate_froxels transmittance", where="froxel [k, j, i]")
+    # A dense, varying medium in equilibrium (S = c sigma): L = c (1 - T) exactly.
+    grid = small_grid()
+    sig = 10 ** (torch.rand(grid.shape, generator=generator(12), dtype=F64) * 4 - 2)
+    L, T = impl.integrate_froxels((0.7 * sig[..., None]).expand(*grid.shape, 3).to(F32)
+                                  .to(device), sig.to(F32).to(device), grid)
+    assert_close(L.cpu()[..., 1], 0.7 * (1 - T.cpu().double()), atol=2e-6, rtol=1e-5,
+                 name="integrate_froxels (S = 0.7 sigma, sigma up to 100/m): L = 0.7 (1 - T): "
+                      "no more light than the medium can emit (update T after adding the "
+                      "slice's integral)", where="froxel [k, j, i]")
+    expect_error("method", impl.integrate_froxels, src.to(device), ext.to(device),
+                 small_grid(slices=32), method="trapezoid", case="an unknown method")
+    expect_error("source", impl.integrate_froxels, src[..., :2].contiguous().to(device),
+                 ext.to(device), small_grid(slices=32), case="2 colour channels")
+
+
+@pytest.mark.task(6)
+@pytest.mark.points(0.5)
+def test_integrate_froxels_naive_leaks(impl, device):
+    grid = small_grid()
+    sig = torch.full(grid.shape, 20.0, dtype=F64)  # slices 0.1 .. 8 m long: optical depth >> 1
+    src = 0.5 * sig[..., None].expand(*grid.shape, 3)
+    energy, t_e = impl.integrate_froxels(src.to(device), sig.to(device), grid, "energy")
+    naive, t_n = impl.integrate_froxels(src.to(device), sig.to(device), grid, "naive")
+    bound = 0.5 * (1 - t_e.cpu()[-1])
+    leak = (naive.cpu()[-1, ..., 0] / bound).min().item()
+    assert leak > 2.0, (
+        f"integrate_froxels(method='naive'): S D T per slice (no absorption within a slice) "
+        f"must overshoot the emitted light 0.5 (1 - T) in thick slices (the talk's leak); "
+        f"got only {leak:.3f}x of it")
+    assert_close(energy.cpu()[-1, ..., 0], bound, rtol=1e-9,
+                 name="integrate_froxels(method='energy') on the same medium: 0.5 (1 - T)")
+    assert_close(t_n, t_e.cpu(), rtol=1e-12, name="naive and energy share the transmittance")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 7: application and the whole frame
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(1)
+def test_apply_froxels_trilinear_lookup(impl, device):
+    grid = small_grid()
+    h, w = grid.camera.height, grid.camera.width
+    # Multilinear in the node coordinates (tile centres across, slice boundaries in depth),
+    # with L = 0 and T = 1 at the front node: trilinear interpolation reproduces it exactly.
+    k = torch.arange(1, grid.slices + 1, dtype=F64)
+    j = torch.arange(grid.ny, dtype=F64)
+    i = torch.arange(grid.nx, dtype=F64)
+    kk, jj, ii = torch.meshgrid(k, j, i, indexing="ij")
+    L = torch.stack([0.01 * kk, 0.01 * kk * (1 + 0.2 * jj), 0.01 * kk * (1 + 0.1 * ii)], -1)
+    T = 1 - 0.05 * kk * (1 + 0.1 * jj)
+    g = generator(13)
+    kz = torch.rand(h, w, generator=g, dtype=F64) * grid.slices
+    depth = grid.near * (grid.far / grid.near) ** (kz / grid.slices)
+    k5 = grid.slices * math.log(5.0 / grid.near) / math.log(grid.far / grid.near)
+    depth[0, :8] = torch.tensor([INF, 1e9, grid.far, 0.0, grid.near / 2, grid.near, 5.0, 5.0])
+    kz[0, :8] = torch.tensor([grid.slices] * 3 + [0.0] * 3 + [k5] * 2)
+    opaque = torch.rand(h, w, 3, generator=g, dtype=F64)
+    out = poisoned((h, w, 3), F64, device)
+    got = impl.apply_froxels(L.to(device), T.to(device), grid, depth.to(device),
+                             opaque.to(device), out=out)
+    check_tensor(got, "apply_froxels", shape=(h, w, 3), dtype=F64, device=device)
+    no_nan("apply_froxels into a NaN-poisoned out", out=out)
+    # Reference: clamp to the nodes, then the multilinear field itself.
+    y = ((torch.arange(h, dtype=F64) + 0.5) / grid.tile - 0.5).clamp(0, grid.ny - 1)
+    x = ((torch.arange(w, dtype=F64) + 0.5) / grid.tile - 0.5).clamp(0, grid.nx - 1)
+    yy, xx = y[:, None].expand(h, w), x[None, :].expand(h, w)
+    want_l = torch.stack([0.01 * kz, 0.01 * kz * (1 + 0.2 * yy), 0.01 * kz * (1 + 0.1 * xx)], -1)
+    want = opaque * (1 - 0.05 * kz * (1 + 0.1 * yy))[..., None] + want_l
+    assert_close(out, want, atol=1e-8, name="apply_froxels: opaque * T + L, trilinear at "
+                 "((col + 0.5) / tile, (row + 0.5) / tile) between tile centres and at the "
+                 "slice coordinate of the depth between slice boundaries (L = 0, T = 1 at near; "
+                 "beyond far: the last slice)", where="pixel (row, col, rgb)")
+    got32 = impl.apply_froxels(L.float().to(device), T.float().to(device), grid,
+                               depth.float().to(device), opaque.float().to(device))
+    assert_close(got32, want, atol=2e-5, name="apply_froxels in float32")
+    expect_error("depth_image", impl.apply_froxels, L, T, grid, depth[:, :-1], opaque,
+                 case="a depth image of the wrong size")
+    bad = depth.clone()
+    bad[3, 3] = math.nan
+    expect_error("depth_image", impl.apply_froxels, L, T, grid, bad, opaque,
+                 case="a NaN depth")
+    expect_error("opaque_image", impl.apply_froxels, L, T, grid, depth, opaque.float(),
+                 kinds=(TypeError,), case="float32 opaque with float64 depths")
+
+
+def render(impl, scene, device, dtype=F32, depth_value=12.0, **kw):
+    depth, opaque = images(depth_value, dtype=dtype, device=device)
+    args = {"tile": TILE, "slices": SLICES, "near": NEAR, "far": FAR, **kw}
+    image, report = impl.render_froxels(scene, CAMERA, depth, opaque, **args)
+    check_tensor(image, "render_froxels image", shape=(H, W, 3), dtype=dtype, device=device)
+    no_nan("render_froxels", image=image)
+    return image.cpu().double(), report
+
+
+PIXELS = torch.arange(0, H * W, 61)  # 605 pixels spread over the image
+
+
+def compare(what, got, ref, max_tol, mean_tol):
+    """Max and mean error relative to the largest reference radiance."""
+    scale = ref.abs().max().item()
+    assert_close(got, ref, atol=max_tol * scale, name=f"{what}: max error allowed "
+                 f"{max_tol:.0%} of the largest radiance {scale:.3g}", where="pixel (index, rgb)")
+    mean = (got - ref).abs().mean().item() / scale
+    assert mean <= mean_tol, f"{what}: mean error {mean:.2%} of {scale:.3g}, allowed {mean_tol:.0%}"
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(1)
+def test_render_froxels_homogeneous_closed_form(impl, device):
+    image, report = render(impl, HOMOGENEOUS, device, volumetric_shadows=False)
+    fog = HOMOGENEOUS.media[0]
+    dirs = pixel_dirs(CAMERA)
+    depth, _ = images()
+    length = (depth.double().clamp(max=FAR) - NEAR) * dirs.norm(dim=-1)
+    view = dirs / dirs.norm(dim=-1, keepdim=True)
+    cos = view @ torch.tensor(SUN.direction, dtype=F64)
+    sig = fog.extinction
+    want = (torch.tensor(fog.scattering, dtype=F64) * hg(cos, fog.g)[..., None]
+            * torch.tensor(SUN.irradiance, dtype=F64) * ((1 - torch.exp(-sig * length))
+                                                         / sig)[..., None]
+            + OPAQUE * torch.exp(-sig * length)[..., None])
+    compare("render_froxels (homogeneous fog, sun, no shadows) vs the closed form "
+            "sigma_s p E (1 - e^(-sigma_t l)) / sigma_t + opaque e^(-sigma_t l)",
+            image, want, 0.04, 0.005)
+    assert report["froxels_lit"] == report["froxels"] == math.prod(GRID.shape), \
+        "render_froxels: every froxel of a homogeneous fog is lit (report['froxels_lit'])"
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(1)
+def test_render_froxels_height_fog_against_reference(impl, device):
+    image, _ = render(impl, HEIGHT, device)
+    depth, opaque = images()
+    ref = reference_render(HEIGHT, CAMERA, depth, opaque, near=NEAR, far=FAR, tile=TILE,
+                           slices=SLICES, samples=48, shadow_steps=12, pixels=PIXELS)
+    compare("render_froxels (height fog, sun with volumetric shadows, ambient) vs the "
+            "brute-force reference", image.reshape(-1, 3)[PIXELS], ref["image"], 0.05, 0.01)
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(1)
+def test_render_froxels_fog_box_point_light_against_reference(impl, device):
+    for dtype in (F32, F64):
+        image, report = render(impl, fog_box_scene(dtype), device, dtype=dtype)
+        depth, opaque = images()
+        ref = reference_render(fog_box_scene(), CAMERA, depth, opaque, near=NEAR, far=FAR,
+                               samples=96, pixels=PIXELS)
+        compare(f"render_froxels ({dtype}: a fog volume with a density texture, lit by a "
+                f"point light above it) vs the brute-force reference",
+                image.reshape(-1, 3)[PIXELS], ref["image"], 0.1, 0.005)
+        assert report["froxels_lit"] < 0.5 * report["froxels"], (
+            f"render_froxels: only froxels with fog are lit; the fog volume covers a small part "
+            f"of the view but {report['froxels_lit']} of {report['froxels']} froxels were lit")
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(1)
+def test_render_froxels_shadow_into_fog_against_reference(impl, device):
+    image, _ = render(impl, SHADOW, device, shadow_resolution=256)
+    depth, opaque = images()
+    ref = reference_render(SHADOW, CAMERA, depth, opaque, near=NEAR, far=FAR, tile=TILE,
+                           slices=SLICES, samples=64, shadow_steps=12, pixels=PIXELS)
+    unlit, _ = render(impl, Scene(media=SHADOW.media, lights=()), device)
+    # A tile of blur at the shadow's edges: up to 20% there, 3% on average.
+    compare("render_froxels (a box shadowing the sun in fog: light shafts) vs the brute-force "
+            "reference with exact shadow rays", image.reshape(-1, 3)[PIXELS], ref["image"],
+            0.2, 0.03)
+    no_shadow, _ = render(impl, dataclasses.replace(SHADOW, occluders=()), device)
+    dark = (no_shadow - image).amax(-1)
+    assert dark.max() > 0.2 * (no_shadow - unlit).max(), \
+        "render_froxels: the occluder must cast a visible shadow into the fog"
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(0.5)
+def test_render_froxels_energy_independent_of_slices(impl, device):
+    scene = Scene(media=(ConstantFog(scattering=(0.2, 0.2, 0.2), extinction=0.25),),
+                  lights=(SUN,))
+    results = {}
+    for slices in (8, 16, 64):
+        image, _ = render(impl, scene, device, depth_value=INF, slices=slices,
+                          volumetric_shadows=False)
+        results[slices] = image
+    # Every pixel looks into the sky: the integral to 'far' is exact for any slice count.
+    for slices in (8, 16):
+        assert_close(results[slices], results[64], rtol=2e-4,
+                     name=f"render_froxels of a homogeneous medium with {slices} slices vs 64: "
+                          f"the energy-conserving integral does not depend on the slice count",
+                     where="pixel (row, col, rgb)")
+    naive, _ = render(impl, scene, device, depth_value=INF, slices=8, volumetric_shadows=False,
+                      integration="naive")
+    assert (naive - results[64]).max() > 0.1 * results[64].max(), \
+        "render_froxels(integration='naive') leaks light in thick slices"
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(0.5)
+def test_render_froxels_models_only_what_is_needed(impl, device):
+    depth, opaque = images(device=device)
+    empty = Scene(lights=(SUN, PointLight(position=(0.0, 2.0, -5.0))))
+    image, report = impl.render_froxels(empty, CAMERA, depth, opaque, tile=TILE, slices=SLICES,
+                                        near=NEAR, far=FAR)
+    assert_equal(image, opaque.cpu(), name="render_froxels without media: the opaque image")
+    assert report["froxels_lit"] == 0 and report["light_evaluations"] == 0, \
+        f"render_froxels without media must light nothing, report {report}"
+    far_light = PointLight(position=(25.0, 1.0, -10.0), intensity=(5, 5, 5), range=2.0)
+    near_light = PointLight(position=(0.0, 1.0, -7.0), intensity=(5, 5, 5), range=3.0)
+    scene = dataclasses.replace(fog_box_scene(F32), lights=(near_light, far_light))
+    _, report = impl.render_froxels(scene, CAMERA, depth, opaque, tile=TILE, slices=SLICES,
+                                    near=NEAR, far=FAR)
+    assert report["light_tiles"][1] == 0, (
+        f"render_froxels: a light out of view (range 2 m, 25 m to the side) must be culled "
+        f"from every tile, report['light_tiles'] = {report['light_tiles']}")
+    assert 0 < report["light_tiles"][0] < GRID.nx * GRID.ny, \
+        f"render_froxels: the light by the fog reaches some tiles, not all: {report}"
+    assert report["light_evaluations"] < report["froxels_lit"] * 2, \
+        "render_froxels: light_evaluations counts the froxel-light pairs evaluated"
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(1)
+def test_render_froxels_temporal(impl, device):
+    scene = fog_box_scene(F32)
+    depth, opaque = images(device=device)
+    args = {"tile": TILE, "slices": SLICES, "near": NEAR, "far": FAR}
+    # Frame 1 on its own: material and lighting share the Halton jitter.
+    one, rep = impl.render_froxels(scene, CAMERA, depth, opaque, temporal=True, frame=1,
+                                   **args)
+    assert rep["jitter"] == pytest.approx(frame_jitter(1)), \
+        "render_froxels: frame n samples at frame_jitter(n)"
+    grid = FroxelGrid(CAMERA, TILE, SLICES, NEAR, FAR)
+    vb = impl.voxelize(scene, grid, frame_jitter(1), F32, device)
+    src, _ = impl.light_froxels(scene, grid, vb, frame_jitter(1))
+    L, T = impl.integrate_froxels(src, vb["extinction"], grid)
+    staged = impl.apply_froxels(L, T, grid, depth, opaque)
+    assert_close(one, staged, atol=1e-6, rtol=1e-5,
+                 name="render_froxels(temporal, frame=1, no history) vs voxelize, light_froxels, "
+                      "integrate_froxels and apply_froxels at jitter frame_jitter(1): material "
+                      "and lighting must share one jitter", where="pixel (row, col, rgb)")
+    zero, _ = impl.render_froxels(scene, CAMERA, depth, opaque, temporal=True, frame=0, **args)
+    assert (zero.cpu() - one.cpu()).abs().max() > 1e-4, "render_froxels: frames 0 and 1 jitter"
+    # A static camera converges toward the reference over frames.
+    ref = reference_render(fog_box_scene(), CAMERA, depth, opaque, near=NEAR, far=FAR,
+                           samples=96, pixels=PIXELS)["image"]
+    history, errors = None, {}
+    for frame in range(8):
+        image, rep = impl.render_froxels(scene, CAMERA, depth, opaque, temporal=True,
+                                         frame=frame, history=history, **args)
+        history = rep["history"]
+        if frame:
+            assert rep["history_valid"] == pytest.approx(1.0), \
+                "render_froxels: a static camera keeps all of its history"
+        errors[frame] = (image.cpu().double().reshape(-1, 3)[PIXELS] - ref).abs().mean().item()
+    assert errors[7] < errors[0], f"temporal integration should reduce the error: {errors}"
+    # The camera turns around: all history is outside the previous frustum and dropped.
+    turned = dataclasses.replace(CAMERA, target=(0.0, 1.5, 10.0))
+    image, rep = impl.render_froxels(scene, turned, depth, opaque, temporal=True, frame=8,
+                                     history=history, **args)
+    alone, _ = impl.render_froxels(scene, turned, depth, opaque, temporal=True, frame=8,
+                                   **args)
+    assert rep["history_valid"] == 0, \
+        f"render_froxels: after turning around no history is valid, got {rep['history_valid']}"
+    assert_close(image, alone, atol=1e-7, name="render_froxels after a camera move that puts "
+                 "all history outside the frustum: the frame without history")
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(0.5)
+def test_render_froxels_extremes_and_bad_input(impl, device):
+    # Opaque fog (sigma_t = 1e6): the wall disappears, T = 0, no NaN.
+    dense = Scene(media=(ConstantFog(scattering=(5e5,) * 3, extinction=1e6),), lights=(SUN,),
+                  ambient=(0.1, 0.1, 0.1))
+    image, _ = render(impl, dense, device)
+    hidden = image - OPAQUE
+    assert hidden.abs().max() > 0 and (image > 0).all(), "render_froxels (sigma_t = 1e6)"
+    # Near plane at 1e-4 and depths beyond the last slice.
+    image, _ = render(impl, HOMOGENEOUS, device, near=1e-4, depth_value=1e4,
+                      volumetric_shadows=False)
+    ref, _ = render(impl, HOMOGENEOUS, device, near=1e-4, depth_value=INF,
+                    volumetric_shadows=False)
+    assert_close(image, ref, rtol=1e-6, name="render_froxels: a depth beyond far reads the last "
+                 "slice, like the sky")
+    # float64 and float32 agree; float16 is rejected.
+    f64, _ = render(impl, HEIGHT, device, dtype=F64)
+    f32, _ = render(impl, HEIGHT, device, dtype=F32)
+    assert_close(f32, f64, rtol=1e-4, atol=1e-6, name="render_froxels float32 vs float64")
+    depth, opaque = images(device=device)
+    expect_error("depth_image", impl.render_froxels, HEIGHT, CAMERA, depth.half(), opaque.half(),
+                 kinds=(TypeError,), case="float16 images (rejected: use float32)")
+    expect_error("scene", impl.render_froxels, "fog", CAMERA, depth, opaque, kinds=(TypeError,),
+                 case="a string for the scene")
+    expect_error("tile", impl.render_froxels, HEIGHT, CAMERA, depth, opaque, tile=0,
+                 case="tile = 0")
+    expect_error("integration", impl.render_froxels, HEIGHT, CAMERA, depth, opaque,
+                 integration="riemann", case="an unknown integration")
+    bad = depth.clone()
+    bad[0, 0] = -1.0
+    expect_error("depth_image", impl.render_froxels, HEIGHT, CAMERA, bad, opaque,
+                 case="a negative depth")
+    inf_color = opaque.clone()
+    inf_color[5, 5] = INF
+    image, _ = impl.render_froxels(HEIGHT, CAMERA, depth, inf_color, tile=TILE, slices=SLICES,
+                                   near=NEAR, far=FAR)
+    assert torch.isinf(image.cpu()[5, 5]).all() and torch.isfinite(image.cpu()[6, 6]).all(), \
+        "render_froxels: an inf opaque colour stays inf (opaque * T + L) and does not spread"
+    cpu_agrees(device, "render_froxels", f64, impl.render_froxels, HEIGHT, CAMERA,
+               images(dtype=F64)[0], images(dtype=F64)[1], tile=TILE, slices=SLICES,
+               near=NEAR, far=FAR)
+
+
+# ---------------------------------------------------------------------------------------
+# The reference renderer itself (course code; ungraded)
+
+
+def test_reference_renderer_closed_form():
+    depth, opaque = images(dtype=F64)
+    fog = HOMOGENEOUS.media[0]
+    ref = reference_render(HOMOGENEOUS, CAMERA, depth, opaque, near=NEAR, far=FAR, samples=8,
+                           pixels=PIXELS, volumetric_shadows=False)
+    dirs = pixel_dirs(CAMERA).reshape(-1, 3)[PIXELS]
+    length = (depth.reshape(-1)[PIXELS].clamp(max=FAR) - NEAR) * dirs.norm(dim=-1)
+    cos = (dirs / dirs.norm(dim=-1, keepdim=True)) @ torch.tensor(SUN.direction, dtype=F64)
+    want = torch.tensor(fog.scattering, dtype=F64) * phase_value(cos, fog.g)[:, None] * 2.0 \
+        * ((1 - torch.exp(-0.06 * length)) / 0.06)[:, None]
+    assert_close(ref["inscatter"], want, rtol=1e-9, name="reference_render (homogeneous)")
+
+
+def test_reference_renderer_converges():
+    depth, opaque = images(dtype=F64)
+    scene = fog_box_scene()
+    a = reference_render(scene, CAMERA, depth, opaque, near=NEAR, far=FAR, samples=64,
+                         pixels=PIXELS)["image"]
+    b = reference_render(scene, CAMERA, depth, opaque, near=NEAR, far=FAR, samples=256,
+                         pixels=PIXELS)["image"]
+    assert (a - b).abs().max() < 0.01 * b.max(), "reference_render: 64 vs 256 samples"
+    assert frustum_bounds(GRID)[0][2] < -FAR * 0.9, "frustum_bounds reach far"
