@@ -26,7 +26,9 @@ At the largest size it sweeps the knobs of the rasterizer:
 Then, for every scene of ``--scenes`` (suzanne, bunny, bunny_x4, bunny_x16 on a GPU) and
 frame of ``--frames`` (512x512, 1920x1080, 3840x2160 on a GPU), the ``frame`` series:
 
-* ``raster``: ``rasterize_mesh`` (visibility + perspective-correct barycentrics);
+* ``raster``: ``rasterize_mesh`` (visibility + perspective-correct barycentrics), and the
+  visibility buffer alone (triangle ids) from the lab's ``rasterize`` and, on CUDA, from
+  the fused kernels of ``course.triton_raster`` (same setup stages, same keys);
 * ``raytrace``: ``traced_visibility`` through ``course.flat_bvh.trace_bvh`` (a binned-SAH
   BVH, Triton traversal on CUDA; its build time is reported apart, ``build_s``), the
   fair competitor at scale where brute force is hopeless;
@@ -92,6 +94,20 @@ def raster_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32,
     else:
         keys = tiled_keys(screen, camera.width, camera.height, tile, **kwargs)
     k = lab.triangle_ids(keys)
+    ids = torch.where(k >= 0, source[k.clamp(min=0)], -1) if len(source) else k
+    return ids.reshape(camera.height, camera.width)
+
+
+def fused_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.Tensor:
+    """``raster_ids`` with ``rasterize`` replaced by the fused Triton kernels (CUDA)."""
+    from course.triton_raster import rasterize_triton
+
+    mvp = camera.view_projection(torch.float64).to(mesh.device)
+    clip = lab.to_clip_space(mesh.vertices, mvp)
+    clipped, source, _ = lab.clip_triangles(clip[mesh.faces])
+    screen = lab.to_screen(clipped, camera.width, camera.height)
+    k = lab.triangle_ids(rasterize_triton(screen, camera.width, camera.height,
+                                          depth_bits=depth_bits))
     ids = torch.where(k >= 0, source[k.clamp(min=0)], -1) if len(source) else k
     return ids.reshape(camera.height, camera.width)
 
@@ -228,6 +244,20 @@ def bench_frames(table: ResultTable, device, cfg: dict) -> None:
             _add(table, method="frame", setting="raster visibility", seconds=t.median,
                  ms_per_frame=1e3 * t.median, pixels_per_s=width * height / t.median,
                  disagreement=differ, **common)
+            t_ids = time_fn(raster_ids, mesh, cam, repeats=cfg["repeats"], warmup=1,
+                            device=device)
+            _add(table, method="frame", setting="raster ids (torch)", seconds=t_ids.median,
+                 ms_per_frame=1e3 * t_ids.median, pixels_per_s=width * height / t_ids.median,
+                 **common)
+            if device.type == "cuda":
+                fused = fused_ids(mesh, cam)
+                t_f = time_fn(fused_ids, mesh, cam, repeats=cfg["repeats"], warmup=1,
+                              device=device)
+                same = ((fused != raster_ids(mesh, cam)).double().mean()).item()
+                _add(table, method="frame", setting="raster ids (fused Triton)",
+                     seconds=t_f.median, ms_per_frame=1e3 * t_f.median,
+                     pixels_per_s=width * height / t_f.median, differs_from_torch=same,
+                     raster_speedup=t_rt.median / t_f.median, **common)
             _add(table, method="frame", setting="BVH-traced visibility", seconds=t_rt.median,
                  ms_per_frame=1e3 * t_rt.median, pixels_per_s=width * height / t_rt.median,
                  build_s=build_s, raster_speedup=t_rt.median / t.median, **common)

@@ -1,0 +1,115 @@
+"""The fused rasterizer (course/triton_raster.py) against Lab 6's reference ``rasterize``.
+
+Not shipped to students (it compares with ``solutions/``). The same keys are asked for on
+scenes that exercise both kernels: Suzanne (small triangles), a jittered mesh covering the
+screen (watertight: no pixel left empty), a few screen-filling and off-screen triangles
+(the program-per-triangle kernel, clamping), NaN and zero-area triangles (nothing drawn),
+with 32-bit and 24-bit depth and with back-face culling. Keys may differ only where an FMA
+changes a last bit: at most a few pixels in a thousand.
+
+The CPU check runs the kernels in Triton's interpreter in a subprocess (``TRITON_INTERPRET``
+must be set before Triton is imported); with CUDA they also run compiled, in process.
+Usage as the subprocess: ``python tests/meta/test_triton_raster.py INPUTS.pt OUTPUTS.pt``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+REPO = Path(__file__).resolve().parents[2]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+needs_triton = pytest.mark.skipif(importlib.util.find_spec("triton") is None,
+                                  reason="triton is not installed")
+RUNS = {"32": {"depth_bits": 32}, "24": {"depth_bits": 24},
+        "cull": {"depth_bits": 32, "cull_backfaces": True}}
+
+
+def cases() -> dict:
+    from course.bench import load_lab
+    from course.scenes import load_scene
+
+    lab = load_lab("lab6_raster", "solutions")
+    scene = load_scene("suzanne")
+    width, height = 40, 28
+    mvp = scene.camera.view_projection(torch.float64)
+    clip = lab.to_clip_space(scene.mesh.vertices, mvp)
+    clipped, _, _ = lab.clip_triangles(clip[scene.mesh.faces])
+    suzanne = lab.to_screen(clipped, width, height).float()
+    # A jittered grid of quads covering the screen, then special triangles on top.
+    g = torch.Generator().manual_seed(3)
+    xs = torch.linspace(-2, width + 2, 8, dtype=torch.float64)
+    ys = torch.linspace(-2, height + 2, 6, dtype=torch.float64)
+    p = torch.stack(torch.meshgrid(xs, ys, indexing="xy"), -1)
+    p[1:-1, 1:-1] += (torch.rand(4, 6, 2, generator=g, dtype=torch.float64) - 0.5) * 3
+    a, b, c, d = p[:-1, :-1], p[:-1, 1:], p[1:, 1:], p[1:, :-1]
+    quads = torch.cat([torch.stack([a, b, c], -2), torch.stack([a, c, d], -2)]).reshape(-1, 3, 2)
+    depth = 0.2 + 0.6 * torch.rand(len(quads), 3, 1, generator=g, dtype=torch.float64)
+    grid = torch.cat([quads, depth * 2 - 1, 1 / (1 + 4 * depth)], -1)
+    special = torch.tensor([
+        [[-500, -400, 0.3, 0.5], [900, -300, 0.1, 0.6], [10, 800, 0.2, 0.7]],  # fills the screen
+        [[60, 60, 0.0, 1.0], [80, 60, 0.0, 1.0], [70, 90, 0.0, 1.0]],          # off screen
+        [[5, 5, 0.0, 1.0], [15, 5, 0.0, 1.0], [25, 5, 0.0, 1.0]],              # zero area
+        [[5, 5, float("nan"), 1.0], [15, 5, 0.0, 1.0], [5, 15, 0.0, 1.0]],     # NaN depth
+        [[5, 5, 0.0, 1.0], [float("nan"), 5, 0.0, 1.0], [5, 15, 0.0, 1.0]],    # NaN position
+        [[30, 2, -0.9, 0.9], [30, 20, -0.9, 0.9], [2, 11, 1.5, 0.9]],          # past the far plane
+    ], dtype=torch.float64)
+    mixed = torch.cat([grid, special]).float()
+    return {"suzanne": (suzanne, width, height), "mixed": (mixed, width, height)}
+
+
+def run_kernels(data: dict, device: str) -> dict:
+    from course.triton_raster import rasterize_triton
+
+    return {(name, run): rasterize_triton(screen.to(device), w, h, small_box=32, **knobs).cpu()
+            for name, (screen, w, h) in data.items() for run, knobs in RUNS.items()}
+
+
+def check(data: dict, out: dict, where: str) -> None:
+    from course.bench import load_lab
+
+    lab = load_lab("lab6_raster", "solutions")
+    for (name, run), keys in out.items():
+        screen, w, h = data[name]
+        want = lab.rasterize(screen, w, h, **RUNS[run])
+        differ = (keys != want).double().mean().item()
+        assert differ <= 0.004, (f"{where}, {name}, depth/cull {run}: keys differ from the "
+                                 f"reference on {differ:.2%} of the pixels (allowed: 0.4%)")
+        if name == "mixed" and run != "cull":
+            assert (keys != lab.EMPTY).all(), f"{where}, {name}, {run}: a pixel left empty"
+
+
+@needs_triton
+def test_interpreted_matches_reference(tmp_path):
+    data = cases()
+    inputs, outputs = tmp_path / "in.pt", tmp_path / "out.pt"
+    torch.save(data, inputs)
+    env = dict(os.environ, TRITON_INTERPRET="1",
+               PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
+    proc = subprocess.run([sys.executable, __file__, str(inputs), str(outputs)], env=env,
+                          capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    check(data, torch.load(outputs, weights_only=False), "TRITON_INTERPRET=1")
+
+
+@needs_triton
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_compiled_matches_reference():
+    from course.triton_intersect import interpreting
+
+    if interpreting():
+        pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
+    data = cases()
+    check(data, run_kernels(data, "cuda"), "compiled")
+
+
+if __name__ == "__main__":
+    torch.save(run_kernels(torch.load(sys.argv[1], weights_only=False), "cpu"), sys.argv[2])
