@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import weakref
 from dataclasses import dataclass
 
 import torch
@@ -253,12 +254,17 @@ def _pow(x, s):
 
 @_jit
 def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, nodes_f, nodes_i, tris_f, tris_i, stack_ptr,
-                    stride, mat_id_ptr, mat_ptr, light_ptr, n_lights, max_depth,
+                    stride, mat_id_ptr, mat_ptr, light_ptr,
                     amb_r, amb_g, amb_b, bg_r, bg_g, bg_b, offset,
+                    N_LIGHTS: tl.constexpr, MAX_DEPTH: tl.constexpr,
                     BLOCK: tl.constexpr, EXIT: tl.constexpr):
     """The uber kernel: per lane, primary ray -> (closest hit -> shade with shadow rays ->
     mirror bounce) up to ``max_depth`` bounces; the radiance recursion unrolled into a
-    loop with a throughput weight (``L += kr * radiance(...)`` becomes ``weight *= kr``)."""
+    loop with a throughput weight (``L += kr * radiance(...)`` becomes ``weight *= kr``).
+
+    The light count and the depth are compile-time constants: the loops stay loops (not
+    unrolled), but their trip counts are known, which also keeps the interpreter of older
+    Tritons (whose scalar arguments are 1-element arrays) able to run them."""
     slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = slot < n_rays
     ox = tl.load(o_ptr + slot * 3 + 0, mask=live, other=0.0)
@@ -281,7 +287,7 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, nodes_f, nodes_i, tris_f, tri
     c_b = tl.where(finite, zero, bg_b)
     active = live & finite
     inv_pi = 0.3183098861837907
-    for depth in range(max_depth + 1):
+    for depth in range(MAX_DEPTH + 1):
         t, row, _u, _v = _trace(nodes_f, nodes_i, tris_f, tris_i, stack_ptr, slot, stride,
                                 ox, oy, oz, dx, dy, dz, zero, inf, active, False, EXIT)
         hit = active & (row >= 0)
@@ -331,7 +337,7 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, nodes_f, nodes_i, tris_f, tri
         c_r += tl.where(hit, w_r * amb_r * kd_r, 0.0)
         c_g += tl.where(hit, w_g * amb_g * kd_g, 0.0)
         c_b += tl.where(hit, w_b * amb_b * kd_b, 0.0)
-        for li in range(n_lights):
+        for li in range(N_LIGHTS):
             lb = light_ptr + li * 8
             lpx = tl.load(lb + 0)
             lpy = tl.load(lb + 1)
@@ -529,15 +535,27 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
 # The uber kernel
 # --------------------------------------------------------------------------------------
 
+_TABLES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def _scene_tables(scene, device, offset: float):
     """Per-face material ids (F,) int32, materials (M, 12) float32 ``kd ks kr shininess``,
-    lights (L, 8) float32 ``xyz, is_point, rgb, OFFSET max(1, |P|inf)`` of a WhittedScene."""
+    lights (L, 8) float32 ``xyz, is_point, rgb, offset max(1, |P|inf)``, the light count,
+    and the ambient and background colours as 6 floats, of a WhittedScene: built once per
+    scene, device and offset (cached like its BVH), so a frame launches without host syncs."""
     names = ("vertices", "faces", "material", "kd", "ks", "shininess", "kr", "point_positions",
              "point_intensities", "dir_directions", "dir_irradiance", "ambient", "background")
     for name in names:
         if not isinstance(getattr(scene, name, None), torch.Tensor):
             raise TypeError(f"scene: expected a WhittedScene with a {name!r} tensor, "
                             f"got {type(scene).__name__}")
+    key = (str(device), offset)
+    try:
+        cached = _TABLES.setdefault(scene, {})
+    except TypeError:  # not weakly referenceable: no cache
+        cached = {}
+    if key in cached:
+        return cached[key]
     f32 = {"dtype": torch.float32, "device": device}
     mats = torch.zeros(scene.kd.shape[0], 12, **f32)
     mats[:, 0:3], mats[:, 3:6], mats[:, 6:9] = scene.kd, scene.ks, scene.kr
@@ -552,8 +570,10 @@ def _scene_tables(scene, device, offset: float):
     lights = torch.cat([point, direc], 0).contiguous()
     if not len(lights):
         lights = torch.zeros(1, 8, **f32)  # never read: n_lights = 0
-    return (scene.material.to(device, torch.int32).contiguous(), mats.contiguous(), lights,
-            len(pp) + len(dd))
+    colours = [float(x) for x in torch.cat([scene.ambient, scene.background]).tolist()]
+    cached[key] = (scene.material.to(device, torch.int32).contiguous(), mats.contiguous(),
+                   lights, len(pp) + len(dd), colours)
+    return cached[key]
 
 
 def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
@@ -580,9 +600,7 @@ def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
     if bvh is None:
         bvh = flat_bvh_for(scene).to(device)
     nodes_f, nodes_i, tris_f, tris_i = _bvh_args(bvh, device)
-    mat_id, mats, lights, n_lights = _scene_tables(scene, device, float(offset))
-    amb = [float(x) for x in scene.ambient.tolist()]
-    bg = [float(x) for x in scene.background.tolist()]
+    mat_id, mats, lights, n_lights, colours = _scene_tables(scene, device, float(offset))
     out = torch.empty(n, 3, dtype=torch.float32, device=device)
     handle = None
     if n:
@@ -590,7 +608,7 @@ def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
         with _ieee_quiet():
             handle = _whitted_kernel[(lanes // block,)](
                 o, d, out, n, nodes_f, nodes_i, tris_f, tris_i, stack, lanes, mat_id, mats,
-                lights, n_lights, max_depth, *amb, *bg, float(offset),
+                lights, *colours, float(offset), N_LIGHTS=n_lights, MAX_DEPTH=max_depth,
                 BLOCK=block, EXIT=EXIT_SCALE, num_warps=num_warps)
     if return_info:
         return out, _info("whitted_uber", handle, num_warps, block)

@@ -1,0 +1,262 @@
+"""Lab 3 GPU benchmark: the CUDA C tracer against the Triton kernels, and the uber kernel.
+
+    python bench/lab3_gpu.py [--small] [--size S] [--frame F] [--out DIR]
+
+On a GPU, in one run:
+
+* **rays/s** of the BVH walk on the Stanford bunny (69K triangles, binned-SAH BVH, leaves
+  of <= 4): ``S x S`` primary rays from its framing camera (coherent) and as many diffuse
+  bounce rays (cosine-distributed about the normal at the primary hits, origins in pixel
+  order: incoherent directions), traced by the CUDA C kernel (course.cuda_tracer, one
+  thread per ray, local-memory stack) and by the Triton kernel (course.triton_tracer, one
+  ray per lane) at several launch shapes; target: Triton >= 50% of CUDA C;
+* **ms/frame** of the whole Whitted frame (``F x F`` pixels, shadow rays to every light,
+  up to 2 mirror bounces) by the Triton uber kernel on the Cornell mirror scene and the
+  bunny on a mirror floor; target: <= 5 ms;
+* each kernel's registers, spills, local memory and occupancy (the Triton kernels' from
+  the compiled binary, the CUDA kernel's from cudaFuncGetAttributes and
+  cudaOccupancyMaxActiveBlocksPerMultiprocessor, both next to course.occupancy's model);
+* **errors**: hits on a sample of rays against the float64 brute force of
+  course.whitted_support (fraction of rays with another triangle, worst relative error of
+  t), and the uber kernel's image on a pixel grid against render_reference.
+
+On the CPU (``--small``, or no GPU) the same rows run at a tiny size with the torch
+traversal (and the Triton kernels when TRITON_INTERPRET=1 is set); CUDA C rows are skipped
+with the reason. Writes ``lab3_gpu.json`` (a ResultTable with the command line) and
+``lab3_gpu.md`` to ``--out``, by default ``bench/results/<device_name>/lab3_gpu/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from course import cuda_tracer, triton_tracer
+from course.bench import ResultTable, device_name, time_fn
+from course.camera import primary_rays
+from course.flat_bvh import build_flat_bvh, flat_bvh_for, trace_flat_torch
+from course.whitted_support import (
+    OFFSET,
+    render_reference,
+    trace_brute_force,
+    whitted_camera,
+    whitted_scene,
+)
+
+TRITON_SHAPES = [(32, 1), (64, 2), (128, 4)]  # (lanes per program, warps)
+CUDA_BLOCKS = [64, 128, 256]
+
+
+def diffuse_rays(bvh, origins, directions, hits, n: int, seed: int = 0):
+    """``n`` cosine-distributed bounce rays from the primary hits, in pixel order (hit
+    pixels repeated cyclically up to ``n``): origin offset along the normal facing the ray
+    by the Whitted contract's OFFSET, direction about that normal (Malley's method)."""
+    hit = hits.triangle >= 0
+    idx = hit.nonzero()[:, 0]
+    idx = idx[torch.arange(n, device=idx.device) % len(idx)]
+    o, d, t = origins[idx], directions[idx], hits.t[idx]
+    row_of = torch.empty_like(bvh.order)
+    row_of[bvh.order] = torch.arange(len(bvh.order), device=bvh.order.device)
+    rows = bvh.triangles[row_of[hits.triangle[idx]]]  # the hit triangles' e1, e2
+    normal = torch.linalg.cross(rows[:, 4:7], rows[:, 8:11])
+    normal = normal / normal.norm(dim=1, keepdim=True)
+    normal = torch.where((normal * d).sum(1, keepdim=True) > 0, -normal, normal)
+    p = o + t[:, None] * d
+    p = p + normal * OFFSET * p.abs().amax(1, keepdim=True).clamp(min=1)
+    g = torch.Generator(device=o.device).manual_seed(seed)
+    r = torch.rand(n, generator=g, device=o.device).sqrt()
+    phi = 2 * math.pi * torch.rand(n, generator=g, device=o.device)
+    # An orthonormal frame about the normal (Duff et al. 2017).
+    sign = torch.where(normal[:, 2] >= 0, 1.0, -1.0)
+    a = -1 / (sign + normal[:, 2])
+    b = normal[:, 0] * normal[:, 1] * a
+    tx = torch.stack([1 + sign * normal[:, 0] ** 2 * a, sign * b, -sign * normal[:, 0]], 1)
+    ty = torch.stack([b, sign + normal[:, 1] ** 2 * a, -normal[:, 1]], 1)
+    x, y = r * phi.cos(), r * phi.sin()
+    z = (1 - r * r).clamp(min=0).sqrt()
+    dirs = x[:, None] * tx + y[:, None] * ty + z[:, None] * normal
+    return p.contiguous(), (dirs / dirs.norm(dim=1, keepdim=True)).contiguous()
+
+
+def hit_errors(scene, origins, directions, hits, sample: int) -> dict:
+    """Against float64 brute force on ``sample`` evenly spaced rays: the fraction with
+    another triangle and the worst relative t error where both hit the same one."""
+    idx = torch.linspace(0, len(origins) - 1, sample, device=origins.device).long()
+    s64 = scene.to(torch.float64)
+    o, d = origins[idx].double(), directions[idx].double()
+    ref = trace_brute_force(s64, o, d, torch.zeros_like(o[:, 0]), torch.full_like(o[:, 0],
+                                                                                  math.inf))
+    tri = hits.triangle[idx]
+    same = tri == ref.triangle
+    both = same & (tri >= 0)
+    rel = ((hits.t[idx].double() - ref.t).abs() / ref.t.abs())[both]
+    return {"mismatch": 1 - same.double().mean().item(),
+            "t_rel_err": rel.max().item() if len(rel) else 0.0}
+
+
+def triton_row(info) -> dict:
+    occ = info.occupancy()
+    return {"regs": info.n_regs, "spills": info.n_spills, "local_bytes": None,
+            "threads_per_block": 32 * info.num_warps,
+            "occupancy_model": None if occ is None else occ.occupancy,
+            "occupancy_cuda": None}
+
+
+def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repeats, sample):
+    """Time every implementation on one ray set; add a row each."""
+    n = len(rays_o)
+    fastest = {}
+    if device.type == "cuda":
+        reason = cuda_tracer.unavailable_reason()
+        if reason is None:
+            try:
+                cuda_tracer.cuda_kernel_info()  # compiles the extension (~1 min, once)
+            except (RuntimeError, OSError, ImportError) as err:  # keep the Triton rows
+                reason = f"the CUDA C build failed: {err!r}"[:2000]
+        if reason is None:
+            for block in CUDA_BLOCKS:
+                fn = cuda_tracer.trace_flat_cuda
+                hits = fn(bvh, rays_o, rays_d, block=block)
+                t = time_fn(fn, bvh, rays_o, rays_d, block=block, repeats=repeats)
+                info = cuda_tracer.cuda_kernel_info(block=block)
+                row = table.add(scene=scene_name, rays=kind, impl="CUDA C", launch=f"{block} thr",
+                                n_rays=n, ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
+                                regs=info.num_regs, spills=None, local_bytes=info.local_bytes,
+                                threads_per_block=block,
+                                occupancy_model=info.occupancy_model,
+                                occupancy_cuda=info.occupancy_cuda,
+                                **hit_errors(scene, rays_o, rays_d, hits, sample))
+                fastest["CUDA C"] = max(fastest.get("CUDA C", 0), row["grays_per_s"])
+                print(_line(row), flush=True)
+        else:
+            print(f"CUDA C skipped: {reason}")
+    if device.type == "cuda" or triton_tracer.interpreting():
+        shapes = TRITON_SHAPES if device.type == "cuda" else TRITON_SHAPES[:1]
+        for block, warps in shapes:
+            fn = triton_tracer.trace_flat_triton
+            hits, info = fn(bvh, rays_o, rays_d, block=block, num_warps=warps, return_info=True)
+            t = time_fn(fn, bvh, rays_o, rays_d, block=block, num_warps=warps, repeats=repeats,
+                        warmup=1)
+            row = table.add(scene=scene_name, rays=kind, impl="Triton",
+                            launch=f"{block} lanes/{warps} warps", n_rays=n, ms=t.median * 1e3,
+                            grays_per_s=n / t.median / 1e9, **triton_row(info),
+                            **hit_errors(scene, rays_o, rays_d, hits, sample))
+            fastest["Triton"] = max(fastest.get("Triton", 0), row["grays_per_s"])
+            print(_line(row), flush=True)
+    if device.type == "cpu":
+        t = time_fn(trace_flat_torch, bvh, rays_o, rays_d, repeats=repeats, warmup=1)
+        hits = trace_flat_torch(bvh, rays_o, rays_d)
+        row = table.add(scene=scene_name, rays=kind, impl="torch (CPU fallback)", launch="-",
+                        n_rays=n, ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
+                        **hit_errors(scene, rays_o, rays_d, hits, sample))
+        print(_line(row), flush=True)
+    return fastest
+
+
+def bench_frames(table, device, frame, repeats, ref_grid):
+    for name in ("cornell_mirror", "bunny_mirror"):
+        scene = whitted_scene(name, device=device)
+        bvh = flat_bvh_for(scene)
+        rays = primary_rays(whitted_camera(name, frame, frame), device)
+        render = triton_tracer.render_whitted_triton
+        rgb, info = render(scene, rays.origins, rays.directions, return_info=True)
+        t = time_fn(render, scene, rays.origins, rays.directions, bvh=bvh, repeats=repeats,
+                    warmup=1)
+        # Reference on a grid of pixels: every (frame / ref_grid)-th row and column.
+        step = max(1, frame // ref_grid)
+        pix = torch.arange(0, frame, step, device=device)
+        idx = (pix[:, None] * frame + pix[None, :]).reshape(-1)
+        want = render_reference(scene, rays.origins[idx], rays.directions[idx])
+        err = (rgb[idx].double() - want).abs().amax(1) / want.abs().amax(1).clamp(min=1e-3)
+        row = table.add(scene=name, rays=f"Whitted frame {frame}x{frame}, 2 bounces",
+                        impl="Triton uber", launch=f"{info.block} lanes/{info.num_warps} warps",
+                        n_rays=frame * frame, ms=t.median * 1e3,
+                        grays_per_s=frame * frame / t.median / 1e9, **triton_row(info),
+                        mismatch=(err > 1e-3).double().mean().item(),
+                        t_rel_err=None, image_rel_err_median=err.median().item())
+        print(_line(row), flush=True)
+
+
+def _line(row: dict) -> str:
+    cells = [f"{row['scene']}", row["rays"], row["impl"], row["launch"],
+             f"{row['ms']:.3f} ms", f"{row['grays_per_s']:.3g} G rays/s"]
+    if row.get("regs") is not None:
+        cells.append(f"{row['regs']} regs")
+    if row.get("spills") is not None:
+        cells.append(f"{row['spills']} spills")
+    if row.get("local_bytes") is not None:
+        cells.append(f"{row['local_bytes']} B local")
+    if row.get("occupancy_model") is not None:
+        cells.append(f"occ model {row['occupancy_model']:.0%}")
+    if row.get("occupancy_cuda") is not None:
+        cells.append(f"occ CUDA {row['occupancy_cuda']:.0%}")
+    cells.append(f"mismatch {row['mismatch']:.2%}")
+    return " | ".join(cells)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--small", action="store_true", help="tiny sizes (CPU)")
+    parser.add_argument("--size", type=int, help="image side of the ray sets (rays = size^2)")
+    parser.add_argument("--frame", type=int, help="image side of the Whitted frames")
+    parser.add_argument("--out", type=Path)
+    args = parser.parse_args(argv)
+    device = torch.device("cuda" if torch.cuda.is_available() and not args.small else "cpu")
+    small = args.small or device.type == "cpu"
+    size = args.size or (24 if small else 1024)
+    frame = args.frame or (8 if small else 1024)
+    repeats, sample = (2, 64) if small else (20, 4096)
+    out = args.out or REPO / "bench" / "results" / device_name(device) / "lab3_gpu"
+    table = ResultTable("lab3 gpu tracers", device=device)
+
+    scene = whitted_scene("bunny_mirror", device=device)
+    bunny_faces = scene.faces[scene.material == 0]  # the bunny alone, without the floor
+    bunny = dataclasses.replace(scene, faces=bunny_faces,
+                                material=scene.material[: len(bunny_faces)])
+    start = time.perf_counter()
+    bvh = build_flat_bvh(bunny.vertices, bunny.faces, leaf_size=4)
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+    build_s = time.perf_counter() - start
+    table.metadata.update(bunny_triangles=len(bunny_faces), bvh_nodes=bvh.num_nodes,
+                          bvh_depth=bvh.depth, bvh_bytes=bvh.nbytes, bvh_build_s=build_s)
+    print(f"bunny: {len(bunny_faces)} triangles, BVH {bvh.num_nodes} nodes, depth {bvh.depth}, "
+          f"{bvh.nbytes / 1e6:.1f} MB, built in {build_s:.2f} s on {device}", flush=True)
+    from course.scenes import load_scene
+
+    camera = dataclasses.replace(load_scene("bunny", device="cpu").camera, width=size,
+                                 height=size)
+    primary = primary_rays(camera, device)
+    o, d = primary.origins.contiguous(), primary.directions.contiguous()
+    hits = trace_flat_torch(bvh, o, d) if device.type == "cpu" else \
+        triton_tracer.trace_flat_triton(bvh, o, d)
+    bo, bd = diffuse_rays(bvh, o, d, hits, size * size)
+    speeds = {}
+    for kind, (ro, rd) in {"primary": (o, d), "diffuse": (bo, bd)}.items():
+        speeds[kind] = bench_rays(table, "bunny", bunny, bvh, ro, rd, kind, device, repeats,
+                                  sample)
+    if device.type == "cuda" or triton_tracer.interpreting():
+        bench_frames(table, device, frame, repeats, ref_grid=64 if not small else 4)
+    for kind, best in speeds.items():
+        if "CUDA C" in best and "Triton" in best:
+            ratio = best["Triton"] / best["CUDA C"]
+            table.metadata[f"triton_over_cuda_{kind}"] = ratio
+            print(f"{kind}: best Triton / best CUDA C = {ratio:.0%} (target >= 50%)")
+    json_path = table.to_json(out / "lab3_gpu.json")
+    (out / "lab3_gpu.md").write_text(
+        f"# Lab 3 GPU tracers on {table.metadata['device']}\n\n"
+        f"Command: `{table.metadata['command']}`\n\n{table.to_markdown()}\n")
+    print(f"wrote {json_path} and lab3_gpu.md")
+
+
+if __name__ == "__main__":
+    main()
