@@ -246,18 +246,19 @@ def _uber_shade(material, kd, ks, shininess, kr, ambient, background, d, through
 
 
 @functools.cache
-def _compiled(backend: str):
+def _compiled(backend):
     return (torch.compile(_uber_shadow_rays, backend=backend, fullgraph=True, dynamic=True),
             torch.compile(_uber_shade, backend=backend, fullgraph=True, dynamic=True))
 
 
 def render_uber(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor, trace,
-                max_depth: int = MAX_DEPTH, compile: bool | str = False) -> torch.Tensor:
-    """The bounce loop over fixed-size lane buffers; ``compile`` fuses each step."""
+                max_depth: int = MAX_DEPTH, compile=False) -> torch.Tensor:
+    """The bounce loop over fixed-size lane buffers; ``compile`` (True, or a torch.compile
+    backend: a name or a callable) fuses each step."""
     n = check_render_inputs(scene, origins, directions, trace, max_depth)
-    if not isinstance(compile, (bool, str)):
-        raise TypeError(f"compile: expected a bool or a torch.compile backend name, "
-                        f"got {compile!r}")
+    if not (isinstance(compile, (bool, str)) or callable(compile)):
+        raise TypeError(f"compile: expected a bool or a torch.compile backend (a name or a "
+                        f"callable), got {compile!r}")
     if compile:
         shadow_step, shade_step = _compiled("inductor" if compile is True else compile)
     else:

@@ -678,33 +678,49 @@ def test_render_uber_matches_reference(impl, device):
 
 
 def probe_uber_compiled(lab, scene, origins, directions):
-    """Run render_uber(compile="eager") with fresh dynamo counters: (image, graph breaks,
-    graphs captured). The "eager" backend captures graphs without generating code."""
+    """Run render_uber with a recording torch.compile backend (it captures graphs, then runs
+    them eagerly): ``(image, graph breaks, graphs captured, data-dependent ops)``, the last
+    a list of the graph nodes whose sizes depend on tensor values."""
     import torch._dynamo
     from torch._dynamo.utils import counters
+    from torch.fx.experimental.symbolic_shapes import free_unbacked_symbols
 
     torch._dynamo.reset()
     counters.clear()
-    image = lab.render_uber(scene, origins, directions, trace_brute_force, 2, compile="eager")
-    breaks = sum(counters["graph_break"].values())
-    return image, breaks, int(counters["stats"]["unique_graphs"])
+    graphs, dynamic = [], []
+
+    def recording_backend(gm, example_inputs):
+        graphs.append(len(gm.graph.nodes))
+        for node in gm.graph.nodes:
+            value = node.meta.get("example_value")
+            if value is not None and free_unbacked_symbols(value):
+                dynamic.append(str(node.target))
+        return gm.forward
+
+    image = lab.render_uber(scene, origins, directions, trace_brute_force, 2,
+                            compile=recording_backend)
+    return image, sum(counters["graph_break"].values()), len(graphs), dynamic
 
 
 @pytest.mark.task(3)
 @pytest.mark.points(1)
 def test_render_uber_compiles(impl, device):
-    """Under torch.compile every step of the uber loop is one graph: no data-dependent
-    shapes (boolean indexing, nonzero), no .item(), no Python branches on tensor values."""
+    """Under torch.compile every step of the uber loop is one graph of fixed-size tensors:
+    no data-dependent shapes (boolean indexing, nonzero), no .item(), no Python branches on
+    tensor values."""
     scene = scene_on("courtyard_both", F32, device)
     o, d = camera_rays("courtyard_both", F32, device, 12)
-    image, breaks, graphs = impl.probe(probe_uber_compiled, scene, o, d)
+    image, breaks, graphs, dynamic = impl.probe(probe_uber_compiled, scene, o, d)
     compare_images(image, _reference("courtyard_both", F32, 2, "camera", 12),
-                   "render_uber(compile='eager')", F32, device)
-    assert graphs >= 1, ("render_uber(compile=...): torch.compile captured no graph: compile "
-                         "the shading/spawning steps with torch.compile(..., backend=compile)")
-    assert breaks == 0, (f"render_uber(compile=...): {breaks} graph breaks: an uber step must "
-                         "work on fixed-size buffers (torch.where instead of x[mask], no "
-                         "nonzero(), no .item(), no Python if on tensor values)")
+                   "render_uber(compile=backend)", F32, device)
+    assert graphs >= 1, ("render_uber(compile=backend): torch.compile captured no graph: compile "
+                         "the shading/spawning steps with torch.compile(step, backend=compile)")
+    assert breaks == 0, (f"render_uber(compile=backend): {breaks} graph breaks: an uber step "
+                         "must not call .item() or branch on tensor values")
+    assert not dynamic, (
+        f"render_uber(compile=backend): the captured steps contain operations whose output "
+        f"size depends on the data ({', '.join(sorted(set(dynamic))[:4])}): an uber kernel "
+        f"works on fixed-size buffers (torch.where instead of x[mask] or nonzero)")
     expect_error("compile", impl.render_uber, scene, o, d, trace_brute_force, 2, 3.5,
                  kinds=(TypeError,), case="compile=3.5")
 
