@@ -38,7 +38,7 @@ def cases() -> dict:
     from course.scenes import load_scene
 
     lab = load_lab("lab6_raster", "solutions")
-    scene = load_scene("suzanne")
+    scene = load_scene("suzanne", device="cpu")
     width, height = 40, 28
     mvp = scene.camera.view_projection(torch.float64)
     clip = lab.to_clip_space(scene.mesh.vertices, mvp)
@@ -80,9 +80,17 @@ def check(data: dict, out: dict, where: str) -> None:
     for (name, run), keys in out.items():
         screen, w, h = data[name]
         want = lab.rasterize(screen, w, h, **RUNS[run])
-        differ = (keys != want).double().mean().item()
-        assert differ <= 0.004, (f"{where}, {name}, depth/cull {run}: keys differ from the "
-                                 f"reference on {differ:.2%} of the pixels (allowed: 0.4%)")
+        ids, want_ids = lab.triangle_ids(keys), lab.triangle_ids(want)
+        differ = (ids != want_ids).double().mean().item()
+        assert differ <= 0.004, (f"{where}, {name}, depth/cull {run}: the visible triangle "
+                                 f"differs from the reference on {differ:.2%} of the pixels "
+                                 f"(allowed: 0.4%)")
+        # Where the same triangle wins, its depth field may differ only by the last bits
+        # an FMA contraction changes (32-bit float depth) or one unorm step (24-bit).
+        same = (ids == want_ids) & (ids >= 0)
+        steps = ((keys[same] >> 32) - (want[same] >> 32)).abs()
+        assert steps.max().item() <= (4 if run != "24" else 1) if len(steps) else True, \
+            f"{where}, {name}, {run}: depths differ by up to {steps.max().item()} units"
         if name == "mixed" and run != "cull":
             assert (keys != lab.EMPTY).all(), f"{where}, {name}, {run}: a pixel left empty"
 
