@@ -340,7 +340,7 @@ def halton(index: int, base: int = 2) -> float:
 
 def frame_jitter(frame: int) -> float:
     """The sample depth offset within a froxel for temporal frame ``frame`` (0, 1, ...):
-    ``halton(frame + 1, 2)``, so frame 0 samples the slice's middle."""
+    ``halton(frame + 1, 2)``, so frame 0 samples the slice's middle depth."""
     return halton(frame + 1, 2)
 
 
@@ -530,10 +530,20 @@ def frustum_bounds(grid: FroxelGrid):
     return tuple(c.amin(0).tolist()), tuple(c.amax(0).tolist())
 
 
+def slice_offset(grid: FroxelGrid, jitter: float) -> float:
+    """Slice coordinate offset of the view depth ``z_k + jitter (z_(k+1) - z_k)`` within any
+    slice: ``log(1 + jitter (r - 1)) / log(r)`` with ``r = (far / near)^(1 / slices)``.
+    Uniform in depth, so averaging frames over jitters averages the slice over its depth
+    (uniform in the slice coordinate would favour the slice's near end)."""
+    log_r = math.log(grid.far / grid.near) / grid.slices
+    return math.log1p(jitter * math.expm1(log_r)) / log_r
+
+
 def froxel_sample_coords(grid, jitter, dtype, device):
     """Froxel coordinates (slices, ny, nx, 3) of every froxel's sample point
-    ``(i + 0.5, j + 0.5, k + jitter)``: its tile's centre, ``jitter`` through its slice."""
-    k = torch.arange(grid.slices, dtype=dtype, device=device) + jitter
+    ``(i + 0.5, j + 0.5, k + slice_offset(grid, jitter))``: its tile's centre, the fraction
+    ``jitter`` of the way through its slice in view depth."""
+    k = torch.arange(grid.slices, dtype=dtype, device=device) + slice_offset(grid, jitter)
     j = torch.arange(grid.ny, dtype=dtype, device=device) + 0.5
     i = torch.arange(grid.nx, dtype=dtype, device=device) + 0.5
     kk, jj, ii = torch.meshgrid(k, j, i, indexing="ij")

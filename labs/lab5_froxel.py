@@ -22,9 +22,10 @@ Conventions shared by all kernels
   ``(slices, ny, nx)`` (``[k, j, i]``: slice, tile row from the top, tile column), colour
   last. Froxel coordinates ``(x, y, z)``: ``x = pixel column / tile``, ``y = pixel row / tile``,
   ``z`` the slice coordinate (slice ``k`` spans ``[k, k + 1)``).
-* Froxel ``[k, j, i]`` is sampled at ``(i + 0.5, j + 0.5, k + jitter)``: its tile's centre,
-  and a depth ``jitter`` in [0, 1) through its slice (0.5 without temporal integration; the
-  Halton sequence ``frame_jitter(frame)`` with it). Material and lighting use the same one.
+* Froxel ``[k, j, i]`` is sampled at ``froxel_sample_coords(grid, jitter)``: its tile's centre
+  and the view depth ``z_k + jitter (z_(k+1) - z_k)``, ``jitter`` in [0, 1) (0.5 without
+  temporal integration; the Halton sequence ``frame_jitter(frame)`` with it). Material and
+  lighting use the same one.
 * The view direction at a point p is ``v = (p - eye) / |p - eye|``; the scattering angle of
   light arriving from unit direction ``l`` (toward the light) has ``cos theta = v . l``
   (``g > 0`` scatters forward: bright looking toward the light).
@@ -81,6 +82,7 @@ from course.froxel_support import (  # noqa: F401  (given helpers)
     light_frame,
     ray_boxes,
     sample_texture,
+    slice_offset,
 )
 from course.raymath import check_inputs  # noqa: F401  (given: validates (..., 3) inputs)
 
@@ -139,7 +141,8 @@ def media_at(scene, points):
 
 def voxelize(scene, grid, jitter=0.5, dtype=torch.float32, device="cpu"):
     """The V-buffer: :func:`media_at` at every froxel's sample point
-    ``froxel_to_world(grid, (i + 0.5, j + 0.5, k + jitter))``.
+    ``froxel_to_world(grid, froxel_sample_coords(grid, jitter))``: the tile's centre, the
+    fraction ``jitter`` of the way through the slice in view depth.
 
     Returns a dict of ``scattering`` (S, ny, nx, 3), ``extinction`` (S, ny, nx),
     ``emissive`` (S, ny, nx, 3), ``g`` (S, ny, nx) of ``dtype`` on ``device``.
@@ -265,9 +268,10 @@ def reproject(history, prev_grid, grid):
     """The previous frame's volume seen from the current froxels: ``(values, valid)``.
 
     history: (S, ny, nx) or (S, ny, nx, C) on ``prev_grid``; ``grid``: the current frame's
-    grid (same shape, another camera). Each current froxel's centre (jitter 0.5) is moved to
+    grid (same shape, another camera). Each current froxel's centre (jitter 0.5: the tile's centre, the slice's middle depth) is moved to
     world space and into ``prev_grid``'s froxel coordinates; ``values`` are the history
-    sampled trilinearly there (shape of ``history``), ``valid`` (S, ny, nx) bool is True
+    sampled trilinearly there (shape of ``history``; its voxels sit at the froxel centres
+    ``froxel_sample_coords(prev_grid, 0.5)``, clamped at the border), ``valid`` (S, ny, nx) bool is True
     only where that point lies inside the previous froxel volume (``0 <= x <= nx``, ``0 <= y
     <= ny``, ``0 <= z <= slices``): history from outside the previous frustum is dropped.
     """
@@ -307,7 +311,8 @@ def integrate_froxels(source, extinction, grid, method="energy"):
     (``dir`` with unit view depth). method "energy": ``L += T * slice_integral``, then
     ``T *= e^(-sigma_t D)`` (after: the slice's own medium absorbs only via the integral).
     "naive": ``L += T * S D`` (the talk's leak: no absorption within a slice, so a dense
-    slice emits more light than it can).
+    slice emits more light than it can). A loop over slices or prefix sums (``cumsum``
+    of the optical depths) are both fine; the result is the same to rounding.
     """
     raise NotImplementedError("not implemented yet: integrate_froxels (task 6)")
 

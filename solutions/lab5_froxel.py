@@ -16,9 +16,10 @@ Conventions shared by all kernels
   ``(slices, ny, nx)`` (``[k, j, i]``: slice, tile row from the top, tile column), colour
   last. Froxel coordinates ``(x, y, z)``: ``x = pixel column / tile``, ``y = pixel row / tile``,
   ``z`` the slice coordinate (slice ``k`` spans ``[k, k + 1)``).
-* Froxel ``[k, j, i]`` is sampled at ``(i + 0.5, j + 0.5, k + jitter)``: its tile's centre,
-  and a depth ``jitter`` in [0, 1) through its slice (0.5 without temporal integration; the
-  Halton sequence ``frame_jitter(frame)`` with it). Material and lighting use the same one.
+* Froxel ``[k, j, i]`` is sampled at ``froxel_sample_coords(grid, jitter)``: its tile's centre
+  and the view depth ``z_k + jitter (z_(k+1) - z_k)``, ``jitter`` in [0, 1) (0.5 without
+  temporal integration; the Halton sequence ``frame_jitter(frame)`` with it). Material and
+  lighting use the same one.
 * The view direction at a point p is ``v = (p - eye) / |p - eye|``; the scattering angle of
   light arriving from unit direction ``l`` (toward the light) has ``cos theta = v . l``
   (``g > 0`` scatters forward: bright looking toward the light).
@@ -75,6 +76,7 @@ from course.froxel_support import (  # noqa: F401  (given helpers)
     light_frame,
     ray_boxes,
     sample_texture,
+    slice_offset,
 )
 from course.raymath import check_inputs
 
@@ -217,7 +219,8 @@ def media_at(scene, points):
 
 def voxelize(scene, grid, jitter=0.5, dtype=torch.float32, device="cpu"):
     """The V-buffer: :func:`media_at` at every froxel's sample point
-    ``froxel_to_world(grid, (i + 0.5, j + 0.5, k + jitter))``.
+    ``froxel_to_world(grid, froxel_sample_coords(grid, jitter))``: the tile's centre, the
+    fraction ``jitter`` of the way through the slice in view depth.
 
     Returns a dict of ``scattering`` (S, ny, nx, 3), ``extinction`` (S, ny, nx),
     ``emissive`` (S, ny, nx, 3), ``g`` (S, ny, nx) of ``dtype`` on ``device``.
@@ -573,9 +576,10 @@ def reproject(history, prev_grid, grid):
     """The previous frame's volume seen from the current froxels: ``(values, valid)``.
 
     history: (S, ny, nx) or (S, ny, nx, C) on ``prev_grid``; ``grid``: the current frame's
-    grid (same shape, another camera). Each current froxel's centre (jitter 0.5) is moved to
+    grid (same shape, another camera). Each current froxel's centre (jitter 0.5: the tile's centre, the slice's middle depth) is moved to
     world space and into ``prev_grid``'s froxel coordinates; ``values`` are the history
-    sampled trilinearly there (shape of ``history``), ``valid`` (S, ny, nx) bool is True
+    sampled trilinearly there (shape of ``history``; its voxels sit at the froxel centres
+    ``froxel_sample_coords(prev_grid, 0.5)``, clamped at the border), ``valid`` (S, ny, nx) bool is True
     only where that point lies inside the previous froxel volume (``0 <= x <= nx``, ``0 <= y
     <= ny``, ``0 <= z <= slices``): history from outside the previous frustum is dropped.
     """
@@ -595,7 +599,10 @@ def reproject(history, prev_grid, grid):
     limits = torch.tensor([grid.nx, grid.ny, grid.slices], dtype=history.dtype,
                           device=history.device)
     valid = ((prev >= 0) & (prev <= limits)).all(-1)  # NaN compares False: dropped
-    zyx = torch.where(valid[..., None], prev.flip(-1), 0)
+    # History voxels sit at the froxel centres: x, y = i + 0.5, j + 0.5, z = k + offset.
+    lookup = prev - torch.tensor([0.0, 0.0, slice_offset(grid, 0.5) - 0.5],
+                                 dtype=prev.dtype, device=prev.device)
+    zyx = torch.where(valid[..., None], lookup.flip(-1), 0)
     return sample_texture(history, zyx), valid
 
 
@@ -653,7 +660,8 @@ def integrate_froxels(source, extinction, grid, method="energy"):
     (``dir`` with unit view depth). method "energy": ``L += T * slice_integral``, then
     ``T *= e^(-sigma_t D)`` (after: the slice's own medium absorbs only via the integral).
     "naive": ``L += T * S D`` (the talk's leak: no absorption within a slice, so a dense
-    slice emits more light than it can).
+    slice emits more light than it can). A loop over slices or prefix sums (``cumsum``
+    of the optical depths) are both fine; the result is the same to rounding.
     """
     check_grid(grid)
     check_choice(method, "method", INTEGRATIONS)
@@ -666,20 +674,17 @@ def integrate_froxels(source, extinction, grid, method="energy"):
     jj, ii = torch.meshgrid(j, i, indexing="ij")
     stretch = _view_dirs(grid, ii, jj, torch.float64, device).norm(dim=-1)  # (ny, nx)
     lengths = ((z[1:] - z[:-1])[:, None, None] * stretch).to(dtype)  # (S, ny, nx)
-    radiance = torch.zeros(grid.ny, grid.nx, 3, dtype=dtype, device=device)
-    transmittance = torch.ones(grid.ny, grid.nx, dtype=dtype, device=device)
-    out_l, out_t = [], []
-    for k in range(grid.slices):
-        if method == "energy":
-            piece, slice_t = slice_integral(source[k], extinction[k], lengths[k])
-        else:
-            piece, slice_t = source[k] * lengths[k][..., None], torch.exp(
-                -extinction[k] * lengths[k])
-        radiance = radiance + transmittance[..., None] * piece
-        transmittance = transmittance * slice_t
-        out_l.append(radiance)
-        out_t.append(transmittance)
-    return torch.stack(out_l), torch.stack(out_t)
+    # Front to back without a loop over slices: the transmittance in front of slice k is
+    # exp(-(sum of the optical depths before it)), an exclusive prefix sum.
+    tau = extinction * lengths
+    behind = torch.cumsum(tau, 0)
+    in_front = torch.exp(-(behind - tau))
+    if method == "energy":
+        piece, _ = slice_integral(source, extinction, lengths)
+    else:
+        piece = source * lengths[..., None]
+    radiance = torch.cumsum(in_front[..., None] * piece, 0)
+    return radiance, torch.exp(-behind)
 
 
 # ---------------------------------------------------------------------------------------

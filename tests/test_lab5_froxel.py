@@ -116,7 +116,10 @@ def ref_points(grid, coords):
 
 
 def sample_coords(grid, jitter):
-    k = torch.arange(grid.slices, dtype=F64) + jitter
+    """Froxel sample points: tile centres, the fraction jitter through each slice in depth."""
+    z = ref_depths(grid.near, grid.far, grid.slices)
+    depth = z[:-1] + jitter * (z[1:] - z[:-1])
+    k = grid.slices * torch.log(depth / grid.near) / math.log(grid.far / grid.near)
     j = torch.arange(grid.ny, dtype=F64) + 0.5
     i = torch.arange(grid.nx, dtype=F64) + 0.5
     kk, jj, ii = torch.meshgrid(k, j, i, indexing="ij")
@@ -343,7 +346,7 @@ def test_voxelize_samples_froxel_points(impl, device):
                                device=device)
             assert_close(got.reshape(value.shape), value, rtol=1e-7, atol=1e-9,
                          name=f"voxelize[{key!r}] (jitter={jitter}): media at froxel "
-                              f"(i + 0.5, j + 0.5, k + jitter), volumes indexed [k, j, i]",
+                              f"(i + 0.5, j + 0.5) at depth z_k + jitter (z_k+1 - z_k), volumes indexed [k, j, i]",
                          where="froxel (flat k*ny*nx + j*nx + i)")
     vb = impl.voxelize(scene, grid, 0.5, F32, device)
     check_tensor(vb["extinction"], "voxelize float32 extinction", shape=grid.shape, dtype=F32,
@@ -542,7 +545,7 @@ def test_light_froxels_matches_closed_form(impl, device):
                      device=device)
         assert_close(src, expected_source(grid, scene, jitter, sigma_s, g), rtol=1e-7,
                      atol=1e-12, name=f"light_froxels (jitter={jitter}): sigma_s (ambient + "
-                     f"sum phase(v.l) E) at froxel (i + 0.5, j + 0.5, k + jitter)",
+                     f"sum phase(v.l) E) at the froxel sample points (froxel_sample_coords)",
                      where="froxel [k, j, i, rgb]")
         assert report["froxels_lit"] == math.prod(grid.shape), \
             f"light_froxels: every froxel holds fog here, report says {report['froxels_lit']}"
@@ -692,8 +695,8 @@ def test_reproject_follows_the_camera(impl, device):
                                   prev.far / prev.near)], -1)
     limits = torch.tensor([prev.nx, prev.ny, prev.slices], dtype=F64)
     inside = ((ref_coords >= 0) & (ref_coords <= limits)).all(-1)
-    # Away from the border clamp (half a froxel) trilinear reproduces a linear field.
-    where = ((ref_coords >= 0.5) & (ref_coords <= limits - 0.5)).all(-1)
+    # Away from the border clamp (a froxel) trilinear reproduces a linear field.
+    where = ((ref_coords >= 1) & (ref_coords <= limits - 1)).all(-1)
     assert 0.2 < inside.double().mean() < 0.98, "test set-up: some history leaves the frustum"
     assert_equal(valid.cpu(), inside, name="reproject valid: inside the previous frustum",
                  where="froxel [k, j, i]")

@@ -70,17 +70,14 @@ MUTANTS = [
            why="(S - S e^(-sigma D)) / sigma as written: 0/0 = NaN in empty froxels and "
                "cancellation for thin ones"),
     Mutant(name="transmittance_before_integral", module=M, function="integrate_froxels",
-           find="        radiance = radiance + transmittance[..., None] * piece\n"
-                "        transmittance = transmittance * slice_t\n",
-           replace="        transmittance = transmittance * slice_t\n"
-                   "        radiance = radiance + transmittance[..., None] * piece\n",
+           find="radiance = torch.cumsum(in_front[..., None] * piece, 0)",
+           replace="radiance = torch.cumsum(torch.exp(-behind)[..., None] * piece, 0)",
            tests="integrate_froxels",
            why="transmittance updated before adding the slice: its own medium absorbs the "
                "slice's light twice"),
     Mutant(name="naive_integration", module=M, function="integrate_froxels",
-           find="piece, slice_t = slice_integral(source[k], extinction[k], lengths[k])",
-           replace="piece, slice_t = source[k] * lengths[k][..., None], torch.exp(\n"
-                   "                -extinction[k] * lengths[k])",
+           find="piece, _ = slice_integral(source, extinction, lengths)",
+           replace="piece = source * lengths[..., None]",
            tests="integrate_froxels",
            why="the naive S D per slice (the talk's light leak): thick slices emit more than "
                "the medium can, and the result depends on the slice count"),
