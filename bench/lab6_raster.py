@@ -258,6 +258,20 @@ def bench_frames(table: ResultTable, device, cfg: dict) -> None:
                      seconds=t_f.median, ms_per_frame=1e3 * t_f.median,
                      pixels_per_s=width * height / t_f.median, differs_from_torch=same,
                      raster_speedup=t_rt.median / t_f.median, **common)
+                # Where the time goes: the torch setup (MVP, near-plane clipping, viewport)
+                # against the fused kernels alone on its output.
+                from course.triton_raster import rasterize_triton
+
+                mvp = cam.view_projection(torch.float64).to(device)
+                clipped, _, _ = lab.clip_triangles(lab.to_clip_space(mesh.vertices, mvp)
+                                                   [mesh.faces])
+                screen = lab.to_screen(clipped, width, height)
+                t_k = time_fn(rasterize_triton, screen, width, height, repeats=cfg["repeats"],
+                              warmup=1, device=device)
+                _add(table, method="frame", setting="fused raster kernels alone",
+                     seconds=t_k.median, ms_per_frame=1e3 * t_k.median,
+                     pixels_per_s=width * height / t_k.median,
+                     raster_speedup=t_rt.median / t_k.median, **common)
             _add(table, method="frame", setting="BVH-traced visibility", seconds=t_rt.median,
                  ms_per_frame=1e3 * t_rt.median, pixels_per_s=width * height / t_rt.median,
                  build_s=build_s, raster_speedup=t_rt.median / t.median, **common)
