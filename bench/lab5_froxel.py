@@ -1,0 +1,326 @@
+"""Lab 5 speed/accuracy benchmark: froxel resolution, temporal integration, volumetric shadows.
+
+    python bench/lab5_froxel.py --device cpu|cuda [--small] [--out DIR]
+    python bench/lab5_froxel.py --device cuda --gpu-target     # the talk's 1080p frame only
+
+Every row renders one frame of a fog scene with ``render_froxels`` and compares it with
+``course.froxel_reference.reference_render`` (brute-force single scattering, float64, exact
+shadow rays) on a fixed subset of pixels; ``error`` is the mean absolute error divided by
+the mean reference radiance, ``max_error`` the largest pixel error divided by the largest
+reference radiance; ``seconds`` is the median time of one frame (after warm-up).
+
+* ``resolution``: tile sizes 4, 8, 16 px x slice counts 32, 64, 128 (volumetric shadows on,
+  no temporal integration).
+* ``shadows``: volumetric shadows on and off at 8 px x 64 slices (the reference keeps them:
+  turning them off is a modelling error, measured).
+* ``temporal``: error after 1, 8 and 32 frames of temporal integration with a static camera
+  and with a camera sliding sideways (each frame against the reference from its own
+  camera); 8 px x 32 slices, where the jitter has the most to add; with all the scene's
+  lights and with the sun only. Point lights inside the fog put a 1/d^2 peak inside some
+  froxels: jittered samples find it (the midpoint misses it) and the tile spreads it over
+  8 x 8 pixels, so with point lights the error grows over frames; with the sun it shrinks.
+* ``frame``: the talk's test scene at 1080p (240 x 135 x 64 froxels, sun + 14 point lights,
+  6 local fog volumes with 16^3 density textures, height fog), time per frame; the target
+  on an H100/H200 is 2 ms. ``--gpu-target`` times only this and prints ms/frame.
+
+Writes ``lab5_froxel.json`` (a ResultTable with the command line), ``lab5_froxel.md`` and
+Pareto plots (seconds against error) into ``--out``, by default
+``bench/results/<device_name>/lab5/``. On the CPU only ratios between rows mean anything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import shlex
+import sys
+from pathlib import Path
+
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
+
+from course.bench import ResultTable, device_name, pareto_plot, time_fn
+from course.camera import Camera
+from course.device import default_device
+from course.froxel_reference import reference_render
+from course.froxel_support import (
+    Box,
+    DirectionalLight,
+    FogVolume,
+    HeightFog,
+    PointLight,
+    Scene,
+)
+
+try:
+    from solutions import lab5_froxel as lab
+except ImportError:  # the student handout has no solutions/: measure the student's lab
+    from labs import lab5_froxel as lab
+
+F64 = torch.float64
+# Per mode: image size of the accuracy sweeps, reference samples and shadow steps, pixels
+# compared (every n-th), timed runs per setting, far plane.
+SIZES = {"small": {"image": (192, 108), "samples": 64, "shadow_steps": 12, "stride": 53,
+                   "repeats": 2, "frames": (1, 8, 32)},
+         "full": {"image": (640, 360), "samples": 192, "shadow_steps": 32, "stride": 97,
+                  "repeats": 10, "frames": (1, 8, 32)}}
+NEAR, FAR = 0.1, 40.0
+
+
+# --------------------------------------------------------------------------------------
+# Scenes
+# --------------------------------------------------------------------------------------
+
+
+def density_texture(n: int, seed: int) -> torch.Tensor:
+    """(n, n, n) float32 in [0, 1]: a few soft blobs, 0 on the border voxels."""
+    g = torch.Generator().manual_seed(seed)
+    x = (torch.arange(n, dtype=torch.float32) + 0.5) / n
+    p = torch.stack(torch.meshgrid(x, x, x, indexing="ij"), -1)
+    d = torch.zeros(n, n, n)
+    for c, r in zip(0.3 + 0.4 * torch.rand(4, 3, generator=g),
+                    0.15 + 0.15 * torch.rand(4, generator=g)):
+        d += torch.exp(-(p - c).square().sum(-1) / r ** 2)
+    d = (d / d.max()).clamp(0, 1)
+    d[[0, -1]] = 0
+    d[:, [0, -1]] = 0
+    d[:, :, [0, -1]] = 0
+    return d
+
+
+def talk_scene(device, volumes: int = 6, points: int = 14, texture: int = 16) -> Scene:
+    """The talk's test scene: sun with a shadow-casting occluder, point lights, local fog
+    volumes with density textures and a height fog, in a 40 m street."""
+    g = torch.Generator().manual_seed(5)
+    fogs = [HeightFog(scattering=(0.03, 0.035, 0.04), extinction=0.045, base=0.0,
+                      falloff=0.25, g=0.3)]
+    for v in range(volumes):
+        c = (float(torch.rand(1, generator=g)) * 16 - 8, 1.5 + float(torch.rand(1, generator=g)),
+             -4.0 - 5.0 * v)
+        angle = float(torch.rand(1, generator=g)) * math.pi
+        ca, sa = math.cos(angle), math.sin(angle)
+        fogs.append(FogVolume(center=c, half_size=(2.5, 1.5, 2.0), scattering=(0.25,) * 3,
+                              extinction=0.3, g=0.5, shape="box" if v % 2 else "ellipsoid",
+                              rotation=((ca, 0, -sa), (0, 1, 0), (sa, 0, ca)),
+                              density=density_texture(texture, v).to(device)))
+    lights = [DirectionalLight(direction=(0.4, 0.8, -0.45), irradiance=(3.0, 2.8, 2.5))]
+    for n in range(points):
+        pos = (float(torch.rand(1, generator=g)) * 20 - 10, 0.5 + 3 * float(torch.rand(
+            1, generator=g)), -2.0 - 2.6 * n)
+        color = tuple(2.0 + 6.0 * float(x) for x in torch.rand(3, generator=g))
+        lights.append(PointLight(position=pos, intensity=color, range=6.0))
+    occluders = (Box((-6.0, 5.0, -20.0), (-1.0, 6.0, -12.0)), Box((2.0, 4.0, -30.0),
+                                                                  (7.0, 5.0, -26.0)))
+    return Scene(media=tuple(fogs), lights=tuple(lights), ambient=(0.05, 0.06, 0.08),
+                 occluders=occluders)
+
+
+def accuracy_scene() -> Scene:
+    """A smaller scene for the sweeps against the reference: height fog, two textured fog
+    volumes, the sun with a shadow-casting occluder and three point lights."""
+    return talk_scene("cpu", volumes=2, points=3, texture=8)
+
+
+def camera_at(width: int, height: int, shift: float = 0.0) -> Camera:
+    return Camera(eye=(shift, 1.6, 2.0), target=(shift * 0.5, 1.8, -20.0), fov_y=55.0,
+                  width=width, height=height)
+
+
+def scene_images(camera: Camera, device, dtype=torch.float32):
+    """Depth (H, W) and opaque (H, W, 3) images: a ground plane y = 0 and a wall at z = -36
+    (sky above it), the wall's colour shaded by distance."""
+    from course.camera import primary_rays
+
+    rays = primary_rays(camera, device="cpu", dtype=F64)
+    d = rays.directions
+    fwd = torch.tensor(camera.target, dtype=F64) - torch.tensor(camera.eye, dtype=F64)
+    fwd = fwd / fwd.norm()
+    t_ground = torch.where(d[:, 1] < 0, -camera.eye[1] / d[:, 1].clamp(max=-1e-9), math.inf)
+    t_wall = torch.where(d[:, 2] < 0, (-36.0 - camera.eye[2]) / d[:, 2].clamp(max=-1e-9),
+                         math.inf)
+    p_wall = torch.tensor(camera.eye, dtype=F64) + t_wall.clamp(max=1e6)[:, None] * d
+    t_wall = torch.where(p_wall[:, 1] < 8.0, t_wall, math.inf)
+    t = torch.minimum(t_ground, t_wall)
+    depth = (t * (d @ fwd)).reshape(camera.height, camera.width)
+    colour = torch.where((t_ground < t_wall)[:, None], torch.tensor([0.10, 0.09, 0.08],
+                                                                     dtype=F64),
+                         torch.tensor([0.18, 0.16, 0.15], dtype=F64))
+    colour = torch.where(torch.isinf(t)[:, None], torch.tensor([0.0, 0.0, 0.0], dtype=F64),
+                         colour).reshape(camera.height, camera.width, 3)
+    return depth.to(device, dtype), colour.to(device, dtype)
+
+
+# --------------------------------------------------------------------------------------
+# Rows
+# --------------------------------------------------------------------------------------
+
+
+def errors(image, ref, pixels):
+    got = image.detach().to("cpu", F64).reshape(-1, 3)[pixels]
+    diff = (got - ref).abs()
+    return (diff.mean() / ref.abs().mean()).item(), (diff.max() / ref.abs().max()).item()
+
+
+def reference(scene, camera, cfg, device):
+    depth, opaque = scene_images(camera, "cpu", F64)
+    pixels = torch.arange(0, camera.width * camera.height, cfg["stride"])
+    ref = reference_render(scene, camera, depth, opaque, near=NEAR, far=FAR,
+                           samples=cfg["samples"], shadow_steps=cfg["shadow_steps"],
+                           pixels=pixels)
+    return ref["image"], pixels
+
+
+def bench_resolution(table, cfg, device):
+    scene = accuracy_scene()
+    camera = camera_at(*cfg["image"])
+    ref, pixels = reference(scene, camera, cfg, device)
+    depth, opaque = scene_images(camera, device)
+    for tile in (4, 8, 16):
+        for slices in (32, 64, 128):
+            for shadows in ((True, False) if (tile, slices) == (8, 64) else (True,)):
+                args = {"tile": tile, "slices": slices, "near": NEAR, "far": FAR,
+                        "volumetric_shadows": shadows}
+                image, report = lab.render_froxels(scene, camera, depth, opaque, **args)
+                t = time_fn(lab.render_froxels, scene, camera, depth, opaque,
+                            repeats=cfg["repeats"], warmup=1, device=device, **args)
+                err, worst = errors(image, ref, pixels)
+                series = "resolution" if shadows else "shadows"
+                table.add(series=series, setting=f"{tile}px x {slices}"
+                          + ("" if shadows else " no vol. shadows"), tile=tile, slices=slices,
+                          volumetric_shadows=shadows, froxels=report["froxels"],
+                          froxels_lit=report["froxels_lit"],
+                          light_evaluations=report["light_evaluations"], seconds=t.median,
+                          ms_per_frame=1e3 * t.median, error=err, max_error=worst)
+                print(f"  {series} {tile}px x {slices} shadows={shadows}: {1e3 * t.median:.1f} "
+                      f"ms, error {err:.4f} (max {worst:.3f})", flush=True)
+                if shadows and (tile, slices) == (8, 64):
+                    table.add(series="shadows", setting="8px x 64", tile=tile, slices=slices,
+                              volumetric_shadows=True, froxels=report["froxels"],
+                              froxels_lit=report["froxels_lit"],
+                              light_evaluations=report["light_evaluations"],
+                              seconds=t.median, ms_per_frame=1e3 * t.median, error=err,
+                              max_error=worst)
+
+
+def bench_temporal(table, cfg, device, lights="all"):
+    """Temporal integration on the accuracy scene with all its lights, or the sun only."""
+    scene = accuracy_scene()
+    if lights == "sun":
+        scene = dataclasses.replace(scene, lights=scene.lights[:1])
+    tile, slices, last = 8, 32, max(cfg["frames"])
+    args = {"tile": tile, "slices": slices, "near": NEAR, "far": FAR}
+    static_ref, pixels = reference(scene, camera_at(*cfg["image"]), cfg, device)
+    for motion in ("static", "moving"):
+        shift = 0.04 if motion == "moving" else 0.0
+        history = None
+        for frame in range(last):
+            camera = camera_at(*cfg["image"], shift=shift * frame)
+            depth, opaque = scene_images(camera, device)
+            image, report = lab.render_froxels(scene, camera, depth, opaque, temporal=True,
+                                               frame=frame, history=history, **args)
+            if frame + 1 in cfg["frames"]:
+                # Each frame against the reference seen from its own camera.
+                ref = static_ref if shift == 0 else reference(scene, camera, cfg, device)[0]
+                err, worst = errors(image, ref, pixels)
+                t = time_fn(lab.render_froxels, scene, camera, depth, opaque, temporal=True,
+                            frame=frame, history=history, repeats=cfg["repeats"], warmup=1,
+                            device=device, **args)
+                table.add(series="temporal", setting=f"{lights} lights, {motion}, frame "
+                          f"{frame + 1}", lights=lights, motion=motion, frames=frame + 1, tile=tile, slices=slices,
+                          history_valid=report["history_valid"], seconds=t.median,
+                          ms_per_frame=1e3 * t.median, error=err, max_error=worst)
+                print(f"  temporal ({lights} lights) {motion} after {frame + 1} frames: error {err:.4f} "
+                      f"(max {worst:.3f}), history kept {report['history_valid']:.2f}",
+                      flush=True)
+            history = report["history"]
+    # Without temporal integration, for comparison.
+    camera = camera_at(*cfg["image"])
+    depth, opaque = scene_images(camera, device)
+    t = time_fn(lab.render_froxels, scene, camera, depth, opaque, repeats=cfg["repeats"],
+                warmup=1, device=device, **args)
+    err, worst = errors(lab.render_froxels(scene, camera, depth, opaque, **args)[0],
+                        static_ref, pixels)
+    table.add(series="temporal", setting=f"{lights} lights, off", lights=lights, motion="off",
+              frames=1, tile=tile,
+              slices=slices, seconds=t.median, ms_per_frame=1e3 * t.median, error=err,
+              max_error=worst)
+
+
+def bench_frame(table, device, repeats: int, size=(1920, 1080)):
+    """The talk's scene at 1080p: 240 x 135 x 64 froxels; milliseconds per frame."""
+    scene = talk_scene(device)
+    camera = camera_at(*size)
+    depth, opaque = scene_images(camera, device)
+    args = {"tile": 8, "slices": 64, "near": NEAR, "far": FAR}
+    _, report = lab.render_froxels(scene, camera, depth, opaque, **args)
+    t = time_fn(lab.render_froxels, scene, camera, depth, opaque, repeats=repeats, warmup=2,
+                device=device, **args)
+    grid = report["grid"]
+    table.add(series="frame", setting=f"{size[0]}x{size[1]}, 8px x 64, sun + "
+              f"{len(scene.lights) - 1} points, {len(scene.media) - 1} volumes",
+              tile=8, slices=64, froxels=report["froxels"], froxels_lit=report["froxels_lit"],
+              light_evaluations=report["light_evaluations"], seconds=t.median,
+              ms_per_frame=1e3 * t.median, grid=f"{grid.nx}x{grid.ny}x{grid.slices}")
+    print(f"  frame {size[0]}x{size[1]} ({grid.nx}x{grid.ny}x{grid.slices} froxels, "
+          f"{report['froxels_lit']} lit, {report['light_evaluations']} light evaluations): "
+          f"{1e3 * t.median:.2f} ms/frame (median of {repeats}; target 2 ms on an H100/H200)",
+          flush=True)
+    return t.median
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--small", action="store_true", help="small sizes (CPU, CI)")
+    parser.add_argument("--gpu-target", action="store_true",
+                        help="time only the talk's 1080p frame and print ms/frame")
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args(argv)
+    device = default_device(args.device)
+    if args.gpu_target:
+        table = ResultTable("Lab 5: the talk's 1080p frame", device)
+        bench_frame(table, device, repeats=50 if device.type == "cuda" else 3)
+        return table
+    cfg = SIZES["small" if args.small or device.type == "cpu" else "full"]
+    out = Path(args.out) if args.out else REPO / "bench" / "results" / device_name(device) / "lab5"
+    table = ResultTable("Lab 5: the froxel pipeline, speed against accuracy", device)
+    table.metadata["command"] = "python " + shlex.join(
+        ["bench/lab5_froxel.py", *(sys.argv[1:] if argv is None else argv)])
+    print(f"Lab 5 bench on {device} ({'small' if cfg is SIZES['small'] else 'full'})", flush=True)
+    bench_resolution(table, cfg, device)
+    bench_temporal(table, cfg, device)
+    bench_temporal(table, cfg, device, lights="sun")
+    if device.type == "cuda" or not args.small:
+        bench_frame(table, device, repeats=cfg["repeats"])
+    else:  # the 1080p frame on 2 CPU cores takes seconds: time a quarter-size frame
+        bench_frame(table, device, repeats=1, size=(480, 270))
+    out.mkdir(parents=True, exist_ok=True)
+    table.to_json(out / "lab5_froxel.json")
+    notes = ("error: mean |pipeline - reference| / mean reference radiance over every "
+             f"{cfg['stride']}th pixel; max_error: largest pixel error / largest reference "
+             "radiance; seconds: median per frame; froxels_lit and light_evaluations from the "
+             "pipeline's report (only froxels with medium are lit, culled lights not counted).")
+    (out / "lab5_froxel.md").write_text(
+        "# Lab 5: the froxel pipeline, speed against accuracy\n\n"
+        f"Device: {table.metadata['device']} ({torch.get_num_threads()} torch threads); "
+        f"torch {table.metadata['torch']}; "
+        f"{table.metadata['date']}.\n\nCommand: `{table.metadata['command']}`\n\n{notes}\n\n"
+        + table.to_markdown() + "\n")
+    rows = [r for r in table.rows if r["series"] in ("resolution", "shadows")]
+    pareto_plot(rows, x="seconds", y="error", label="setting", group="series",
+                path=out / "pareto_resolution.png",
+                title="Froxel resolution: time per frame against error")
+    temporal = [r for r in table.rows if r["series"] == "temporal" and r.get("seconds")]
+    if temporal:
+        pareto_plot(temporal, x="frames", y="error", label="setting", group="lights",
+                    maximize_x=False, path=out / "temporal.png",
+                    title="Temporal integration: error against frames accumulated")
+    print(f"wrote {out}", flush=True)
+    return table
+
+
+if __name__ == "__main__":
+    main()
