@@ -47,7 +47,9 @@ Traversal contract (the torch fallback here and both GPU kernels implement the s
 
 from __future__ import annotations
 
+import contextlib
 import math
+import time
 import weakref
 from dataclasses import dataclass
 
@@ -125,6 +127,27 @@ class FlatBVH:
 # Build
 # --------------------------------------------------------------------------------------
 
+@contextlib.contextmanager
+def _one_cpu_thread(device: torch.device):
+    """Run torch's CPU ops on one thread inside (restored after; a no-op off the CPU).
+
+    The build and the torch walk run many small ops (10^3 to 10^5 elements) one after
+    another: splitting each over threads costs more in start-up and waiting than it saves,
+    and on a busy machine much more (the bunny's build took 1.9 s on one thread and 12-27 s
+    on two, on a shared two-core machine). The setting is process-wide while inside: torch
+    ops of other Python threads run on one thread meanwhile.
+    """
+    if device.type != "cpu":
+        yield
+        return
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
 def _check_mesh(vertices, faces) -> None:
     if not isinstance(vertices, torch.Tensor) or not vertices.is_floating_point():
         raise TypeError(f"vertices: expected a (V, 3) float tensor, got "
@@ -199,12 +222,16 @@ def build_flat_bvh(vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int =
     axis; a node whose centroids all fall into one bin (or one below MEDIAN_DEPTH) is split
     at its object median instead. Node boxes are the exact float32 bounds of their triangles.
     """
-    import time
-
     start_time = time.perf_counter()
     _check_mesh(vertices, faces)
     if isinstance(leaf_size, bool) or not isinstance(leaf_size, int) or leaf_size < 1:
         raise ValueError(f"leaf_size: expected an int >= 1, got {leaf_size!r}")
+    with _one_cpu_thread(vertices.device):
+        return _build(vertices, faces, leaf_size, start_time)
+
+
+def _build(vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int,
+           start_time: float) -> FlatBVH:
     device = vertices.device
     faces = faces.long()
     corners = vertices[faces]  # (F, 3, 3) in the input dtype
@@ -377,8 +404,12 @@ def trace_flat_torch(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.in
     the BVH given; returns float32 Hits on the rays' device.
     """
     o, d, t_lo, t_hi = check_rays(origins, directions, t_min, t_max)
+    with _one_cpu_thread(o.device):
+        return _walk(bvh.to(o.device), o, d, t_lo, t_hi, any_hit)
+
+
+def _walk(bvh: FlatBVH, o, d, t_lo, t_hi, any_hit: bool) -> Hits:
     device, n = o.device, o.shape[0]
-    bvh = bvh.to(device)
     nodes, ints, rows = bvh.nodes, bvh.node_ints, bvh.triangles
     tri_index = bvh.order
     inv = 1.0 / d
