@@ -34,14 +34,33 @@ Conventions shared by all kernels
 
 Tasks (points)
 --------------
-1. ``slice_depths``, ``depth_to_slice``, ``froxel_to_world``, ``world_to_froxel``: the grid
-2. ``media_at``, ``voxelize``: the V-buffer
+1. ``slice_depths``, ``depth_to_slice``, ``froxel_to_world``, ``world_to_froxel``: the grid (2)
+2. ``media_at``, ``voxelize``: the V-buffer (2)
 3. ``henyey_greenstein``, ``schlick_phase``, ``cull_lights``, ``build_shadow_map``,
-   ``shadow_lookup``, ``light_froxels``: scattered light per froxel
-4. ``extinction_volume``, ``transmittance_volume``, ``sample_light_volume``: volumetric shadows
-5. ``reproject``, ``temporal_blend``: temporal integration
-6. ``slice_integral``, ``integrate_froxels``: final integration
-7. ``apply_froxels``, ``render_froxels``: application to the opaque image, the whole frame
+   ``shadow_lookup``, ``light_froxels``: scattered light per froxel (3.5)
+4. ``extinction_volume``, ``transmittance_volume``, ``sample_light_volume``: volumetric shadows (1.5)
+5. ``reproject``, ``temporal_blend``: temporal integration (2)
+6. ``slice_integral``, ``integrate_froxels``: final integration (2.5)
+7. ``apply_froxels``, ``render_froxels``: application to the opaque image, the whole frame (7.5)
+
+Accuracy (asserted by the grader, measured by ``bench/lab5_froxel.py``)
+-----------------------------------------------------------------------
+* Exact to rounding: the slicing and its inverse, world <-> froxel mapping, the V-buffer at
+  its sample points, the lighting at its sample points (without shadows), the per-slice
+  integral (any optical depth, 0 to 1e6, with a finite gradient at 0), and the integration
+  of a homogeneous medium, independent of the slice count.
+* Approximate by design, at the froxel resolution: everything between sample points. A
+  tile spans 8 pixels (the phase function, the path length per view depth and the edges
+  of fog volumes and shadows are interpolated across it), a slice 43% of its depth at 16
+  slices over 0.1 .. 30 m. Against the brute-force reference the grader allows 4-5% of the
+  largest radiance (homogeneous fog, height fog; measured 1-2%), 10% at the silhouette of
+  a textured fog volume and 20% at the edges of a sun shadow in fog (a tile of blur).
+* Measured on the bench's street scene (float32, 2-core CPU, one torch thread): mean error
+  0.9% at 8 px x 32 slices, 0.6% at 4 px x 128; without volumetric shadows 8.3%; point
+  lights inside the fog put a 1/d^2 peak inside single froxels, so more slices can raise
+  the worst pixel (8 px x 128: mean 2.7%). Temporal integration with the sun only: 0.81%
+  after 1 frame, 0.75% after 32 (static camera); with the camera sliding 4 cm per frame the
+  repeated trilinear reprojection blurs the history: 2.9% after 32 frames.
 """
 
 from __future__ import annotations
