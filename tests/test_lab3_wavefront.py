@@ -270,6 +270,9 @@ def expect_render_errors(render, device, **extra) -> None:
                  trace_brute_force, **extra, kinds=(TypeError,), case="bfloat16 rays")
     expect_error("origins", render, scene, o.double(), d.double(), trace_brute_force, **extra,
                  kinds=(TypeError,), case="float64 rays for a float32 scene")
+    if torch.device(device).type != "cpu":
+        expect_error("origins", render, scene, o.cpu(), d.cpu(), trace_brute_force, **extra,
+                     case=f"rays on the CPU for a scene on {device}")
     expect_error("trace", render, scene, o, d, "brute force", **extra, case="a string as trace")
     expect_error("max_depth", render, scene, o, d, trace_brute_force, -1, **extra,
                  case="max_depth=-1")
