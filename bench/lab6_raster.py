@@ -99,13 +99,14 @@ def raster_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32,
 
 
 def fused_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.Tensor:
-    """``raster_ids`` with ``rasterize`` replaced by the fused Triton kernels (CUDA)."""
-    from course.triton_raster import rasterize_triton
+    """``raster_ids`` with ``rasterize`` replaced by the fused Triton kernels (CUDA), and
+    the near-plane clipper applied only to the triangles that cross the near plane."""
+    from course.triton_raster import rasterize_triton, screen_triangles_fast
 
     mvp = camera.view_projection(torch.float64).to(mesh.device)
     clip = lab.to_clip_space(mesh.vertices, mvp)
-    clipped, source, _ = lab.clip_triangles(clip[mesh.faces])
-    screen = lab.to_screen(clipped, camera.width, camera.height)
+    screen, source = screen_triangles_fast(clip, mesh.faces, camera.width, camera.height,
+                                           lab.clip_triangles, lab.to_screen)
     k = lab.triangle_ids(rasterize_triton(screen, camera.width, camera.height,
                                           depth_bits=depth_bits))
     ids = torch.where(k >= 0, source[k.clamp(min=0)], -1) if len(source) else k

@@ -47,7 +47,7 @@ except ImportError:  # course.triton_intersect reports the missing package
 else:
     _jit = triton.jit
 
-__all__ = ["EMPTY", "SMALL_BOX", "rasterize_triton"]
+__all__ = ["EMPTY", "SMALL_BOX", "rasterize_triton", "screen_triangles_fast"]
 
 EMPTY = torch.iinfo(torch.int64).max  # the key of a pixel no fragment reached
 SMALL_BOX = 64  # pixels: boxes up to this size go to the lane-per-triangle kernel
@@ -258,3 +258,37 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
                 data, large_ids, out, width, height, DEPTH_BITS=depth_bits,
                 CULL=cull_backfaces, BLOCK=BLOCK_PIXELS, num_warps=4)
     return out
+
+
+def screen_triangles_fast(clip_vertices: torch.Tensor, faces: torch.Tensor, width: int,
+                          height: int, clip_triangles, to_screen):
+    """Lab 6's setup stages (``clip_triangles`` then ``to_screen``), cheap for most triangles.
+
+    clip_vertices: (V, 4) clip coordinates (``to_clip_space``); faces: (F, 3) int64;
+    clip_triangles, to_screen: the lab's functions, used for the triangles that need them.
+    Returns ``(screen (K, 3, 4), source (K,) int64)`` like ``to_screen(clip_triangles(...))``
+    but in another order: first the triangles entirely on the visible side of the near
+    plane (no clipping: only the viewport, a handful of element-wise kernels), then what
+    ``clip_triangles`` makes of the others (near-plane crossings, NaN/inf corners). Trivially
+    rejected triangles are not removed from the first group: their clamped boxes are empty,
+    or they cover nothing, which costs less than a compaction. Ids index the returned
+    ``screen``; exact depth ties may therefore go to another triangle than in the lab's
+    order (visible only as coplanar z-fighting).
+    """
+    clip = clip_vertices[faces]  # (F, 3, 4)
+    d = clip[..., 2] + clip[..., 3]
+    simple = (d >= 0).all(-1) & (clip[..., 3] > 0).all(-1) & torch.isfinite(clip).all(-1).all(-1)
+    first = simple.nonzero()[:, 0]
+    rest = (~simple).nonzero()[:, 0]
+    parts, sources = [], []
+    if len(first):
+        parts.append(to_screen(clip[first], width, height))
+        sources.append(first)
+    if len(rest):
+        clipped, source, _ = clip_triangles(clip[rest])
+        if len(source):
+            parts.append(to_screen(clipped, width, height))
+            sources.append(rest[source])
+    if not parts:
+        return clip.new_zeros(0, 3, 4), faces.new_zeros(0)
+    return torch.cat(parts), torch.cat(sources)

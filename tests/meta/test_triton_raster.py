@@ -121,3 +121,38 @@ def test_compiled_matches_reference():
 
 if __name__ == "__main__":
     torch.save(run_kernels(torch.load(sys.argv[1], weights_only=False), "cpu"), sys.argv[2])
+
+
+def test_fast_setup_matches_the_lab_pipeline():
+    """screen_triangles_fast (no Triton needed) gives the lab's visibility, also when the
+    camera stands inside the mesh and many triangles cross the near plane."""
+    import dataclasses
+
+    from course.bench import load_lab
+    from course.camera import Camera
+    from course.scenes import load_scene
+    from course.triton_raster import screen_triangles_fast
+
+    lab = load_lab("lab6_raster", "solutions")
+    mesh = load_scene("suzanne", device="cpu").mesh
+    centre = mesh.vertices.mean(0).tolist()
+    inside = Camera(eye=tuple(centre), target=(centre[0] + 1.0, centre[1], centre[2] + 0.3),
+                    fov_y=90.0, width=48, height=40, near=0.05, far=50.0)
+    outside = dataclasses.replace(load_scene("suzanne", device="cpu").camera, width=48,
+                                  height=40)
+    for name, camera in (("inside", inside), ("outside", outside)):
+        clip = lab.to_clip_space(mesh.vertices, camera.view_projection(torch.float64))
+        screen, source = screen_triangles_fast(clip, mesh.faces, 48, 40, lab.clip_triangles,
+                                               lab.to_screen)
+        clipped, want_source, _ = lab.clip_triangles(clip[mesh.faces])
+        if name == "inside":
+            d = clip[mesh.faces][..., 2] + clip[mesh.faces][..., 3]
+            crossing = ((d >= 0).any(-1) & (d < 0).any(-1)).sum().item()
+            assert crossing > 10, f"only {crossing} triangles cross the near plane"
+        got = lab.triangle_ids(lab.rasterize(screen, 48, 40))
+        want = lab.triangle_ids(lab.rasterize(lab.to_screen(clipped, 48, 40), 48, 40))
+        got = torch.where(got >= 0, source[got.clamp(min=0)], -1)
+        want = torch.where(want >= 0, want_source[want.clamp(min=0)], -1)
+        assert (got >= 0).any(), f"{name}: nothing visible: the test sees nothing"
+        assert torch.equal(got, want), (f"{name}: {(got != want).sum().item()} pixels see "
+                                        f"another triangle than the lab's pipeline")
