@@ -7,6 +7,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -20,16 +22,20 @@ sys.path.insert(0, str(ROOT))
 from course.bench import ResultTable, device_name
 
 
-def _grade_seconds(impl: str, trusted: bool) -> float:
+def _grade_seconds(impl: str, trusted: bool) -> tuple[float, float]:
+    """(wall seconds, CPU seconds of the grader and all its processes) of one grading."""
     cmd = [sys.executable, "-m", "course.cli", "grade", "--impl", impl]
     if trusted:
         cmd.append("--trusted")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=False)
     seconds = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if "total:" not in proc.stdout:
         raise RuntimeError(proc.stdout[-2000:] + proc.stderr[-2000:])
-    return seconds
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return seconds, cpu
 
 
 def main():
@@ -43,14 +49,18 @@ def main():
         shutil.copytree(ROOT / "solutions", copy, ignore=shutil.ignore_patterns("mutants"))
         for mode, impl, trusted in (("in-process", "solutions", True),
                                     ("sandboxed", str(copy), False)):
-            times = sorted(_grade_seconds(impl, trusted) for _ in range(args.repeats))
-            table.add(mode=mode, seconds=times[len(times) // 2], runs=len(times))
-            print(f"{mode:<11} {times[len(times) // 2]:7.2f} s")
+            runs = sorted(_grade_seconds(impl, trusted) for _ in range(args.repeats))
+            wall, cpu = runs[len(runs) // 2]
+            table.add(mode=mode, seconds=wall, cpu_seconds=cpu, runs=len(runs))
+            print(f"{mode:<11} {wall:7.2f} s wall, {cpu:7.2f} s CPU")
     rows = table.rows
     ratio = rows[1]["seconds"] / rows[0]["seconds"]
-    print(f"sandboxed / in-process = {ratio:.2f}")
+    cpu_ratio = rows[1]["cpu_seconds"] / rows[0]["cpu_seconds"]
+    print(f"sandboxed / in-process = {ratio:.2f} (wall), {cpu_ratio:.2f} (CPU)")
     out = Path(args.out or ROOT / "bench" / "results" / device_name("cpu") / "grading_cost.json")
     table.metadata["ratio_sandboxed_over_in_process"] = ratio
+    table.metadata["cpu_ratio_sandboxed_over_in_process"] = cpu_ratio
+    table.metadata["cpus"] = len(os.sched_getaffinity(0))
     table.to_json(out)
     print(f"wrote {out}")
 
