@@ -9,8 +9,8 @@ On a GPU, in one run:
   bounce rays (cosine-distributed about the normal at the primary hits, origins in pixel
   order: incoherent directions), traced by the CUDA C kernel (course.cuda_tracer, one
   thread per ray, local-memory stack) and by the Triton kernel (course.triton_tracer, one
-  ray per lane) at several launch shapes; target: Triton >= 50% of CUDA C (best launch of
-  each);
+  ray per lane) at several launch shapes, with and without skipping the stages of a step
+  that no lane needs; target: Triton >= 50% of CUDA C (best launch of each);
 * **ms/frame** of the whole Whitted frame (``F x F`` pixels, shadow rays to every light,
   up to 2 mirror bounces) by the Triton uber kernel on the Cornell mirror scene and the
   bunny on a mirror floor; target: <= 5 ms;
@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import math
 import sys
 import time
@@ -54,6 +55,7 @@ from course.whitted_support import (
 )
 
 TRITON_SHAPES = [(32, 1), (64, 2), (128, 4)]  # (lanes per program, warps)
+UNIFORM = [True, False]  # skip stages no lane needs / run every stage masked
 CUDA_BLOCKS = [64, 128, 256]
 
 
@@ -142,15 +144,15 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
             print(f"CUDA C skipped: {reason}")
     if device.type == "cuda" or triton_tracer.interpreting():
         shapes = TRITON_SHAPES if device.type == "cuda" else TRITON_SHAPES[:1]
-        for block, warps in shapes:
+        for (block, warps), uniform in itertools.product(shapes, UNIFORM):
             fn = triton_tracer.trace_flat_triton
-            hits, info = fn(bvh, rays_o, rays_d, block=block, num_warps=warps, return_info=True)
-            t = time_fn(fn, bvh, rays_o, rays_d, block=block, num_warps=warps, repeats=repeats,
-                        warmup=1)
+            kw = {"block": block, "num_warps": warps, "uniform_branches": uniform}
+            hits, info = fn(bvh, rays_o, rays_d, return_info=True, **kw)
+            t = time_fn(fn, bvh, rays_o, rays_d, repeats=repeats, warmup=1, **kw)
             row = table.add(scene=scene_name, rays=kind, impl="Triton",
-                            launch=f"{block} lanes/{warps} warps", n_rays=n, ms=t.median * 1e3,
-                            grays_per_s=n / t.median / 1e9, **triton_row(info),
-                            **hit_errors(scene, rays_o, rays_d, hits, sample))
+                            launch=_launch(block, warps, uniform), n_rays=n,
+                            ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
+                            **triton_row(info), **hit_errors(scene, rays_o, rays_d, hits, sample))
             fastest["Triton"] = max(fastest.get("Triton", 0), row["grays_per_s"])
             print(_line(row), flush=True)
     if device.type == "cpu":
@@ -174,20 +176,24 @@ def bench_frames(table, device, frame, repeats, ref_grid, shapes):
         idx = (pix[:, None] * frame + pix[None, :]).reshape(-1)
         want = render_reference(scene, rays.origins[idx], rays.directions[idx])
         render = triton_tracer.render_whitted_triton
-        for block, warps in shapes:
-            rgb, info = render(scene, rays.origins, rays.directions, block=block,
-                               num_warps=warps, return_info=True)
-            t = time_fn(render, scene, rays.origins, rays.directions, bvh=bvh, block=block,
-                        num_warps=warps, repeats=repeats, warmup=1)
+        for (block, warps), uniform in itertools.product(shapes, UNIFORM):
+            kw = {"block": block, "num_warps": warps, "uniform_branches": uniform}
+            rgb, info = render(scene, rays.origins, rays.directions, return_info=True, **kw)
+            t = time_fn(render, scene, rays.origins, rays.directions, bvh=bvh, repeats=repeats,
+                        warmup=1, **kw)
             err = (rgb[idx].double() - want).abs().amax(1) / want.abs().amax(1).clamp(min=1e-3)
             row = table.add(scene=name, rays=f"Whitted frame {frame}x{frame}, 2 bounces",
-                            impl="Triton uber", launch=f"{block} lanes/{warps} warps",
+                            impl="Triton uber", launch=_launch(block, warps, uniform),
                             n_rays=None, n_pixels=frame * frame, ms=t.median * 1e3,
                             gpixels_per_s=frame * frame / t.median / 1e9, **triton_row(info),
                             mismatch=(err > 1e-3).double().mean().item(),
                             image_rel_err_median=err.median().item(),
                             image_rel_err_max=err.max().item())
             print(_line(row), flush=True)
+
+
+def _launch(block: int, warps: int, uniform: bool) -> str:
+    return f"{block} lanes/{warps} warps, " + ("uniform skips" if uniform else "all masked")
 
 
 def _line(row: dict) -> str:

@@ -62,6 +62,8 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
         hits, info = tt.trace_flat_triton(bvh, *args, any_hit=any_hit, return_info=True)
         out["any" if any_hit else "closest"] = hits.to("cpu")
         out["info"][info.name] = info
+    # Skipping stages no lane needs must not change a single result.
+    out["masked_only"] = tt.trace_flat_triton(bvh, *args, uniform_branches=False).to("cpu")
     v, f, o, d = axis_parallel_case()
     out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
                                        o.to(device), d.to(device)).to("cpu")
@@ -86,6 +88,10 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
         f"{label}: any hit and closest hit disagree on occlusion for rays "
         f"{(out['any'].hit != out['closest'].hit).nonzero()[:, 0].tolist()}")
     check_axis_parallel(out["axis"], label)
+    for field in ("t", "triangle", "u", "v"):
+        assert torch.equal(getattr(out["masked_only"], field), getattr(out["closest"], field)), (
+            f"{label}: uniform_branches=False changed {field}: the stages must be skipped "
+            f"only where no lane needs them")
     assert out["empty"] == 0
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device="cpu")
