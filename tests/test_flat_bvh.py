@@ -156,8 +156,6 @@ def check_hits(case: dict, hits, label: str, any_hit: bool = False, ref: dict | 
     ref = ref or brute_force64(case)
     t_k, id_k = hits.t.double().cpu(), hits.triangle.cpu()
     u_k, v_k = hits.u.double().cpu(), hits.v.double().cpu()
-    n = len(t_k)
-    rays = torch.arange(n)
     assert not (torch.isnan(t_k).any() or torch.isnan(u_k).any() or torch.isnan(v_k).any()), (
         f"{label}: NaN in the outputs (rays {torch.isnan(t_k).nonzero()[:, 0].tolist()})")
     miss = id_k < 0
@@ -202,7 +200,6 @@ def check_hits(case: dict, hits, label: str, any_hit: bool = False, ref: dict | 
             f"but triangle {int(torch.where(ref['solid'], ref['t'], math.inf)[hit[nearer][0]].argmin())} "
             f"is hit solidly nearer, at t = {float(t_solid[hit][nearer][0]):.9g}: the walk "
             f"culled a box it should have entered")
-    del rays
 
 
 # --------------------------------------------------------------------------------------
