@@ -419,3 +419,91 @@ class TreeLevels:
             left[parents], right[parents] = a, b
         return assemble_bvh(order, start, end, left, right, torch.cat(self.depths), tri_lo,
                             tri_hi)
+
+
+def pack_bvh(bvh: dict, mesh: Mesh) -> dict:
+    """Provided: a BVH dict laid out for the fixed-shape traversal (``bvh_closest_hit_fast``).
+
+    bvh: any valid BVH dict (``build_lbvh``/``build_sah_bvh``); mesh: its mesh. Returns:
+
+    ===============  ================  ==================================================
+    ``child``        (M, 2) int64      the two children of each inner node (-1, -1 for
+                                       leaves)
+    ``child_lo/hi``  (M, 2, 3) float   their boxes side by side: one gather per step reads
+                                       both (zeros for leaves)
+    ``first``        (M,) int64        a leaf's triangles are the packed slots
+    ``count``        (M,) int64        ``first .. first + count - 1``; 0 for inner nodes
+    ``v0, e1, e2``   (F, 3) float      each slot's vertex and edges ``v1 - v0``, ``v2 - v0``
+                                       (in leaf order: a leaf's triangles are contiguous)
+    ``tri``          (F,) int64        each slot's triangle index in the mesh
+    ``lo, hi``       (3,) float        the root's box
+    ``depth``        int               the tree's depth (root 0): a stack of ``depth + 2``
+                                       entries never overflows with near-first pushes
+    ``leaf_size``    int               the largest leaf: the slot loop's trip count
+    ===============  ================  ==================================================
+
+    The only host syncs are here, once per tree: ``depth`` and ``leaf_size`` are sizes.
+    """
+    check_structure(bvh, "bvh", "bvh", mesh)
+    left, right = bvh["left"], bvh["right"]
+    m, device = len(left), left.device
+    leaf = left < 0
+    child = torch.stack((left, right), dim=1)
+    safe = child.clamp(min=0)
+    child_lo = torch.where(leaf[:, None, None], 0.0, bvh["lo"][safe])
+    child_hi = torch.where(leaf[:, None, None], 0.0, bvh["hi"][safe])
+    # Depth by pointer jumping over parents: every round doubles the reach.
+    parent = torch.full((m,), -1, dtype=torch.int64, device=device)
+    inner = (~leaf).nonzero()[:, 0]
+    parent[left[inner]] = inner
+    parent[right[inner]] = inner
+    depth = (parent >= 0).long()
+    up = parent.clone()
+    for _ in range(64):
+        has = up >= 0
+        if not bool(has.any()):
+            break
+        depth = depth + torch.where(has, depth[up.clamp(min=0)], 0)
+        up = torch.where(has, up[up.clamp(min=0)], -1)
+    corners = mesh.triangles()[bvh["triangles"]]
+    return {"child": child, "child_lo": child_lo, "child_hi": child_hi,
+            "first": torch.where(leaf, bvh["first"], 0), "count": torch.where(leaf, bvh["count"], 0),
+            "v0": corners[:, 0].contiguous(), "e1": (corners[:, 1] - corners[:, 0]).contiguous(),
+            "e2": (corners[:, 2] - corners[:, 0]).contiguous(), "tri": bvh["triangles"],
+            "lo": bvh["lo"][0], "hi": bvh["hi"][0], "depth": int(depth.max()),
+            "leaf_size": int(bvh["count"].max())}
+
+
+def moller_trumbore_rows(o, d, v0, e1, e2, t_min, t_max):
+    """Provided: Lab 1's Möller–Trumbore on precomputed edges, one ray per row.
+
+    o, d, v0, e1, e2: (n, 3) float (``e1 = v1 - v0``, ``e2 = v2 - v0``); t_min, t_max: (n,).
+    Returns ``(t, u, v, hit)``, each (n,): unmasked ``t, u, v`` and whether they are a hit
+    (inside, not parallel, ``t`` in ``[t_min, t_max]``). The parallel test is relative:
+    ``|det| <= eps |d| |e1| |e2|`` (max-norms). Cross and dot products are written out as
+    elementwise ops, so that ``torch.compile`` can fuse the whole test into one kernel.
+    """
+    p = _cross(d, e2)
+    det = _dot(e1, p)
+    scale = d.abs().amax(-1) * e1.abs().amax(-1) * e2.abs().amax(-1)
+    not_parallel = det.abs() > torch.finfo(det.dtype).eps * scale
+    inv_det = 1 / det
+    s = o - v0
+    u = _dot(s, p) * inv_det
+    q = _cross(s, e1)
+    v = _dot(d, q) * inv_det
+    t = _dot(e2, q) * inv_det
+    hit = not_parallel & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= t_min) & (t <= t_max)
+    return t, u, v, hit
+
+
+def _cross(a, b):
+    """``a x b`` over the last axis, written out: elementwise ops a compiler fuses."""
+    return torch.stack((a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                        a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                        a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]), dim=-1)
+
+
+def _dot(a, b):
+    """``a . b`` over the last axis, written out."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]

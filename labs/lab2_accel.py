@@ -53,6 +53,9 @@ Tasks (points)
 6. The two-level grid: ``build_two_level_grid`` (a coarse top grid, a sub-grid sized
    by the density heuristic in each crowded cell), ``two_level_closest_hit`` (nested
    DDA, mailboxing across both levels): the teapot in a stadium                (4)
+7. ``bvh_closest_hit_fast``: the BVH traversal with fixed shapes and fixed trip counts
+   (no host sync inside the loop, ``torch.compile``-able), and its any-hit mode for
+   shadow rays                                                                (3)
 
 What each structure buys, measured
 ----------------------------------
@@ -113,8 +116,10 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     expand_ranges,
     grid_resolutions,
     intersect_pairs,
+    moller_trumbore_rows,
     new_closest,
     new_counters,
+    pack_bvh,
     pair_chunks,
     slab_test,
     surface_area,
@@ -722,3 +727,58 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
     check_trace_inputs(rays, mesh, intersect)
     check_structure(grid2, "grid2", "grid2", mesh)
     raise NotImplementedError("not implemented yet: two_level_closest_hit (task 6)")
+
+
+# =======================================================================================
+# Task 7: sync-free BVH traversal
+
+
+def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
+                         check_every: int = 8, compile=False, compact: bool = True):
+    """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop.
+
+    rays: N rays; mesh: the BVH's mesh; bvh: a BVH dict; any_hit: stop each ray at its
+    first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
+    steps run between two looks at the rays (one host sync each); compile: False, True or
+    a ``torch.compile`` mode (``"reduce-overhead"``: CUDA graphs) for the ``k``-step body;
+    compact: at a look, drop finished rays if at most half are still running.
+    Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = nodes popped
+    and not culled, ``"tests"`` = triangle tests); with ``any_hit`` the hit of a ray is
+    *a* hit in its interval (the first found), not necessarily the closest.
+
+    :func:`bvh_closest_hit` compacts the active rays every step (``nonzero``) and sizes
+    its stack from ``sp.max()``: each is a host sync, and on a GPU a sync per step (plus
+    a hundred small kernel launches) is the whole cost. Here:
+
+    * every tensor keeps its shape: all rays step together, finished ones masked
+      (``sp == 0``); the stack is ``(N, depth + 2)`` (:func:`pack_bvh`'s depth bound), a
+      push writes slot ``sp`` unconditionally (free slots hold garbage) and then
+      ``sp += pushed``;
+    * a step pops one node per ray: an inner node slab-tests both children at once
+      (``child_lo/hi``: one gather), pushes the far hit child, then the near one; a
+      leaf runs a **fixed** loop of ``leaf_size`` slots, each a Möller–Trumbore test in
+      the mesh's dtype, masked by ``slot < count``, keeping the closest hit (ties: lowest
+      triangle index);
+    * the host looks only every ``k`` steps: stop when no stack holds anything, and
+      compact if few rays are left;
+    * the ``k`` steps are one function of tensors with no data-dependent Python control
+      flow, so ``torch.compile`` can fuse each step into a few kernels.
+
+    The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
+    in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
+    (rounding may decide a ray grazing an edge differently when the ops are fused).
+    
+    Hints: ``pack_bvh`` (provided) lays the tree out for you: ``depth`` sizes the stack,
+    ``leaf_size`` the slot loop. Write the ``k`` steps as one function of tensors (state in,
+    state out: ``gather``/``scatter_`` on the stack, ``torch.where`` for the masked
+    updates); ``moller_trumbore_rows`` (provided) is the triangle test. Compile that function
+    once (``torch.compile(fn, mode=..., dynamic=True)``) and keep it, not per call.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_trace_inputs(rays, mesh, moller_trumbore_rows)
+    check_structure(bvh, "bvh", "bvh", mesh)
+    _positive_int(check_every, "check_every", 1, 1024)
+    if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
+                       "max-autotune-no-cudagraphs"):
+        raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
+    raise NotImplementedError("not implemented yet: bvh_closest_hit_fast (task 7)")

@@ -46,6 +46,9 @@ Tasks (points)
 6. The two-level grid: ``build_two_level_grid`` (a coarse top grid, a sub-grid sized
    by the density heuristic in each crowded cell), ``two_level_closest_hit`` (nested
    DDA, mailboxing across both levels): the teapot in a stadium                (4)
+7. ``bvh_closest_hit_fast``: the BVH traversal with fixed shapes and fixed trip counts
+   (no host sync inside the loop, ``torch.compile``-able), and its any-hit mode for
+   shadow rays                                                                (3)
 
 What each structure buys, measured
 ----------------------------------
@@ -108,15 +111,18 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     expand_ranges,
     grid_resolutions,
     intersect_pairs,
+    moller_trumbore_rows,
     new_closest,
     new_counters,
+    pack_bvh,
     pair_chunks,
     slab_test,
     surface_area,
     test_ranges,
     triangle_bounds,
 )
-from course.types import Mesh, Rays
+from course.raymath import gamma
+from course.types import Hits, Mesh, Rays
 
 # =======================================================================================
 # Provided helpers (not tasks): input checks, bounds, the slab test, pairs, closest hits
@@ -1297,3 +1303,161 @@ def _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray, sub
         ray, o, inv, s_out, prev_top = ray[keep], o[keep], inv[keep], s_out[keep], prev_top[keep]
         lo, res, base, width = lo[keep], res[keep], base[keep], width[keep]
         cell, prev, step = cell[keep], prev[keep], step[keep]
+
+
+# =======================================================================================
+# Task 7: sync-free BVH traversal
+
+
+def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
+                         check_every: int = 8, compile=False, compact: bool = True):
+    """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop.
+
+    rays: N rays; mesh: the BVH's mesh; bvh: a BVH dict; any_hit: stop each ray at its
+    first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
+    steps run between two looks at the rays (one host sync each); compile: False, True or
+    a ``torch.compile`` mode (``"reduce-overhead"``: CUDA graphs) for the ``k``-step body;
+    compact: at a look, drop finished rays if at most half are still running.
+    Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = nodes popped
+    and not culled, ``"tests"`` = triangle tests); with ``any_hit`` the hit of a ray is
+    *a* hit in its interval (the first found), not necessarily the closest.
+
+    :func:`bvh_closest_hit` compacts the active rays every step (``nonzero``) and sizes
+    its stack from ``sp.max()``: each is a host sync, and on a GPU a sync per step (plus
+    a hundred small kernel launches) is the whole cost. Here:
+
+    * every tensor keeps its shape: all rays step together, finished ones masked
+      (``sp == 0``); the stack is ``(N, depth + 2)`` (:func:`pack_bvh`'s depth bound), a
+      push writes slot ``sp`` unconditionally (free slots hold garbage) and then
+      ``sp += pushed``;
+    * a step pops one node per ray: an inner node slab-tests both children at once
+      (``child_lo/hi``: one gather), pushes the far hit child, then the near one; a
+      leaf runs a **fixed** loop of ``leaf_size`` slots, each a Möller–Trumbore test in
+      the mesh's dtype, masked by ``slot < count``, keeping the closest hit (ties: lowest
+      triangle index);
+    * the host looks only every ``k`` steps: stop when no stack holds anything, and
+      compact if few rays are left;
+    * the ``k`` steps are one function of tensors with no data-dependent Python control
+      flow, so ``torch.compile`` can fuse each step into a few kernels.
+
+    The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
+    in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
+    (rounding may decide a ray grazing an edge differently when the ops are fused).
+    """
+    check_trace_inputs(rays, mesh, moller_trumbore_rows)
+    check_structure(bvh, "bvh", "bvh", mesh)
+    _positive_int(check_every, "check_every", 1, 1024)
+    if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
+                       "max-autotune-no-cudagraphs"):
+        raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
+    tree = pack_bvh(bvh, mesh)
+    n, device, dtype = len(rays), rays.device, rays.dtype
+    inv = 1 / rays.directions
+    t_root, _, hit_root = slab_test(rays.origins, inv, tree["lo"], tree["hi"], rays.t_min,
+                                    rays.t_max)
+    depth = tree["depth"] + 2
+    out = {"t": torch.full((n,), math.inf, dtype=dtype, device=device),
+           "tri": torch.full((n,), -1, dtype=torch.int64, device=device),
+           "u": torch.zeros(n, dtype=dtype, device=device),
+           "v": torch.zeros(n, dtype=dtype, device=device),
+           "steps": torch.zeros(n, dtype=torch.int64, device=device),
+           "tests": torch.zeros(n, dtype=torch.int64, device=device)}
+    ray = torch.arange(n, device=device)
+    state = [rays.origins, rays.directions, inv, rays.t_min, rays.t_max,
+             torch.zeros((n, depth), dtype=torch.int64, device=device),   # stack: nodes
+             torch.where(hit_root, t_root, math.inf)[:, None].expand(n, depth).contiguous(),
+             hit_root.long()] + [out[k].clone() for k in ("t", "tri", "u", "v", "steps",
+                                                          "tests")]
+    names = ("t", "tri", "u", "v", "steps", "tests")
+    steps_fn = _fast_steps if compile is False else _compiled_fast_steps(compile)
+    consts = (check_every, tree["leaf_size"], bool(any_hit))
+    # One row per node and per slot: one gather reads all a step needs of each.
+    tensors = (torch.cat((tree["child"], tree["first"][:, None], tree["count"][:, None]), 1),
+               torch.cat((tree["child_lo"], tree["child_hi"]), 2).reshape(-1, 12),
+               torch.cat((tree["v0"], tree["e1"], tree["e2"]), 1), tree["tri"])
+    for _ in range(0, 2 * len(tree["child"]) + 1, check_every):
+        state = list(steps_fn(*state, *tensors, *consts))
+        running = state[7] > 0
+        active = int(running.sum())  # the one host sync per k steps
+        if active == 0:
+            break
+        if compact and active <= len(ray) // 2:
+            for i, name in enumerate(names):
+                out[name][ray] = state[8 + i]
+            keep = running.nonzero()[:, 0]
+            ray = ray[keep]
+            state = [x[keep] for x in state]
+    for i, name in enumerate(names):
+        out[name][ray] = state[8 + i]
+    return (Hits(t=out["t"], triangle=out["tri"], u=out["u"], v=out["v"]),
+            {"steps": out["steps"], "tests": out["tests"]})
+
+
+def _fast_steps(o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, best_u, best_v,
+                steps, tests, nodes, boxes, slots, tri_of, k: int, leaf_size: int,
+                any_hit: bool):
+    """``k`` steps of :func:`bvh_closest_hit_fast` for every ray: the same shapes in and
+    out, no host sync (what ``torch.compile`` fuses). ``stack``/``stack_t`` are updated in
+    place; nodes: (M, 4) int64 ``[left, right, first, count]``; boxes: (M, 12) the two
+    children's ``lo, hi``; slots: (F, 9) ``v0, e1, e2`` per leaf slot."""
+    grow = 1 + 2 * gamma(3, o.dtype)  # the conservative slab test's far-side scale
+    depth = stack.shape[1]
+    num_slots = len(slots)
+    for _ in range(k):
+        active = sp > 0
+        top = (sp - 1).clamp(min=0)[:, None]
+        node = stack.gather(1, top)[:, 0].clamp(min=0)  # free slots hold garbage (-1)
+        t_node = stack_t.gather(1, top)[:, 0]
+        sp = sp - active.long()
+        live = active & (t_node <= best_t)
+        steps = steps + live.long()
+        info = nodes.index_select(0, node)
+        n_tri = info[:, 3]
+        leaf = live & (n_tri > 0)
+        inner = live & (n_tri == 0)
+        # Inner nodes: both children's slabs at once, (N, 2, 3).
+        box = boxes.index_select(0, node).view(-1, 2, 2, 3)
+        t0 = (box[:, :, 0] - o[:, None]) * inv[:, None]
+        t1 = (box[:, :, 1] - o[:, None]) * inv[:, None]
+        near, far = torch.minimum(t0, t1), torch.maximum(t0, t1) * grow
+        t_hi = torch.minimum(t_max, best_t)[:, None]
+        t_in = torch.fmax(torch.fmax(torch.fmax(near[..., 0], near[..., 1]), near[..., 2]),
+                          t_min[:, None])
+        t_out = torch.fmin(torch.fmin(torch.fmin(far[..., 0], far[..., 1]), far[..., 2]), t_hi)
+        hit = inner[:, None] & (t_in <= t_out) & (t_in < math.inf)
+        a_first = (t_in[:, :1] <= t_in[:, 1:]).long()
+        for chosen in (a_first, 1 - a_first):  # far child first: the near one pops next
+            slot = sp.clamp(max=depth - 1)[:, None]
+            stack.scatter_(1, slot, info[:, :2].gather(1, chosen))
+            stack_t.scatter_(1, slot, t_in.gather(1, chosen))
+            sp = sp + hit.gather(1, chosen)[:, 0].long()
+        # Leaves: a fixed loop over the slots, masked by the leaf's count.
+        for j in range(leaf_size):
+            ok = leaf & (j < n_tri)
+            s = (info[:, 2] + j).clamp(max=num_slots - 1)
+            tri = slots.index_select(0, s)
+            t, u, v, h = moller_trumbore_rows(o, d, tri[:, 0:3], tri[:, 3:6], tri[:, 6:9],
+                                                t_min, t_max)
+            index = tri_of.index_select(0, s)
+            better = ok & h & ((t < best_t) | ((t == best_t) & (index < best_tri)))
+            best_t = torch.where(better, t, best_t)
+            best_tri = torch.where(better, index, best_tri)
+            best_u = torch.where(better, u, best_u)
+            best_v = torch.where(better, v, best_v)
+            tests = tests + ok.long()
+        if any_hit:
+            sp = torch.where(best_tri >= 0, 0, sp)
+    return (o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, best_u, best_v,
+            steps, tests)
+
+
+_COMPILED: dict = {}
+
+
+def _compiled_fast_steps(mode):
+    """``torch.compile`` of :func:`_fast_steps`, one per mode (dynamic shapes: compaction
+    changes the number of rays without a recompile)."""
+    mode = "default" if mode is True else mode
+    if mode not in _COMPILED:
+        _COMPILED[mode] = torch.compile(_fast_steps, mode=mode, dynamic=True)
+    return _COMPILED[mode]

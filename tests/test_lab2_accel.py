@@ -1429,3 +1429,166 @@ def test_two_level_mailboxing_and_work(impl, device):
         f"({mean / mesh.num_faces:.1%} of the scene): the teapot's sub-grids should give it "
         f"cells its own size (a uniform grid tests most of it)")
     assert steps <= 100, f"two-level grid: {steps:.0f} cells per ray at the teapot: too many"
+
+
+# ---------------------------------------------------------------------------------------
+# Task 7: sync-free BVH traversal (its own float32 Möller–Trumbore: rounding may decide
+# a ray that grazes an edge, or runs nearly parallel to a triangle, differently)
+
+
+def grazed(rays: Rays, mesh: Mesh, i: torch.Tensor, tri: torch.Tensor, margin=1e-5):
+    """(len(i),) bool: ray i[j] passes within ``margin`` (barycentric, relative) of triangle
+    tri[j]'s edges, or nearly parallel to its plane: where float32 may decide either way."""
+    corners = mesh.triangles().cpu().double()[tri.clamp(min=0)]
+    o, d = rays.origins[i].double(), rays.directions[i].double()
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    p = torch.linalg.cross(d, e2, dim=-1)
+    det = (e1 * p).sum(-1)
+    s = o - corners[:, 0]
+    u = (s * p).sum(-1) / det
+    v = (d * torch.linalg.cross(s, e1, dim=-1)).sum(-1) / det
+    edge = torch.stack((u, v, 1 - u - v), 1).abs().amin(1) <= margin
+    flat = det.abs() <= 1e-4 * d.norm(dim=1) * e1.norm(dim=1) * e2.norm(dim=1)
+    return (edge | flat | ~torch.isfinite(det)) & (tri >= 0)
+
+
+def compare_fast(result, rays: Rays, mesh: Mesh, what: str, ref=None, any_hit=False):
+    """Like ``compare``, for a kernel that rounds on its own: a ray may differ from brute
+    force only where it grazes an edge of (or runs parallel to) the triangles involved.
+    With ``any_hit`` a ray must hit iff brute force does, and its hit must be real."""
+    hits, count = check_result(result, len(rays), rays.dtype, rays.device, what)
+    rays, mesh = rays.to("cpu"), on(mesh, "cpu")
+    ref_t, ref_i, _, _ = reference(rays, mesh) if ref is None else ref
+    t, tri = hits.t.cpu(), hits.triangle.cpu()
+    # float32 rounds t by about eps * (coordinates) / |d|: an absolute part, and a relative one.
+    reach = (rays.origins.abs().amax(1).double() + float(mesh.vertices.abs().amax())) / \
+        rays.directions.double().norm(dim=1)
+    slack = 1e-6 * reach.nan_to_num(0.0, posinf=0.0)
+    if any_hit:
+        differ = (tri >= 0) != (ref_i >= 0)
+    else:
+        tol = 1e-5 * ref_t.abs().nan_to_num(posinf=0.0) + slack
+        same_t = ((t - ref_t).abs() <= tol) | ((tri < 0) & (ref_i < 0))
+        differ = (tri != ref_i) & ~same_t
+    idx = differ.nonzero()[:, 0]
+    excused = grazed(rays, mesh, idx, ref_i[idx]) | grazed(rays, mesh, idx, tri[idx])
+    bad = idx[~excused]
+    if len(bad):
+        i = int(bad[0])
+        raise AssertionError(
+            f"{what}: {len(bad)} of {len(rays)} rays disagree with brute force (not at an edge). "
+            f"First: ray {i} ({describe(rays, i)}): brute force: triangle {int(ref_i[i])} at "
+            f"t={ref_t[i].item():.9g}; you: triangle {int(tri[i])} at t={t[i].item():.9g}")
+    assert len(idx) <= max(2, 0.02 * len(rays)), \
+        f"{what}: {len(idx)} of {len(rays)} rays disagree with brute force (edges): too many"
+    # A reported hit must be real: that triangle, at that t, inside [t_min, t_max].
+    hit = (tri >= 0).nonzero()[:, 0]
+    corners = mesh.triangles()[tri[hit]]
+    t_check, _, _ = mt64(rays.origins[hit], rays.directions[hit], corners[:, 0], corners[:, 1],
+                         corners[:, 2], rays.t_min[hit], rays.t_max[hit])
+    fake = ~((t_check - t[hit]).abs() <= 1e-5 * t[hit].abs() + slack[hit]) & \
+        ~grazed(rays, mesh, hit, tri[hit])
+    if fake.any():
+        i = int(hit[fake][0])
+        raise AssertionError(f"{what}: ray {i} reports triangle {int(tri[i])} at "
+                             f"t={t[i].item():.9g}, but the ray hits it at "
+                             f"t={t_check[fake][0].item():.9g} (inf: not at all in [t_min, t_max])")
+    if (count["tests"][tri >= 0] < 1).any():
+        raise AssertionError(f"{what}: rays with a hit but counters['tests'] == 0")
+    if (count["steps"][count["tests"] > 0] < 1).any():
+        raise AssertionError(f"{what}: rays with triangle tests but counters['steps'] == 0")
+    return {k: v.cpu() for k, v in count.items()}
+
+
+def shadow_rays(mesh: Mesh, seed: int, n: int = 160) -> Rays:
+    """Rays from points on the surface (t_min = 1e-4 keeps them off their own triangle)
+    towards a point light above the scene, t_max just short of it."""
+    g = generator(seed)
+    corners = mesh.triangles().cpu().double()
+    pick = torch.randint(0, len(corners), (n,), generator=g)
+    w = torch.rand(n, 3, generator=g, dtype=F64)
+    w = w / w.sum(1, keepdim=True)
+    points = (corners[pick] * w[:, :, None]).sum(1)
+    lo, hi = bounds(mesh)
+    light = (lo + hi) / 2 + torch.tensor([0.3, 1.0, 0.2], dtype=F64) * (hi - lo).norm()
+    return Rays.create(points.float(), (light - points).float(), 1e-4, 1 - 1e-4)
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(2)
+def test_fast_bvh_matches_brute_force(impl, device):
+    for name, leaf_size, k in (("soup", 1, 1), ("shards", 3, 4), ("ico", 2, 8), ("teapot", 4, 3),
+                               ("far", 2, 16), ("coincident", 3, 2), ("single", 1, 5),
+                               ("slabs", 2, 64)):
+        mesh = on(scene(name), device)
+        bvh = median_bvh(mesh, leaf_size)
+        if name == "teapot":
+            rays = cat_rays(teapot_rays(200, 171), axis_rays(mesh, 172, 4))
+        else:
+            rays = cat_rays(rays_around(mesh, 160, 173), axis_rays(mesh, 174, 4), bad_rays())
+        rays = rays.to(device)
+        count = compare_fast(impl.bvh_closest_hit_fast(rays, mesh, bvh, check_every=k), rays,
+                             mesh, f"bvh_closest_hit_fast({name}, median BVH, leaf_size="
+                             f"{leaf_size}, check_every={k})")
+        if name == "ico":
+            mean = count["tests"].double().mean().item()
+            assert mean <= 6.0, (
+                f"bvh_closest_hit_fast: {mean:.2f} triangle tests per ray into a closed "
+                f"icosphere; push the far child first (the near one is popped next) and cull "
+                f"popped nodes beyond the closest hit")
+    # Coincident triangles: the tie goes to the lowest index.
+    mesh = on(scene("coincident"), device)
+    rays = Rays.create(torch.tensor([[0.4, 0.4, -1.0], [0.45, 0.4, 2.0]]),
+                       torch.tensor([[0.0, 0.0, 1.0], [-0.0, 0.0, -1.0]])).to(device)
+    hits, _ = impl.bvh_closest_hit_fast(rays, mesh, median_bvh(mesh, 3))
+    assert hits.triangle.tolist() == [0, 0], (
+        f"bvh_closest_hit_fast: 40 coincident triangles hit at the same t: the lowest index "
+        f"(0) must win, got {hits.triangle.tolist()}")
+    # float64 in, float64 out; and the lab's own SAH build.
+    m64 = Mesh(vertices=scene("shards").vertices.double().to(device),
+               faces=scene("shards").faces.to(device))
+    rays = rays_around(m64, 80, 175, dtype=F64).to(device)
+    compare_fast(impl.bvh_closest_hit_fast(rays, m64, median_bvh(m64, 3)), rays, m64,
+                 "bvh_closest_hit_fast (float64)")
+    mesh = on(scene("teapot"), device)
+    rays = teapot_rays(160, 176).to(device)
+    compare_fast(impl.bvh_closest_hit_fast(rays, mesh, impl.build_sah_bvh(mesh)), rays, mesh,
+                 "bvh_closest_hit_fast on build_sah_bvh(teapot)")
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(1)
+def test_fast_bvh_any_hit_and_knobs(impl, device):
+    for name in ("ico", "shards", "teapot"):
+        mesh = on(scene(name), device)
+        bvh = median_bvh(mesh, 2)
+        rays = cat_rays(shadow_rays(mesh, 181), rays_around(mesh, 80, 182)).to(device)
+        ref = reference(rays.to("cpu"), on(mesh, "cpu"))
+        any_count = compare_fast(impl.bvh_closest_hit_fast(rays, mesh, bvh, any_hit=True), rays,
+                                 mesh, f"bvh_closest_hit_fast({name}, any_hit=True)", ref=ref,
+                                 any_hit=True)
+        closest = compare_fast(impl.bvh_closest_hit_fast(rays, mesh, bvh), rays, mesh,
+                               f"bvh_closest_hit_fast({name})", ref=ref)
+        assert int(any_count["steps"].sum()) < int(closest["steps"].sum()), (
+            f"bvh_closest_hit_fast({name}, any_hit=True): {int(any_count['steps'].sum())} node "
+            f"visits, as many as the closest-hit search ({int(closest['steps'].sum())}): a "
+            f"shadow ray is done at its first hit")
+    # The knobs change when the host looks, never what the rays find or do.
+    mesh = on(scene("soup"), device)
+    bvh = median_bvh(mesh, 3)
+    rays = rays_around(mesh, 150, 183).to(device)
+    base_hits, base = impl.bvh_closest_hit_fast(rays, mesh, bvh, check_every=1)
+    for k, compact in ((2, True), (7, False), (1000, True)):
+        hits, count = impl.bvh_closest_hit_fast(rays, mesh, bvh, check_every=k, compact=compact)
+        for key in ("steps", "tests"):
+            assert_equal(count[key].cpu(), base[key].cpu(), name=f"bvh_closest_hit_fast("
+                         f"check_every={k}, compact={compact}): counters[{key!r}] (the same as "
+                         f"check_every=1)", where="ray")
+        assert_equal(hits.triangle.cpu(), base_hits.triangle.cpu(), name=f"bvh_closest_hit_fast("
+                     f"check_every={k}, compact={compact}): triangles", where="ray")
+    expect_error("check_every", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 0,
+                 case="check_every=0")
+    expect_error("compile", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 8, "fast",
+                 case="compile='fast'")
+    expect_error("bvh", impl.bvh_closest_hit_fast, rays, mesh, impl.build_grid(mesh),
+                 case="a grid passed as the bvh")
