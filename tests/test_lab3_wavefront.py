@@ -255,6 +255,29 @@ def check_corridor(render, dtype, device, what: str) -> None:
                           f"depth limit)")
 
 
+def without_cube(scene: WhittedScene) -> WhittedScene:
+    """The courtyard without its cube (its last 12 triangles): the other indices stay."""
+    return dataclasses.replace(scene, faces=scene.faces[:-12], material=scene.material[:-12])
+
+
+def trace_without_cube(scene, origins, directions, t_min, t_max, any_hit=False):
+    """A tracer for which the courtyard's cube does not exist (module level: it travels to
+    the sandbox by reference)."""
+    return trace_brute_force(without_cube(scene), origins, directions, t_min, t_max, any_hit)
+
+
+def check_uses_trace(render, device, what: str) -> None:
+    """A renderer must find every hit through the ``trace`` it is given: with a tracer that
+    does not see the courtyard's cube, the image is the courtyard without the cube."""
+    scene = scene_on("courtyard_both", F32, device)
+    o, d = camera_rays("courtyard_both", F32, device, 16)
+    image = render(scene, o, d, trace_without_cube)
+    expected = render_reference(without_cube(scene).to("cpu"), o.cpu(), d.cpu(), 2)
+    compare_images(image, expected, f"{what} with a tracer that does not see the cube (every "
+                   f"closest hit and every shadow ray must go through the trace argument)",
+                   F32, device)
+
+
 def expect_render_errors(render, device, **extra) -> None:
     """Bad arguments of a renderer: ValueError/TypeError naming them."""
     scene = scene_on("cornell_mirror", F32, device)
@@ -433,6 +456,14 @@ def test_shade_direct_matches_reference(impl, device, name):
         compare_images(radiance, expected, f"shade_direct on {name} ({dtype})", dtype, device)
         check_shadow_count(shadow_rays, expected_shadow_rays(scene, p, n),
                            f"shade_direct on {name} ({dtype})")
+    if name == "courtyard_both":  # shadow rays through the given tracer: the cube casts none
+        keep = m != 2  # the points not on the cube (their primary hit is the same without it)
+        radiance, _ = impl.shade_direct(scene, p[keep], n[keep], d[keep], m[keep],
+                                        trace_without_cube)
+        unshadowed = render_reference(without_cube(scene).to("cpu"), o[keep].cpu(),
+                                      d[keep].cpu(), 0)
+        compare_images(radiance, unshadowed, "shade_direct with a tracer that does not see the "
+                       "cube (shadow rays must go through the trace argument)", dtype, device)
     expect_error("material", impl.shade_direct, scene, p, n, d, m + 3, trace_brute_force,
                  case="material indices beyond the material table")
     expect_error("material", impl.shade_direct, scene, p, n, d, m.int(), trace_brute_force,
@@ -488,6 +519,8 @@ def test_render_whitted_matches_reference(impl, device, name):
             compare_images(image, _reference(name, dtype, max_depth, "camera"),
                            f"render_whitted on {name}, max_depth={max_depth} ({dtype})",
                            dtype, device)
+    check_uses_trace(lambda s, o, d, t: impl.render_whitted(s, o, d, t), device,
+                     "render_whitted")
 
 
 @pytest.mark.task(1)
@@ -511,6 +544,17 @@ def test_render_whitted_extremes(impl, device):
         o, d = bad_rays(dtype, device)
         check_background(impl.render_whitted(scene, o, d, trace_brute_force), scene,
                          f"render_whitted ({dtype})")
+        # Rays that escape the courtyard into the sky return the background, exactly.
+        sky = scene_on("courtyard_both", dtype, device)
+        o, d = camera_rays("courtyard_both", dtype, device, 16)
+        zeros = torch.zeros(len(o), dtype=dtype, device=device)
+        escaped = ~trace_brute_force(sky, o, d, zeros, zeros + INF).hit
+        image = impl.render_whitted(sky, o, d, trace_brute_force)
+        check_tensor(image, "render_whitted: the image", shape=(len(o), 3), dtype=dtype,
+                     device=device)
+        assert_close(image.cpu()[escaped.cpu()], sky.background.cpu().expand(int(escaped.sum()), 3),
+                     name=f"render_whitted ({dtype}): primary rays that escape into the sky "
+                          f"(the background, exactly)", where="(escaped ray, channel)")
     expect_render_errors(impl.render_whitted, device)
 
 
@@ -576,6 +620,8 @@ def test_render_wavefront_matches_reference(impl, device, sort):
     check_corridor(lambda s, o, d, k: impl.render_wavefront(s, o, d, trace_brute_force, k,
                                                             sort)[0],
                    F32, device, f"render_wavefront (sort_by_material={sort})")
+    check_uses_trace(lambda s, o, d, t: impl.render_wavefront(s, o, d, t, 2, sort)[0], device,
+                     "render_wavefront")
 
 
 @pytest.mark.task(2)
@@ -670,6 +716,7 @@ def test_render_uber_matches_reference(impl, device):
                            f"render_uber on {name} ({dtype})", dtype, device)
     check_corridor(lambda s, o, d, k: impl.render_uber(s, o, d, trace_brute_force, k), F32,
                    device, "render_uber")
+    check_uses_trace(lambda s, o, d, t: impl.render_uber(s, o, d, t), device, "render_uber")
     scene = scene_on("cornell_mirror", F32, device)
     o, d = bad_rays(F32, device)
     check_background(impl.render_uber(scene, o, d, trace_brute_force), scene, "render_uber")
@@ -769,6 +816,9 @@ def test_render_persistent_matches_reference(impl, device, pool_size):
     check_corridor(lambda s, o, d, k: impl.render_persistent(s, o, d, trace_brute_force, k,
                                                              pool_size)[0],
                    F32, device, f"render_persistent (pool_size={pool_size})")
+    if pool_size > 1:
+        check_uses_trace(lambda s, o, d, t: impl.render_persistent(s, o, d, t, 2, pool_size)[0],
+                         device, "render_persistent")
 
 
 @pytest.mark.task(4)
