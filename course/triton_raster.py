@@ -17,6 +17,9 @@ Two kernels, because triangle sizes on screen differ by orders of magnitude:
 * large triangles: one program per triangle, its lanes spread over the box's pixels (a
   screen-filling triangle costs ``box / BLOCK`` iterations, not ``box``).
 
+Both kernels run over all triangles and each keeps its own: no sort or compaction on the
+host, so a frame has no synchronisation and no launches beyond these two.
+
 The arithmetic is Lab 6's contract (``solutions``' docstrings state it in full): screen
 positions ``(x, y, z_ndc, 1/w)``; bounding boxes of pixel centres clamped to the screen;
 consistent edge functions (evaluated from the lexicographically smaller endpoint, so a
@@ -164,15 +167,15 @@ def _setup(x0, y0, x1, y1, x2, y2, live, width, height, CULL: tl.constexpr):
 
 
 @_jit
-def _small_kernel(screen_ptr, index_ptr, out_ptr, count, width, height,
+def _small_kernel(screen_ptr, out_ptr, count, width, height, small_box,
                   DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr):
-    lane = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
-    live = lane < count
-    tri = tl.load(index_ptr + lane, mask=live, other=0)
+    tri = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    live = tri < count
     x0, y0, z0, w0, x1, y1, z1, w1, x2, y2, z2, w2 = _load_triangle(screen_ptr, tri, live)
     positive, tl0, tl1, tl2, bx, by, box_w, box_h = _setup(x0, y0, x1, y1, x2, y2, live,
                                                            width, height, CULL)
     pixels = box_w * box_h
+    pixels = tl.where(pixels <= small_box, pixels, 0)  # large boxes: the other kernel's
     most = tl.max(pixels, axis=0)
     safe_w = tl.maximum(box_w, 1)
     for k in range(most):
@@ -183,17 +186,19 @@ def _small_kernel(screen_ptr, index_ptr, out_ptr, count, width, height,
 
 
 @_jit
-def _large_kernel(screen_ptr, index_ptr, out_ptr, width, height,
+def _large_kernel(screen_ptr, out_ptr, width, height, small_box,
                   DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr):
-    tri = tl.load(index_ptr + tl.program_id(0))
+    # One program per triangle; the small ones (nearly all) leave at once, which costs
+    # less than sorting the triangles by size on the host (a synchronisation).
     lanes = tl.arange(0, BLOCK)
     # The triangle's data, the same for every lane (uniform loads).
-    tri_v = tl.zeros([BLOCK], tl.int64) + tri
+    tri_v = tl.zeros([BLOCK], tl.int64) + tl.program_id(0)
     live = lanes >= 0
     x0, y0, z0, w0, x1, y1, z1, w1, x2, y2, z2, w2 = _load_triangle(screen_ptr, tri_v, live)
     positive, tl0, tl1, tl2, bx, by, box_w, box_h = _setup(x0, y0, x1, y1, x2, y2, live,
                                                            width, height, CULL)
     pixels = tl.max(box_w * box_h, axis=0)
+    pixels = tl.where(pixels > small_box, pixels, 0)
     safe_w = tl.maximum(box_w, 1)
     for start in range(0, pixels, BLOCK):
         k = start + lanes
@@ -201,16 +206,6 @@ def _large_kernel(screen_ptr, index_ptr, out_ptr, width, height,
         row = by + k // safe_w
         _fragment(out_ptr, tri_v, col, row, k < pixels, width, x0, y0, z0, w0, x1, y1, z1,
                   w1, x2, y2, z2, w2, positive, tl0, tl1, tl2, DEPTH_BITS)
-
-
-def _box_pixels(screen: torch.Tensor, width: int, height: int) -> torch.Tensor:
-    """(K,) pixels of each triangle's clamped box (an upper bound is all the split needs)."""
-    xy = torch.nan_to_num(screen[..., :2].float(), nan=0.0, posinf=0.0, neginf=0.0)
-    size = torch.tensor([width, height], device=xy.device, dtype=xy.dtype)
-    lo = torch.minimum(xy.amin(1).clamp(min=-1.0), size + 1)
-    hi = torch.minimum(xy.amax(1).clamp(min=-1.0), size + 1)
-    extent = ((hi - lo).floor() + 2).clamp(min=0)
-    return extent.prod(1)
 
 
 def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bits: int = 32,
@@ -245,17 +240,14 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
                          f"{tuple(out.shape)} {out.dtype} on {out.device}")
     out.fill_(EMPTY)
     data = screen.to(torch.float32).contiguous()
-    big = _box_pixels(data, width, height) > small_box
-    small_ids = (~big).nonzero()[:, 0].to(torch.int32)
-    large_ids = big.nonzero()[:, 0].to(torch.int32)
-    with _ieee_quiet():
-        if len(small_ids):
-            _small_kernel[(triton.cdiv(len(small_ids), BLOCK_TRIANGLES),)](
-                data, small_ids, out, len(small_ids), width, height, DEPTH_BITS=depth_bits,
+    count = data.shape[0]
+    if count:  # no host synchronisation: both kernels see every triangle, keep their own
+        with _ieee_quiet():
+            _small_kernel[(triton.cdiv(count, BLOCK_TRIANGLES),)](
+                data, out, count, width, height, small_box, DEPTH_BITS=depth_bits,
                 CULL=cull_backfaces, BLOCK=BLOCK_TRIANGLES, num_warps=4)
-        if len(large_ids):
-            _large_kernel[(len(large_ids),)](
-                data, large_ids, out, width, height, DEPTH_BITS=depth_bits,
+            _large_kernel[(count,)](
+                data, out, width, height, small_box, DEPTH_BITS=depth_bits,
                 CULL=cull_backfaces, BLOCK=BLOCK_PIXELS, num_warps=4)
     return out
 
