@@ -113,6 +113,7 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     check_resolution,
     check_structure,
     check_trace_inputs,
+    choose_structure,
     expand_ranges,
     grid_resolutions,
     intersect_pairs,
@@ -614,7 +615,9 @@ def build(mesh: Mesh, kind: str, **knobs) -> dict:
 def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
     """Closest hits of ``rays`` through any structure: the lab's common entry point.
 
-    structure: None (brute force), or a dict from a ``build_*`` function, dispatched on
+    structure: None (brute force), ``"auto"`` (``choose_structure(mesh, len(rays))``
+    picks the kind and knobs, and exactly that one structure is built, with :func:`build`,
+    nothing else), or a dict from a ``build_*`` function, dispatched on
     its ``"kind"``: ``grid_closest_hit`` and ``two_level_closest_hit`` (option
     ``mailbox``), ``bvh_closest_hit`` or,
     with ``stackless=True``, ``bvh_closest_hit_stackless``, and ``kd_closest_hit``.
@@ -623,6 +626,8 @@ def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
     anything else, or an option the structure does not take.
 
     Hints: Check ``structure['kind']`` and the options, then call the matching function.
+    For ``"auto"``: ``choose_structure`` (provided) names the kind and knobs, ``build``
+    builds them.
     """
     raise NotImplementedError("not implemented yet: closest_hit (task 5)")
 

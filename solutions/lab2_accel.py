@@ -108,6 +108,7 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     check_resolution,
     check_structure,
     check_trace_inputs,
+    choose_structure,
     expand_ranges,
     grid_resolutions,
     intersect_pairs,
@@ -1020,7 +1021,9 @@ def build(mesh: Mesh, kind: str, **knobs) -> dict:
 def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
     """Closest hits of ``rays`` through any structure: the lab's common entry point.
 
-    structure: None (brute force), or a dict from a ``build_*`` function, dispatched on
+    structure: None (brute force), ``"auto"`` (``choose_structure(mesh, len(rays))``
+    picks the kind and knobs, and exactly that one structure is built, with :func:`build`,
+    nothing else), or a dict from a ``build_*`` function, dispatched on
     its ``"kind"``: ``grid_closest_hit`` and ``two_level_closest_hit`` (option
     ``mailbox``), ``bvh_closest_hit`` or,
     with ``stackless=True``, ``bvh_closest_hit_stackless``, and ``kd_closest_hit``.
@@ -1030,6 +1033,10 @@ def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
     """
     if structure is None:
         return brute_force_closest_hit(rays, mesh, intersect, **options)
+    if isinstance(structure, str) and structure == "auto":
+        check_trace_inputs(rays, mesh, intersect)
+        kind, knobs, _ = choose_structure(mesh, max(1, len(rays)))
+        structure = build(mesh, kind, **knobs)
     kind = structure.get("kind") if isinstance(structure, dict) else None
     if kind not in STRUCTURES:
         raise ValueError(f"structure: expected None or a dict with kind in "

@@ -32,6 +32,7 @@ import math
 import pytest
 import torch
 
+from course.accel_support import STRUCTURES, choose_structure
 from course.scenes import load_scene
 from course.testing import (
     assert_close,
@@ -1592,3 +1593,72 @@ def test_fast_bvh_any_hit_and_knobs(impl, device):
                  case="compile='fast'")
     expect_error("bvh", impl.bvh_closest_hit_fast, rays, mesh, impl.build_grid(mesh),
                  case="a grid passed as the bvh")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 5 (continued): closest_hit(structure="auto") builds what the chooser picks, only that
+
+BUILDERS = ("build_grid", "build_two_level_grid", "build_lbvh", "build_sah_bvh", "build_kdtree")
+
+
+def builds_of_auto(lab, rays, mesh, intersect):
+    """Run ``closest_hit(rays, mesh, "auto", intersect)`` next to the lab with its builders
+    wrapped to record each outermost call (a two-level grid may build its top grid with
+    ``build_grid``); returns ``(builder names called, hit triangles)``."""
+    called, saved, depth = [], {name: getattr(lab, name) for name in BUILDERS}, [0]
+
+    def recording(name):
+        def builder(*args, **kwargs):
+            if depth[0] == 0:
+                called.append(name)
+            depth[0] += 1
+            try:
+                return saved[name](*args, **kwargs)
+            finally:
+                depth[0] -= 1
+        return builder
+
+    try:
+        for name in BUILDERS:
+            setattr(lab, name, recording(name))
+        hits, _ = lab.closest_hit(rays, mesh, "auto", intersect)
+    finally:
+        for name, fn in saved.items():
+            setattr(lab, name, fn)
+    return called, hits.triangle.cpu().tolist()
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(1)
+def test_auto_builds_only_its_choice(impl, device):
+    want_builder = {("grid", None): "build_grid", ("grid2", None): "build_two_level_grid",
+                    ("bvh", "sah"): "build_sah_bvh", ("bvh", "lbvh"): "build_lbvh",
+                    ("kd", None): "build_kdtree"}
+    seen = set()
+    for name, n_rays in (("ico", 400), ("teapot", 200), ("soup", 300), ("soup", 1000)):
+        mesh = on(scene(name), device)
+        kind, knobs, reason = choose_structure(mesh, n_rays)
+        assert kind in STRUCTURES and isinstance(knobs, dict) and len(reason) > 20
+        seen.add(kind)
+        # The chooser sees len(rays) as its hint.
+        rays = (teapot_rays(n_rays, 191) if name == "teapot" else rays_around(mesh, n_rays, 192))
+        rays = rays.to(device)
+        called, triangles = impl.probe(builds_of_auto, rays, mesh, mt64)
+        builder = want_builder[(kind, knobs.get("method", "sah") if kind == "bvh" else None)]
+        assert called == [builder], (
+            f"closest_hit(structure='auto') on {name} with {len(rays)} rays: the chooser picks "
+            f"{kind} {knobs} ({reason}); expected exactly one call of {builder}, got {called}: "
+            f"build only what the chooser picked, and nothing it will not use")
+        ref_i = reference(rays.to("cpu"), on(mesh, "cpu"))[1]
+        assert triangles == ref_i.tolist(), \
+            f"closest_hit(structure='auto') on {name}: hits differ from brute force"
+    assert {"grid", "grid2", "bvh"} <= seen, f"the chooser's picks: {seen}"
+    assert choose_structure(on(scene("soup"), device), 300)[1] == {"method": "lbvh"}
+    assert choose_structure(on(scene("soup"), device), 1000)[1] == {"method": "sah"}
+    # The chooser's judgement on the lecture's cases.
+    assert choose_structure(on(scene("teapot"), device))[0] == "bvh", \
+        "choose_structure: the teapot in a stadium, many rays: an SAH BVH"
+    assert choose_structure(on(scene("ico"), device))[0] == "grid", \
+        "choose_structure: a small, evenly tessellated sphere: a uniform grid"
+    expect_error("structure", impl.closest_hit, rays_around(on(scene("soup"), device), 4, 193)
+                 .to(device), on(scene("soup"), device), "octree", mt64, case="structure='octree'")

@@ -130,4 +130,11 @@ MUTANTS = [
            replace="((t == best_t) & (index > best_tri))", tests="fast_bvh",
            why="among hits at the same t keeps the highest triangle index, not brute force's "
                "lowest"),
+    Mutant(name="auto_builds_a_fallback_too", module=M, function="closest_hit",
+           find="        structure = build(mesh, kind, **knobs)\n",
+           replace="        fallback = build(mesh, \"bvh\", method=\"lbvh\")  # just in case\n"
+                   "        structure = build(mesh, kind, **knobs) if kind != \"bvh\" else fallback\n",
+           tests="auto_builds_only_its_choice",
+           why="builds an LBVH 'just in case' next to the chosen structure (and uses it for "
+               "every BVH pick): the scene pays for a structure it did not ask for"),
 ]
