@@ -246,7 +246,7 @@ def whitted_scene(name: str, device=None, dtype: torch.dtype = torch.float32) ->
                      "shininess": [1.0, 1.0, 1.0, 40.0, 1.0],
                      "kr": [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0.85, 0.85, 0.85]]}
         return make_scene(mesh, material, materials,
-                          point_lights=[((0.0, 1.85, 0.2), (6.0, 5.4, 4.6))],
+                          point_lights=[((0.0, 1.8, 1.0), (6.0, 5.4, 4.6))],
                           ambient=(0.03, 0.03, 0.03))
     if name == "bunny_mirror":
         bunny = load_mesh("bunny", device="cpu", dtype=torch.float64)
