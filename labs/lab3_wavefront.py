@@ -59,8 +59,8 @@ decisions agree; 0.4% of the Cornell box's pixels flip a shadow decision at an e
 =======================  =============================  ========================
                          Cornell box (36 triangles)     bunny (69K triangles)
 =======================  =============================  ========================
-lanes traced: wavefront  1,179 closest + 1,079 shadow   1,459 + 1,322
-  full-size loop         2,048 + 1,079                  2,048 + 1,322
+lanes traced: wavefront  1,179 closest + 1,153 shadow   1,459 + 1,322
+  full-size loop         2,048 + 1,153                  2,048 + 1,322
   uber (every lane)      3,072 + 3,072                  3,072 + 6,144
 persistent pool of N/4   5 steps, 8% lanes idle         6 steps, 5% idle
 =======================  =============================  ========================
