@@ -1,36 +1,39 @@
-"""Lab 2 benchmark: what each acceleration structure and each of its knobs costs and buys.
+"""Lab 2 benchmark: what each acceleration structure, and each knob of the fast traversal,
+costs and buys, against brute force (and, on the CPU, trimesh) in the same run.
 
-    python bench/lab2_accel.py --device cpu|cuda [--size S] [--brute-rays B] [--threads T]
-                               [--out DIR]
+    python bench/lab2_accel.py --small                  # CPU, a few minutes
+    python bench/lab2_accel.py --device cuda            # GPU, a few minutes on an H100
+    python bench/lab2_accel.py --device cpu --threads 2 --scenes bunny --fast-size 256
 
-For two scenes, the Stanford bunny (69K triangles, rays from its framing camera) and the
-teapot in a stadium (Suzanne Loop-subdivided twice on a GPU, 15.5K triangles, once on the
-CPU, 3.9K triangles, in a room a thousand times larger), and for every structure and knob
-setting of the reference solution:
+Three parts, each a table of the same ResultTable (column ``part``):
 
-* uniform grid: density lambda (cells per triangle), mailbox on/off;
-* BVH: build method (LBVH / binned SAH), leaf size, SAH bins; stack vs stackless traversal;
-* kd-tree: the default SAH build, and one cut at depth 12 (big leaves);
+* ``structures``: per scene (suzanne 1K, bunny 69K, bunny_x4 278K, bunny_x16 1.1M,
+  teapot_in_stadium, a random soup) and structure (uniform grid, two-level grid, LBVH,
+  binned-SAH BVH with the stack traversal and with the sync-free one, kd-tree): build time,
+  bytes, primary-ray and shadow-ray throughput (shadow rays: from the primary hits to a
+  light; the sync-free BVH runs them in any-hit mode, the others as closest-hit rays
+  clipped at the light), mean steps (cells or nodes) and triangle tests per primary ray,
+  and the fraction of sampled rays whose hit differs from brute force (``error``). Every
+  scene also gets a brute-force row and, on the CPU, a row for trimesh's own ray query
+  (``RayMeshIntersector.intersects_first``: numpy, or Embree where installed) on the same
+  rays. Structures whose build would take minutes on a scene are skipped there (the kd
+  tree above 300K triangles, the slow traversals above ``--max-slow``).
+* ``fast``: the sync-free BVH traversal on the bunny, one knob at a time: ``check_every``
+  (k, steps between host syncs), ``compile`` (off, ``torch.compile``, CUDA graphs), leaf
+  size; primary rays at ``--fast-size`` squared.
+* ``lbvh``: the LBVH build of bunny_x16 (1.1M triangles), median of several builds.
 
-it measures the build time, the traversal time of ``S x S`` primary rays (rays/s), the
-mean work per ray (steps = cells or nodes visited, triangle tests, mailbox skips), the
-structure's size in bytes, and the **error**: the fraction of rays, among ``B`` checked
-against brute force with the same triangle kernel, that get another hit (0 for a correct
-structure: an acceleration structure trades build time and memory for speed, never
-accuracy). Brute force is timed on the ``B`` rays, so every row also gets its speed-up
-over brute force, measured in the same run: on the CPU only such ratios mean anything.
-
-The triangle kernel is Lab 1's Möller–Trumbore (float32) from the solutions.
-
-Writes ``lab2_accel.json`` (a ResultTable with the command line), ``lab2_accel.md`` and
-Pareto plots (trace time against build time per scene; triangle tests against steps) into
-``--out``, by default ``bench/results/<device_name>/lab2/``.
+The triangle kernel of the structures is Lab 1's Möller–Trumbore (float32) from the
+solutions; the sync-free traversal inlines the same test. Writes ``lab2_accel.json``,
+``lab2_accel.md`` and plots (trace throughput against build time per scene; the fast
+path's knobs) into ``--out`` (default ``bench/results/<device>/lab2/``).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 import time
 from pathlib import Path
@@ -44,57 +47,43 @@ from course.bench import ResultTable, device_name, pareto_plot, time_fn
 from course.camera import primary_rays
 from course.device import default_device
 from course.scenes import load_scene
+from course.types import Rays
 from solutions import lab2_accel as lab
 from solutions.lab1_intersect import moller_trumbore
 
-# Image size (rays = size^2), rays checked against brute force, timing repeats, and the
-# teapot's Loop subdivisions (the grid tests every teapot triangle for every ray at it: on
-# the CPU, 968 * 4 = 3.9K triangles keep that row short).
-SIZES = {"cpu": {"size": 48, "brute_rays": 64, "repeats": 2, "warmup": 1, "teapot": 1},
-         "cuda": {"size": 512, "brute_rays": 8192, "repeats": 5, "warmup": 2, "teapot": 2}}
+ALL_SCENES = "suzanne,bunny,bunny_x4,bunny_x16,teapot_in_stadium,random_soup"
+# size: primary rays size^2 for the per-step-compacting traversals; fast_size: for the
+# sync-free one; brute_rays: rays checked against (and timed with) brute force.
+MODES = {
+    "small": {"scenes": "suzanne,bunny,bunny_x4,teapot_in_stadium,random_soup", "size": 32,
+              "fast_size": 128, "brute_rays": 32, "trimesh_rays": 48, "repeats": 1,
+              "warmup": 1, "teapot": 1, "soup": 10_000, "max_slow": 100_000, "lbvh_builds": 3,
+              "compile": (), "knob_compile": True},
+    "cpu": {"scenes": ALL_SCENES, "size": 64, "fast_size": 256, "brute_rays": 64,
+            "trimesh_rays": 64, "repeats": 2, "warmup": 1, "teapot": 2, "soup": 100_000,
+            "max_slow": 300_000, "lbvh_builds": 3, "compile": ("default",),
+            "knob_compile": True},
+    "cuda": {"scenes": ALL_SCENES, "size": 256, "fast_size": 1024, "brute_rays": 4096,
+             "trimesh_rays": 0, "repeats": 3, "warmup": 1, "teapot": 2, "soup": 100_000,
+             "max_slow": 300_000, "lbvh_builds": 10, "compile": ("default", "reduce-overhead"),
+             "knob_compile": True},
+}
 
-# (structure, build keywords, traversal keywords, label); "default" marks the lab's defaults.
-SETTINGS = [
-    ("grid", {"density": 0.5}, {}, "grid lambda=0.5"),
-    ("grid", {"density": 2.0}, {}, "grid lambda=2 (default)"),
-    ("grid", {"density": 2.0}, {"mailbox": False}, "grid lambda=2, no mailbox"),
-    ("grid", {"density": 8.0}, {}, "grid lambda=8"),
-    ("bvh", {"method": "lbvh", "leaf_size": 1}, {}, "LBVH leaf 1"),
-    ("bvh", {"method": "lbvh", "leaf_size": 4}, {}, "LBVH leaf 4 (default)"),
-    ("bvh", {"method": "lbvh", "leaf_size": 4, "bits": 4}, {}, "LBVH leaf 4, 4-bit Morton"),
-    ("bvh", {"method": "sah", "leaf_size": 1, "bins": 16}, {}, "SAH leaf 1"),
-    ("bvh", {"method": "sah", "leaf_size": 4, "bins": 16}, {}, "SAH leaf 4 (default)"),
-    ("bvh", {"method": "sah", "leaf_size": 4, "bins": 16}, {"stackless": True},
-     "SAH leaf 4, stackless"),
-    ("bvh", {"method": "sah", "leaf_size": 16, "bins": 16}, {}, "SAH leaf 16"),
-    ("bvh", {"method": "sah", "leaf_size": 4, "bins": 4}, {}, "SAH leaf 4, 4 bins"),
-    ("bvh", {"method": "sah", "leaf_size": 4, "bins": 64}, {}, "SAH leaf 4, 64 bins"),
-    ("kd", {}, {}, "kd leaf 2 (default)"),
-    ("kd", {"max_depth": 12}, {}, "kd max depth 12"),
+# (label, kind, build knobs, traversal): traversal "slow" = lab.closest_hit, "fast" = the
+# sync-free BVH traversal (k = 8, eager), "fast+<mode>" = the same under torch.compile.
+STRUCTURES = [
+    ("grid lambda=2", "grid", {"density": 2.0}, "slow"),
+    ("two-level grid", "grid2", {}, "slow"),
+    ("LBVH leaf 4", "bvh", {"method": "lbvh"}, "slow"),
+    ("SAH leaf 4, stack", "bvh", {"method": "sah"}, "slow"),
+    ("SAH leaf 4, sync-free", "bvh", {"method": "sah"}, "fast"),
+    ("kd-tree (SAH)", "kd", {}, "slow"),
 ]
 
 
 def intersect(origins, directions, v0, v1, v2, t_min, t_max):
-    """The triangle kernel every structure calls: Lab 1's Möller–Trumbore."""
+    """The triangle kernel the structures call: Lab 1's Möller–Trumbore."""
     return moller_trumbore(origins, directions, v0, v1, v2, t_min, t_max)
-
-
-def scene_rays(name: str, sizes: dict, device):
-    """(mesh, primary rays of the scene's camera at size x size) on ``device``."""
-    params = {"subdivisions": sizes["teapot"]} if name == "teapot_in_stadium" else {}
-    scene = load_scene(name, device=device, **params)
-    size = sizes["size"]
-    camera = dataclasses.replace(scene.camera, width=size, height=size)
-    return scene.mesh, primary_rays(camera, device=device)
-
-
-def speedup_text(x: float) -> str:
-    return f"{x:,.0f}" if x >= 10 else f"{x:.2f}"
-
-
-def nbytes(structure: dict) -> int:
-    return sum(x.numel() * x.element_size() for x in structure.values()
-               if isinstance(x, torch.Tensor))
 
 
 def sync(device):
@@ -102,87 +91,281 @@ def sync(device):
         torch.cuda.synchronize(device)
 
 
-def run_scene(name, sizes, device, table, log):
-    mesh, rays = scene_rays(name, sizes, device)
-    n, f = len(rays), mesh.num_faces
-    check = torch.linspace(0, n - 1, min(n, sizes["brute_rays"]), device=device).long().unique()
-    sample = rays[check]
-    timing = time_fn(lab.brute_force_closest_hit, sample, mesh, intersect, repeats=1, warmup=0,
-                     device=device)
-    reference, _ = lab.brute_force_closest_hit(sample, mesh, intersect)
-    brute_per_ray = timing.median / len(sample)
-    log(f"{name}: {f} triangles, {n} rays; brute force {len(sample) / timing.median:,.0f} "
-        f"rays/s on {len(sample)} rays")
-    table.add(scene=name, setting="brute force", structure="none", triangles=f, rays=len(sample),
-              build_s=0.0, trace_s=timing.median, rays_per_s=len(sample) / timing.median,
-              speedup=1.0, steps=0.0, tests=float(f), skipped=0.0, bytes=0, error=0.0)
-    for kind, build_kw, trace_kw, label in SETTINGS:
-        sync(device)
-        start = time.perf_counter()
-        structure = lab.build(mesh, kind, **dict(build_kw))
-        sync(device)
-        build_s = time.perf_counter() - start
-        trace = time_fn(lab.closest_hit, rays, mesh, structure, intersect, repeats=sizes["repeats"],
-                        warmup=sizes["warmup"], device=device, **trace_kw)
-        hits, counters = lab.closest_hit(rays, mesh, structure, intersect, **trace_kw)
-        got = hits[check]
-        wrong = (got.triangle != reference.triangle) & ~((got.t - reference.t).abs()
-                                                         <= 1e-6 * reference.t.abs())
-        row = table.add(
-            scene=name, setting=label, structure=kind, triangles=f, rays=n, build_s=build_s,
-            trace_s=trace.median, rays_per_s=n / trace.median,
-            speedup=brute_per_ray / (trace.median / n),
-            steps=counters["steps"].double().mean().item(),
-            tests=counters["tests"].double().mean().item(),
-            skipped=counters.get("skipped", torch.zeros(1)).double().mean().item(),
-            bytes=nbytes(structure), error=wrong.double().mean().item())
-        log(f"  {label:<28} build {build_s:7.3f} s  trace {row['rays_per_s']:>12,.0f} rays/s "
-            f"(x{speedup_text(row['speedup'])} brute)  steps {row['steps']:6.1f}  tests "
-            f"{row['tests']:7.1f}  {row['bytes'] / 2**20:6.1f} MiB  error {row['error']:.3g}")
+def seconds(fn, *args, device, **kwargs):
+    """(result, seconds) of one call, synchronised."""
+    sync(device)
+    start = time.perf_counter()
+    out = fn(*args, **kwargs)
+    sync(device)
+    return out, time.perf_counter() - start
+
+
+def load(name: str, mode: dict, device):
+    params = {}
+    if name == "teapot_in_stadium":
+        params = {"subdivisions": mode["teapot"]}
+    elif name == "random_soup":
+        params = {"n": mode["soup"], "seed": 1}
+    return load_scene(name, device=device, **params)
+
+
+def camera_rays(scene, size: int, device) -> Rays:
+    return primary_rays(dataclasses.replace(scene.camera, width=size, height=size),
+                        device=device)
+
+
+def shadow_rays(rays: Rays, hits, mesh) -> Rays:
+    """From the primary hits towards a light above the scene (t_max just short of it)."""
+    hit = hits.triangle >= 0
+    points = rays.origins[hit] + hits.t[hit, None] * rays.directions[hit]
+    v = mesh.vertices
+    lo, hi = v.amin(0), v.amax(0)
+    light = (lo + hi) / 2 + torch.tensor([0.3, 1.0, 0.2], device=v.device,
+                                         dtype=v.dtype) * (hi - lo).norm()
+    scale = float((hi - lo).norm())
+    return Rays.create(points, light - points, 1e-5 * scale / float((light - points).norm(
+        dim=1).amax().clamp(min=1e-30)), 1 - 1e-4)
+
+
+def nbytes(structure) -> int:
+    return sum(x.numel() * x.element_size() for x in structure.values()
+               if isinstance(x, torch.Tensor))
+
+
+def trace(label_kind, structure, rays, mesh, traversal, any_hit=False):
+    if traversal == "slow":
+        return lab.closest_hit(rays, mesh, structure, intersect)
+    mode = traversal.split("+")[1] if "+" in traversal else False
+    return lab.bvh_closest_hit_fast(rays, mesh, structure, any_hit=any_hit, check_every=8,
+                                    compile=mode)
+
+
+def run_scene(name, mode, device, table, log):
+    scene = load(name, mode, device)
+    mesh, f = scene.mesh, scene.mesh.num_faces
+    slow_rays = camera_rays(scene, mode["size"], device)
+    fast_rays = camera_rays(scene, mode["fast_size"], device)
+    check = torch.linspace(0, len(fast_rays) - 1, min(len(fast_rays), mode["brute_rays"]),
+                           device=device).long().unique()
+    sample = fast_rays[check]
+    (reference, _), brute_s = seconds(lab.brute_force_closest_hit, sample, mesh, intersect,
+                                      device=device)
+    log(f"{name}: {f:,} triangles; brute force {len(sample) / brute_s:,.0f} rays/s "
+        f"({len(sample)} rays)")
+    common = {"part": "structures", "scene": name, "triangles": f}
+    table.add(**common, setting="brute force", rays=len(sample), build_s=0.0,
+              rays_per_s=len(sample) / brute_s, shadow_rays_per_s=math.nan, steps=0.0,
+              tests=float(f), bytes=0, error=0.0)
+    if mode["trimesh_rays"] and device.type == "cpu":
+        trimesh_row(mesh, fast_rays, mode, table, common, log)
+    for label, kind, knobs, traversal in STRUCTURES:
+        if (kind == "kd" and f > 300_000) or (traversal == "slow" and f > mode["max_slow"]
+                                                 and kind != "bvh"):
+            log(f"  {label:<26} skipped: its build or walk takes minutes at {f:,} triangles")
+            continue
+        if kind == "kd" and f > mode["max_slow"]:
+            continue
+        variants = [traversal] + ([f"fast+{m}" for m in mode["compile"]]
+                                  if traversal == "fast" else [])
+        structure, build_s = seconds(lab.build, mesh, kind, device=device, **dict(knobs))
+        for variant in variants:
+            rays = fast_rays if variant.startswith("fast") else slow_rays
+            if variant == "slow" and f > mode["max_slow"]:
+                continue
+            try:
+                trace(kind, structure, rays[:64], mesh, variant)  # warm up (and compile)
+                (hits, counters), trace_s = seconds(trace, kind, structure, rays, mesh, variant,
+                                                    device=device)
+                if mode["repeats"] > 1:
+                    timing = time_fn(trace, kind, structure, rays, mesh, variant,
+                                     repeats=mode["repeats"], warmup=0, device=device)
+                    trace_s = timing.median
+                shadow = shadow_rays(rays, hits, mesh)
+                trace(kind, structure, shadow[:64], mesh, variant, any_hit=True)
+                _, shadow_s = seconds(trace, kind, structure, shadow, mesh, variant,
+                                      any_hit=variant.startswith("fast"), device=device)
+            except RuntimeError as error:  # a failed variant (no compiler, out of memory): a row
+                log(f"  {label} [{variant}]: failed: {type(error).__name__}: {error}")
+                table.add(**common, setting=f"{label} [{variant}]", rays=len(rays),
+                          build_s=build_s, rays_per_s=math.nan, shadow_rays_per_s=math.nan,
+                          steps=math.nan, tests=math.nan, bytes=nbytes(structure),
+                          error=math.nan, failed=f"{type(error).__name__}")
+                continue
+            if variant.startswith("fast"):
+                got = hits[check]
+            else:
+                got, _ = trace(kind, structure, sample, mesh, variant)
+            wrong = (got.triangle != reference.triangle) & ~(
+                (got.t - reference.t).abs() <= 1e-5 * reference.t.abs())
+            setting = label if variant in ("slow", "fast") else f"{label}, compile={variant[5:]}"
+            row = table.add(**common, setting=setting, rays=len(rays), build_s=build_s,
+                            rays_per_s=len(rays) / trace_s,
+                            shadow_rays_per_s=len(shadow) / shadow_s,
+                            steps=counters["steps"].double().mean().item(),
+                            tests=counters["tests"].double().mean().item(),
+                            bytes=nbytes(structure), error=wrong.double().mean().item())
+            log(f"  {setting:<40} build {build_s:7.3f} s  primary {row['rays_per_s']:>13,.0f} "
+                f"rays/s  shadow {row['shadow_rays_per_s']:>13,.0f} rays/s  steps "
+                f"{row['steps']:6.1f}  tests {row['tests']:7.1f}  "
+                f"{row['bytes'] / 2**20:6.1f} MiB  error {row['error']:.3g}")
+
+
+def trimesh_row(mesh, rays, mode, table, common, log):
+    """trimesh's own ray query on a subsample of the same rays (CPU)."""
+    import trimesh
+
+    tm = trimesh.Trimesh(mesh.vertices.cpu().double().numpy(), mesh.faces.cpu().numpy(),
+                         process=False)
+    n = min(len(rays), mode["trimesh_rays"])
+    pick = torch.linspace(0, len(rays) - 1, n).long().unique()
+    o, d = rays.origins[pick].cpu().double().numpy(), rays.directions[pick].cpu().double().numpy()
+    query = trimesh.ray.ray_triangle.RayMeshIntersector(tm)  # numpy, with an rtree of boxes
+    start = time.perf_counter()
+    try:
+        query.intersects_first(o, d)
+    except ImportError as error:  # it needs the rtree package
+        log(f"  trimesh: unavailable ({error})")
+        return
+    elapsed = time.perf_counter() - start
+    kind = "RayMeshIntersector"
+    log(f"  trimesh ({kind}) {len(pick) / elapsed:,.0f} rays/s ({len(pick)} rays)")
+    table.add(**common, setting=f"trimesh {kind}", rays=len(pick), build_s=math.nan,
+              rays_per_s=len(pick) / elapsed, shadow_rays_per_s=math.nan, steps=math.nan,
+              tests=math.nan, bytes=0, error=math.nan)
+
+
+def run_fast_knobs(mode, device, table, log):
+    """The sync-free traversal on the bunny, one knob at a time."""
+    scene = load("bunny", mode, device)
+    mesh = scene.mesh
+    rays = camera_rays(scene, mode["fast_size"], device)
+    log(f"fast path knobs: bunny, {len(rays):,} primary rays")
+    settings = [(8, False, 4, True), (1, False, 4, True), (32, False, 4, True),
+                (8, False, 4, False), (8, False, 1, True), (8, False, 8, True)]
+    if mode["knob_compile"]:  # the small CPU run compiles once (minutes on 2 cores)
+        modes = mode["compile"] or ("default",)
+        settings += [(8, m, 4, True) for m in modes] + [(32, m, 4, True) for m in modes[:1]]
+    bvhs = {}
+    for k, compile_mode, leaf, compact in settings:
+        if leaf not in bvhs:
+            bvhs[leaf] = lab.build_sah_bvh(mesh, leaf_size=leaf)
+        bvh = bvhs[leaf]
+        label = (f"k={k}, compile={compile_mode or 'off'}, leaf {leaf}"
+                 + ("" if compact else ", no compaction"))
+        try:
+            lab.bvh_closest_hit_fast(rays[:64], mesh, bvh, check_every=k, compile=compile_mode,
+                                     compact=compact)
+            timing = time_fn(lab.bvh_closest_hit_fast, rays, mesh, bvh, check_every=k,
+                             compile=compile_mode, compact=compact, repeats=mode["repeats"],
+                             warmup=1, device=device)
+        except RuntimeError as error:
+            log(f"  {label}: failed: {type(error).__name__}: {error}")
+            continue
+        row = table.add(part="fast", scene="bunny", setting=label, triangles=mesh.num_faces,
+                        rays=len(rays), build_s=math.nan, rays_per_s=len(rays) / timing.median,
+                        check_every=k, compile=str(compile_mode), leaf_size=leaf,
+                        compact=compact)
+        log(f"  {label:<44} {row['rays_per_s']:>14,.0f} rays/s")
+
+
+def run_lbvh_build(mode, device, table, log):
+    mesh = load("bunny_x16", mode, device).mesh
+    lab.build_lbvh(mesh)  # warm up
+    timing = time_fn(lab.build_lbvh, mesh, repeats=mode["lbvh_builds"], warmup=0, device=device)
+    log(f"LBVH build, bunny_x16 ({mesh.num_faces:,} triangles): {timing.median * 1e3:.1f} ms "
+        f"(median of {mode['lbvh_builds']})")
+    table.add(part="lbvh", scene="bunny_x16", setting="LBVH leaf 4 build",
+              triangles=mesh.num_faces, build_s=timing.median)
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
-    parser.add_argument("--size", type=int, default=None, help="image size S (S x S rays)")
-    parser.add_argument("--brute-rays", type=int, default=None,
-                        help="rays checked against (and timed with) brute force")
-    parser.add_argument("--scenes", default="bunny,teapot_in_stadium")
+    parser.add_argument("--small", action="store_true", help="the CPU run of a few minutes")
+    parser.add_argument("--scenes", default=None, help=f"comma-separated (default: {ALL_SCENES})")
+    parser.add_argument("--parts", default="structures,fast,lbvh")
+    parser.add_argument("--size", type=int, default=None)
+    parser.add_argument("--fast-size", type=int, default=None)
     parser.add_argument("--out", default=None, help="output folder")
-    parser.add_argument("--threads", type=int, default=None,
-                        help="CPU threads for torch (default: torch's choice); 1 gives steadier "
-                             "ratios on a machine shared with other work")
+    parser.add_argument("--threads", type=int, default=None, help="CPU threads for torch")
+    parser.add_argument("--no-compile", action="store_true", help="skip torch.compile rows")
     args = parser.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
     device = default_device(args.device)
-    sizes = dict(SIZES["cuda" if device.type == "cuda" else "cpu"])
-    if args.size:
-        sizes["size"] = args.size
-    if args.brute_rays:
-        sizes["brute_rays"] = args.brute_rays
+    mode = dict(MODES["small" if args.small else device.type if device.type == "cuda"
+                      else "cpu"])
+    if args.no_compile:
+        mode.update(compile=(), knob_compile=False)
+    for key in ("scenes", "size", "fast_size"):
+        if getattr(args, key) is not None:
+            mode[key] = getattr(args, key)
     out = Path(args.out) if args.out else REPO / "bench" / "results" / device_name(device) / "lab2"
     table = ResultTable("lab2 acceleration structures", device=device)
-    table.metadata.update(sizes=sizes, kernel="lab1 moller_trumbore float32",
-                          cpu_threads=torch.get_num_threads())
+    table.metadata.update(mode={k: v for k, v in mode.items()}, cpu_threads=torch.get_num_threads(),
+                          kernel="lab1 moller_trumbore float32; sync-free path: inline, float32")
     start = time.perf_counter()
-    for name in args.scenes.split(","):
-        run_scene(name, sizes, device, table, lambda text: print(text, flush=True))
-    table.to_json(out / "lab2_accel.json")
-    (out / "lab2_accel.md").write_text(
-        f"# Lab 2: acceleration structures on {table.metadata['device']}\n\n"
-        f"`{table.metadata['command']}` (torch {table.metadata['torch']}, "
-        f"{table.metadata['date']})\n\n{table.to_markdown()}\n")
-    for name in args.scenes.split(","):
-        rows = [r for r in table.rows if r["scene"] == name and r["structure"] != "none"]
-        pareto_plot(rows, x="trace_s", y="build_s", label="setting", group="structure",
-                    path=out / f"pareto_{name}_trace_vs_build.png",
-                    title=f"{name}: trace time of {rows[0]['rays']} rays vs build time")
-        pareto_plot(rows, x="steps", y="tests", label="setting", group="structure",
-                    maximize_x=False, path=out / f"pareto_{name}_tests_vs_steps.png",
-                    title=f"{name}: mean triangle tests vs traversal steps per ray")
-    print(f"wrote {out} in {time.perf_counter() - start:.0f} s")
+
+    def log(text):
+        print(f"[{time.perf_counter() - start:6.0f} s] {text}", flush=True)
+
+    # The headline figures first, and the files rewritten after every part: a run stopped
+    # at its time limit keeps what it measured.
+    parts = args.parts.split(",")
+    if "lbvh" in parts:
+        run_lbvh_build(mode, device, table, log)
+    if "fast" in parts:
+        run_fast_knobs(mode, device, table, log)
+        write(table, out, mode)
+    if "structures" in parts:
+        for name in mode["scenes"].split(","):
+            run_scene(name, mode, device, table, log)
+            write(table, out, mode)
+    write(table, out, mode)
+    log(f"wrote {out}")
     return table
+
+
+def write(table, out: Path, mode: dict):
+    out.mkdir(parents=True, exist_ok=True)
+    table.to_json(out / "lab2_accel.json")
+    meta = table.metadata
+    parts = []
+    for part, title in (("structures", "Structures: build, primary and shadow rays, work"),
+                        ("fast", "The sync-free BVH traversal: one knob at a time (bunny)"),
+                        ("lbvh", "LBVH build of bunny_x16")):
+        rows = [r for r in table.rows if r.get("part") == part]
+        if rows:
+            sub = ResultTable(part)
+            for r in rows:
+                sub.add(**{k: v for k, v in r.items() if k != "part"})
+            parts.append(f"## {title}\n\n{sub.to_markdown()}\n")
+    (out / "lab2_accel.md").write_text(
+        f"# Lab 2: acceleration structures on {meta['device']}\n\n"
+        f"`{meta['command']}` (torch {meta['torch']}, {meta['date']}, "
+        f"{meta['cpu_threads']} CPU threads)\n\n" + "\n".join(parts))
+    for name in ("bunny", "teapot_in_stadium"):  # two plots: the device returns few files
+        rows = [r for r in table.rows if r.get("part") == "structures" and r["scene"] == name
+                and r["build_s"] > 0 and math.isfinite(r["rays_per_s"])]
+        if rows:
+            pareto_plot(rows, x="rays_per_s", y="build_s", label="setting",
+                        path=out / f"pareto_{name}_trace_vs_build.png",
+                        title=f"{name}: primary rays/s against build time")
+    rows = [r for r in table.rows if r.get("part") == "fast"]
+    if rows:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(7, 0.35 * len(rows) + 1.2))
+        ax.barh([r["setting"] for r in rows], [r["rays_per_s"] for r in rows])
+        ax.set_xscale("log")
+        ax.set_xlabel("primary rays/s (bunny)")
+        ax.set_title(f"sync-free BVH traversal, one knob at a time ({meta['device']})")
+        ax.invert_yaxis()
+        fig.tight_layout()
+        fig.savefig(out / "fast_path_knobs.png", dpi=110)
+        plt.close(fig)
 
 
 if __name__ == "__main__":

@@ -1371,19 +1371,19 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
            "tests": torch.zeros(n, dtype=torch.int64, device=device)}
     ray = torch.arange(n, device=device)
     state = [rays.origins, rays.directions, inv, rays.t_min, rays.t_max,
-             torch.zeros((n, depth), dtype=torch.int64, device=device),   # stack: nodes
+             torch.zeros((n, depth), dtype=torch.int32, device=device),   # stack: nodes
              torch.where(hit_root, t_root, math.inf)[:, None].expand(n, depth).contiguous(),
              hit_root.long()] + [out[k].clone() for k in ("t", "tri", "u", "v", "steps",
                                                           "tests")]
     names = ("t", "tri", "u", "v", "steps", "tests")
-    steps_fn = _fast_steps if compile is False else _compiled_fast_steps(compile)
-    consts = (check_every, tree["leaf_size"], bool(any_hit))
+    step = _fast_step if compile is False else _compiled_fast_step(compile)
     # One row per node and per slot: one gather reads all a step needs of each.
     tensors = (torch.cat((tree["child"], tree["first"][:, None], tree["count"][:, None]), 1),
                torch.cat((tree["child_lo"], tree["child_hi"]), 2).reshape(-1, 12),
                torch.cat((tree["v0"], tree["e1"], tree["e2"]), 1), tree["tri"])
     for _ in range(0, 2 * len(tree["child"]) + 1, check_every):
-        state = list(steps_fn(*state, *tensors, *consts))
+        state = list(_fast_steps(step, state, tensors, check_every, tree["leaf_size"],
+                                 bool(any_hit)))
         running = state[7] > 0
         active = int(running.sum())  # the one host sync per k steps
         if active == 0:
@@ -1400,60 +1400,67 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
             {"steps": out["steps"], "tests": out["tests"]})
 
 
-def _fast_steps(o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, best_u, best_v,
-                steps, tests, nodes, boxes, slots, tri_of, k: int, leaf_size: int,
-                any_hit: bool):
-    """``k`` steps of :func:`bvh_closest_hit_fast` for every ray: the same shapes in and
-    out, no host sync (what ``torch.compile`` fuses). ``stack``/``stack_t`` are updated in
-    place; nodes: (M, 4) int64 ``[left, right, first, count]``; boxes: (M, 12) the two
-    children's ``lo, hi``; slots: (F, 9) ``v0, e1, e2`` per leaf slot."""
+def _fast_steps(step, state, tree, k: int, leaf_size: int, any_hit: bool):
+    """``k`` steps of :func:`bvh_closest_hit_fast`: ``step`` (:func:`_fast_step`, or its
+    compiled form) called ``k`` times; nothing here waits for the device."""
+    for _ in range(k):
+        state = step(*state, *tree, leaf_size, any_hit)
+    return state
+
+
+def _fast_step(o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, best_u, best_v,
+               steps, tests, nodes, boxes, slots, tri_of, leaf_size: int, any_hit: bool):
+    """One step of :func:`bvh_closest_hit_fast` for every ray: the same shapes in and out
+    (``stack``, (N, D) int32, and ``stack_t`` are updated in place), no host sync, no
+    data-dependent Python control flow (what ``torch.compile`` fuses).
+    nodes: (M, 4) int64 ``[left, right, first, count]``; boxes: (M, 12) the two children's
+    ``lo, hi``; slots: (F, 9) ``v0, e1, e2`` per leaf slot; tri_of: (F,) their triangles."""
     grow = 1 + 2 * gamma(3, o.dtype)  # the conservative slab test's far-side scale
     depth = stack.shape[1]
-    num_slots = len(slots)
-    for _ in range(k):
-        active = sp > 0
-        top = (sp - 1).clamp(min=0)[:, None]
-        node = stack.gather(1, top)[:, 0].clamp(min=0)  # free slots hold garbage (-1)
-        t_node = stack_t.gather(1, top)[:, 0]
-        sp = sp - active.long()
-        live = active & (t_node <= best_t)
-        steps = steps + live.long()
-        info = nodes.index_select(0, node)
-        n_tri = info[:, 3]
-        leaf = live & (n_tri > 0)
-        inner = live & (n_tri == 0)
-        # Inner nodes: both children's slabs at once, (N, 2, 3).
-        box = boxes.index_select(0, node).view(-1, 2, 2, 3)
-        t0 = (box[:, :, 0] - o[:, None]) * inv[:, None]
-        t1 = (box[:, :, 1] - o[:, None]) * inv[:, None]
-        near, far = torch.minimum(t0, t1), torch.maximum(t0, t1) * grow
-        t_hi = torch.minimum(t_max, best_t)[:, None]
-        t_in = torch.fmax(torch.fmax(torch.fmax(near[..., 0], near[..., 1]), near[..., 2]),
-                          t_min[:, None])
-        t_out = torch.fmin(torch.fmin(torch.fmin(far[..., 0], far[..., 1]), far[..., 2]), t_hi)
-        hit = inner[:, None] & (t_in <= t_out) & (t_in < math.inf)
-        a_first = (t_in[:, :1] <= t_in[:, 1:]).long()
-        for chosen in (a_first, 1 - a_first):  # far child first: the near one pops next
-            slot = sp.clamp(max=depth - 1)[:, None]
-            stack.scatter_(1, slot, info[:, :2].gather(1, chosen))
-            stack_t.scatter_(1, slot, t_in.gather(1, chosen))
-            sp = sp + hit.gather(1, chosen)[:, 0].long()
-        # Leaves: a fixed loop over the slots, masked by the leaf's count.
-        for j in range(leaf_size):
-            ok = leaf & (j < n_tri)
-            s = (info[:, 2] + j).clamp(max=num_slots - 1)
-            tri = slots.index_select(0, s)
-            t, u, v, h = moller_trumbore_rows(o, d, tri[:, 0:3], tri[:, 3:6], tri[:, 6:9],
-                                                t_min, t_max)
-            index = tri_of.index_select(0, s)
-            better = ok & h & ((t < best_t) | ((t == best_t) & (index < best_tri)))
-            best_t = torch.where(better, t, best_t)
-            best_tri = torch.where(better, index, best_tri)
-            best_u = torch.where(better, u, best_u)
-            best_v = torch.where(better, v, best_v)
-            tests = tests + ok.long()
-        if any_hit:
-            sp = torch.where(best_tri >= 0, 0, sp)
+    num_slots = slots.shape[0]
+    active = sp > 0
+    top = (sp - 1).clamp(min=0)[:, None]
+    node = stack.gather(1, top)[:, 0].long().clamp(min=0)  # free slots hold garbage (-1)
+    t_node = stack_t.gather(1, top)[:, 0]
+    sp = sp - active.long()
+    live = active & (t_node <= best_t)
+    steps = steps + live.long()
+    info = nodes.index_select(0, node)
+    n_tri = info[:, 3]
+    leaf = live & (n_tri > 0)
+    inner = live & (n_tri == 0)
+    # Inner nodes: both children's slabs at once, (N, 2, 3).
+    box = boxes.index_select(0, node).view(-1, 2, 2, 3)
+    t0 = (box[:, :, 0] - o[:, None]) * inv[:, None]
+    t1 = (box[:, :, 1] - o[:, None]) * inv[:, None]
+    near, far = torch.minimum(t0, t1), torch.maximum(t0, t1) * grow
+    t_hi = torch.minimum(t_max, best_t)[:, None]
+    t_in = torch.fmax(torch.fmax(torch.fmax(near[..., 0], near[..., 1]), near[..., 2]),
+                      t_min[:, None])
+    t_out = torch.fmin(torch.fmin(torch.fmin(far[..., 0], far[..., 1]), far[..., 2]), t_hi)
+    hit = inner[:, None] & (t_in <= t_out) & (t_in < math.inf)
+    a_first = (t_in[:, :1] <= t_in[:, 1:]).long()
+    for chosen in (a_first, 1 - a_first):  # far child first: the near one pops next
+        slot = sp.clamp(max=depth - 1)[:, None]
+        stack.scatter_(1, slot, info[:, :2].gather(1, chosen).int())  # in place: no copy
+        stack_t.scatter_(1, slot, t_in.gather(1, chosen))
+        sp = sp + hit.gather(1, chosen)[:, 0].long()
+    # Leaves: a fixed loop over the slots, masked by the leaf's count.
+    for j in range(leaf_size):
+        ok = leaf & (j < n_tri)
+        s = (info[:, 2] + j).clamp(max=num_slots - 1)
+        tri = slots.index_select(0, s)
+        t, u, v, h = moller_trumbore_rows(o, d, tri[:, 0:3], tri[:, 3:6], tri[:, 6:9], t_min,
+                                          t_max)
+        index = tri_of.index_select(0, s)
+        better = ok & h & ((t < best_t) | ((t == best_t) & (index < best_tri)))
+        best_t = torch.where(better, t, best_t)
+        best_tri = torch.where(better, index, best_tri)
+        best_u = torch.where(better, u, best_u)
+        best_v = torch.where(better, v, best_v)
+        tests = tests + ok.long()
+    if any_hit:
+        sp = torch.where(best_tri >= 0, 0, sp)
     return (o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, best_u, best_v,
             steps, tests)
 
@@ -1461,10 +1468,10 @@ def _fast_steps(o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, b
 _COMPILED: dict = {}
 
 
-def _compiled_fast_steps(mode):
-    """``torch.compile`` of :func:`_fast_steps`, one per mode (dynamic shapes: compaction
-    changes the number of rays without a recompile)."""
+def _compiled_fast_step(mode):
+    """``torch.compile`` of :func:`_fast_step`, one per mode, kept across calls (dynamic
+    shapes: compaction changes the number of rays without a recompile)."""
     mode = "default" if mode is True else mode
     if mode not in _COMPILED:
-        _COMPILED[mode] = torch.compile(_fast_steps, mode=mode, dynamic=True)
+        _COMPILED[mode] = torch.compile(_fast_step, mode=mode, dynamic=True)
     return _COMPILED[mode]

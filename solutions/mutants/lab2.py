@@ -110,22 +110,22 @@ MUTANTS = [
            replace="cell_id = cell[:, 0] + res[:, 0] * (cell[:, 1] + res[:, 1] * cell[:, 2])",
            tests="two_level",
            why="indexes every sub-grid's cells from 0: all sub-grids read the first one's lists"),
-    Mutant(name="fast_leaf_slot_loop_one_short", module=M, function="_fast_steps",
+    Mutant(name="fast_leaf_slot_loop_one_short", module=M, function="_fast_step",
            find="for j in range(leaf_size):", replace="for j in range(leaf_size - 1):",
            tests="fast_bvh",
            why="the fixed slot loop stops one slot short: the last triangle of every full "
                "leaf is never tested"),
-    Mutant(name="fast_any_hit_never_stops", module=M, function="_fast_steps",
+    Mutant(name="fast_any_hit_never_stops", module=M, function="_fast_step",
            find="sp = torch.where(best_tri >= 0, 0, sp)", replace="sp = sp",
            tests="fast_bvh",
            why="any-hit mode keeps searching after the first hit: a shadow ray costs as much "
                "as a closest-hit ray"),
-    Mutant(name="fast_near_child_pushed_first", module=M, function="_fast_steps",
+    Mutant(name="fast_near_child_pushed_first", module=M, function="_fast_step",
            find="for chosen in (a_first, 1 - a_first):",
            replace="for chosen in (1 - a_first, a_first):", tests="fast_bvh",
            why="pushes the near child first, so the far one is popped first: correct hits, "
                "but no culling by the near side's hit"),
-    Mutant(name="fast_tie_to_highest_index", module=M, function="_fast_steps",
+    Mutant(name="fast_tie_to_highest_index", module=M, function="_fast_step",
            find="((t == best_t) & (index < best_tri))",
            replace="((t == best_t) & (index > best_tri))", tests="fast_bvh",
            why="among hits at the same t keeps the highest triangle index, not brute force's "
