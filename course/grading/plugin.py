@@ -103,13 +103,13 @@ def resolve_impl(config) -> tuple[Path, bool]:
 
 
 class _Labs:
-    """Lab modules loaded for this session, one warm worker per sandboxed lab."""
+    """Lab modules loaded for this session; one warm worker serves every sandboxed lab."""
 
     def __init__(self, config):
         self.config = config
         self.folder, self.trusted = resolve_impl(config)
         self.loaded: dict[str, object] = {}
-        self.workers: list[Worker] = []
+        self.worker: Worker | None = None
 
     def get(self, name: str):
         if name not in self.loaded:
@@ -121,15 +121,15 @@ class _Labs:
                 self.loaded[name] = LocalLab(name, import_file(path, f"trusted_{name}"))
             else:
                 limit = self.config.getoption("--time-limit")
-                worker = Worker(str(path),
-                                memory_bytes=int(self.config.getoption("--memory-limit") * 2**30))
-                self.workers.append(worker)
-                self.loaded[name] = SandboxedLab(name, worker, limit)
+                if self.worker is None:
+                    self.worker = Worker(str(self.folder), memory_bytes=int(
+                        self.config.getoption("--memory-limit") * 2**30))
+                self.loaded[name] = SandboxedLab(name, self.worker, limit)
         return self.loaded[name]
 
     def close(self):
-        for worker in self.workers:
-            worker.stop()
+        if self.worker is not None:
+            self.worker.stop()
 
 
 _LABS_KEY = pytest.StashKey()
@@ -142,14 +142,15 @@ def _labs(config) -> _Labs:
 
 
 def pytest_collection_finish(session):
-    """Start the sandboxed workers of every lab about to be graded, all at once."""
+    """Start the sandboxed worker now: it imports torch while the first tests set up."""
     labs = _labs(session.config)
     if labs.trusted:
         return
     names = {getattr(item.module, "LAB_MODULE", None) for item in session.items
              if hasattr(item, "module") and "impl" in getattr(item, "fixturenames", ())}
-    for name in sorted(n for n in names if n and (labs.folder / f"{n}.py").is_file()):
-        labs.get(name)._worker.launch()
+    present = sorted(n for n in names if n and (labs.folder / f"{n}.py").is_file())
+    if present:
+        labs.get(present[0])._worker.launch()
 
 
 def pytest_unconfigure(config):

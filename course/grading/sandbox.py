@@ -91,10 +91,19 @@ def _as_user(name: str | None) -> dict:
 
 
 class Worker:
-    """One worker process serving one lab file, restarted after a failure."""
+    """One worker process serving every lab file of a submission folder, restarted after a
+    failure.
 
-    def __init__(self, lab_file: str, *, memory_bytes: int, startup_timeout: float = 60.0):
-        self.lab_file = lab_file
+    One process for all labs: Python, torch and whatever the labs import (``torch._dynamo``
+    for the op counter and ``torch.compile``, Triton) are imported once per submission, not
+    once per lab; that import is most of what isolation costs. The labs of one submission
+    share the process, so a lab that ends it (``os._exit``, a crash) costs the others a
+    restart, never points: each request names its lab, whose module is imported again in
+    the fresh process.
+    """
+
+    def __init__(self, folder: str, *, memory_bytes: int, startup_timeout: float = 60.0):
+        self.folder = folder
         self.memory_bytes = memory_bytes
         self.startup_timeout = startup_timeout
         self.proc = None
@@ -111,7 +120,7 @@ class Worker:
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "course.grading.worker", str(child.fileno()),
-             self.lab_file, str(self.memory_bytes)],
+             self.folder, str(self.memory_bytes)],
             pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, env=env,
             **as_user,
         )
@@ -120,7 +129,7 @@ class Worker:
         self.starting = True
 
     def _await_ready(self, deadline):
-        reply = self._receive(deadline, "starting the worker and importing the lab module")
+        reply = self._receive(deadline, "starting the worker")
         self.starting = False
         self.output.append(reply.get("output", ""))
 
@@ -221,6 +230,7 @@ class SandboxedLab:
 
     def _request(self, message, where):
         __tracebackhide__ = True
+        message["lab"] = self._name
         reply = self._worker.request(message, self._remaining_deadline(), where)
         if "error" in reply:
             _raise_student_error(reply["error"], where)
@@ -253,7 +263,7 @@ class SandboxedLab:
         return self._decode(reply["value"])
 
     def __repr__(self):
-        return f"<sandboxed lab {self._name} from {self._worker.lab_file}>"
+        return f"<sandboxed lab {self._name} from {self._worker.folder}>"
 
 
 class RemoteCallable:

@@ -1,7 +1,8 @@
 """The sandboxed worker: imports a submitted lab module and runs calls on it.
 
 Started by :mod:`course.grading.sandbox` as ``python -m course.grading.worker FD
-LAB_FILE MEMORY_BYTES``; ``FD`` is one end of a socket pair. Requests arrive as
+FOLDER MEMORY_BYTES``; ``FD`` is one end of a socket pair. Each request names its lab;
+the lab file ``FOLDER/<lab>.py`` is imported on the first request for it. Requests arrive as
 pickles from the trusted grader; replies go back as plain data (see
 :mod:`course.grading.wire`). Anything the submission prints lands in a file the
 grader reads after each request, never on the grader's own output.
@@ -112,7 +113,7 @@ def parameter_names(fn, count):
 
 
 def main(argv):
-    fd, lab_file, memory_bytes = int(argv[0]), argv[1], int(argv[2])
+    fd, folder, memory_bytes = int(argv[0]), argv[1], int(argv[2])
     conn = Connection(fd)
     capture = _capture_output()
     os.chdir(tempfile.mkdtemp(prefix="rtcourse-worker-"))
@@ -121,12 +122,8 @@ def main(argv):
     from course.grading import wire  # imports torch
 
     _limit_memory(memory_bytes)
+    labs = _Labs(folder, wire)
     refs: dict[int, object] = {}
-    try:
-        module, import_error = wire.import_file(lab_file, "submission_" + os.path.basename(
-            lab_file).removesuffix(".py")), None
-    except BaseException as exc:  # a submission may raise anything, SystemExit included
-        module, import_error = None, _error(exc)
     conn.send_bytes(wire.dumps({"ready": True, "output": _take_output(capture)}))
 
     while True:
@@ -134,7 +131,7 @@ def main(argv):
             request = wire.pickle.loads(conn.recv_bytes())
         except EOFError:
             return
-        reply = _serve(request, module, import_error, refs, wire)
+        reply = _serve(request, labs, refs, wire)
         reply["output"] = _take_output(capture)
         try:
             data = wire.dumps(reply)
@@ -143,8 +140,26 @@ def main(argv):
         conn.send_bytes(data)
 
 
-def _serve(request, module, import_error, refs, wire):
+class _Labs:
+    """The submission's lab modules, each imported on its first request."""
+
+    def __init__(self, folder, wire):
+        self.folder, self.wire = folder, wire
+        self.modules: dict[str, tuple] = {}  # name -> (module or None, import error or None)
+
+    def get(self, name):
+        if name not in self.modules:
+            path = os.path.join(self.folder, f"{name}.py")
+            try:
+                self.modules[name] = (self.wire.import_file(path, "submission_" + name), None)
+            except BaseException as exc:  # a submission may raise anything, SystemExit too
+                self.modules[name] = (None, _error(exc))
+        return self.modules[name]
+
+
+def _serve(request, labs, refs, wire):
     op = request["op"]
+    module, import_error = labs.get(request["lab"])
     if import_error is not None:
         return {"error": dict(import_error, message="the lab module failed to import: "
                               + import_error["type"] + ": " + import_error["message"])}
