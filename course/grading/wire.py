@@ -51,7 +51,7 @@ def loads_plain(data: bytes):
 # ---------------------------------------------------------------- encoding
 
 
-def _tensor_bytes(t: torch.Tensor) -> bytes:
+def _tensor_bytes(t: torch.Tensor) -> bytes | pickle.PickleBuffer:
     # Strip any subclass behaviour before touching the data.
     with torch._C.DisableTorchFunctionSubclass():
         t = torch.Tensor.detach(t).to("cpu")
@@ -60,7 +60,9 @@ def _tensor_bytes(t: torch.Tensor) -> bytes:
         # A fresh dense buffer: contiguous() keeps stride 0 on expanded size-1 dims,
         # which cannot be reinterpreted as bytes.
         flat = torch.empty(t.numel(), dtype=t.dtype).copy_(t.reshape(-1))
-        return flat.view(torch.uint8).numpy().tobytes()
+        # Pickled in place (protocol 5: the buffer's bytes go straight into the stream
+        # and come out as a bytearray the tensor can wrap), no intermediate bytes copy.
+        return pickle.PickleBuffer(flat.view(torch.uint8).numpy())
 
 
 def encode(obj, refs=None):
@@ -128,10 +130,15 @@ def _decode_tensor(d, device_map) -> torch.Tensor:
         raise TypeError(f"tensor of unsupported dtype {d['dtype']!r}")
     shape = tuple(int(s) for s in d["shape"])
     data = d["data"]
+    if not isinstance(data, (bytes, bytearray)):
+        raise TypeError(f"tensor data of type {type(data).__name__}, expected bytes")
     if len(data) == 0:
         t = torch.empty(shape, dtype=dtype)
     else:
-        t = torch.frombuffer(bytearray(data), dtype=torch.uint8).view(dtype).reshape(shape)
+        # A bytearray is this side's own copy (what the unpickler made of the buffer):
+        # wrap it without copying again.
+        owned = data if isinstance(data, bytearray) else bytearray(data)
+        t = torch.frombuffer(owned, dtype=torch.uint8).view(dtype).reshape(shape)
     device = device_map(d["device"])
     return t if device == "cpu" else t.to(device)
 
