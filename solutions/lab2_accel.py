@@ -1473,5 +1473,8 @@ def _compiled_fast_step(mode):
     shapes: compaction changes the number of rays without a recompile)."""
     mode = "default" if mode is True else mode
     if mode not in _COMPILED:
+        # Every (leaf size, any-hit, dtype) is a specialisation of its own: allow enough of
+        # them that none falls back to eager after dynamo's default limit of 8.
+        torch._dynamo.config.recompile_limit = max(torch._dynamo.config.recompile_limit, 64)
         _COMPILED[mode] = torch.compile(_fast_step, mode=mode, dynamic=True)
     return _COMPILED[mode]
