@@ -56,7 +56,7 @@ ALL_SCENES = "suzanne,bunny,bunny_x4,bunny_x16,teapot_in_stadium,random_soup"
 # sync-free one; brute_rays: rays checked against (and timed with) brute force.
 MODES = {
     "small": {"scenes": "suzanne,bunny,bunny_x4,teapot_in_stadium,random_soup", "size": 32,
-              "fast_size": 128, "brute_rays": 32, "trimesh_rays": 48, "repeats": 1,
+              "fast_size": 256, "brute_rays": 32, "trimesh_rays": 48, "repeats": 1,
               "warmup": 1, "teapot": 1, "soup": 10_000, "max_slow": 100_000, "lbvh_builds": 3,
               "compile": (), "knob_compile": True},
     "cpu": {"scenes": ALL_SCENES, "size": 64, "fast_size": 256, "brute_rays": 64,
@@ -244,7 +244,7 @@ def run_fast_knobs(mode, device, table, log):
                 (8, False, 4, False), (8, False, 1, True), (8, False, 8, True)]
     if mode["knob_compile"]:  # the small CPU run compiles once (minutes on 2 cores)
         modes = mode["compile"] or ("default",)
-        settings += [(8, m, 4, True) for m in modes] + [(32, m, 4, True) for m in modes[:1]]
+        settings += [(8, m, 4, True) for m in modes] + [(k, modes[0], 4, True) for k in (4, 32)]
     bvhs = {}
     for k, compile_mode, leaf, compact in settings:
         if leaf not in bvhs:
