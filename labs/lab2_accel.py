@@ -83,6 +83,21 @@ coincident triangles        one cell, all tested    median fallback: no     one 
 axis-parallel rays, +-0.0   step 0, t_next = inf    1/+-0 = +-inf slabs     t_split = +-inf: the
                                                                             near child
 ==========================  ======================  ======================  ======================
+
+The two-level grid and the sync-free traversal (``bench/lab2_accel.py --small --threads 2``,
+``bench/results/cpu-2cores/lab2/``; on an H200, ``bench/results/nvidia-h200/lab2/``):
+
+* teapot in a stadium (3.9K triangles): the uniform grid tests 2,900 triangles per ray and
+  runs at x0.7 brute force; the two-level grid tests 9 (8 cells per ray) and runs 10x the
+  uniform grid (x7 brute force), close to the SAH BVH's stack traversal.
+* bunny, primary rays: the stack traversal 7.6K rays/s (65K rays, 2 threads); the
+  sync-free one 0.09 M rays/s eager (compaction every k = 8 steps: 5x faster than none),
+  0.25 M rays/s under ``torch.compile`` (k = 4); trimesh's numpy query 100 rays/s. On an
+  H200 with 1M rays: 0.25 M (stack), 2 M (sync-free, eager), 20 M rays/s (compiled).
+* ``choose_structure`` (given) reads triangle count, crowding and size spread and picks:
+  a grid for small even scenes, the two-level grid for crowded scenes with few rays, the
+  SAH BVH for many rays, the LBVH when the build dominates; never the kd-tree (slowest
+  build, no faster walk here).
 """
 
 from __future__ import annotations
