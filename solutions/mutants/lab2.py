@@ -11,6 +11,7 @@ from course.grading.mutants import Mutant
 
 M = "lab2_accel"
 GRID = "grid_closest_hit or grid_dda or grid_mailboxing"
+GRID2 = "two_level_matches or two_level_mailboxing"  # the traversal's tests
 
 MUTANTS = [
     Mutant(name="dda_lower_face_when_stepping_up", module=M, function="grid_closest_hit",
@@ -90,25 +91,25 @@ MUTANTS = [
            function="build_two_level_grid",
            find="big = (tri_hi - tri_lo).amax(dim=1) >= width.amin()",
            replace="big = torch.zeros(mesh.num_faces, dtype=torch.bool, device=device)",
-           tests="two_level",
+           tests="two_level_build or two_level_mailboxing",
            why="puts the stadium's floor into the teapot's sub-grid: its box becomes the whole "
                "floor of the top cell, and the teapot falls into one or two sub cells again"),
     Mutant(name="two_level_mailbox_after_crowded_cell", module=M,
            function="two_level_closest_hit",
            find="                seen &= prev_plain[owner] | big[tri]\n", replace="",
-           tests="two_level",
+           tests=GRID2,
            why="trusts the mailbox after a crowded top cell: a small triangle whose sub cells "
                "the ray did not cross there was never tested, and is skipped here"),
     Mutant(name="two_level_sub_walk_stops_at_any_hit", module=M, function="_walk_sub_grids",
            find='done = (closest["t"][ray] <= t_out) | (t_out >= s_out)',
            replace='done = (closest["t"][ray] < math.inf) | (t_out >= s_out)',
-           tests="two_level",
+           tests=GRID2,
            why="the classic grid bug, one level down: a hit found in a sub cell may lie "
                "beyond it, with a nearer triangle in the next sub cell"),
     Mutant(name="two_level_sub_cell_without_base", module=M, function="_walk_sub_grids",
            find="cell_id = base + cell[:, 0] + res[:, 0] * (cell[:, 1] + res[:, 1] * cell[:, 2])",
            replace="cell_id = cell[:, 0] + res[:, 0] * (cell[:, 1] + res[:, 1] * cell[:, 2])",
-           tests="two_level",
+           tests=GRID2,
            why="indexes every sub-grid's cells from 0: all sub-grids read the first one's lists"),
     Mutant(name="fast_leaf_slot_loop_one_short", module=M, function="_fast_step",
            find="for j in range(leaf_size):", replace="for j in range(leaf_size - 1):",
