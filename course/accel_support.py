@@ -104,6 +104,15 @@ def check_grid_inputs(extent, num_triangles, density) -> list[float]:
     return values
 
 
+def check_two_level_knobs(top_density, density, min_triangles) -> None:
+    """Provided: validate ``build_two_level_grid``'s knobs (ValueError naming the knob)."""
+    for name, value in (("top_density", top_density), ("density", density)):
+        if isinstance(value, bool) or not (isinstance(value, (int, float))
+                                           and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}: expected a positive number, got {value!r}")
+    _positive_int(min_triangles, "min_triangles", 0)
+
+
 def check_resolution(resolution) -> None:
     """Provided: ``resolution`` must be None or 3 positive ints."""
     if resolution is not None and (

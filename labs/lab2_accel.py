@@ -128,6 +128,7 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     check_resolution,
     check_structure,
     check_trace_inputs,
+    check_two_level_knobs,
     choose_structure,
     expand_ranges,
     grid_resolutions,
@@ -704,9 +705,7 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
     """
     # Provided: validates the arguments (ValueError naming the argument).
     check_mesh(mesh)
-    check_grid_inputs((1.0, 1.0, 1.0), 1, top_density)
-    check_grid_inputs((1.0, 1.0, 1.0), 1, density)
-    _positive_int(min_triangles, "min_triangles", 0)
+    check_two_level_knobs(top_density, density, min_triangles)
     raise NotImplementedError("not implemented yet: build_two_level_grid (task 6)")
 
 

@@ -123,6 +123,7 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     check_resolution,
     check_structure,
     check_trace_inputs,
+    check_two_level_knobs,
     choose_structure,
     expand_ranges,
     grid_resolutions,
@@ -1124,9 +1125,7 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
        overlap, one stable sort by global sub cell: no loop over cells or triangles.
     """
     check_mesh(mesh)
-    check_grid_inputs((1.0, 1.0, 1.0), 1, top_density)
-    check_grid_inputs((1.0, 1.0, 1.0), 1, density)
-    _positive_int(min_triangles, "min_triangles", 0)
+    check_two_level_knobs(top_density, density, min_triangles)
     top = build_grid(mesh, density=top_density)
     device = mesh.device
     lo, hi, res = top["lo"], top["hi"], top["resolution"]

@@ -1345,6 +1345,7 @@ def test_two_level_build(impl, device):
     expect_error("min_triangles", impl.build_two_level_grid, mesh, 1 / 16, 2.0, -1,
                  case="min_triangles=-1")
     expect_error("density", impl.build_two_level_grid, mesh, 1 / 16, 0.0, case="density=0")
+    expect_error("top_density", impl.build_two_level_grid, mesh, -1.0, case="top_density=-1")
 
 
 @pytest.mark.task(6)
