@@ -101,10 +101,10 @@ def _slab(r, d, size, t_near, t_far):
 
 @_jit
 def _march_kernel(o_ptr, d_ptr, density_ptr, source_ptr, radiance_ptr, trans_ptr, samples_ptr,
-                  n_rays, steps, min_t,
+                  n_rays, divisions, min_t,
                   lo_x, lo_y, lo_z, size_x, size_y, size_z,
                   nx, ny, nz,
-                  CHANNELS: tl.constexpr, BLOCK_RAYS: tl.constexpr):
+                  STEPS: tl.constexpr, CHANNELS: tl.constexpr, BLOCK_RAYS: tl.constexpr):
     ray = tl.program_id(0) * BLOCK_RAYS + tl.arange(0, BLOCK_RAYS)
     live = ray < n_rays
     ox = tl.load(o_ptr + 3 * ray, mask=live, other=0.0)
@@ -126,7 +126,7 @@ def _march_kernel(o_ptr, d_ptr, density_ptr, source_ptr, radiance_ptr, trans_ptr
     moving = (dx != 0.0) | (dy != 0.0) | (dz != 0.0)
     hit = live & finite & moving & (t_near <= t_far) & (tl.abs(t_far) < inf)
     t_near = tl.where(hit, t_near, 0.0)
-    dt = tl.where(hit, t_far - t_near, 0.0) / tl.maximum(steps, 1).to(tl.float32)
+    dt = tl.where(hit, t_far - t_near, 0.0) / (divisions * 1.0)  # 1 may arrive as a constant
     ds = dt * tl.sqrt(dx * dx + dy * dy + dz * dz)
     fx, fy, fz = nx.to(tl.float32), ny.to(tl.float32), nz.to(tl.float32)
     transmittance = tl.full(ox.shape, 1.0, tl.float32)
@@ -134,7 +134,9 @@ def _march_kernel(o_ptr, d_ptr, density_ptr, source_ptr, radiance_ptr, trans_ptr
     l1 = tl.zeros_like(ox)
     l2 = tl.zeros_like(ox)
     samples = tl.zeros(ox.shape, tl.int32)
-    for i in range(steps):
+    # The step count is a compile-time constant: one compiled kernel per count (a march
+    # uses few), and older Triton interpreters loop only over plain integers.
+    for i in range(STEPS):
         active = hit & (transmittance >= min_t)
         t = t_near + (i + 0.5) * dt
         u = (rx + t * dx) / size_x
@@ -232,9 +234,9 @@ def march_grid_triton(origins: torch.Tensor, directions: torch.Tensor, box_min, 
         grid = (triton.cdiv(n, block_rays),)
         with _ieee_quiet():
             handle = _march_kernel[grid](
-                o, d, dens, src, radiance, transmittance, samples, n, steps,
+                o, d, dens, src, radiance, transmittance, samples, n, max(steps, 1),
                 float(min_transmittance), *lo, *(b - a for a, b in zip(lo, hi)),
-                *dens.shape, CHANNELS=channels, BLOCK_RAYS=block_rays,
+                *dens.shape, STEPS=steps, CHANNELS=channels, BLOCK_RAYS=block_rays,
                 num_warps=num_warps)
     return {"radiance": radiance, "transmittance": transmittance, "samples": samples,
             "kernel": handle}
