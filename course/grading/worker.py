@@ -74,7 +74,10 @@ def _same_bits(a, b) -> bool:
     if a.shape != b.shape or a.dtype != b.dtype:
         return False
     if a.dtype.is_floating_point or a.dtype.is_complex:
-        return torch.equal(a.reshape(-1).view(torch.uint8), b.reshape(-1).view(torch.uint8))
+        # Bits, not values (NaN == NaN, -0.0 != +0.0); contiguous first: a strided view
+        # (x[..., 0]) cannot be reinterpreted as bytes.
+        return torch.equal(a.contiguous().reshape(-1).view(torch.uint8),
+                           b.contiguous().reshape(-1).view(torch.uint8))
     return torch.equal(a, b)
 
 
