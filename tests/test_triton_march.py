@@ -37,6 +37,21 @@ needs_triton = pytest.mark.skipif(not HAVE_TRITON, reason="triton is not install
                                   "(pip install triton); the kernel cannot run without it")
 F64 = torch.float64
 
+def _triton_version() -> tuple[int, int]:
+    import triton
+
+    return tuple(int(x) for x in triton.__version__.split(".")[:2])
+
+
+# Triton's interpreter before 3.9 runs loops only to plain-integer bounds and rounds some
+# element-wise operations differently from the compiled kernels; the compiled kernels
+# are what counts and are tested on CUDA whatever the version.
+old_interpreter = pytest.mark.skipif(
+    importlib.util.find_spec("triton") is not None and _triton_version() < (3, 9),
+    reason="Triton's interpreter before 3.9 cannot run these kernels (loop bounds from "
+           "tensors); the compiled kernels are tested on CUDA")
+
+
 
 def make_case(seed: int, n: int = 61, offset: float = 0.0, channels: int = 3) -> dict:
     """Random rays at a [offset + (0, 0, 0), offset + (2, 1, 1.5)] box with random grids."""
@@ -187,6 +202,7 @@ def check_all(cases: dict, out: dict, where: str) -> None:
 
 
 @needs_triton
+@old_interpreter
 def test_interpreted_matches_float64_reference(tmp_path):
     cases, out = run_interpreted(tmp_path)
     check_all(cases, out, "TRITON_INTERPRET=1")

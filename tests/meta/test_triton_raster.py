@@ -32,6 +32,21 @@ needs_triton = pytest.mark.skipif(importlib.util.find_spec("triton") is None,
 RUNS = {"32": {"depth_bits": 32}, "24": {"depth_bits": 24},
         "cull": {"depth_bits": 32, "cull_backfaces": True}}
 
+def _triton_version() -> tuple[int, int]:
+    import triton
+
+    return tuple(int(x) for x in triton.__version__.split(".")[:2])
+
+
+# Triton's interpreter before 3.9 runs loops only to plain-integer bounds and rounds some
+# element-wise operations differently from the compiled kernels; the compiled kernels
+# are what counts and are tested on CUDA whatever the version.
+old_interpreter = pytest.mark.skipif(
+    importlib.util.find_spec("triton") is not None and _triton_version() < (3, 9),
+    reason="Triton's interpreter before 3.9 cannot run these kernels (loop bounds from "
+           "tensors); the compiled kernels are tested on CUDA")
+
+
 
 def cases() -> dict:
     from course.bench import load_lab
@@ -96,6 +111,7 @@ def check(data: dict, out: dict, where: str) -> None:
 
 
 @needs_triton
+@old_interpreter
 def test_interpreted_matches_reference(tmp_path):
     data = cases()
     inputs, outputs = tmp_path / "in.pt", tmp_path / "out.pt"
