@@ -84,8 +84,10 @@ def cases() -> dict:
 def run_kernels(data: dict, device: str) -> dict:
     from course.triton_raster import rasterize_triton
 
+    # Suzanne with the default knobs only: the interpreter runs every lane in Python.
     return {(name, run): rasterize_triton(screen.to(device), w, h, small_box=32, **knobs).cpu()
-            for name, (screen, w, h) in data.items() for run, knobs in RUNS.items()}
+            for name, (screen, w, h) in data.items() for run, knobs in RUNS.items()
+            if name == "mixed" or run == "32"}
 
 
 def check(data: dict, out: dict, where: str) -> None:
