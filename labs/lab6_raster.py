@@ -80,66 +80,23 @@ import math  # noqa: F401  (math.inf, math.isfinite, ...)
 import torch
 
 from course.camera import Camera, primary_rays  # noqa: F401  (task 5)
+from course.raster_support import (  # noqa: F401  (given code, for the tasks to use)
+    BYTES_PER_FRAGMENT,
+    EMPTY,
+    ID_BITS,
+    ID_MASK,
+    any_shape,
+    check_screen,
+    check_size,
+    check_tensor,
+    crossing,
+    face_normals,
+    fragment_depth,
+    normalized,
+    sun_direction,
+    traced_hits,
+)
 from course.types import Mesh
-
-EMPTY = torch.iinfo(torch.int64).max
-"""The key of a pixel no fragment reached: larger than every packed key (the "far" value
-a depth buffer is cleared to)."""
-
-ID_BITS = 32
-ID_MASK = (1 << ID_BITS) - 1
-"""Triangle ids live in the low 32 bits of a key, depth in the bits above."""
-
-BYTES_PER_FRAGMENT = 256
-"""Bytes ``rasterize`` keeps alive per fragment, at most: the fragments of one chunk of
-triangles number at most ``memory_budget_bytes // BYTES_PER_FRAGMENT`` (or one triangle's
-clamped bounding box, at most ``width * height``, when a single triangle needs more)."""
-
-
-# ---------------------------------------------------------------------------------------
-# Provided helpers: argument checks
-
-
-def check_tensor(x, name: str, shape: tuple, kind: str = "float", like=None) -> torch.Tensor:
-    """Provided: ``x`` must be a tensor of ``shape`` (``None`` = any size); ``kind`` is
-    ``"float"`` (float32/float64), ``"int64"`` or ``"any"``; ``like``: a tensor whose device
-    ``x`` must share. Raises TypeError/ValueError naming ``name`` and what was expected."""
-    want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + \
-        ("," if len(shape) == 1 else "") + ")"
-    if not isinstance(x, torch.Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor of shape {want}, "
-                        f"got {type(x).__name__}")
-    if x.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, x.shape)):
-        raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
-    if kind == "float" and x.dtype not in (torch.float32, torch.float64):
-        raise TypeError(f"{name}: expected float32 or float64, got {x.dtype}")
-    if kind == "int64" and x.dtype != torch.int64:
-        raise TypeError(f"{name}: expected dtype torch.int64, got {x.dtype}")
-    if like is not None and x.device != like.device:
-        raise ValueError(f"{name}: expected a tensor on {like.device}, got one on {x.device}")
-    return x
-
-
-def check_size(width, height) -> None:
-    """Provided: the viewport must be positive integers (at most 2**15 each, which keeps
-    pixel centres and ``row * width + col`` exact)."""
-    for name, size in (("width", width), ("height", height)):
-        if isinstance(size, bool) or not isinstance(size, int) or not 0 < size <= 2**15:
-            raise ValueError(f"{name}: expected a positive integer pixel count <= 32768, "
-                             f"got {size!r}")
-
-
-def _any_shape(x) -> tuple:
-    return (None,) * x.ndim if isinstance(x, torch.Tensor) else (None,)
-
-
-def _check_screen(screen, name="screen") -> torch.Tensor:
-    check_tensor(screen, name, (None, 3, None))
-    if screen.shape[2] < 2:
-        raise ValueError(f"{name}: expected shape (K, 3, C) with C >= 2 (x, y first), "
-                         f"got {tuple(screen.shape)}")
-    return screen
-
 
 # ---------------------------------------------------------------------------------------
 # Task 1: MVP transform, clipping, viewport
@@ -166,14 +123,6 @@ def to_clip_space(vertices, mvp):
     raise NotImplementedError("not implemented yet: to_clip_space (task 1)")
 
 
-def _crossing(p_in, d_in, w_in, p_out, d_out, w_out):
-    """Provided: where the edge from an inside to an outside vertex meets the plane ``d = 0``,
-    and that point's weights. Always interpolated from the inside vertex: the two triangles
-    sharing the edge then compute the same point bit for bit (no cracks along the cut)."""
-    t = d_in / (d_in - d_out)
-    return p_in + t[:, None] * (p_out - p_in), w_in + t[:, None] * (w_out - w_in)
-
-
 def clip_triangles(clip):
     """Trivially reject triangles outside the view, clip the rest against the near plane.
 
@@ -194,7 +143,7 @@ def clip_triangles(clip):
        alone on its side comes first, call them A, B, C:
        one inside (A): ``(A, AB, AC)``; two inside (B, C): ``(BA, B, C)`` and
        ``(BA, C, CA)``, where ``XY = X + t (Y - X)``, ``t = d_X / (d_X - d_Y)``, is
-       computed from the inside corner X (see ``_crossing``).
+       computed from the inside corner X (see ``crossing``).
     The near plane must be clipped: a corner behind the eye has ``w < 0`` and its
     perspective divide flips it to the other side of the screen. The other five planes
     need no clipping: the bounding box is clamped to the screen (a "guard band").
@@ -202,7 +151,7 @@ def clip_triangles(clip):
     Hints: work on all F triangles at once and select at the end. ``d.gather(1, order)``
     and ``clip.gather(1, order[..., None].expand(F, 3, 4))`` rotate the corners;
     ``torch.nn.functional.one_hot(order, 3)`` gives each rotated corner's weight row; the
-    provided ``_crossing`` makes the cut points. Build two candidate triangles per input,
+    provided ``crossing`` makes the cut points. Build two candidate triangles per input,
     ``(F, 2, 3, 4)``, and a validity mask ``(F, 2)`` (the first is valid when kept, the second
     only for the quad case); indexing with the mask keeps the input order. ``torch.where``
     picks per case; NaNs computed for the cases that do not use them are harmless.
@@ -277,7 +226,7 @@ def bounding_boxes(screen, width: int, height: int):
     with a ``tensor([width, height])`` clamp both axes at once.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    _check_screen(screen)
+    check_screen(screen)
     check_size(width, height)
     raise NotImplementedError("not implemented yet: bounding_boxes (task 2)")
 
@@ -319,7 +268,7 @@ def coverage(screen, width: int, height: int, cull_backfaces: bool = False):
     boxes; ``rank % box_width`` and ``rank // box_width`` give column and row.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    _check_screen(screen)
+    check_screen(screen)
     check_size(width, height)
     raise NotImplementedError("not implemented yet: coverage (task 2)")
 
@@ -363,7 +312,7 @@ def triangle_ids(keys):
     Hints: ``keys & ID_MASK``; ``torch.where``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_tensor(keys, "keys", _any_shape(keys), kind="int64")
+    check_tensor(keys, "keys", any_shape(keys), kind="int64")
     raise NotImplementedError("not implemented yet: triangle_ids (task 3)")
 
 
@@ -389,27 +338,6 @@ def depth_test(pixel, key, out):
     raise NotImplementedError("not implemented yet: depth_test (task 3)")
 
 
-def _fragment_depth(screen, triangle, bary, depth_bits: int):
-    """Provided: per fragment, (depth to pack, in front of the far plane).
-
-    Interpolated as offsets from corner 0 (``a0 + b1 (a1 - a0) + b2 (a2 - a0)``): a triangle
-    at constant depth gets exactly that depth at every pixel, so coplanar triangles facing
-    the camera tie exactly and the id decides. z_ndc and 1/w are both linear in screen space.
-    32 bits: the view depth ``w = 1 / (1/w)``, which a float holds with the same relative
-    precision at every distance. 24 bits: the window depth ``(z_ndc + 1) / 2`` in [0, 1] of a
-    classic depth buffer, whose resolution is crowded near the near plane.
-    """
-    v = screen[triangle]
-    b1, b2 = bary[:, 1], bary[:, 2]
-
-    def lerp(a):
-        return a[:, 0] + b1 * (a[:, 1] - a[:, 0]) + b2 * (a[:, 2] - a[:, 0])
-
-    z_ndc = lerp(v[..., 2])
-    depth = 1 / lerp(v[..., 3]) if depth_bits == 32 else z_ndc * 0.5 + 0.5
-    return depth, z_ndc <= 1
-
-
 def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
               cull_backfaces: bool = False, memory_budget_bytes: int = 2**28, out=None):
     """The visibility buffer of screen-space triangles.
@@ -424,17 +352,17 @@ def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
 
     Clear ``out`` to ``EMPTY``; walk the triangles in chunks whose bounding boxes hold at
     most ``memory_budget_bytes // BYTES_PER_FRAGMENT`` pixels (at least one triangle per
-    chunk); per chunk: ``coverage``, the fragment depth (see ``_fragment_depth``; fragments
+    chunk); per chunk: ``coverage``, the fragment depth (see ``fragment_depth``; fragments
     beyond the far plane, ``z_ndc > 1``, are dropped), ``pack_depth_id`` with the chunk's
     offset added to the ids, ``depth_test``. The atomic minimum makes the result independent
     of the chunking and of the triangle order: bit for bit the same keys.
 
     Hints: plan the chunks on the host: ``ends = torch.cumsum(sizes, 0).cpu()`` and
     ``torch.searchsorted(ends, before + per_chunk, right=True)`` find where a chunk ends; a
-    Python loop over chunks (not triangles) is fine. ``_fragment_depth`` is provided.
+    Python loop over chunks (not triangles) is fine. ``fragment_depth`` is provided.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    _check_screen(screen)
+    check_screen(screen)
     if screen.shape[2] != 4:
         raise ValueError(f"screen: expected shape (K, 3, 4) (x, y, z_ndc, 1/w), "
                          f"got {tuple(screen.shape)}")
@@ -528,22 +456,9 @@ def interpolate(values, faces, face, bary):
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_tensor(values, "values", (None, None))
     check_tensor(faces, "faces", (None, 3), kind="int64", like=values)
-    check_tensor(face, "face", _any_shape(face), kind="int64", like=values)
+    check_tensor(face, "face", any_shape(face), kind="int64", like=values)
     check_tensor(bary, "bary", (*face.shape, 3), like=values)
     raise NotImplementedError("not implemented yet: interpolate (task 4)")
-
-
-def _face_normals(mesh: Mesh):
-    """Provided: (F, 3) unnormalised face normals ``(v1 - v0) x (v2 - v0)`` (length: twice
-    the area)."""
-    tri = mesh.triangles()
-    return torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-
-
-def _normalize(v):
-    """Provided: unit vectors along the last axis (zero vectors stay zero)."""
-    length = v.norm(dim=-1, keepdim=True)
-    return v / torch.where(length > 0, length, torch.ones_like(length))
 
 
 def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
@@ -559,7 +474,7 @@ def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
     The interpolated normal must be normalised again: a blend of unit vectors is shorter
     than 1 (by up to a few percent on a coarse mesh), which darkens the middle of each face.
 
-    Hints: the provided ``_face_normals`` and ``_normalize``; ``index_add_`` over
+    Hints: the provided ``face_normals`` and ``normalized``; ``index_add_`` over
     ``mesh.faces.reshape(-1)`` sums face normals into their vertices; ``interpolate``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
@@ -575,18 +490,6 @@ def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
 # Task 5: raster vs ray-traced visibility, hybrid shadows
 
 
-def _traced(trace, origins, directions, t_min, t_max):
-    """Provided: call a tracer, check what comes back: ``(t, triangle)`` on the rays' device."""
-    hits = trace(origins, directions, t_min, t_max)
-    t, triangle = getattr(hits, "t", None), getattr(hits, "triangle", None)
-    n = origins.shape[0]
-    if not isinstance(t, torch.Tensor) or not isinstance(triangle, torch.Tensor) \
-            or t.shape != (n,) or triangle.shape != (n,):
-        raise TypeError(f"trace: expected a result with t ({n},) and triangle ({n},) "
-                        f"tensors, got {type(hits).__name__}")
-    return t.to(origins.device), triangle.to(origins.device, torch.int64)
-
-
 def traced_visibility(trace, camera: Camera, device=None, dtype=torch.float32):
     """Ray-traced primary visibility: (H, W) int64, the triangle each pixel's primary ray
     hits first (-1 where it misses), for the same pixel centres as the rasterizer.
@@ -594,7 +497,7 @@ def traced_visibility(trace, camera: Camera, device=None, dtype=torch.float32):
     trace: ``trace(origins, directions, t_min, t_max) -> hits`` (see the module docstring);
     camera: the view; device, dtype: of the rays (``course.camera.primary_rays``).
 
-    Hints: ``course.camera.primary_rays(camera, device, dtype)``; the provided ``_traced``
+    Hints: ``course.camera.primary_rays(camera, device, dtype)``; the provided ``traced_hits``
     calls the tracer and checks its answer.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
@@ -639,15 +542,9 @@ def _shadow_rays(trace, mesh: Mesh, points, hit, light):
     """(N,) bool: which of the points (N, 3) marked ``hit`` see something toward ``light``.
 
     Write this helper for ``hybrid_shadows`` and ``traced_shadows``: shadow rays from the
-    points with ``hit``, ``t_min = shadow_epsilon(mesh)``, ``t_max = inf``, through ``_traced``.
+    points with ``hit``, ``t_min = shadow_epsilon(mesh)``, ``t_max = inf``, through ``traced_hits``.
     """
     raise NotImplementedError("not implemented yet: _shadow_rays (task 5)")
-
-
-def _light(light_direction, like):
-    """Provided: the (3,) light direction, checked and normalised, in ``like``'s dtype."""
-    check_tensor(light_direction, "light_direction", (3,), like=like)
-    return _normalize(light_direction.to(like.dtype))
 
 
 def hybrid_shadows(trace, mesh: Mesh, face, bary, light_direction):
@@ -665,7 +562,7 @@ def hybrid_shadows(trace, mesh: Mesh, face, bary, light_direction):
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not callable(trace):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
-    light = _light(light_direction, mesh.vertices)  # noqa: F841  (unit, toward the light)
+    light = sun_direction(light_direction, mesh.vertices)  # noqa: F841  (unit, toward the light)
     raise NotImplementedError("not implemented yet: hybrid_shadows (task 5)")
 
 
@@ -674,7 +571,7 @@ def traced_shadows(trace, mesh: Mesh, camera: Camera, light_direction):
     shadowed (H, W) bool)``, the primary rays of ``camera`` traced too (hit points
     ``o + t d``), shadow rays as in ``hybrid_shadows``. Rays in the mesh's dtype and device.
 
-    Hints: ``primary_rays``, ``_traced``, hit points ``o + t d`` (use t = 0 for misses to
+    Hints: ``primary_rays``, ``traced_hits``, hit points ``o + t d`` (use t = 0 for misses to
     avoid ``inf * 0``), then ``_shadow_rays``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
@@ -682,5 +579,5 @@ def traced_shadows(trace, mesh: Mesh, camera: Camera, light_direction):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
-    light = _light(light_direction, mesh.vertices)  # noqa: F841  (unit, toward the light)
+    light = sun_direction(light_direction, mesh.vertices)  # noqa: F841  (unit, toward the light)
     raise NotImplementedError("not implemented yet: traced_shadows (task 5)")

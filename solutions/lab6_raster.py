@@ -80,66 +80,23 @@ import math
 import torch
 
 from course.camera import Camera, primary_rays
+from course.raster_support import (  # given code, shared by skeleton and reference
+    BYTES_PER_FRAGMENT,
+    EMPTY,
+    ID_BITS,
+    ID_MASK,
+    any_shape,
+    check_screen,
+    check_size,
+    check_tensor,
+    crossing,
+    face_normals,
+    fragment_depth,
+    normalized,
+    sun_direction,
+    traced_hits,
+)
 from course.types import Mesh
-
-EMPTY = torch.iinfo(torch.int64).max
-"""The key of a pixel no fragment reached: larger than every packed key (the "far" value
-a depth buffer is cleared to)."""
-
-ID_BITS = 32
-ID_MASK = (1 << ID_BITS) - 1
-"""Triangle ids live in the low 32 bits of a key, depth in the bits above."""
-
-BYTES_PER_FRAGMENT = 256
-"""Bytes ``rasterize`` keeps alive per fragment, at most: the fragments of one chunk of
-triangles number at most ``memory_budget_bytes // BYTES_PER_FRAGMENT`` (or one triangle's
-clamped bounding box, at most ``width * height``, when a single triangle needs more)."""
-
-
-# ---------------------------------------------------------------------------------------
-# Provided helpers: argument checks
-
-
-def check_tensor(x, name: str, shape: tuple, kind: str = "float", like=None) -> torch.Tensor:
-    """Provided: ``x`` must be a tensor of ``shape`` (``None`` = any size); ``kind`` is
-    ``"float"`` (float32/float64), ``"int64"`` or ``"any"``; ``like``: a tensor whose device
-    ``x`` must share. Raises TypeError/ValueError naming ``name`` and what was expected."""
-    want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + \
-        ("," if len(shape) == 1 else "") + ")"
-    if not isinstance(x, torch.Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor of shape {want}, "
-                        f"got {type(x).__name__}")
-    if x.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, x.shape)):
-        raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
-    if kind == "float" and x.dtype not in (torch.float32, torch.float64):
-        raise TypeError(f"{name}: expected float32 or float64, got {x.dtype}")
-    if kind == "int64" and x.dtype != torch.int64:
-        raise TypeError(f"{name}: expected dtype torch.int64, got {x.dtype}")
-    if like is not None and x.device != like.device:
-        raise ValueError(f"{name}: expected a tensor on {like.device}, got one on {x.device}")
-    return x
-
-
-def check_size(width, height) -> None:
-    """Provided: the viewport must be positive integers (at most 2**15 each, which keeps
-    pixel centres and ``row * width + col`` exact)."""
-    for name, size in (("width", width), ("height", height)):
-        if isinstance(size, bool) or not isinstance(size, int) or not 0 < size <= 2**15:
-            raise ValueError(f"{name}: expected a positive integer pixel count <= 32768, "
-                             f"got {size!r}")
-
-
-def _any_shape(x) -> tuple:
-    return (None,) * x.ndim if isinstance(x, torch.Tensor) else (None,)
-
-
-def _check_screen(screen, name="screen") -> torch.Tensor:
-    check_tensor(screen, name, (None, 3, None))
-    if screen.shape[2] < 2:
-        raise ValueError(f"{name}: expected shape (K, 3, C) with C >= 2 (x, y first), "
-                         f"got {tuple(screen.shape)}")
-    return screen
-
 
 # ---------------------------------------------------------------------------------------
 # Task 1: MVP transform, clipping, viewport
@@ -166,14 +123,6 @@ def to_clip_space(vertices, mvp):
     return torch.stack(rows, dim=-1).to(vertices.dtype)
 
 
-def _crossing(p_in, d_in, w_in, p_out, d_out, w_out):
-    """Provided: where the edge from an inside to an outside vertex meets the plane ``d = 0``,
-    and that point's weights. Always interpolated from the inside vertex: the two triangles
-    sharing the edge then compute the same point bit for bit (no cracks along the cut)."""
-    t = d_in / (d_in - d_out)
-    return p_in + t[:, None] * (p_out - p_in), w_in + t[:, None] * (w_out - w_in)
-
-
 def clip_triangles(clip):
     """Trivially reject triangles outside the view, clip the rest against the near plane.
 
@@ -194,7 +143,7 @@ def clip_triangles(clip):
        alone on its side comes first, call them A, B, C:
        one inside (A): ``(A, AB, AC)``; two inside (B, C): ``(BA, B, C)`` and
        ``(BA, C, CA)``, where ``XY = X + t (Y - X)``, ``t = d_X / (d_X - d_Y)``, is
-       computed from the inside corner X (see ``_crossing``).
+       computed from the inside corner X (see ``crossing``).
     The near plane must be clipped: a corner behind the eye has ``w < 0`` and its
     perspective divide flips it to the other side of the screen. The other five planes
     need no clipping: the bounding box is clamped to the screen (a "guard band").
@@ -219,10 +168,10 @@ def clip_triangles(clip):
     A, B, C = rot.unbind(1)
     dA, dB, dC = dr.unbind(1)
     wA, wB, wC = slots.unbind(1)
-    AB, w_AB = _crossing(A, dA, wA, B, dB, wB)
-    AC, w_AC = _crossing(A, dA, wA, C, dC, wC)
-    BA, w_BA = _crossing(B, dB, wB, A, dA, wA)
-    CA, w_CA = _crossing(C, dC, wC, A, dA, wA)
+    AB, w_AB = crossing(A, dA, wA, B, dB, wB)
+    AC, w_AC = crossing(A, dA, wA, C, dC, wC)
+    BA, w_BA = crossing(B, dB, wB, A, dA, wA)
+    CA, w_CA = crossing(C, dC, wC, A, dA, wA)
     one, two = (n_in == 1)[:, None, None], (n_in == 2)[:, None, None]
     first_tri = torch.where(one, torch.stack([A, AB, AC], 1),
                             torch.where(two, torch.stack([BA, B, C], 1), rot))
@@ -299,7 +248,7 @@ def bounding_boxes(screen, width: int, height: int):
     most ``width * height`` fragments. (Clamp the floats before converting: ``1e30`` or
     NaN do not fit an int64.)
     """
-    _check_screen(screen)
+    check_screen(screen)
     check_size(width, height)
     xy = screen[..., :2]
     finite = torch.isfinite(xy).all(-1).all(-1)
@@ -351,7 +300,7 @@ def coverage(screen, width: int, height: int, cull_backfaces: bool = False):
        triangles is thus covered by exactly one of them (with ``e >= 0`` by both: double
        blending and double counting; with ``e > 0`` by neither: cracks).
     """
-    _check_screen(screen)
+    check_screen(screen)
     check_size(width, height)
     xy = screen[..., :2]
     K = xy.shape[0]
@@ -423,7 +372,7 @@ def pack_depth_id(depth, triangle, depth_bits: int = 32):
 def triangle_ids(keys):
     """The triangle id in each key: (...) int64 -> (...) int64, -1 where ``EMPTY``.
     """
-    check_tensor(keys, "keys", _any_shape(keys), kind="int64")
+    check_tensor(keys, "keys", any_shape(keys), kind="int64")
     return torch.where(keys == EMPTY, -1, keys & ID_MASK)
 
 
@@ -449,27 +398,6 @@ def depth_test(pixel, key, out):
     return out
 
 
-def _fragment_depth(screen, triangle, bary, depth_bits: int):
-    """Provided: per fragment, (depth to pack, in front of the far plane).
-
-    Interpolated as offsets from corner 0 (``a0 + b1 (a1 - a0) + b2 (a2 - a0)``): a triangle
-    at constant depth gets exactly that depth at every pixel, so coplanar triangles facing
-    the camera tie exactly and the id decides. z_ndc and 1/w are both linear in screen space.
-    32 bits: the view depth ``w = 1 / (1/w)``, which a float holds with the same relative
-    precision at every distance. 24 bits: the window depth ``(z_ndc + 1) / 2`` in [0, 1] of a
-    classic depth buffer, whose resolution is crowded near the near plane.
-    """
-    v = screen[triangle]
-    b1, b2 = bary[:, 1], bary[:, 2]
-
-    def lerp(a):
-        return a[:, 0] + b1 * (a[:, 1] - a[:, 0]) + b2 * (a[:, 2] - a[:, 0])
-
-    z_ndc = lerp(v[..., 2])
-    depth = 1 / lerp(v[..., 3]) if depth_bits == 32 else z_ndc * 0.5 + 0.5
-    return depth, z_ndc <= 1
-
-
 def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
               cull_backfaces: bool = False, memory_budget_bytes: int = 2**28, out=None):
     """The visibility buffer of screen-space triangles.
@@ -484,12 +412,12 @@ def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
 
     Clear ``out`` to ``EMPTY``; walk the triangles in chunks whose bounding boxes hold at
     most ``memory_budget_bytes // BYTES_PER_FRAGMENT`` pixels (at least one triangle per
-    chunk); per chunk: ``coverage``, the fragment depth (see ``_fragment_depth``; fragments
+    chunk); per chunk: ``coverage``, the fragment depth (see ``fragment_depth``; fragments
     beyond the far plane, ``z_ndc > 1``, are dropped), ``pack_depth_id`` with the chunk's
     offset added to the ids, ``depth_test``. The atomic minimum makes the result independent
     of the chunking and of the triangle order: bit for bit the same keys.
     """
-    _check_screen(screen)
+    check_screen(screen)
     if screen.shape[2] != 4:
         raise ValueError(f"screen: expected shape (K, 3, 4) (x, y, z_ndc, 1/w), "
                          f"got {tuple(screen.shape)}")
@@ -514,7 +442,7 @@ def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
         last = max(first + 1, int(torch.searchsorted(ends, before + per_chunk, right=True)))
         chunk = screen[first:last]
         triangle, pixel, bary = coverage(chunk, width, height, cull_backfaces)
-        depth, in_range = _fragment_depth(chunk, triangle, bary, depth_bits)
+        depth, in_range = fragment_depth(chunk, triangle, bary, depth_bits)
         keys = pack_depth_id(depth[in_range], triangle[in_range] + first, depth_bits)
         depth_test(pixel[in_range], keys, out)
         first = last
@@ -610,7 +538,7 @@ def interpolate(values, faces, face, bary):
     """
     check_tensor(values, "values", (None, None))
     check_tensor(faces, "faces", (None, 3), kind="int64", like=values)
-    check_tensor(face, "face", _any_shape(face), kind="int64", like=values)
+    check_tensor(face, "face", any_shape(face), kind="int64", like=values)
     check_tensor(bary, "bary", (*face.shape, 3), like=values)
     hit = face >= 0
     corners = values[faces[torch.where(hit, face, 0)]]  # (..., 3, C)
@@ -618,19 +546,6 @@ def interpolate(values, faces, face, bary):
     result = (b[..., 0, None] * corners[..., 0, :] + b[..., 1, None] * corners[..., 1, :]
               + b[..., 2, None] * corners[..., 2, :])
     return torch.where(hit[..., None], result, torch.zeros_like(result))
-
-
-def _face_normals(mesh: Mesh):
-    """Provided: (F, 3) unnormalised face normals ``(v1 - v0) x (v2 - v0)`` (length: twice
-    the area)."""
-    tri = mesh.triangles()
-    return torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-
-
-def _normalize(v):
-    """Provided: unit vectors along the last axis (zero vectors stay zero)."""
-    length = v.norm(dim=-1, keepdim=True)
-    return v / torch.where(length > 0, length, torch.ones_like(length))
 
 
 def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
@@ -651,32 +566,20 @@ def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
     check_tensor(face, "face", (None, None), kind="int64", like=mesh.vertices)
     check_tensor(bary, "bary", (*face.shape, 3), like=mesh.vertices)
     check_tensor(light_direction, "light_direction", (3,), like=mesh.vertices)
-    light = _normalize(light_direction.to(mesh.dtype))
-    normals = _face_normals(mesh)
+    light = normalized(light_direction.to(mesh.dtype))
+    normals = face_normals(mesh)
     if smooth:
         vertex_normals = torch.zeros_like(mesh.vertices).index_add_(
             0, mesh.faces.reshape(-1), normals.repeat_interleave(3, dim=0))
-        n = _normalize(interpolate(_normalize(vertex_normals), mesh.faces, face, bary))
+        n = normalized(interpolate(normalized(vertex_normals), mesh.faces, face, bary))
     else:
-        n = _normalize(normals)[torch.where(face >= 0, face, 0)]
+        n = normalized(normals)[torch.where(face >= 0, face, 0)]
     cosine = (n * light).sum(-1).clamp(min=0)
     return torch.where(face >= 0, cosine, torch.zeros_like(cosine))
 
 
 # ---------------------------------------------------------------------------------------
 # Task 5: raster vs ray-traced visibility, hybrid shadows
-
-
-def _traced(trace, origins, directions, t_min, t_max):
-    """Provided: call a tracer, check what comes back: ``(t, triangle)`` on the rays' device."""
-    hits = trace(origins, directions, t_min, t_max)
-    t, triangle = getattr(hits, "t", None), getattr(hits, "triangle", None)
-    n = origins.shape[0]
-    if not isinstance(t, torch.Tensor) or not isinstance(triangle, torch.Tensor) \
-            or t.shape != (n,) or triangle.shape != (n,):
-        raise TypeError(f"trace: expected a result with t ({n},) and triangle ({n},) "
-                        f"tensors, got {type(hits).__name__}")
-    return t.to(origins.device), triangle.to(origins.device, torch.int64)
 
 
 def traced_visibility(trace, camera: Camera, device=None, dtype=torch.float32):
@@ -691,7 +594,7 @@ def traced_visibility(trace, camera: Camera, device=None, dtype=torch.float32):
     if not isinstance(camera, Camera):
         raise TypeError(f"camera: expected course.camera.Camera, got {type(camera).__name__}")
     rays = primary_rays(camera, device=device, dtype=dtype)
-    _, triangle = _traced(trace, rays.origins, rays.directions, rays.t_min, rays.t_max)
+    _, triangle = traced_hits(trace, rays.origins, rays.directions, rays.t_min, rays.t_max)
     return triangle.reshape(camera.height, camera.width)
 
 
@@ -730,16 +633,10 @@ def _shadow_rays(trace, mesh: Mesh, points, hit, light):
     n = origins.shape[0]
     t_min = torch.full((n,), shadow_epsilon(mesh), dtype=origins.dtype, device=origins.device)
     t_max = torch.full((n,), math.inf, dtype=origins.dtype, device=origins.device)
-    _, blocker = _traced(trace, origins, directions, t_min, t_max)
+    _, blocker = traced_hits(trace, origins, directions, t_min, t_max)
     shadowed = torch.zeros(hit.shape, dtype=torch.bool, device=points.device)
     shadowed[hit] = blocker >= 0
     return shadowed
-
-
-def _light(light_direction, like):
-    """Provided: the (3,) light direction, checked and normalised, in ``like``'s dtype."""
-    check_tensor(light_direction, "light_direction", (3,), like=like)
-    return _normalize(light_direction.to(like.dtype))
 
 
 def hybrid_shadows(trace, mesh: Mesh, face, bary, light_direction):
@@ -754,7 +651,7 @@ def hybrid_shadows(trace, mesh: Mesh, face, bary, light_direction):
     """
     if not callable(trace):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
-    light = _light(light_direction, mesh.vertices)
+    light = sun_direction(light_direction, mesh.vertices)
     points = world_positions(mesh, face, bary)
     return _shadow_rays(trace, mesh, points.reshape(-1, 3), face.reshape(-1) >= 0,
                         light).reshape(face.shape)
@@ -769,9 +666,9 @@ def traced_shadows(trace, mesh: Mesh, camera: Camera, light_direction):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
-    light = _light(light_direction, mesh.vertices)
+    light = sun_direction(light_direction, mesh.vertices)
     rays = primary_rays(camera, device=mesh.device, dtype=mesh.dtype)
-    t, triangle = _traced(trace, rays.origins, rays.directions, rays.t_min, rays.t_max)
+    t, triangle = traced_hits(trace, rays.origins, rays.directions, rays.t_min, rays.t_max)
     hit = triangle >= 0
     points = rays.origins + torch.where(hit, t, 0)[:, None] * rays.directions
     shadowed = _shadow_rays(trace, mesh, points, hit, light)

@@ -55,8 +55,8 @@ MUTANTS = [
            why="screen-space (affine) interpolation: textures and normals swim on surfaces "
                "that recede from the eye"),
     Mutant(name="smooth_normal_not_renormalised", module=M, function="shade",
-           find="n = _normalize(interpolate(_normalize(vertex_normals), mesh.faces, face, bary))",
-           replace="n = interpolate(_normalize(vertex_normals), mesh.faces, face, bary)",
+           find="n = normalized(interpolate(normalized(vertex_normals), mesh.faces, face, bary))",
+           replace="n = interpolate(normalized(vertex_normals), mesh.faces, face, bary)",
            tests="shade",
            why="a blend of unit normals is shorter than 1: the middle of every face too dark"),
     Mutant(name="shadow_rays_without_offset", module=M, function="_shadow_rays",
