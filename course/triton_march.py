@@ -36,18 +36,7 @@ import math
 
 import torch
 
-from course.triton_intersect import _ieee_quiet, _is_pow2, _require_triton
-
-try:
-    import triton
-    import triton.language as tl
-except ImportError:  # course.triton_intersect reports the missing package
-    triton = tl = None
-
-    def _jit(fn):
-        return fn
-else:
-    _jit = triton.jit
+from course.triton_intersect import _ieee_quiet, _is_pow2, _jit, _require_triton, tl, triton
 
 __all__ = ["march_grid_triton"]
 

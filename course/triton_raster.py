@@ -37,18 +37,14 @@ from __future__ import annotations
 
 import torch
 
-from course.triton_intersect import _ieee_quiet, _require_triton, interpreting
-
-try:
-    import triton
-    import triton.language as tl
-except ImportError:  # course.triton_intersect reports the missing package
-    triton = tl = None
-
-    def _jit(fn):
-        return fn
-else:
-    _jit = triton.jit
+from course.triton_intersect import (
+    _ieee_quiet,
+    _jit,
+    _require_triton,
+    interpreting,
+    tl,
+    triton,
+)
 
 __all__ = ["EMPTY", "SMALL_BOX", "rasterize_triton", "screen_triangles_fast"]
 

@@ -50,7 +50,6 @@ Triton works; calling a kernel then raises ImportError.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import weakref
 from dataclasses import dataclass
@@ -58,20 +57,8 @@ from dataclasses import dataclass
 import torch
 
 from course.flat_bvh import EXIT_SCALE, STACK_DEPTH, FlatBVH, check_rays, flat_bvh_for, valid_rays
+from course.triton_intersect import _ieee_quiet, _jit, _require_triton, tl, triton
 from course.types import Hits
-
-try:
-    import triton
-    import triton.language as tl
-except ImportError as _err:  # the rest of the course works without Triton
-    triton = tl = None
-    _TRITON_IMPORT_ERROR: ImportError | None = _err
-
-    def _jit(fn):
-        return fn
-else:
-    _TRITON_IMPORT_ERROR = None
-    _jit = triton.jit
 
 __all__ = [
     "TracerKernelInfo",
@@ -445,26 +432,10 @@ def triton_available() -> bool:
     return triton is not None
 
 
-def _require_triton() -> None:
-    if triton is None:
-        raise ImportError("the Triton kernels need the `triton` package (pip install triton; "
-                          "it ships with torch's CUDA wheels on Linux)") from _TRITON_IMPORT_ERROR
-
-
 def interpreting() -> bool:
     """True when the kernels run in Triton's CPU interpreter (``TRITON_INTERPRET=1``)."""
     _require_triton()
     return type(_trace_kernel).__name__ == "InterpretedFunction"
-
-
-def _ieee_quiet():
-    """The kernels divide by zero on purpose (1/+-0 = +-inf for axis-parallel rays, a
-    degenerate det); the interpreter evaluates them with numpy, which would warn."""
-    if interpreting():
-        import numpy as np
-
-        return np.errstate(divide="ignore", invalid="ignore", over="ignore")
-    return contextlib.nullcontext()
 
 
 def _check_launch(block: int, num_warps: int) -> None:
