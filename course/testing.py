@@ -180,3 +180,32 @@ def expect_error(names, fn, *args, kinds=(ValueError, TypeError), case: str = ""
     raise AssertionError(f"{what} accepted {case} without complaint: expected "
                          f"{' or '.join(k.__name__ for k in kinds)} naming "
                          f"{' or '.join(map(repr, names))}")
+
+
+def run_in_triton_interpreter(script, inputs, tmp_path, timeout: float = 300):
+    """Run ``python script IN.pt OUT.pt`` with ``TRITON_INTERPRET=1`` and return OUT.pt.
+
+    Triton chooses between compiling and interpreting when it is first imported, so a
+    CPU check of Triton kernels runs in a fresh process with the variable set, whatever
+    the calling process imported. ``inputs`` is saved with ``torch.save``; ``script``
+    (usually the test file itself, run as ``__main__``) loads it, runs the kernels and
+    saves its results. Fails the test with the subprocess's output if it fails.
+    """
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import pytest
+
+    repo = Path(__file__).resolve().parents[1]
+    source, target = Path(tmp_path) / "inputs.pt", Path(tmp_path) / "outputs.pt"
+    torch.save(inputs, source)
+    env = dict(os.environ, TRITON_INTERPRET="1",
+               PYTHONPATH=os.pathsep.join(filter(None, [str(repo), os.environ.get("PYTHONPATH")])))
+    proc = subprocess.run([sys.executable, str(script), str(source), str(target)], env=env,
+                          capture_output=True, text=True, timeout=timeout, check=False)
+    if proc.returncode != 0:
+        pytest.fail(f"the interpreter subprocess failed (exit {proc.returncode}):\n"
+                    f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return torch.load(target, weights_only=False)

@@ -29,6 +29,8 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as a script: make `import course` work from a checkout
     sys.path.insert(0, str(REPO))
 
+from course.testing import run_in_triton_interpreter
+
 HAVE_TRITON = importlib.util.find_spec("triton") is not None
 needs_triton = pytest.mark.skipif(not HAVE_TRITON, reason="triton is not installed "
                                   "(pip install triton); the kernels cannot run without it")
@@ -176,17 +178,8 @@ def run_kernels(cases: dict, device: str) -> dict:
 
 def run_interpreted(tmp_path: Path) -> dict:
     """run_kernels in a fresh Python with TRITON_INTERPRET=1 set before triton's import."""
-    inputs, outputs = tmp_path / "inputs.pt", tmp_path / "outputs.pt"
     cases = all_cases()
-    torch.save(cases, inputs)
-    env = dict(os.environ, TRITON_INTERPRET="1",
-               PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
-    proc = subprocess.run([sys.executable, __file__, str(inputs), str(outputs)], env=env,
-                          capture_output=True, text=True, timeout=300, check=False)
-    if proc.returncode != 0:
-        pytest.fail(f"the interpreter subprocess failed (exit {proc.returncode}):\n"
-                    f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return cases, torch.load(outputs, weights_only=False)
+    return cases, run_in_triton_interpreter(__file__, cases, tmp_path)
 
 
 # --------------------------------------------------------------------------------------

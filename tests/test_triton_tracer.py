@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import importlib.util
 import math
-import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -31,6 +29,8 @@ from test_flat_bvh import (
     check_hits,
     make_case,
 )
+
+from course.testing import run_in_triton_interpreter
 
 HAVE_TRITON = importlib.util.find_spec("triton") is not None
 needs_triton = pytest.mark.skipif(not HAVE_TRITON, reason="triton is not installed")
@@ -113,16 +113,7 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
 def test_interpreted_kernels_follow_the_contract(tmp_path):
     case = make_case(n_tris=80, n_rays=64, seed=5)
     renders = render_cases(5)
-    inputs, outputs = tmp_path / "in.pt", tmp_path / "out.pt"
-    torch.save({"case": case, "renders": renders}, inputs)
-    env = dict(os.environ, TRITON_INTERPRET="1",
-               PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
-    proc = subprocess.run([sys.executable, __file__, str(inputs), str(outputs)], env=env,
-                          capture_output=True, text=True, timeout=300, check=False)
-    if proc.returncode != 0:
-        pytest.fail(f"the interpreter subprocess failed (exit {proc.returncode}):\n"
-                    f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    out = torch.load(outputs, weights_only=False)
+    out = run_in_triton_interpreter(__file__, {"case": case, "renders": renders}, tmp_path)
     assert out["interpreting"], "the subprocess did not run Triton's interpreter"
     check_all(case, renders, out, "interpreted")
     for info in out["info"].values():

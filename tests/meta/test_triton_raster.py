@@ -15,8 +15,6 @@ Usage as the subprocess: ``python tests/meta/test_triton_raster.py INPUTS.pt OUT
 from __future__ import annotations
 
 import importlib.util
-import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -115,15 +113,11 @@ def check(data: dict, out: dict, where: str) -> None:
 @needs_triton
 @old_interpreter
 def test_interpreted_matches_reference(tmp_path):
+    from course.testing import run_in_triton_interpreter
+
     data = cases()
-    inputs, outputs = tmp_path / "in.pt", tmp_path / "out.pt"
-    torch.save(data, inputs)
-    env = dict(os.environ, TRITON_INTERPRET="1",
-               PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
-    proc = subprocess.run([sys.executable, __file__, str(inputs), str(outputs)], env=env,
-                          capture_output=True, text=True, timeout=600, check=False)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    check(data, torch.load(outputs, weights_only=False), "TRITON_INTERPRET=1")
+    check(data, run_in_triton_interpreter(__file__, data, tmp_path, timeout=600),
+          "TRITON_INTERPRET=1")
 
 
 @needs_triton
