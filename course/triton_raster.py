@@ -46,12 +46,23 @@ from course.triton_intersect import (
     triton,
 )
 
-__all__ = ["EMPTY", "SMALL_BOX", "rasterize_triton", "screen_triangles_fast"]
+__all__ = ["EMPTY", "SMALL_BOX", "rasterize_triton", "screen_triangles_fast",
+           "screen_triangles_triton", "visibility_fused"]
 
 EMPTY = torch.iinfo(torch.int64).max  # the key of a pixel no fragment reached
+# Launch settings (module attributes, read at every launch; bench/lab6_raster.py's sweep).
 SMALL_BOX = 64  # pixels: boxes up to this size go to the lane-per-triangle kernel
-BLOCK_TRIANGLES = 128
-BLOCK_PIXELS = 256
+HUGE_BOX = 16384  # pixels: boxes above this size are split over all large-kernel programs
+BLOCK_TRIANGLES = 128  # lanes (triangles) per program of the small kernel
+SMALL_WARPS = 4
+SPREAD = False  # small kernel: lanes take the block's fragments in turn, not a triangle each
+BLOCK_PIXELS = 256  # lanes (pixels) per program of the large kernel
+LARGE_WARPS = 4
+LARGE_PROGRAMS_PER_SM = 4
+BLOCK_FACES = 128  # faces per program of the vertex kernel
+FILL_KEYS = 4096  # keys cleared per program of the vertex kernel
+BLOCK_IDS = 1024
+FP_FUSION = False  # no FMA contraction in the raster kernels: the lab's keys bit for bit
 
 
 @_jit
@@ -163,45 +174,301 @@ def _setup(x0, y0, x1, y1, x2, y2, live, width, height, CULL: tl.constexpr):
 
 
 @_jit
-def _small_kernel(screen_ptr, out_ptr, count, width, height, small_box,
-                  DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr):
-    tri = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+def _small_kernel(screen_ptr, out_ptr, list_ptr, counter_ptr, count, width, height, small_box,
+                  huge_box, DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr,
+                  SPREAD: tl.constexpr):
+    """One lane per triangle: rasterizes the small ones, queues the others for
+    ``_large_kernel`` (``list[:count]``: one program each; ``list[count:]``: huge, shared by
+    all programs), rejects the rest (empty slots, NaN, zero area, off screen, culled)."""
+    lanes = tl.arange(0, BLOCK)
+    tri = tl.program_id(0) * BLOCK + lanes
     live = tri < count
     x0, y0, z0, w0, x1, y1, z1, w1, x2, y2, z2, w2 = _load_triangle(screen_ptr, tri, live)
     positive, tl0, tl1, tl2, bx, by, box_w, box_h = _setup(x0, y0, x1, y1, x2, y2, live,
                                                            width, height, CULL)
     pixels = box_w * box_h
-    pixels = tl.where(pixels <= small_box, pixels, 0)  # large boxes: the other kernel's
-    most = tl.max(pixels, axis=0)
-    safe_w = tl.maximum(box_w, 1)
-    for k in range(most):
-        col = bx + k % safe_w
-        row = by + k // safe_w
-        _fragment(out_ptr, tri, col, row, k < pixels, width, x0, y0, z0, w0, x1, y1, z1, w1,
-                  x2, y2, z2, w2, positive, tl0, tl1, tl2, DEPTH_BITS)
+    # Queue the large boxes: one atomic per large triangle (they are few).
+    large = pixels > small_box
+    huge = pixels > huge_box
+    zero = tl.zeros([BLOCK], tl.int32)
+    slot = tl.atomic_add(counter_ptr + zero, 1, mask=large & ~huge)
+    tl.store(list_ptr + slot, tri, mask=large & ~huge)
+    slot = tl.atomic_add(counter_ptr + 1 + zero, 1, mask=huge)
+    tl.store(list_ptr + count + slot, tri, mask=huge)
+    pixels = tl.where(large, 0, pixels)
+    if SPREAD:
+        # Fragment-parallel: the block's fragments numbered in lane order, BLOCK at a time;
+        # each lane finds its fragment's triangle (no lane idles while another finishes a
+        # large box).
+        ends = tl.cumsum(pixels, axis=0)
+        total = tl.sum(pixels, axis=0)
+        for start in range(0, total, BLOCK):
+            f = start + lanes
+            before = ends[None, :] <= f[:, None]
+            owner = tl.minimum(tl.sum(before.to(tl.int32), axis=1), BLOCK - 1)
+            rank = f - tl.sum(tl.where(before, pixels[None, :], 0), axis=1)
+            ok = f < total
+            otri = tl.program_id(0) * BLOCK + owner
+            a0, b0, c0, d0, a1, b1, c1, d1, a2, b2, c2, d2 = _load_triangle(screen_ptr, otri,
+                                                                            ok)
+            opos, otl0, otl1, otl2, obx, oby, obw, _ = _setup(a0, b0, a1, b1, a2, b2, ok,
+                                                                width, height, CULL)
+            safe_w = tl.maximum(obw, 1)
+            _fragment(out_ptr, otri, obx + rank % safe_w, oby + rank // safe_w, ok, width,
+                      a0, b0, c0, d0, a1, b1, c1, d1, a2, b2, c2, d2, opos, otl0, otl1, otl2,
+                      DEPTH_BITS)
+    else:
+        most = tl.max(pixels, axis=0)
+        safe_w = tl.maximum(box_w, 1)
+        for k in range(most):
+            col = bx + k % safe_w
+            row = by + k // safe_w
+            _fragment(out_ptr, tri, col, row, k < pixels, width, x0, y0, z0, w0, x1, y1, z1,
+                      w1, x2, y2, z2, w2, positive, tl0, tl1, tl2, DEPTH_BITS)
 
 
 @_jit
-def _large_kernel(screen_ptr, out_ptr, width, height, small_box,
-                  DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr):
-    # One program per triangle; the small ones (nearly all) leave at once, which costs
-    # less than sorting the triangles by size on the host (a synchronisation).
-    lanes = tl.arange(0, BLOCK)
-    # The triangle's data, the same for every lane (uniform loads).
-    tri_v = tl.zeros([BLOCK], tl.int64) + tl.program_id(0)
+def _large_fragments(screen_ptr, out_ptr, tri, lanes, first, step, width, height,
+                     DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr):
+    """Pixels ``first, first + step, ...`` (BLOCK at a time) of triangle ``tri``'s box."""
+    tri_v = tl.zeros([BLOCK], tl.int64) + tri  # the same triangle in every lane
     live = lanes >= 0
     x0, y0, z0, w0, x1, y1, z1, w1, x2, y2, z2, w2 = _load_triangle(screen_ptr, tri_v, live)
     positive, tl0, tl1, tl2, bx, by, box_w, box_h = _setup(x0, y0, x1, y1, x2, y2, live,
                                                            width, height, CULL)
     pixels = tl.max(box_w * box_h, axis=0)
-    pixels = tl.where(pixels > small_box, pixels, 0)
     safe_w = tl.maximum(box_w, 1)
-    for start in range(0, pixels, BLOCK):
+    for start in range(first, pixels, step):
         k = start + lanes
-        col = bx + k % safe_w
-        row = by + k // safe_w
-        _fragment(out_ptr, tri_v, col, row, k < pixels, width, x0, y0, z0, w0, x1, y1, z1,
-                  w1, x2, y2, z2, w2, positive, tl0, tl1, tl2, DEPTH_BITS)
+        _fragment(out_ptr, tri_v, bx + k % safe_w, by + k // safe_w, k < pixels, width,
+                  x0, y0, z0, w0, x1, y1, z1, w1, x2, y2, z2, w2, positive, tl0, tl1, tl2,
+                  DEPTH_BITS)
+
+
+@_jit
+def _large_kernel(screen_ptr, out_ptr, list_ptr, counter_ptr, count, width, height,
+                  DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr):
+    """A fixed grid over ``_small_kernel``'s queues: the large triangles round robin, one
+    program each (lanes over its box); then every huge triangle split over all programs."""
+    pid = tl.program_id(0)
+    programs = tl.num_programs(0)
+    lanes = tl.arange(0, BLOCK)
+    queued = tl.load(counter_ptr)
+    for k in range(pid, queued, programs):
+        tri = tl.load(list_ptr + k).to(tl.int64)
+        _large_fragments(screen_ptr, out_ptr, tri, lanes, 0, BLOCK, width, height, DEPTH_BITS,
+                         CULL, BLOCK)
+    huge = tl.load(counter_ptr + 1)
+    for k in range(huge):
+        tri = tl.load(list_ptr + count + k).to(tl.int64)
+        _large_fragments(screen_ptr, out_ptr, tri, lanes, pid * BLOCK, programs * BLOCK,
+                         width, height, DEPTH_BITS, CULL, BLOCK)
+
+
+@_jit
+def _clip_corner(vert_ptr, index, live, m00, m01, m02, m03, m10, m11, m12, m13,
+                 m20, m21, m22, m23, m30, m31, m32, m33):
+    """``to_clip_space`` of one corner: ``mvp @ [x, y, z, 1]`` in float64, rounded once."""
+    base = vert_ptr + index * 3
+    x = tl.load(base + 0, mask=live, other=0.0).to(tl.float64)
+    y = tl.load(base + 1, mask=live, other=0.0).to(tl.float64)
+    z = tl.load(base + 2, mask=live, other=0.0).to(tl.float64)
+    cx = (m00 * x + m01 * y + m02 * z + m03).to(tl.float32)
+    cy = (m10 * x + m11 * y + m12 * z + m13).to(tl.float32)
+    cz = (m20 * x + m21 * y + m22 * z + m23).to(tl.float32)
+    cw = (m30 * x + m31 * y + m32 * z + m33).to(tl.float32)
+    return cx, cy, cz, cw
+
+
+@_jit
+def _pick(first, a, b, c):
+    return tl.where(first == 0, a, tl.where(first == 1, b, c))
+
+
+@_jit
+def _cross(p, q, t):
+    """``crossing``'s point: ``p + t (q - p)``, from the inside corner p."""
+    return p + t * (q - p)
+
+
+@_jit
+def _store_corner(ptr, live, valid, x, y, z, w, half_w, half_h):
+    """``to_screen`` of one corner, NaN where the slot holds no triangle."""
+    one = tl.full(x.shape, 1.0, tl.float32)
+    nan = float("nan")
+    sx = (tl.div_rn(x, w) + 1.0) * half_w
+    sy = (1.0 - tl.div_rn(y, w)) * half_h
+    tl.store(ptr + 0, tl.where(valid, sx, nan), mask=live)
+    tl.store(ptr + 1, tl.where(valid, sy, nan), mask=live)
+    tl.store(ptr + 2, tl.where(valid, tl.div_rn(z, w), nan), mask=live)
+    tl.store(ptr + 3, tl.where(valid, tl.div_rn(one, w), nan), mask=live)
+
+
+@_jit
+def _vertex_kernel(vert_ptr, face_ptr, mvp_ptr, screen_ptr, keys_ptr, counter_ptr, count,
+                   n_keys, half_w, half_h, BLOCK: tl.constexpr, FILL: tl.constexpr,
+                   PREPARE: tl.constexpr):
+    """Lab 6's ``to_clip_space``, ``clip_triangles`` and ``to_screen``, one lane per face:
+    slot ``i`` of ``screen`` (2F, 3, 4) gets face i's triangle (the first piece when the
+    near plane cuts it), slot ``F + i`` the second piece of a face cut into a quad, NaN
+    where there is none. With PREPARE it also clears ``FILL`` keys of the visibility buffer
+    per program and (program 0) the queue counters of ``_small_kernel``."""
+    pid = tl.program_id(0)
+    if PREPARE:
+        spots = pid.to(tl.int64) * FILL + tl.arange(0, FILL)
+        tl.store(keys_ptr + spots, tl.full([FILL], 9223372036854775807, tl.int64),
+                 mask=spots < n_keys)
+        pair = tl.arange(0, 2)
+        tl.store(counter_ptr + pair, tl.zeros([2], tl.int32), mask=(pair * 0 + pid) == 0)
+    tri = pid.to(tl.int64) * BLOCK + tl.arange(0, BLOCK)
+    live = tri < count
+    i0 = tl.load(face_ptr + tri * 3 + 0, mask=live, other=0).to(tl.int64)
+    i1 = tl.load(face_ptr + tri * 3 + 1, mask=live, other=0).to(tl.int64)
+    i2 = tl.load(face_ptr + tri * 3 + 2, mask=live, other=0).to(tl.int64)
+    m00 = tl.load(mvp_ptr + 0)
+    m01 = tl.load(mvp_ptr + 1)
+    m02 = tl.load(mvp_ptr + 2)
+    m03 = tl.load(mvp_ptr + 3)
+    m10 = tl.load(mvp_ptr + 4)
+    m11 = tl.load(mvp_ptr + 5)
+    m12 = tl.load(mvp_ptr + 6)
+    m13 = tl.load(mvp_ptr + 7)
+    m20 = tl.load(mvp_ptr + 8)
+    m21 = tl.load(mvp_ptr + 9)
+    m22 = tl.load(mvp_ptr + 10)
+    m23 = tl.load(mvp_ptr + 11)
+    m30 = tl.load(mvp_ptr + 12)
+    m31 = tl.load(mvp_ptr + 13)
+    m32 = tl.load(mvp_ptr + 14)
+    m33 = tl.load(mvp_ptr + 15)
+    x0, y0, z0, w0 = _clip_corner(vert_ptr, i0, live, m00, m01, m02, m03, m10, m11, m12, m13,
+                                  m20, m21, m22, m23, m30, m31, m32, m33)
+    x1, y1, z1, w1 = _clip_corner(vert_ptr, i1, live, m00, m01, m02, m03, m10, m11, m12, m13,
+                                  m20, m21, m22, m23, m30, m31, m32, m33)
+    x2, y2, z2, w2 = _clip_corner(vert_ptr, i2, live, m00, m01, m02, m03, m10, m11, m12, m13,
+                                  m20, m21, m22, m23, m30, m31, m32, m33)
+    # clip_triangles, step 1: trivial reject (non-finite, or all corners outside one plane).
+    inf = float("inf")
+    finite = ((tl.abs(x0) < inf) & (tl.abs(y0) < inf) & (tl.abs(z0) < inf) & (tl.abs(w0) < inf)
+              & (tl.abs(x1) < inf) & (tl.abs(y1) < inf) & (tl.abs(z1) < inf)
+              & (tl.abs(w1) < inf) & (tl.abs(x2) < inf) & (tl.abs(y2) < inf)
+              & (tl.abs(z2) < inf) & (tl.abs(w2) < inf))
+    outside = (((x0 < -w0) & (x1 < -w1) & (x2 < -w2)) | ((x0 > w0) & (x1 > w1) & (x2 > w2))
+               | ((y0 < -w0) & (y1 < -w1) & (y2 < -w2)) | ((y0 > w0) & (y1 > w1) & (y2 > w2))
+               | ((z0 < -w0) & (z1 < -w1) & (z2 < -w2)) | ((z0 > w0) & (z1 > w1) & (z2 > w2)))
+    keep = live & finite & ~outside
+    # Step 2: the near plane d = z + w >= 0; the corner alone on its side first.
+    d0 = z0 + w0
+    d1 = z1 + w1
+    d2 = z2 + w2
+    in0 = d0 >= 0
+    in1 = d1 >= 0
+    in2 = d2 >= 0
+    n_in = in0.to(tl.int32) + in1.to(tl.int32) + in2.to(tl.int32)
+    one_in = n_in == 1
+    odd0 = tl.where(one_in, in0, ~in0)
+    odd1 = tl.where(one_in, in1, ~in1)
+    odd2 = tl.where(one_in, in2, ~in2)
+    first = tl.where(odd0, 0, tl.where(odd1, 1, tl.where(odd2, 2, 0)))
+    ax = _pick(first, x0, x1, x2)
+    ay = _pick(first, y0, y1, y2)
+    az = _pick(first, z0, z1, z2)
+    aw = _pick(first, w0, w1, w2)
+    da = _pick(first, d0, d1, d2)
+    bx = _pick(first, x1, x2, x0)
+    by = _pick(first, y1, y2, y0)
+    bz = _pick(first, z1, z2, z0)
+    bw = _pick(first, w1, w2, w0)
+    db = _pick(first, d1, d2, d0)
+    cx = _pick(first, x2, x0, x1)
+    cy = _pick(first, y2, y0, y1)
+    cz = _pick(first, z2, z0, z1)
+    cw = _pick(first, w2, w0, w1)
+    dc = _pick(first, d2, d0, d1)
+    t_ab = tl.div_rn(da, da - db)
+    t_ac = tl.div_rn(da, da - dc)
+    t_ba = tl.div_rn(db, db - da)
+    t_ca = tl.div_rn(dc, dc - da)
+    two_in = n_in == 2
+    # First piece: (A, AB, AC) with one corner in, (BA, B, C) with two, (A, B, C) with three.
+    p0x = tl.where(one_in, ax, tl.where(two_in, _cross(bx, ax, t_ba), ax))
+    p0y = tl.where(one_in, ay, tl.where(two_in, _cross(by, ay, t_ba), ay))
+    p0z = tl.where(one_in, az, tl.where(two_in, _cross(bz, az, t_ba), az))
+    p0w = tl.where(one_in, aw, tl.where(two_in, _cross(bw, aw, t_ba), aw))
+    p1x = tl.where(one_in, _cross(ax, bx, t_ab), bx)
+    p1y = tl.where(one_in, _cross(ay, by, t_ab), by)
+    p1z = tl.where(one_in, _cross(az, bz, t_ab), bz)
+    p1w = tl.where(one_in, _cross(aw, bw, t_ab), bw)
+    p2x = tl.where(one_in, _cross(ax, cx, t_ac), cx)
+    p2y = tl.where(one_in, _cross(ay, cy, t_ac), cy)
+    p2z = tl.where(one_in, _cross(az, cz, t_ac), cz)
+    p2w = tl.where(one_in, _cross(aw, cw, t_ac), cw)
+    out = screen_ptr + tri * 12
+    _store_corner(out + 0, live, keep, p0x, p0y, p0z, p0w, half_w, half_h)
+    _store_corner(out + 4, live, keep, p1x, p1y, p1z, p1w, half_w, half_h)
+    _store_corner(out + 8, live, keep, p2x, p2y, p2z, p2w, half_w, half_h)
+    # Second piece of a quad: (BA, C, CA).
+    second = keep & two_in
+    out = screen_ptr + (tri + count) * 12
+    _store_corner(out + 0, live, second, _cross(bx, ax, t_ba), _cross(by, ay, t_ba),
+                  _cross(bz, az, t_ba), _cross(bw, aw, t_ba), half_w, half_h)
+    _store_corner(out + 4, live, second, cx, cy, cz, cw, half_w, half_h)
+    _store_corner(out + 8, live, second, _cross(cx, ax, t_ca), _cross(cy, ay, t_ca),
+                  _cross(cz, az, t_ca), _cross(cw, aw, t_ca), half_w, half_h)
+
+
+@_jit
+def _ids_kernel(keys_ptr, n_keys, count, BLOCK: tl.constexpr):
+    """In place: key -> source face (slot mod count), -1 where EMPTY."""
+    spots = tl.program_id(0).to(tl.int64) * BLOCK + tl.arange(0, BLOCK)
+    live = spots < n_keys
+    key = tl.load(keys_ptr + spots, mask=live, other=0)
+    slot = key & tl.full([BLOCK], 4294967295, tl.int64)
+    face = tl.where(slot >= count, slot - count, slot)
+    empty = key == tl.full([BLOCK], 9223372036854775807, tl.int64)
+    tl.store(keys_ptr + spots, tl.where(empty, -1, face), mask=live)
+
+
+# ---------------------------------------------------------------------------------------
+# Launchers
+
+
+def _programs(device: torch.device) -> int:
+    """The fixed grid of ``_large_kernel``: a few programs per SM (2 when interpreting)."""
+    if interpreting():
+        return 2
+    index = device.index if device.index is not None else torch.cuda.current_device()
+    if index not in _SM_COUNT:
+        _SM_COUNT[index] = torch.cuda.get_device_properties(index).multi_processor_count
+    return LARGE_PROGRAMS_PER_SM * _SM_COUNT[index]
+
+
+_SM_COUNT: dict[int, int] = {}
+
+
+def _raster_launch(screen, out, queue, counter, count: int, width: int, height: int,
+                   depth_bits: int, cull: bool, small_box: int) -> None:
+    """The two raster kernels on ``screen`` (count, 3, 4) float32; ``out`` cleared to
+    EMPTY, ``counter`` (2,) int32 zeroed, ``queue`` (2 * count,) int32 scratch."""
+    _small_kernel[(triton.cdiv(count, BLOCK_TRIANGLES),)](
+        screen, out, queue, counter, count, width, height, small_box, HUGE_BOX,
+        DEPTH_BITS=depth_bits, CULL=cull, BLOCK=BLOCK_TRIANGLES, SPREAD=SPREAD,
+        num_warps=SMALL_WARPS, enable_fp_fusion=FP_FUSION)
+    _large_kernel[(_programs(screen.device),)](
+        screen, out, queue, counter, count, width, height, DEPTH_BITS=depth_bits,
+        CULL=cull, BLOCK=BLOCK_PIXELS, num_warps=LARGE_WARPS, enable_fp_fusion=FP_FUSION)
+
+
+def _check_viewport(width, height) -> None:
+    for name, value in (("width", width), ("height", height)):
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 < value < 2**15:
+            raise ValueError(f"{name}: expected an int in [1, 32767], got {value!r}")
+
+
+def _check_device(device: torch.device, name: str) -> None:
+    if not interpreting() and device.type != "cuda":
+        raise ValueError(f"{name}: the compiled Triton kernels need a CUDA tensor, got {device} "
+                         "(for the CPU, set TRITON_INTERPRET=1 before importing triton)")
 
 
 def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bits: int = 32,
@@ -220,15 +487,11 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
         got = tuple(screen.shape) if isinstance(screen, torch.Tensor) else type(screen).__name__
         raise ValueError(f"screen: expected a (K, 3, 4) float tensor (x, y, z_ndc, 1/w), "
                          f"got {got}")
-    for name, value in (("width", width), ("height", height)):
-        if isinstance(value, bool) or not isinstance(value, int) or not 0 < value < 2**15:
-            raise ValueError(f"{name}: expected an int in [1, 32767], got {value!r}")
+    _check_viewport(width, height)
     if depth_bits not in (24, 32):
         raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
     device = screen.device
-    if not interpreting() and device.type != "cuda":
-        raise ValueError(f"screen: the compiled Triton kernels need a CUDA tensor, got {device} "
-                         "(for the CPU, set TRITON_INTERPRET=1 before importing triton)")
+    _check_device(device, "screen")
     if out is None:
         out = torch.empty(width * height, dtype=torch.int64, device=device)
     if out.shape != (width * height,) or out.dtype != torch.int64 or out.device != device:
@@ -237,15 +500,104 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
     out.fill_(EMPTY)
     data = screen.to(torch.float32).contiguous()
     count = data.shape[0]
-    if count:  # no host synchronisation: both kernels see every triangle, keep their own
+    if count:  # no host synchronisation: the queues of large triangles stay on the device
+        counter = torch.zeros(2, dtype=torch.int32, device=device)
+        queue = torch.empty(2 * count, dtype=torch.int32, device=device)
         with _ieee_quiet():
-            _small_kernel[(triton.cdiv(count, BLOCK_TRIANGLES),)](
-                data, out, count, width, height, small_box, DEPTH_BITS=depth_bits,
-                CULL=cull_backfaces, BLOCK=BLOCK_TRIANGLES, num_warps=4)
-            _large_kernel[(count,)](
-                data, out, width, height, small_box, DEPTH_BITS=depth_bits,
-                CULL=cull_backfaces, BLOCK=BLOCK_PIXELS, num_warps=4)
+            _raster_launch(data, out, queue, counter, count, width, height, depth_bits,
+                           cull_backfaces, small_box)
     return out
+
+
+def _mesh_arguments(vertices, faces, mvp, width, height):
+    _require_triton()
+    if not isinstance(vertices, torch.Tensor) or vertices.ndim != 2 \
+            or vertices.shape[1] != 3 or vertices.dtype not in (torch.float32, torch.float64):
+        got = (f"{tuple(vertices.shape)} {vertices.dtype}" if isinstance(vertices, torch.Tensor)
+               else type(vertices).__name__)
+        raise ValueError(f"vertices: expected a (V, 3) float32/float64 tensor, got {got}")
+    if not isinstance(faces, torch.Tensor) or faces.ndim != 2 or faces.shape[1] != 3 \
+            or faces.dtype not in (torch.int32, torch.int64):
+        got = (f"{tuple(faces.shape)} {faces.dtype}" if isinstance(faces, torch.Tensor)
+               else type(faces).__name__)
+        raise ValueError(f"faces: expected an (F, 3) int32/int64 tensor, got {got}")
+    if not isinstance(mvp, torch.Tensor) or mvp.shape != (4, 4) or not mvp.is_floating_point():
+        got = tuple(mvp.shape) if isinstance(mvp, torch.Tensor) else type(mvp).__name__
+        raise ValueError(f"mvp: expected a (4, 4) float tensor, got {got}")
+    device = vertices.device
+    if faces.device != device:
+        raise ValueError(f"faces: expected a tensor on {device} like vertices, got {faces.device}")
+    _check_device(device, "vertices")
+    _check_viewport(width, height)
+    # A CPU matrix is copied without a synchronisation (the copy is queued like a kernel).
+    m = mvp.to(device=device, dtype=torch.float64, non_blocking=True).contiguous()
+    return vertices.contiguous(), faces.contiguous(), m
+
+
+def _vertex_launch(vertices, faces, mvp, screen, keys, counter, width, height) -> None:
+    count = faces.shape[0]
+    n_keys = 0 if keys is None else keys.shape[0]
+    grid = max(triton.cdiv(count, BLOCK_FACES), triton.cdiv(n_keys, FILL_KEYS))
+    _vertex_kernel[(grid,)](
+        vertices, faces, mvp, screen, screen if keys is None else keys,
+        screen if counter is None else counter, count, n_keys, width / 2, height / 2,
+        BLOCK=BLOCK_FACES, FILL=FILL_KEYS, PREPARE=keys is not None, num_warps=4,
+        enable_fp_fusion=False)
+
+
+def screen_triangles_triton(vertices: torch.Tensor, faces: torch.Tensor, mvp: torch.Tensor,
+                            width: int, height: int) -> torch.Tensor:
+    """Lab 6's ``to_clip_space``, ``clip_triangles`` and ``to_screen`` in one kernel.
+
+    vertices: (V, 3) float32 (float64 is rounded to float32 clip coordinates); faces: (F, 3)
+    int64/int32 indices into vertices (not range-checked: that would cost a
+    synchronisation); mvp: (4, 4) float, used in float64 (``to_clip_space``'s contract);
+    width, height: the viewport. Returns (2F, 3, 4) float32 ``(x, y, z_ndc, 1/w)``: slot
+    ``i`` is face i (its first piece when the near plane cuts it), slot ``F + i`` the second
+    piece of a face cut into a quad, and every coordinate of a slot holding nothing (a
+    rejected face, no second piece) is NaN, which every rasterizer draws as nothing. The
+    pieces are those of the lab, bit for bit (same operations, no FMA contraction, correctly
+    rounded divisions); their order differs: source face = slot mod F.
+    """
+    vertices, faces, m = _mesh_arguments(vertices, faces, mvp, width, height)
+    screen = torch.empty(2 * faces.shape[0], 3, 4, dtype=torch.float32, device=vertices.device)
+    if faces.shape[0]:
+        with _ieee_quiet():
+            _vertex_launch(vertices, faces, m, screen, None, None, width, height)
+    return screen
+
+
+def visibility_fused(vertices: torch.Tensor, faces: torch.Tensor, mvp: torch.Tensor,
+                     width: int, height: int, *, depth_bits: int = 32,
+                     cull_backfaces: bool = False, small_box: int = SMALL_BOX) -> torch.Tensor:
+    """Primary visibility of a mesh: (height, width) int64 source-face ids, -1 where empty.
+
+    Lab 6's pipeline (``to_clip_space`` .. ``rasterize``, ids through ``source``) in four
+    kernels and no host synchronisation: ``_vertex_kernel`` (MVP, clipping, viewport; it
+    also clears the visibility buffer), ``_small_kernel``, ``_large_kernel`` and the id map,
+    written in place over the keys. Arguments as ``screen_triangles_triton``; depth_bits,
+    cull_backfaces, small_box as ``rasterize_triton``. The keys are the lab's for the
+    triangles of ``screen_triangles_triton``: the same pixels see the same faces, except
+    that an exact depth tie between a face's second piece and another face goes to the
+    other face here (slot order), to the lower face in the lab.
+    """
+    vertices, faces, m = _mesh_arguments(vertices, faces, mvp, width, height)
+    if depth_bits not in (24, 32):
+        raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
+    device, count = vertices.device, faces.shape[0]
+    if count == 0:
+        return torch.full((height, width), -1, dtype=torch.int64, device=device)
+    keys = torch.empty(width * height, dtype=torch.int64, device=device)
+    screen = torch.empty(2 * count, 3, 4, dtype=torch.float32, device=device)
+    counter = torch.empty(2, dtype=torch.int32, device=device)  # zeroed by the vertex kernel
+    queue = torch.empty(4 * count, dtype=torch.int32, device=device)
+    with _ieee_quiet():
+        _vertex_launch(vertices, faces, m, screen, keys, counter, width, height)
+        _raster_launch(screen, keys, queue, counter, 2 * count, width, height, depth_bits,
+                       cull_backfaces, small_box)
+        _ids_kernel[(triton.cdiv(keys.shape[0], BLOCK_IDS),)](keys, keys.shape[0], count,
+                                                              BLOCK=BLOCK_IDS, num_warps=4)
+    return keys.view(height, width)
 
 
 def screen_triangles_fast(clip_vertices: torch.Tensor, faces: torch.Tensor, width: int,

@@ -9,6 +9,13 @@ changes a last bit: at most a few pixels in a thousand.
 
 The CPU check runs the kernels in Triton's interpreter in a subprocess (``TRITON_INTERPRET``
 must be set before Triton is imported); with CUDA they also run compiled, in process.
+The fused pipeline (``screen_triangles_triton``: MVP, near-plane clipping and viewport in
+one kernel; ``visibility_fused``: that, the raster kernels and the id map) is compared with
+the lab's ``to_clip_space``, ``clip_triangles`` and ``to_screen`` (the same pieces, bit for
+bit, in another order) and with the lab's visibility, on Suzanne seen from outside and
+from inside and on a soup of triangles around the eye (crossings of the near plane with one
+and two corners in front, faces behind the eye, NaN and inf vertices).
+
 Usage as the subprocess: ``python tests/meta/test_triton_raster.py INPUTS.pt OUTPUTS.pt``.
 """
 
@@ -110,14 +117,21 @@ def check(data: dict, out: dict, where: str) -> None:
             assert (keys != lab.EMPTY).all(), f"{where}, {name}, {run}: a pixel left empty"
 
 
-@needs_triton
-@old_interpreter
-def test_interpreted_matches_reference(tmp_path):
+@pytest.fixture(scope="module")
+def interpreted(tmp_path_factory):
+    """Every kernel of this file run once in Triton's interpreter (one subprocess)."""
     from course.testing import run_in_triton_interpreter
 
-    data = cases()
-    check(data, run_in_triton_interpreter(__file__, data, tmp_path, timeout=600),
-          "TRITON_INTERPRET=1")
+    data = {"raster": cases(), "mesh": mesh_cases()}
+    return data, run_in_triton_interpreter(__file__, data, tmp_path_factory.mktemp("interp"),
+                                           timeout=600)
+
+
+@needs_triton
+@old_interpreter
+def test_interpreted_matches_reference(interpreted):
+    data, out = interpreted
+    check(data["raster"], out["raster"], "TRITON_INTERPRET=1")
 
 
 @needs_triton
@@ -129,10 +143,6 @@ def test_compiled_matches_reference():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
     data = cases()
     check(data, run_kernels(data, "cuda"), "compiled")
-
-
-if __name__ == "__main__":
-    torch.save(run_kernels(torch.load(sys.argv[1], weights_only=False), "cpu"), sys.argv[2])
 
 
 def test_fast_setup_matches_the_lab_pipeline():
@@ -168,3 +178,196 @@ def test_fast_setup_matches_the_lab_pipeline():
         assert (got >= 0).any(), f"{name}: nothing visible: the test sees nothing"
         assert torch.equal(got, want), (f"{name}: {(got != want).sum().item()} pixels see "
                                         f"another triangle than the lab's pipeline")
+
+
+# --------------------------------------------------------------------------------------
+# The fused vertex stage and the whole pipeline
+# --------------------------------------------------------------------------------------
+
+MESH_RUNS = {"32": {}, "cull": {"cull_backfaces": True}}
+
+
+def soup_mesh() -> tuple[torch.Tensor, torch.Tensor, int]:
+    """Triangles with corners anywhere in a cube around the eye (at the origin, looking
+    down -z): many cross the near plane with one or two corners in front, many lie behind
+    it; the last faces use NaN and inf vertices. Returns (vertices, faces, special faces)."""
+    g = torch.Generator().manual_seed(11)
+    n = 80
+    vertices = (torch.rand(3 * n, 3, generator=g, dtype=torch.float64) - 0.5) * 4
+    vertices[:, 2] -= 0.6  # a little more in front of the eye than behind
+    special = torch.tensor([[float("nan"), 0.0, -2.0], [0.0, float("inf"), -2.0],
+                            [0.3, 0.3, -1.5], [0.0, 0.0, -float("inf")]], dtype=torch.float64)
+    faces = torch.arange(3 * n).reshape(n, 3)
+    base = 3 * n
+    extra = torch.tensor([[base, base + 2, 1], [base + 1, 0, base + 2], [base + 3, 2, 4],
+                          [base + 2, base + 2, base + 2]]) # NaN, inf, -inf, degenerate
+    return (torch.cat([vertices, special]).float(), torch.cat([faces, extra]), len(extra))
+
+
+def mesh_cases() -> dict:
+    """name -> (vertices, faces, mvp float64, width, height)."""
+    import dataclasses
+
+    from course.camera import Camera
+    from course.scenes import load_scene
+
+    scene = load_scene("suzanne", device="cpu")
+    mesh = scene.mesh
+    centre = mesh.vertices.mean(0).tolist()
+    inside = Camera(eye=tuple(centre), target=(centre[0] + 1.0, centre[1], centre[2] + 0.3),
+                    fov_y=90.0, width=32, height=24, near=0.05, far=50.0)
+    outside = dataclasses.replace(scene.camera, width=48, height=40)
+    vertices, faces, _ = soup_mesh()
+    eye = Camera(eye=(0.0, 0.0, 0.0), target=(0.0, 0.0, -1.0), fov_y=70.0, width=24, height=18,
+                 near=0.3, far=10.0)
+    return {name: (v, f, cam.view_projection(torch.float64), cam.width, cam.height)
+            for name, v, f, cam in (("suzanne outside", mesh.vertices, mesh.faces, outside),
+                                    ("suzanne inside", mesh.vertices, mesh.faces, inside),
+                                    ("soup", vertices, faces, eye))}
+
+
+def run_mesh_stages(data: dict, device: str) -> dict:
+    from course.triton_raster import screen_triangles_triton, visibility_fused
+
+    out = {}
+    for name, (v, f, mvp, w, h) in data.items():
+        v, f = v.to(device), f.to(device)
+        out[("screen", name)] = screen_triangles_triton(v, f, mvp, w, h).cpu()
+        for run, knobs in MESH_RUNS.items():
+            if run == "32" or name == "soup":
+                out[("ids", name, run)] = visibility_fused(v, f, mvp, w, h, **knobs).cpu()
+    return out
+
+
+def lab_pieces(lab, vertices, faces, mvp, width, height):
+    """The lab's screen triangles and, for each, the slot the fused vertex stage gives it:
+    face i's first piece -> i, its second piece -> F + i."""
+    clip = lab.to_clip_space(vertices, mvp)
+    clipped, source, _ = lab.clip_triangles(clip[faces])
+    screen = lab.to_screen(clipped, width, height)
+    second = torch.zeros(len(source), dtype=torch.bool)
+    second[1:] = source[1:] == source[:-1]
+    return screen, source, torch.where(second, source + len(faces), source)
+
+
+def check_screen(data: dict, out: dict, where: str) -> None:
+    from course.bench import load_lab
+
+    lab = load_lab("lab6_raster", "solutions")
+    for name, (v, f, mvp, w, h) in data.items():
+        got = out[("screen", name)]
+        F = len(f)
+        assert got.shape == (2 * F, 3, 4) and got.dtype == torch.float32, \
+            f"{where}, {name}: screen is {tuple(got.shape)} {got.dtype}, expected ({2 * F}, 3, 4) float32"
+        want, _, slots = lab_pieces(lab, v, f, mvp, w, h)
+        empty = torch.isnan(got).all(-1).all(-1)
+        filled = (~empty).nonzero()[:, 0]
+        order = slots.argsort()
+        missing = sorted(set(slots.tolist()) - set(filled.tolist()))
+        extra = sorted(set(filled.tolist()) - set(slots.tolist()))
+        assert not missing and not extra, (
+            f"{where}, {name}: slots holding a triangle differ from the lab's pieces: "
+            f"missing {missing[:8]} ({len(missing)}), unexpected {extra[:8]} ({len(extra)}) "
+            f"(slot i: face i, slot {F} + i: the second piece of face i)")
+        a, b = got[filled], want[order]
+        same = (a == b) | (torch.isnan(a) & torch.isnan(b))
+        if not same.all():
+            bad = (~same).nonzero()[0].tolist()
+            ulps = (a.view(torch.int32).long() - b.view(torch.int32).long()).abs()[~same]
+            raise AssertionError(
+                f"{where}, {name}: {(~same).sum().item()} screen coordinates differ from "
+                f"to_screen(clip_triangles(...)); first: slot {filled[bad[0]].item()}, corner "
+                f"{bad[1]}, component {bad[2]}: {a[tuple(bad)].item()!r} vs "
+                f"{b[tuple(bad)].item()!r}; up to {ulps.max().item()} float32 ulps")
+
+
+def test_soup_exercises_every_clipping_case():
+    """The soup is worth testing: faces cut into one piece and into two, faces behind the
+    near plane, and the special faces (NaN, inf, degenerate) rejected by the lab."""
+    from course.bench import load_lab
+
+    lab = load_lab("lab6_raster", "solutions")
+    v, f, mvp, w, h = mesh_cases()["soup"]
+    special = soup_mesh()[2]
+    clip = lab.to_clip_space(v, mvp)[f]
+    d = clip[..., 2] + clip[..., 3]
+    inside = (d >= 0).sum(-1)
+    finite = torch.isfinite(clip).all(-1).all(-1)
+    counts = {n: ((inside == n) & finite).sum().item() for n in range(4)}
+    assert min(counts.values()) >= 5, f"faces by corners in front of the near plane: {counts}"
+    _, source, slots = lab_pieces(lab, v, f, mvp, w, h)
+    assert (slots >= len(f)).sum() >= 5, "fewer than 5 faces are cut into two pieces"
+    kept = set(range(len(f) - special, len(f) - 1)) & set(source.tolist())
+    assert not kept, f"the lab keeps the faces with NaN/inf corners {sorted(kept)}"
+
+
+def check_ids(data: dict, out: dict, where: str) -> None:
+    """visibility_fused against the lab's pipeline (the torch rasterizer). Not bit for bit
+    by design: an exact depth tie between a face's second piece and another face goes to
+    the other face here (slot order: every first piece before every second piece), to the
+    lower face in the lab; ties need coplanar overlapping faces, so they are rare."""
+    from course.bench import load_lab
+
+    lab = load_lab("lab6_raster", "solutions")
+    for key, ids in out.items():
+        if key[0] != "ids":
+            continue
+        _, name, run = key
+        v, f, mvp, w, h = data[name]
+        screen, source, _ = lab_pieces(lab, v, f, mvp, w, h)
+        k = lab.triangle_ids(lab.rasterize(screen, w, h, **MESH_RUNS[run]))
+        want = torch.where(k >= 0, source[k.clamp(min=0)], -1).reshape(h, w)
+        assert ids.shape == (h, w) and ids.dtype == torch.int64, \
+            f"{where}, {name}, {run}: ids are {tuple(ids.shape)} {ids.dtype}, expected ({h}, {w}) int64"
+        covered = (want >= 0) | (ids >= 0)
+        assert covered.double().mean() > 0.05, f"{where}, {name}, {run}: nothing to compare"
+        differ = ((ids != want) & covered).double().sum().item() / covered.sum().item()
+        if differ:
+            r, c = ((ids != want) & covered).nonzero()[0].tolist()
+            first = f"; first at (row {r}, col {c}): {ids[r, c].item()} vs {want[r, c].item()}"
+        else:
+            first = ""
+        assert differ <= 0.004, (f"{where}, {name}, {run}: the visible face differs from the "
+                                 f"lab's pipeline on {differ:.2%} of the covered pixels "
+                                 f"(allowed: 0.4%){first}")
+
+
+@needs_triton
+@old_interpreter
+def test_interpreted_vertex_stage(interpreted):
+    data, out = interpreted
+    check_screen(data["mesh"], out["mesh"], "TRITON_INTERPRET=1")
+
+
+@needs_triton
+@old_interpreter
+def test_interpreted_visibility_fused(interpreted):
+    data, out = interpreted
+    check_ids(data["mesh"], out["mesh"], "TRITON_INTERPRET=1")
+
+
+@needs_triton
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_compiled_fused_pipeline():
+    """The same on CUDA, plus Suzanne at 640x480 (thousands of small and large boxes)."""
+    import dataclasses
+
+    from course.scenes import load_scene
+    from course.triton_intersect import interpreting
+
+    if interpreting():
+        pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
+    data = mesh_cases()
+    scene = load_scene("suzanne", device="cpu")
+    cam = dataclasses.replace(scene.camera, width=640, height=480)
+    data["suzanne 640x480"] = (scene.mesh.vertices, scene.mesh.faces,
+                               cam.view_projection(torch.float64), 640, 480)
+    out = run_mesh_stages(data, "cuda")
+    check_screen(data, out, "compiled")
+    check_ids(data, out, "compiled")
+
+
+if __name__ == "__main__":
+    data = torch.load(sys.argv[1], weights_only=False)
+    torch.save({"raster": run_kernels(data["raster"], "cpu"),
+                "mesh": run_mesh_stages(data["mesh"], "cpu")}, sys.argv[2])
