@@ -2,6 +2,7 @@
 
     python bench/lab6_raster.py --device cpu|cuda [--sizes 64 128 256] [--scene suzanne]
                                 [--repeats N] [--threads N] [--out DIR]
+                                [--only sizes knobs zfight frames] [--quick]
 
 For each square resolution it times, on the same camera and mesh,
 
@@ -28,12 +29,19 @@ frame of ``--frames`` (512x512, 1920x1080, 3840x2160 on a GPU), the ``frame`` se
 
 * ``raster``: ``rasterize_mesh`` (visibility + perspective-correct barycentrics), and the
   visibility buffer alone (triangle ids) from the lab's ``rasterize`` and, on CUDA, from
-  the fused kernels of ``course.triton_raster`` (same setup stages, same keys);
+  the fused kernels of ``course.triton_raster``: after the lab's torch setup stages
+  (``fused Triton``), and end to end with the fused vertex kernel (``fused, vertex
+  kernel``: camera to ids in four kernels, no host synchronisation), whose
+  ``raster_speedup`` is the BVH-traced time over its own (same keys);
 * ``raytrace``: ``traced_visibility`` through ``course.flat_bvh.trace_bvh`` (a binned-SAH
   BVH, Triton traversal on CUDA; its build time is reported apart, ``build_s``), the
   fair competitor at scale where brute force is hopeless;
 * ``hybrid``: raster visibility + Lambert shading + ``hybrid_shadows`` (one BVH shadow ray
   per lit pixel), against ``traced``: ``traced_shadows`` (primary and shadow rays traced).
+
+``--quick`` keeps, in the frame series, only the BVH-traced visibility and the end-to-end
+fused raster (e.g. ``--only frames --quick --scenes suzanne bunny bunny_x4 --frames
+1920x1080`` on a GPU: a few minutes, most of it building bunny_x4 and compiling).
 
 Writes ``lab6_raster.json`` (a ResultTable with the command line), ``lab6_raster.md``,
 ``throughput.png`` (pixels/s by resolution, both methods) and ``zfighting.png`` into
@@ -111,6 +119,18 @@ def fused_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.Tensor:
                                           depth_bits=depth_bits))
     ids = torch.where(k >= 0, source[k.clamp(min=0)], -1) if len(source) else k
     return ids.reshape(camera.height, camera.width)
+
+
+def fused_vertex_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.Tensor:
+    """``raster_ids`` as one fused pipeline, ``course.triton_raster.visibility_fused``: the
+    MVP, near-plane clipping and viewport in one Triton kernel (no host synchronisation),
+    then the raster kernels and the id map. The same pieces and keys as the lab's; only an
+    exact depth tie between the second piece of a clipped face and another face can go
+    the other way (slot order)."""
+    from course.triton_raster import visibility_fused
+
+    return visibility_fused(mesh.vertices, mesh.faces, camera.view_projection(torch.float64),
+                            camera.width, camera.height, depth_bits=depth_bits)
 
 
 def tiled_keys(screen, width: int, height: int, tile: int, **kwargs) -> torch.Tensor:
@@ -234,12 +254,32 @@ def bench_frames(table: ResultTable, device, cfg: dict) -> None:
             cam = dataclasses.replace(scene.camera, width=width, height=height)
             common = {"scene": name, "triangles": mesh.num_faces, "frame": f"{width}x{height}",
                       "size": width, "pixels": width * height}
-            face, _ = lab.rasterize_mesh(mesh, cam)
-            t = time_fn(lab.rasterize_mesh, mesh, cam, repeats=cfg["repeats"], warmup=1)
             traced = lab.traced_visibility(trace, cam, device=device)
             # traced_visibility's own ``device`` goes positionally; time_fn's by keyword.
             t_rt = time_fn(lab.traced_visibility, trace, cam, device, repeats=cfg["repeats"],
                            warmup=1, device=device)
+            torch_ids = raster_ids(mesh, cam)
+            if device.type == "cuda":
+                # The whole pipeline in the fused kernels (vertex stage included), from the
+                # camera to the ids like traced_visibility; timed next to it, same process.
+                fused = fused_vertex_ids(mesh, cam)
+                t_v = time_fn(fused_vertex_ids, mesh, cam, repeats=cfg["repeats"], warmup=2,
+                              device=device)
+                covered = (fused >= 0) | (traced >= 0)
+                _add(table, method="frame", setting="raster ids (fused, vertex kernel)",
+                     seconds=t_v.median, ms_per_frame=1e3 * t_v.median,
+                     pixels_per_s=width * height / t_v.median,
+                     disagreement=((fused != traced) & covered).double().sum()
+                     / covered.double().sum(),
+                     differs_from_torch=(fused != torch_ids).double().mean().item(),
+                     raster_speedup=t_rt.median / t_v.median, **common)
+            if cfg.get("quick"):
+                _add(table, method="frame", setting="BVH-traced visibility",
+                     seconds=t_rt.median, ms_per_frame=1e3 * t_rt.median,
+                     pixels_per_s=width * height / t_rt.median, build_s=build_s, **common)
+                continue
+            face, _ = lab.rasterize_mesh(mesh, cam)
+            t = time_fn(lab.rasterize_mesh, mesh, cam, repeats=cfg["repeats"], warmup=1)
             covered = (face >= 0) | (traced >= 0)
             differ = ((face != traced) & covered).double().sum() / covered.double().sum()
             _add(table, method="frame", setting="raster visibility", seconds=t.median,
@@ -254,7 +294,7 @@ def bench_frames(table: ResultTable, device, cfg: dict) -> None:
                 fused = fused_ids(mesh, cam)
                 t_f = time_fn(fused_ids, mesh, cam, repeats=cfg["repeats"], warmup=1,
                               device=device)
-                same = ((fused != raster_ids(mesh, cam)).double().mean()).item()
+                same = ((fused != torch_ids).double().mean()).item()
                 _add(table, method="frame", setting="raster ids (fused Triton)",
                      seconds=t_f.median, ms_per_frame=1e3 * t_f.median,
                      pixels_per_s=width * height / t_f.median, differs_from_torch=same,
@@ -385,6 +425,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--frames", nargs="+", help="frame sizes WxH of the frame series")
     parser.add_argument("--only", nargs="+", choices=("sizes", "knobs", "zfight", "frames"),
                         help="run only these parts")
+    parser.add_argument("--quick", action="store_true", help="frame series: only the "
+                        "BVH-traced visibility and the end-to-end fused raster")
     parser.add_argument("--repeats", type=int, help="timed runs per setting (median reported)")
     parser.add_argument("--threads", type=int, help="CPU threads of torch (default: torch's)")
     parser.add_argument("--out", type=Path, help="output folder "
@@ -397,6 +439,7 @@ def main(argv: list[str] | None = None) -> None:
         cfg["sizes"] = tuple(args.sizes)
     if args.repeats:
         cfg["repeats"] = args.repeats
+    cfg["quick"] = args.quick
     if args.scenes:
         cfg["scenes"] = tuple(args.scenes)
     if args.frames:
@@ -412,7 +455,7 @@ def main(argv: list[str] | None = None) -> None:
                             *(sys.argv[1:] if argv is None else argv)]),
         scene=args.scene, triangles=scene.mesh.num_faces, sizes=list(cfg["sizes"]),
         scenes=list(cfg["scenes"]), frames=[f"{w}x{h}" for w, h in cfg["frames"]],
-        repeats=cfg["repeats"], threads=torch.get_num_threads())
+        repeats=cfg["repeats"], threads=torch.get_num_threads(), quick=args.quick)
     print(f"{table.metadata['device']}: {args.scene} ({scene.mesh.num_faces} triangles), "
           f"sizes {cfg['sizes']}", flush=True)
     started = time.perf_counter()

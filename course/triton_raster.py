@@ -447,11 +447,11 @@ _SM_COUNT: dict[int, int] = {}
 
 
 def _raster_launch(screen, out, queue, counter, count: int, width: int, height: int,
-                   depth_bits: int, cull: bool, small_box: int) -> None:
+                   depth_bits: int, cull: bool, small_box: int, huge_box: int) -> None:
     """The two raster kernels on ``screen`` (count, 3, 4) float32; ``out`` cleared to
     EMPTY, ``counter`` (2,) int32 zeroed, ``queue`` (2 * count,) int32 scratch."""
     _small_kernel[(triton.cdiv(count, BLOCK_TRIANGLES),)](
-        screen, out, queue, counter, count, width, height, small_box, HUGE_BOX,
+        screen, out, queue, counter, count, width, height, small_box, huge_box,
         DEPTH_BITS=depth_bits, CULL=cull, BLOCK=BLOCK_TRIANGLES, SPREAD=SPREAD,
         num_warps=SMALL_WARPS, enable_fp_fusion=FP_FUSION)
     _large_kernel[(_programs(screen.device),)](
@@ -473,13 +473,14 @@ def _check_device(device: torch.device, name: str) -> None:
 
 def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bits: int = 32,
                      cull_backfaces: bool = False, out: torch.Tensor | None = None,
-                     small_box: int = SMALL_BOX) -> torch.Tensor:
+                     small_box: int = SMALL_BOX, huge_box: int | None = None) -> torch.Tensor:
     """Lab 6's ``rasterize`` (same arguments and keys), fused: (width * height,) int64.
 
     screen: (K, 3, 4) float ``(x, y, z_ndc, 1/w)`` (computed in float32); width, height:
     the viewport; depth_bits: 32 or 24; cull_backfaces: drop negative-area triangles;
     out: optional (width * height,) int64 buffer (every element written); small_box: the
-    box size, in pixels, up to which a triangle gets one lane rather than a program.
+    box size, in pixels, up to which a triangle gets one lane rather than a program;
+    huge_box: above it, a triangle is split over all programs (default ``HUGE_BOX``).
     """
     _require_triton()
     if not isinstance(screen, torch.Tensor) or screen.ndim != 3 or screen.shape[1:] != (3, 4) \
@@ -505,7 +506,7 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
         queue = torch.empty(2 * count, dtype=torch.int32, device=device)
         with _ieee_quiet():
             _raster_launch(data, out, queue, counter, count, width, height, depth_bits,
-                           cull_backfaces, small_box)
+                           cull_backfaces, small_box, HUGE_BOX if huge_box is None else huge_box)
     return out
 
 
@@ -594,7 +595,7 @@ def visibility_fused(vertices: torch.Tensor, faces: torch.Tensor, mvp: torch.Ten
     with _ieee_quiet():
         _vertex_launch(vertices, faces, m, screen, keys, counter, width, height)
         _raster_launch(screen, keys, queue, counter, 2 * count, width, height, depth_bits,
-                       cull_backfaces, small_box)
+                       cull_backfaces, small_box, HUGE_BOX)
         _ids_kernel[(triton.cdiv(keys.shape[0], BLOCK_IDS),)](keys, keys.shape[0], count,
                                                               BLOCK=BLOCK_IDS, num_warps=4)
     return keys.view(height, width)
