@@ -21,7 +21,10 @@ reference radiance; ``seconds`` is the median time of one frame (after warm-up).
   8 x 8 pixels, so with point lights the error grows over frames; with the sun it shrinks.
 * ``frame``: the talk's test scene at 1080p (240 x 135 x 64 froxels, sun + 14 point lights,
   6 local fog volumes with 16^3 density textures, height fog), time per frame; the target
-  on an H100/H200 is 2 ms. ``--gpu-target`` times only this and prints ms/frame.
+  on an H100/H200 is 2 ms. ``--gpu-target`` times only this and prints ms/frame. On CUDA
+  the same frame is also timed with ``course.triton_froxel.render_froxels_fused`` (the
+  pipeline fused into five Triton kernels), without and with its counts, and its error
+  against the torch pipeline's image is recorded (``error_vs_torch``, ``max_error_vs_torch``).
 
 Writes ``lab5_froxel.json`` (a ResultTable with the command line), ``lab5_froxel.md`` and
 Pareto plots (seconds against error) into ``--out``, by default
@@ -268,7 +271,39 @@ def bench_frame(table, device, repeats: int, size=(1920, 1080)):
           f"{report['froxels_lit']} lit, {report['light_evaluations']} light evaluations): "
           f"{1e3 * t.median:.2f} ms/frame (median of {repeats}; target 2 ms on an H100/H200)",
           flush=True)
+    if device.type == "cuda":
+        bench_frame_fused(table, scene, camera, depth, opaque, args, report, repeats, size)
     return t.median
+
+
+def bench_frame_fused(table, scene, camera, depth, opaque, args, report, repeats, size):
+    """The same frame with ``course.triton_froxel.render_froxels_fused`` (five Triton
+    launches, no host synchronisation unless the counts are asked for), its error against
+    the torch pipeline's image: ``max_error`` the largest difference / the largest
+    radiance, ``error`` the mean difference / the mean radiance."""
+    from course.triton_froxel import render_froxels_fused
+
+    want, _ = lab.render_froxels(scene, camera, depth, opaque, **args)
+    got, counts = render_froxels_fused(scene, camera, depth, opaque, **args)
+    diff = (got.double() - want.double()).abs()
+    err = (diff.mean() / want.double().abs().mean()).item()
+    worst = (diff.max() / want.double().abs().max()).item()
+    same = all(counts[k] == report[k] for k in ("froxels_lit", "tiles_with_media",
+                                                "light_tiles", "light_evaluations"))
+    for label, knobs in (("fused", {"counts": False}),
+                         ("fused, counts (one sync)", {"counts": True})):
+        t = time_fn(render_froxels_fused, scene, camera, depth, opaque, repeats=repeats,
+                    warmup=2, device=depth.device, **args, **knobs)
+        table.add(series="frame", setting=f"{size[0]}x{size[1]}, 8px x 64, {label}",
+                  implementation=label, tile=8, slices=64, froxels=report["froxels"],
+                  froxels_lit=counts["froxels_lit"],
+                  light_evaluations=counts["light_evaluations"], seconds=t.median,
+                  ms_per_frame=1e3 * t.median, error_vs_torch=err, max_error_vs_torch=worst,
+                  counts_match=same)
+        print(f"  frame {size[0]}x{size[1]}, {label} (course.triton_froxel): "
+              f"{1e3 * t.median:.3f} ms/frame (median of {repeats}, min {1e3 * t.min:.3f}); "
+              f"against the torch pipeline: mean error {err:.2e}, max error {worst:.2e} of the "
+              f"largest radiance; counts {'match' if same else 'differ'}", flush=True)
 
 
 def main(argv=None):
