@@ -31,8 +31,11 @@ frame of ``--frames`` (512x512, 1920x1080, 3840x2160 on a GPU), the ``frame`` se
   visibility buffer alone (triangle ids) from the lab's ``rasterize`` and, on CUDA, from
   the fused kernels of ``course.triton_raster``: after the lab's torch setup stages
   (``fused Triton``), and end to end with the fused vertex kernel (``fused, vertex
-  kernel``: camera to ids in four kernels, no host synchronisation), whose
-  ``raster_speedup`` is the BVH-traced time over its own (same keys);
+  kernel``: camera matrix to ids in four kernels, no host synchronisation; ``CUDA graph``:
+  the same four replayed as one graph, ``FusedVisibility``; ``kernels' GPU time``: the
+  profiler's time of each kernel, the host's launch time left out), whose
+  ``raster_speedup`` is the BVH-traced time over its own (same keys). The camera matrix
+  is computed once per camera (``camera_matrix``), as the BVH is built once per mesh;
 * ``raytrace``: ``traced_visibility`` through ``course.flat_bvh.trace_bvh`` (a binned-SAH
   BVH, Triton traversal on CUDA; its build time is reported apart, ``build_s``), the
   fair competitor at scale where brute force is hopeless;
@@ -53,6 +56,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import os
 import shlex
 import sys
@@ -121,6 +125,18 @@ def fused_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.Tensor:
     return ids.reshape(camera.height, camera.width)
 
 
+@functools.lru_cache(maxsize=64)
+def camera_matrix(camera: Camera) -> torch.Tensor:
+    """The (4, 4) float64 MVP of a camera, computed once per camera (a host tensor).
+
+    ``Camera.view_projection`` builds it from a dozen small torch operations, 0.1-0.3 ms of
+    host time: longer than the fused raster's kernels at 1080p, and not part of
+    rasterizing (an engine computes its 4x4 matrix once per frame, in nanoseconds). The
+    fused rows time the rasterizer from this matrix, the copy to the GPU included; the
+    traced rows build their rays from the camera, on the GPU."""
+    return camera.view_projection(torch.float64)
+
+
 def fused_vertex_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.Tensor:
     """``raster_ids`` as one fused pipeline, ``course.triton_raster.visibility_fused``: the
     MVP, near-plane clipping and viewport in one Triton kernel (no host synchronisation),
@@ -129,8 +145,36 @@ def fused_vertex_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.
     the other way (slot order)."""
     from course.triton_raster import visibility_fused
 
-    return visibility_fused(mesh.vertices, mesh.faces, camera.view_projection(torch.float64),
+    return visibility_fused(mesh.vertices, mesh.faces, camera_matrix(camera),
                             camera.width, camera.height, depth_bits=depth_bits)
+
+
+@functools.lru_cache(maxsize=8)
+def _recorded(mesh: Mesh, width: int, height: int):
+    from course.triton_raster import FusedVisibility
+
+    return FusedVisibility(mesh.vertices, mesh.faces, width, height)
+
+
+def graphed_ids(mesh: Mesh, camera: Camera) -> torch.Tensor:
+    """``fused_vertex_ids`` replayed from a CUDA graph (``FusedVisibility``, recorded on
+    the first call for this mesh and viewport): one launch per frame instead of four."""
+    return _recorded(mesh, camera.width, camera.height)(camera_matrix(camera))
+
+
+def kernel_times(fn, repeats: int = 20) -> dict[str, float]:
+    """Seconds of GPU time per call of each CUDA kernel and copy ``fn`` launches
+    (``torch.profiler``), by name; empty where the profiler reports no device times."""
+    from torch.profiler import ProfilerActivity, profile
+
+    fn()
+    torch.cuda.synchronize()
+    with profile(activities=[ProfilerActivity.CUDA]) as prof:
+        for _ in range(repeats):
+            fn()
+        torch.cuda.synchronize()
+    return {e.key: e.self_device_time_total / 1e6 / repeats for e in prof.key_averages()
+            if getattr(e, "self_device_time_total", 0) > 0}
 
 
 def tiled_keys(screen, width: int, height: int, tile: int, **kwargs) -> torch.Tensor:
@@ -238,7 +282,6 @@ def bench_zfighting(table: ResultTable, device) -> None:
 
 def bench_frames(table: ResultTable, device, cfg: dict) -> None:
     """Raster vs BVH-traced visibility and the hybrid frame, per scene and frame size."""
-    import functools
 
     from course.flat_bvh import flat_bvh_for, trace_bvh
 
@@ -273,6 +316,24 @@ def bench_frames(table: ResultTable, device, cfg: dict) -> None:
                      / covered.double().sum(),
                      differs_from_torch=(fused != torch_ids).double().mean().item(),
                      raster_speedup=t_rt.median / t_v.median, **common)
+                graphed = graphed_ids(mesh, cam)
+                t_g = time_fn(graphed_ids, mesh, cam, repeats=cfg["repeats"], warmup=2,
+                              device=device)
+                _add(table, method="frame", setting="raster ids (fused, vertex kernel, "
+                     "CUDA graph)", seconds=t_g.median, ms_per_frame=1e3 * t_g.median,
+                     pixels_per_s=width * height / t_g.median,
+                     differs_from_torch=(graphed != torch_ids).double().mean().item(),
+                     raster_speedup=t_rt.median / t_g.median, **common)
+                # Where the time goes: each kernel's GPU time (the rest is host time).
+                gpu = kernel_times(functools.partial(fused_vertex_ids, mesh, cam))
+                if gpu:
+                    total = sum(gpu.values())
+                    _add(table, method="frame", setting="fused, vertex kernel: kernels' GPU "
+                         "time", seconds=total, ms_per_frame=1e3 * total,
+                         pixels_per_s=width * height / total,
+                         raster_speedup=t_rt.median / total,
+                         **{f"{k.strip('_').removesuffix('_kernel')}_us": 1e6 * v
+                            for k, v in gpu.items() if k.startswith("_")}, **common)
             if cfg.get("quick"):
                 _add(table, method="frame", setting="BVH-traced visibility",
                      seconds=t_rt.median, ms_per_frame=1e3 * t_rt.median,
