@@ -19,8 +19,9 @@ Two raster kernels, because triangle sizes on screen differ by orders of magnitu
 * ``_large_kernel`` runs a fixed grid (a few programs per SM) over the queue: each queued
   triangle gets one program whose lanes spread over its box, and a huge one (over
   ``HUGE_BOX`` pixels, e.g. a floor filling the screen) is split over all programs.
-  Launching one program per triangle instead, most of them leaving at once, cost as much
-  as the rasterization itself on a 278K-triangle mesh.
+  With one program per triangle instead (nearly all of them leaving at once), the two
+  kernels took 0.23 ms for bunny_x4 (278K triangles) at 1080p on an H200; queued, 0.06 ms
+  on an H100.
 
 Nothing goes back to the host: no sort, compaction or count is read, so a frame has no
 synchronisation.
@@ -159,8 +160,8 @@ def _fragment(out_ptr, tri, col, row, ok, width,
     inside = (((e0 > 0) | ((e0 == 0) & tl0)) & ((e1 > 0) | ((e1 == 0) & tl1))
               & ((e2 > 0) | ((e2 == 0) & tl2)))
     total = e0 + e1 + e2
-    # Correctly rounded divisions (``/`` would compile to the 2-ulp approximation): the
-    # keys then differ from the torch version only where an FMA contraction does.
+    # Correctly rounded divisions (``/`` would compile to the 2-ulp approximation) and no
+    # FMA contraction (FP_FUSION): the torch version's values, bit for bit.
     b1 = tl.div_rn(e1, total)
     b2 = tl.div_rn(e2, total)
     z_ndc = z0 + b1 * (z1 - z0) + b2 * (z2 - z0)

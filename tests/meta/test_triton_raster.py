@@ -4,8 +4,12 @@ Not shipped to students (it compares with ``solutions/``). The same keys are ask
 scenes that exercise both kernels: Suzanne (small triangles), a jittered mesh covering the
 screen (watertight: no pixel left empty), a few screen-filling and off-screen triangles
 (the program-per-triangle kernel, clamping), NaN and zero-area triangles (nothing drawn),
-with 32-bit and 24-bit depth and with back-face culling. Keys may differ only where an FMA
-changes a last bit: at most a few pixels in a thousand.
+with 32-bit and 24-bit depth and with back-face culling. The kernels are compiled without
+FMA contraction and divide with correct rounding, so the keys are expected to be the lab's
+(the benchmark's end-to-end ids equal the torch pipeline's on every pixel on an H100);
+the checks still allow a last-bit difference to resolve an edge or a depth tie the other
+way on a few pixels in a thousand (a compiler or interpreter that rounds one operation
+differently), and fail beyond that.
 
 The CPU check runs the kernels in Triton's interpreter in a subprocess (``TRITON_INTERPRET``
 must be set before Triton is imported); with CUDA they also run compiled, in process.
@@ -111,8 +115,8 @@ def check(data: dict, out: dict, where: str) -> None:
         assert differ <= 0.004, (f"{where}, {name}, depth/cull {run}: the visible triangle "
                                  f"differs from the reference on {differ:.2%} of the pixels "
                                  f"(allowed: 0.4%)")
-        # Where the same triangle wins, its depth field may differ only by the last bits
-        # an FMA contraction changes (32-bit float depth) or one unorm step (24-bit).
+        # Where the same triangle wins, its depth field may differ only by a few last bits
+        # (32-bit float depth) or one unorm step (24-bit).
         same = (ids == want_ids) & (ids >= 0)
         steps = ((keys[same] >> 32) - (want[same] >> 32)).abs()
         assert steps.max().item() <= (4 if run != "24" else 1) if len(steps) else True, \
