@@ -349,10 +349,23 @@ def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
     scale = torch.where(extent > 0, 2.0**bits / extent, torch.zeros_like(extent))
     q = torch.floor(((points - lo) * scale).nan_to_num(0.0)).clamp(0, 2**bits - 1).long()
     code = torch.zeros(len(points), dtype=torch.int64, device=points.device)
-    for i in range(bits):
-        for axis, shift in ((0, 2), (1, 1), (2, 0)):
-            code |= ((q[:, axis] >> i) & 1) << (3 * i + shift)
+    for axis, shift in ((0, 2), (1, 1), (2, 0)):
+        code |= _spread_bits(q[:, axis]) << shift
     return code
+
+
+# x -> the bits of x (up to 21) two zeros apart: bit i moves to bit 3i. Five shift-and-mask
+# rounds (each moves the upper half of every group), not one op per bit: 15 kernels on a
+# GPU instead of 60 per axis.
+_SPREAD = ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
+           (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249))
+
+
+def _spread_bits(x: torch.Tensor) -> torch.Tensor:
+    """Bit ``i`` of ``x`` (int64, ``0 <= x < 2^21``) at bit ``3i`` of the result."""
+    for shift, mask in _SPREAD:
+        x = (x | (x << shift)) & mask
+    return x
 
 
 def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
@@ -384,6 +397,14 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
 
     The tree's quality depends on the code's resolution only: a bad split wastes node
     visits, never correctness.
+
+    This reference builds exactly that tree without a loop over levels (a level loop waits
+    for the device at every level: 30 ms for 1.1M triangles on an H200, mostly syncs), as
+    Karras 2012 does: every one of the ``F - 1`` gaps between neighbouring sorted codes is
+    the split of exactly one node of the full tree (:func:`_lbvh_gap_ranges`), each node's
+    box is a min/max over its contiguous range of sorted triangles (a sparse table,
+    :func:`_range_boxes`), and one sort by ``(first triangle, -size)`` is the depth-first
+    order. It waits for the device three times, at any size.
     """
     check_mesh(mesh)
     check_leaf_size(leaf_size)
@@ -391,24 +412,143 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
     centres = (tri_lo + tri_hi) / 2
     codes = morton_codes(centres, centres.amin(dim=0), centres.amax(dim=0), bits)
     codes, order = torch.sort(codes, stable=True)
-    levels = TreeLevels(mesh.num_faces, mesh.device)
-    nodes = torch.zeros(1, dtype=torch.int64, device=mesh.device)
-    level = 0
-    while len(nodes):
-        start, end = levels.ranges(nodes)
-        inner = end - start > leaf_size
-        nodes, start, end = nodes[inner], start[inner], end[inner]
-        first, last = codes[start], codes[end - 1]
-        differ = first ^ last
-        # frexp: differ = m * 2^e with m in [0.5, 1), so the highest set bit is e - 1
-        # (exact: the codes fit in a double's 53-bit mantissa).
-        high = torch.frexp(differ.double()).exponent.long() - 1
-        split_code = (last >> high.clamp(min=0)) << high.clamp(min=0)
-        mid = torch.searchsorted(codes, split_code)
-        mid = torch.where(differ == 0, (start + end) // 2, mid)
-        nodes = levels.split(nodes, mid, level)
-        level += 1
-    return levels.finish(order, tri_lo, tri_hi)
+    f, device = mesh.num_faces, mesh.device
+    if f <= leaf_size:  # the root is a leaf
+        zero = torch.zeros(1, dtype=torch.int64, device=device)
+        start, size, split = zero, zero + f, zero - 1
+    else:
+        differ = codes[:-1] ^ codes[1:]  # gap g lies between sorted triangles g and g + 1
+        same = differ == 0
+        start, end = _lbvh_gap_ranges(differ, same)
+        # The tree cut at leaf_size: a node of more triangles splits at its gap, its
+        # children of at most leaf_size are leaves.
+        split = ((end - start) > leaf_size).nonzero()[:, 0]  # host sync 1: the node count
+        s, e = start[split], end[split]
+        kids_start = torch.stack((s, split + 1), 1).reshape(-1)
+        kids_size = torch.stack((split + 1 - s, e - split - 1), 1).reshape(-1)
+        leaf_kid = kids_size <= leaf_size
+        start = torch.cat((s, kids_start))
+        size = torch.cat((e - s, kids_size))
+        split = torch.cat((split, torch.full_like(kids_start, -1)))
+        valid = torch.cat((torch.ones_like(s, dtype=torch.bool), leaf_kid))
+        # Depth-first (pre-order) = by first triangle, then larger nodes first (a node
+        # precedes the nodes inside it that start where it starts); invalid entries last.
+        key = torch.where(valid, start * (f + 1) + (f - size), (f + 1) ** 2)
+        pick = torch.sort(key).indices[:2 * len(s) + 1]  # inner nodes + their leaves
+        start, size, split = start[pick], size[pick], split[pick]
+    leaf = split < 0
+    m = len(start)
+    # The right child follows the left subtree: 2 L - 1 nodes for L leaves in [s, g + 1).
+    starts_leaf = torch.zeros(f + 1, dtype=torch.int64, device=device)
+    starts_leaf.index_add_(0, torch.where(leaf, start, f), leaf.long())
+    before = torch.cumsum(starts_leaf, 0) - starts_leaf  # leaves starting before i
+    node = torch.arange(m, device=device)
+    gap = split.clamp(min=0)
+    left_size = 2 * (before[gap + 1] - before[start]) - 1
+    lo, hi = _range_boxes(tri_lo[order], tri_hi[order], start, size)
+    minus = torch.full_like(start, -1)
+    return {"kind": "bvh", "lo": lo, "hi": hi,
+            "left": torch.where(leaf, minus, node + 1),
+            "right": torch.where(leaf, minus, node + 1 + left_size),
+            "first": torch.where(leaf, start, 0), "count": torch.where(leaf, size, 0),
+            "triangles": order}
+
+
+def _lbvh_gap_ranges(differ: torch.Tensor, same: torch.Tensor):
+    """The node of the full LBVH (down to one triangle) that splits at each gap.
+
+    differ: (F - 1,) int64, ``codes[g] ^ codes[g + 1]`` of the sorted codes; same: (F - 1,)
+    bool, ``differ == 0``. Returns ``(start, end)``, each (F - 1,) int64: the node that
+    splits between sorted triangles ``g`` and ``g + 1`` holds ``[start[g], end[g])``.
+
+    Splitting ``[s, e)`` at its highest differing bit is splitting at the gap of the
+    highest ``differ`` bit inside it (the codes are sorted, so that bit flips once there);
+    a run of equal codes splits in the middle. So every gap gets a priority (lower =
+    nearer the root): ``63 - highest bit``, and below all of those, a run's gaps by the
+    depth of their middle split inside the run. A gap's node then reaches out to the
+    nearest gap of lower priority on each side: the tree is the Cartesian tree of the
+    priorities. Those nearest gaps come from a sparse table of minima (``log2 F`` levels
+    of elementwise ``minimum``) walked down by binary lifting: ``2 log2 F`` gathers and
+    compares for all gaps at once, no host sync.
+    """
+    n, device = len(differ), differ.device
+    # frexp: differ = m 2^e with m in [0.5, 1), the highest set bit is e - 1 (the double
+    # may round up to the next power of two above 2^53: then one less).
+    high = torch.frexp(differ.double()).exponent.long() - 1
+    high = high - ((differ >> high.clamp(0, 63)) == 0).long()
+    prio = torch.where(same, 64 * 32 + _middle_split_depth(same), (63 - high) * 32).int()
+    # Sparse table: table[k][i] = min(prio[i : i + 2^k]).
+    table = [prio]
+    while 2 ** len(table) <= n:
+        half = 2 ** (len(table) - 1)
+        last = table[-1]
+        table.append(torch.minimum(last[:-half], last[half:]))
+    gap = torch.arange(n, device=device)
+    start, end = gap.clone(), gap + 1  # in gaps: lower-priority neighbours at start - 1, end
+    for k in reversed(range(len(table))):
+        width, level = 2 ** k, table[k]
+        top = len(level) - 1
+        step = start - width  # the block [start - 2^k, start) holds no lower priority?
+        ok = (step >= 0) & (level[step.clamp(0, top)] >= prio)
+        start = torch.where(ok, step, start)
+        ok = (end + width <= n) & (level[end.clamp(max=top)] >= prio)
+        end = torch.where(ok, end + width, end)
+    return start, end + 1  # in triangles: gap end lies between triangles end and end + 1
+
+
+def _middle_split_depth(same: torch.Tensor) -> torch.Tensor:
+    """For each gap inside a run of equal codes (``same``), at which depth the run's middle
+    splits (``[s, e)`` at ``(s + e) // 2``) cut there; 0 elsewhere. (F - 1,) int64."""
+    n, device = len(same), same.device
+    depth = torch.zeros(n, dtype=torch.int64, device=device)
+    gap = same.nonzero()[:, 0]  # host sync 2 (runs are few: a short loop on few gaps)
+    if len(gap) == 0:
+        return depth
+    # Run ids of the triangles (nondecreasing): a run's triangles share one.
+    run = torch.cat((depth[:1], torch.cumsum((~same).long(), 0)))
+    s = torch.searchsorted(run, run[gap])  # the run's triangles [s, e)
+    e = torch.searchsorted(run, run[gap], right=True)
+    d = torch.zeros_like(gap)
+    found = torch.zeros_like(gap, dtype=torch.bool)
+    for _ in range(n.bit_length() + 1):  # halving: at most log2(run) + 1 rounds
+        mid = (s + e) // 2
+        here = gap == mid - 1
+        d = d + (~found & ~here).long()
+        found = found | here
+        go_left = gap < mid - 1
+        s, e = torch.where(go_left, s, mid), torch.where(go_left, mid, e)
+    return depth.index_copy_(0, gap, d)
+
+
+def _range_boxes(lo: torch.Tensor, hi: torch.Tensor, start: torch.Tensor, size: torch.Tensor):
+    """Bounds of contiguous ranges of boxes: ``lo[start[i] : start[i] + size[i]].amin(0)``
+    and the ``amax`` of ``hi`` for every range ``i`` at once (sizes >= 1).
+
+    A sparse table level by level, without keeping the levels: level ``k`` holds the
+    minimum of every ``2^k`` consecutive boxes, and a range whose size has its highest bit
+    at ``k`` is the union of two (overlapping) such blocks: its first and its last. The
+    ranges are grouped by that bit (one sort, one host sync for the group sizes), so each
+    range is read at its own level only: ``log2 F`` elementwise minima over the boxes plus
+    two gathers per range. The result is exactly the union (min and max do not round).
+    """
+    f, m = len(lo), len(start)
+    high = torch.frexp(size.double()).exponent.long() - 1  # sizes < 2^53: exact
+    group = torch.argsort(high)
+    counts = torch.bincount(high, minlength=f.bit_length()).tolist()  # host sync
+    first, last = start[group], (start + size)[group]
+    level = torch.cat((lo, -hi), 1)  # one minimum for both
+    out = torch.empty((m, 6), dtype=lo.dtype, device=lo.device)
+    done = 0
+    for k, count in enumerate(counts):
+        if count:
+            s, e = first[done:done + count], last[done:done + count] - 2**k
+            out[done:done + count] = torch.minimum(level[s], level[e])
+            done += count
+        if done == m:
+            break
+        level = torch.minimum(level[:-2**k], level[2**k:])
+    out = torch.empty_like(out).index_copy_(0, group, out)
+    return out[:, :3].contiguous(), (-out[:, 3:]).contiguous()
 
 
 def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
@@ -1337,8 +1477,11 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     rays: N rays; mesh: the BVH's mesh; bvh: a BVH dict; any_hit: stop each ray at its
     first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
     steps run between two looks at the rays (one host sync each); compile: False, True or
-    a ``torch.compile`` mode (``"reduce-overhead"``: CUDA graphs) for the ``k``-step body;
-    compact: at a look, drop finished rays if at most half are still running.
+    a ``torch.compile`` mode for the step; ``"reduce-overhead"`` (CUDA graphs) compiles it
+    as ``"default"`` and, on a GPU, captures it in a CUDA graph per number of rays
+    (:class:`_StepGraph`: inductor's own graphs skip a step that mutates its stack);
+    compact: at a look, drop finished rays if at most half (a quarter with graphs) are
+    still running.
     Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = nodes popped
     and not culled, ``"tests"`` = triangle tests); with ``any_hit`` the hit of a ray is
     *a* hit in its interval (the first found), not necessarily the closest.
@@ -1390,24 +1533,40 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
              hit_root.long()] + [out[k].clone() for k in ("t", "tri", "u", "v", "steps",
                                                           "tests")]
     names = ("t", "tri", "u", "v", "steps", "tests")
-    step = _fast_step if compile is False else _compiled_fast_step(compile)
+    # "reduce-overhead": inductor's own CUDA graphs skip a step that mutates its inputs
+    # (the stack), so compile it as "default" and capture the k steps in a graph here.
+    graphs = compile == "reduce-overhead" and device.type == "cuda"
+    step = (_fast_step if compile is False
+            else _compiled_fast_step("default" if graphs else compile))
     # One row per node and per slot: one gather reads all a step needs of each.
-    tensors = (torch.cat((tree["child"], tree["first"][:, None], tree["count"][:, None]), 1),
+    tensors = (torch.cat((tree["child"], tree["first"][:, None], tree["count"][:, None]),
+                         1).int(),
                torch.cat((tree["child_lo"], tree["child_hi"]), 2).reshape(-1, 12),
                torch.cat((tree["v0"], tree["e1"], tree["e2"]), 1), tree["tri"])
+    graph, warm = None, False
     for _ in range(0, 2 * len(tree["child"]) + 1, check_every):
-        state = list(_fast_steps(step, state, tensors, check_every, tree["leaf_size"],
-                                 bool(any_hit)))
+        if graphs:
+            if graph is None:  # a graph per number of rays: captured after each compaction
+                graph = _StepGraph(step, state, tensors, tree["leaf_size"], bool(any_hit),
+                                   warm)
+                warm = True
+            state = graph.run(check_every)
+        else:
+            state = list(_fast_steps(step, state, tensors, check_every, tree["leaf_size"],
+                                     bool(any_hit)))
         running = state[7] > 0
         active = int(running.sum())  # the one host sync per k steps
         if active == 0:
             break
-        if compact and active <= len(ray) // 2:
+        # With graphs a compaction costs a capture (a compiled call, ~1 ms of host time):
+        # compact only when at most a quarter of the rays run.
+        if compact and active <= len(ray) // (4 if graphs else 2):
             for i, name in enumerate(names):
                 out[name][ray] = state[8 + i]
             keep = running.nonzero()[:, 0]
             ray = ray[keep]
             state = [x[keep] for x in state]
+            graph = None
     for i, name in enumerate(names):
         out[name][ray] = state[8 + i]
     return (Hits(t=out["t"], triangle=out["tri"], u=out["u"], v=out["v"]),
@@ -1422,12 +1581,42 @@ def _fast_steps(step, state, tree, k: int, leaf_size: int, any_hit: bool):
     return state
 
 
+class _StepGraph:
+    """One step of :func:`bvh_closest_hit_fast` captured in a CUDA graph and replayed:
+    one graph launch per step instead of a compiled call (about 1 ms of host time for the
+    wrapper and its kernel launches, far more than the step's device time) per step.
+
+    The state lives in static buffers; the graph runs the step and copies the new state
+    back into them, so each replay advances it by one step. A new number of rays (after a
+    compaction) needs a new capture."""
+
+    def __init__(self, step, state, tensors, leaf_size, any_hit, warm):
+        self.state = [x.clone() for x in state]
+        if not warm:  # warm up on a copy, on a side stream (lazy initialisation)
+            side = torch.cuda.Stream()
+            side.wait_stream(torch.cuda.current_stream())
+            with torch.cuda.stream(side):
+                _fast_steps(step, [x.clone() for x in state], tensors, 1, leaf_size, any_hit)
+            torch.cuda.current_stream().wait_stream(side)
+        self.graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(self.graph):
+            new = _fast_steps(step, self.state, tensors, 1, leaf_size, any_hit)
+            for old, x in zip(self.state, new):
+                if x.data_ptr() != old.data_ptr():
+                    old.copy_(x)
+
+    def run(self, k: int):
+        for _ in range(k):
+            self.graph.replay()
+        return self.state
+
+
 def _fast_step(o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, best_u, best_v,
                steps, tests, nodes, boxes, slots, tri_of, leaf_size: int, any_hit: bool):
     """One step of :func:`bvh_closest_hit_fast` for every ray: the same shapes in and out
     (``stack``, (N, D) int32, and ``stack_t`` are updated in place), no host sync, no
     data-dependent Python control flow (what ``torch.compile`` fuses).
-    nodes: (M, 4) int64 ``[left, right, first, count]``; boxes: (M, 12) the two children's
+    nodes: (M, 4) int32 ``[left, right, first, count]``; boxes: (M, 12) the two children's
     ``lo, hi``; slots: (F, 9) ``v0, e1, e2`` per leaf slot; tri_of: (F,) their triangles."""
     grow = 1 + 2 * gamma(3, o.dtype)  # the conservative slab test's far-side scale
     depth = stack.shape[1]
@@ -1435,16 +1624,17 @@ def _fast_step(o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, be
     active = sp > 0
     top = (sp - 1).clamp(min=0)[:, None]
     node = stack.gather(1, top)[:, 0].long().clamp(min=0)  # free slots hold garbage (-1)
+    node = torch.where(active, node, 0)  # finished rays all read node 0: cached, no traffic
     t_node = stack_t.gather(1, top)[:, 0]
     sp = sp - active.long()
     live = active & (t_node <= best_t)
     steps = steps + live.long()
-    info = nodes.index_select(0, node)
+    info = nodes.index_select(0, node).long()
     n_tri = info[:, 3]
     leaf = live & (n_tri > 0)
     inner = live & (n_tri == 0)
     # Inner nodes: both children's slabs at once, (N, 2, 3).
-    box = boxes.index_select(0, node).view(-1, 2, 2, 3)
+    box = boxes.index_select(0, torch.where(inner, node, 0)).view(-1, 2, 2, 3)
     t0 = (box[:, :, 0] - o[:, None]) * inv[:, None]
     t1 = (box[:, :, 1] - o[:, None]) * inv[:, None]
     near, far = torch.minimum(t0, t1), torch.maximum(t0, t1) * grow
@@ -1462,7 +1652,7 @@ def _fast_step(o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, be
     # Leaves: a fixed loop over the slots, masked by the leaf's count.
     for j in range(leaf_size):
         ok = leaf & (j < n_tri)
-        s = (info[:, 2] + j).clamp(max=num_slots - 1)
+        s = torch.where(ok, info[:, 2] + j, 0).clamp(max=num_slots - 1)  # masked: slot 0
         tri = slots.index_select(0, s)
         t, u, v, h = moller_trumbore_rows(o, d, tri[:, 0:3], tri[:, 3:6], tri[:, 6:9], t_min,
                                           t_max)
