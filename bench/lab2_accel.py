@@ -4,6 +4,7 @@ costs and buys, against brute force (and, on the CPU, trimesh) in the same run.
     python bench/lab2_accel.py --small                  # CPU, a few minutes
     python bench/lab2_accel.py --device cuda            # GPU, a few minutes on an H100
     python bench/lab2_accel.py --device cpu --threads 2 --scenes bunny --fast-size 256
+    python bench/lab2_accel.py --device cuda --headline  # LBVH build + traversal rows, ~2 min
 
 Three parts, each a table of the same ResultTable (column ``part``):
 
@@ -236,19 +237,25 @@ def trimesh_row(mesh, rays, mode, table, common, log):
               tests=math.nan, bytes=0, error=math.nan)
 
 
-def run_fast_knobs(mode, device, table, log):
-    """The sync-free traversal on the bunny, one knob at a time."""
+def run_fast_knobs(mode, device, table, log, headline=False):
+    """The sync-free traversal on the bunny, one knob at a time (``headline``: only the
+    rows of the targets: eager, compiled, compiled with CUDA graphs; one compile)."""
     scene = load("bunny", mode, device)
     mesh = scene.mesh
     rays = camera_rays(scene, mode["fast_size"], device)
     log(f"fast path knobs: bunny, {len(rays):,} primary rays")
     settings = [(8, False, 4, True), (1, False, 4, True), (32, False, 4, True),
                 (8, False, 4, False), (8, False, 1, True), (8, False, 8, True)]
-    if mode["knob_compile"]:  # the small CPU run compiles once (minutes on 2 cores)
+    if headline:
+        settings = [(8, False, 4, True), (8, "default", 4, True)]
+        if device.type == "cuda":  # the same compiled step: no second compile
+            settings += [(k, "reduce-overhead", 4, True) for k in (8, 32)]
+            settings.append((32, "reduce-overhead", 4, False))  # one capture, device-bound
+    elif mode["knob_compile"]:  # the small CPU run compiles once (minutes on 2 cores)
         modes = mode["compile"] or ("default",)
         settings += [(8, m, 4, True) for m in modes] + [(k, modes[0], 4, True) for k in (4, 32)]
-        if device.type == "cuda":  # CUDA graphs: skipped by inductor, the step mutates its stack
-            settings.append((8, "reduce-overhead", 4, True))
+        if device.type == "cuda":  # CUDA graphs of the compiled step, captured by the solution
+            settings += [(k, "reduce-overhead", 4, True) for k in (8, 32)]
     bvhs = {}
     for k, compile_mode, leaf, compact in settings:
         if leaf not in bvhs:
@@ -293,6 +300,9 @@ def main(argv=None):
     parser.add_argument("--out", default=None, help="output folder")
     parser.add_argument("--threads", type=int, default=None, help="CPU threads for torch")
     parser.add_argument("--no-compile", action="store_true", help="skip torch.compile rows")
+    parser.add_argument("--headline", action="store_true",
+                        help="only the LBVH build and the headline traversal rows (bunny, "
+                             "eager / compiled / CUDA graphs): ~2 minutes on a GPU")
     args = parser.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -315,11 +325,11 @@ def main(argv=None):
 
     # The headline figures first, and the files rewritten after every part: a run stopped
     # at its time limit keeps what it measured.
-    parts = args.parts.split(",")
+    parts = ["lbvh", "fast"] if args.headline else args.parts.split(",")
     if "lbvh" in parts:
         run_lbvh_build(mode, device, table, log)
     if "fast" in parts:
-        run_fast_knobs(mode, device, table, log)
+        run_fast_knobs(mode, device, table, log, headline=args.headline)
         write(table, out, mode)
     if "structures" in parts:
         for name in mode["scenes"].split(","):
