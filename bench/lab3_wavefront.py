@@ -104,6 +104,7 @@ def triton_renderer(device):
 def errors(image: torch.Tensor, sample: torch.Tensor, reference: torch.Tensor) -> dict:
     """max_rel_error over the pixels that agree in their decisions, and the flipped fraction."""
     got = image[sample].double().cpu()
+    reference = reference.double().cpu()
     rel = ((got - reference).abs() / reference.abs().clamp(min=1e-3)).amax(1)
     flipped = rel > FLIP
     agree = rel[~flipped]
