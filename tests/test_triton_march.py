@@ -28,26 +28,21 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as a script: make `import course` work from a checkout
     sys.path.insert(0, str(REPO))
 
-from course.testing import assert_close, assert_equal, run_in_triton_interpreter
+from course.testing import (
+    OLD_INTERPRETER_REASON,
+    assert_close,
+    assert_equal,
+    run_in_triton_interpreter,
+    triton_interpreter_too_old,
+)
 
 HAVE_TRITON = importlib.util.find_spec("triton") is not None
 needs_triton = pytest.mark.skipif(not HAVE_TRITON, reason="triton is not installed "
                                   "(pip install triton); the kernel cannot run without it")
 F64 = torch.float64
 
-def _triton_version() -> tuple[int, int]:
-    import triton
-
-    return tuple(int(x) for x in triton.__version__.split(".")[:2])
-
-
-# Triton's interpreter before 3.9 runs loops only to plain-integer bounds and rounds some
-# element-wise operations differently from the compiled kernels; the compiled kernels
-# are what counts and are tested on CUDA whatever the version.
-old_interpreter = pytest.mark.skipif(
-    importlib.util.find_spec("triton") is not None and _triton_version() < (3, 9),
-    reason="Triton's interpreter before 3.9 cannot run these kernels (loop bounds from "
-           "tensors); the compiled kernels are tested on CUDA")
+old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(),
+                                     reason=OLD_INTERPRETER_REASON)
 
 
 

@@ -35,6 +35,8 @@ REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
+from course.testing import OLD_INTERPRETER_REASON, triton_interpreter_too_old
+
 needs_triton = pytest.mark.skipif(importlib.util.find_spec("triton") is None,
                                   reason="triton is not installed")
 COUNTS = ("froxels_lit", "tiles_with_media", "light_tiles", "light_evaluations")
@@ -44,16 +46,8 @@ COUNTS = ("froxels_lit", "tiles_with_media", "light_tiles", "light_evaluations")
 RTOL, ATOL = 2e-5, 2e-5
 
 
-def _triton_version() -> tuple[int, int]:
-    import triton
-
-    return tuple(int(x) for x in triton.__version__.split(".")[:2])
-
-
-old_interpreter = pytest.mark.skipif(
-    importlib.util.find_spec("triton") is not None and _triton_version() < (3, 9),
-    reason="Triton's interpreter before 3.9 cannot run these kernels (loop bounds from "
-           "tensors); the compiled kernels are tested on CUDA")
+old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(),
+                                     reason=OLD_INTERPRETER_REASON)
 
 
 def _texture(n: int, g: torch.Generator) -> torch.Tensor:

@@ -36,6 +36,8 @@ REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
+from course.testing import OLD_INTERPRETER_REASON, triton_interpreter_too_old
+
 needs_triton = pytest.mark.skipif(importlib.util.find_spec("triton") is None,
                                   reason="triton is not installed")
 RUNS = {"32": {"depth_bits": 32}, "24": {"depth_bits": 24},
@@ -45,19 +47,8 @@ RUNS = {"32": {"depth_bits": 32}, "24": {"depth_bits": 24},
 KNOBS = {"32": {"small_box": 32}, "24": {"small_box": 32, "huge_box": 200},
          "cull": {"small_box": 32}}
 
-def _triton_version() -> tuple[int, int]:
-    import triton
-
-    return tuple(int(x) for x in triton.__version__.split(".")[:2])
-
-
-# Triton's interpreter before 3.9 runs loops only to plain-integer bounds and rounds some
-# element-wise operations differently from the compiled kernels; the compiled kernels
-# are what counts and are tested on CUDA whatever the version.
-old_interpreter = pytest.mark.skipif(
-    importlib.util.find_spec("triton") is not None and _triton_version() < (3, 9),
-    reason="Triton's interpreter before 3.9 cannot run these kernels (loop bounds from "
-           "tensors); the compiled kernels are tested on CUDA")
+old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(),
+                                     reason=OLD_INTERPRETER_REASON)
 
 
 
