@@ -829,9 +829,9 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, sl
     ``counts=False`` they are None, the kernels skip that bookkeeping and nothing waits
     for the GPU (the frame is only queued).
 
-    ``num_warps``: of the froxel kernel (default: one warp per 32 slices, a lane per
-    froxel of the column; one warp for 64 slices timed faster on an H100, 0.40 against
-    0.50 ms per frame, but the GPU accuracy tests ran with the default).
+    ``num_warps``: of the froxel kernel, a power of two up to 32 (default: one warp per 32
+    slices, a lane per froxel of the column; one warp for 64 slices timed faster on an
+    H100, 0.40 against 0.50 ms per frame, but the GPU accuracy tests ran with the default).
 
     A scene without media returns a copy of ``opaque_image``, as the lab does. The scene's
     description (not its density textures) is packed into device tables once per scene,
@@ -854,6 +854,12 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, sl
                                ("volume_resolution", volume_resolution, 2)):
         if isinstance(value, bool) or not isinstance(value, int) or value < least:
             raise ValueError(f"{name}: expected an int >= {least}, got {value!r}")
+    # Compiled, Triton rejects a warp count that is not a power of two deep in its compiler
+    # (an assertion naming none of these arguments) and cannot launch over 32 warps; the
+    # interpreter ignores num_warps, so a bad value would pass every CPU test.
+    if num_warps is not None and (isinstance(num_warps, bool) or not isinstance(num_warps, int)
+                                  or not 1 <= num_warps <= 32 or num_warps & (num_warps - 1)):
+        raise ValueError(f"num_warps: expected None or a power of two <= 32, got {num_warps!r}")
     report = {"grid": grid, "froxels": math.prod(grid.shape), "froxels_lit": 0,
               "tiles_with_media": 0, "light_tiles": [0] * len(scene.lights),
               "light_evaluations": 0, "jitter": 0.5, "history_valid": 0.0, "history": None}

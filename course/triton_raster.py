@@ -508,6 +508,17 @@ def _check_viewport(width, height) -> None:
             raise ValueError(f"{name}: expected an int in [1, 32767], got {value!r}")
 
 
+def _check_knobs(depth_bits, small_box, huge_box=HUGE_BOX) -> None:
+    if depth_bits not in (24, 32):
+        raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
+    # The small kernel compares every lane's box size (0 for lanes past the last triangle)
+    # with these: below 0, every lane of a block is queued, past the end of the queue (the
+    # interpreter corrupted its heap on small_box=-1); None or a string fails inside Triton.
+    for name, value in (("small_box", small_box), ("huge_box", huge_box)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise ValueError(f"{name}: expected an int >= 0 (pixels), got {value!r}")
+
+
 def _check_device(device: torch.device, name: str) -> None:
     if not interpreting() and device.type != "cuda":
         raise ValueError(f"{name}: the compiled Triton kernels need a CUDA tensor, got {device} "
@@ -532,8 +543,7 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
         raise ValueError(f"screen: expected a (K, 3, 4) float tensor (x, y, z_ndc, 1/w), "
                          f"got {got}")
     _check_viewport(width, height)
-    if depth_bits not in (24, 32):
-        raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
+    _check_knobs(depth_bits, small_box, HUGE_BOX if huge_box is None else huge_box)
     device = screen.device
     _check_device(device, "screen")
     if out is None:
@@ -553,7 +563,9 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
     return out
 
 
-def _mesh_arguments(vertices, faces, mvp, width, height):
+def _mesh_arguments(vertices, faces, mvp, width, height, depth_bits=32, small_box=SMALL_BOX):
+    """Checked arguments of the mesh entry points. The device comes last: on a machine
+    without CUDA every other bad argument is still named, not reported as a CPU tensor."""
     _require_triton()
     if not isinstance(vertices, torch.Tensor) or vertices.ndim != 2 \
             or vertices.shape[1] != 3 or vertices.dtype not in (torch.float32, torch.float64):
@@ -571,8 +583,9 @@ def _mesh_arguments(vertices, faces, mvp, width, height):
     device = vertices.device
     if faces.device != device:
         raise ValueError(f"faces: expected a tensor on {device} like vertices, got {faces.device}")
-    _check_device(device, "vertices")
     _check_viewport(width, height)
+    _check_knobs(depth_bits, small_box)
+    _check_device(device, "vertices")
     # A CPU matrix is copied without a synchronisation (the copy is queued like a kernel).
     m = mvp.to(device=device, dtype=torch.float64, non_blocking=True).contiguous()
     return vertices.contiguous(), faces.contiguous(), m
@@ -625,9 +638,8 @@ def visibility_fused(vertices: torch.Tensor, faces: torch.Tensor, mvp: torch.Ten
     that an exact depth tie between a face's second piece and another face goes to the
     other face here (slot order), to the lower face in the lab.
     """
-    vertices, faces, m = _mesh_arguments(vertices, faces, mvp, width, height)
-    if depth_bits not in (24, 32):
-        raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
+    vertices, faces, m = _mesh_arguments(vertices, faces, mvp, width, height, depth_bits,
+                                         small_box)
     device, count = vertices.device, faces.shape[0]
     if count == 0:
         return torch.full((height, width), -1, dtype=torch.int64, device=device)
@@ -662,10 +674,10 @@ class FusedVisibility:
     def __init__(self, vertices: torch.Tensor, faces: torch.Tensor, width: int, height: int,
                  *, depth_bits: int = 32, cull_backfaces: bool = False,
                  small_box: int = SMALL_BOX) -> None:
-        eye = torch.eye(4, dtype=torch.float64, device=vertices.device)
-        vertices, faces, _ = _mesh_arguments(vertices, faces, eye, width, height)
-        if depth_bits not in (24, 32):
-            raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
+        # A stand-in matrix on the CPU: vertices, not yet checked, may have no device.
+        eye = torch.eye(4, dtype=torch.float64)
+        vertices, faces, _ = _mesh_arguments(vertices, faces, eye, width, height, depth_bits,
+                                             small_box)
         self.vertices, self.faces, self.width, self.height = vertices, faces, width, height
         self.knobs = {"depth_bits": depth_bits, "cull_backfaces": cull_backfaces,
                       "small_box": small_box}

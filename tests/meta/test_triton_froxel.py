@@ -13,7 +13,9 @@ pipeline (non-temporal) and count for count with its report:
 * ``dense``: extinction 1e4 per metre (transmittance 0 after the first slice: no NaN);
 * ``emissive``: sigma_t = 0 everywhere, emission only (the slice integral's series at 0;
   nothing lit, lights listed but never evaluated);
-* a scene without media: a copy of the opaque image.
+* a scene without media: a copy of the opaque image;
+* bad arguments (wrong kind, shape, dtype, device or value): an error naming the argument,
+  raised before any launch (in process, no interpreter needed).
 
 The CPU check runs the kernels in Triton's interpreter in a subprocess (``TRITON_INTERPRET``
 must be set before Triton is imported); with CUDA they also run compiled, in process, and
@@ -258,6 +260,93 @@ def test_compiled_1080p_frame_matches_the_lab():
     for key in ("froxels_lit", "tiles_with_media", "light_evaluations"):
         assert abs(counts[key] - report[key]) <= 1e-4 * report[key], \
             f"1080p: report[{key!r}] is {counts[key]}, the lab's {report[key]}"
+
+
+def _tiny_frame():
+    """A valid call's arguments: a 12 x 8 frame of a scene with media (without media the
+    call returns before the device check), float32 CPU images."""
+    from course.camera import Camera
+    from course.froxel_support import ConstantFog, PointLight, Scene
+
+    camera = Camera(eye=(0.0, 1.0, 2.0), target=(0.0, 1.0, -5.0), width=12, height=8)
+    scene = Scene(media=(ConstantFog(),), lights=(PointLight(),))
+    return scene, camera, torch.ones(8, 12), torch.zeros(8, 12, 3)
+
+
+@needs_triton
+def test_bad_arguments_are_named():
+    """render_froxels_fused checks every argument before its first launch (no interpreter
+    needed): each bad one raises a TypeError (wrong kind) or ValueError (wrong shape,
+    device or value) naming it, with or without media in the scene."""
+    from course.froxel_support import ConstantFog, Scene
+    from course.testing import expect_error
+    from course.triton_froxel import render_froxels_fused
+
+    scene, camera, depth, opaque = _tiny_frame()
+    positional = [  # (name, kind, case, scene, camera, depth_image, opaque_image)
+        ("camera", TypeError, "a string as the camera", "camera", depth, opaque),
+        ("depth_image", TypeError, "a numpy depth image", camera, depth.numpy(), opaque),
+        ("depth_image", TypeError, "int64 depths", camera, depth.long(), opaque),
+        ("depth_image", TypeError, "float16 images", camera, depth.half(), opaque.half()),
+        ("depth_image", ValueError, "depths of shape (W, H)", camera, depth.T, opaque),
+        ("depth_image", ValueError, "depths with a channel axis", camera, depth[..., None],
+         opaque),
+        ("opaque_image", TypeError, "None as the opaque image", camera, depth, None),
+        ("opaque_image", TypeError, "a float64 opaque image with float32 depths", camera,
+         depth, opaque.double()),
+        ("opaque_image", ValueError, "an RGBA opaque image", camera, depth,
+         torch.zeros(8, 12, 4)),
+        ("opaque_image", ValueError, "an (H, W) opaque image", camera, depth, depth),
+        ("opaque_image", ValueError, "the opaque image on another device than the depths",
+         camera, depth, opaque.to("meta")),
+    ]
+    keywords = [  # (name, kind, case, keyword arguments)
+        ("tile", ValueError, "tile = 0", {"tile": 0}),
+        ("slices", ValueError, "slices = 0", {"slices": 0}),
+        ("slices", ValueError, "slices = True", {"slices": True}),
+        ("slices", ValueError, "slices = 16.0", {"slices": 16.0}),
+        ("near", ValueError, "near = 0", {"near": 0.0}),
+        ("near", ValueError, "near = NaN", {"near": math.nan}),
+        ("near", TypeError, "near as a string", {"near": "0.1"}),
+        ("far", ValueError, "far == near", {"near": 1.0, "far": 1.0}),
+        ("far", ValueError, "far = inf", {"far": math.inf}),
+        ("phase", ValueError, "an unknown phase function", {"phase": "rayleigh"}),
+        ("integration", ValueError, "an unknown integration", {"integration": "trapezoid"}),
+        ("shadow_resolution", ValueError, "shadow_resolution = 0", {"shadow_resolution": 0}),
+        ("shadow_resolution", ValueError, "shadow_resolution = True",
+         {"shadow_resolution": True}),
+        ("shadow_resolution", ValueError, "shadow_resolution = 16.0",
+         {"shadow_resolution": 16.0}),
+        ("volume_resolution", ValueError, "volume_resolution = 1 (one depth sample)",
+         {"volume_resolution": 1}),
+        ("num_warps", ValueError, "num_warps = 3", {"num_warps": 3}),
+        ("num_warps", ValueError, "num_warps = 64", {"num_warps": 64}),
+        ("num_warps", ValueError, "num_warps = 0", {"num_warps": 0}),
+        ("num_warps", ValueError, "num_warps = 2.0", {"num_warps": 2.0}),
+    ]
+    expect_error("scene", render_froxels_fused, [ConstantFog()], camera, depth, opaque,
+                 kinds=(TypeError,), case="a list of media as the scene")
+    for media, sc in (("with media", scene), ("without media", Scene())):
+        for name, kind, case, *args in positional:
+            expect_error(name, render_froxels_fused, sc, *args, kinds=(kind,),
+                         case=f"{case} ({media})")
+        for name, kind, case, kwargs in keywords:
+            expect_error(name, render_froxels_fused, sc, camera, depth, opaque, **kwargs,
+                         kinds=(kind,), case=f"{case} ({media})")
+
+
+@needs_triton
+def test_cpu_images_need_the_interpreter():
+    """Compiled, the kernels need CUDA tensors: CPU images are refused, naming depth_image,
+    before anything is packed or launched."""
+    from course.testing import expect_error
+    from course.triton_froxel import render_froxels_fused
+    from course.triton_intersect import interpreting
+
+    if interpreting():
+        pytest.skip("TRITON_INTERPRET=1 is set in this process: CPU tensors are accepted")
+    expect_error("depth_image", render_froxels_fused, *_tiny_frame(), kinds=(ValueError,),
+                 case="CPU images without TRITON_INTERPRET=1")
 
 
 if __name__ == "__main__":

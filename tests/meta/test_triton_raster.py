@@ -18,7 +18,8 @@ one kernel; ``visibility_fused``: that, the raster kernels and the id map) is co
 the lab's ``to_clip_space``, ``clip_triangles`` and ``to_screen`` (the same pieces, bit for
 bit, in another order) and with the lab's visibility, on Suzanne seen from outside and
 from inside and on a soup of triangles around the eye (crossings of the near plane with one
-and two corners in front, faces behind the eye, NaN and inf vertices).
+and two corners in front, faces behind the eye, NaN and inf vertices). Bad arguments of
+the entry points raise an error naming the argument before any launch (in process).
 
 Usage as the subprocess: ``python tests/meta/test_triton_raster.py INPUTS.pt OUTPUTS.pt``.
 """
@@ -395,6 +396,132 @@ def test_graph_replay_matches_eager():
         results.append(got)
     assert not torch.equal(results[0], results[1]), "the graph ignored the new matrix"
     assert results[0].data_ptr() != results[1].data_ptr(), "calls share their output"
+
+
+# --------------------------------------------------------------------------------------
+# Argument checks (all before the first launch: no interpreter needed)
+# --------------------------------------------------------------------------------------
+
+
+def _tiny_mesh():
+    """A valid call's arguments: one triangle in front of the eye, a float64 matrix, 8 x 6."""
+    vertices = torch.tensor([[-0.5, -0.5, 0.5], [0.5, -0.5, 0.5], [0.0, 0.5, 0.5]])
+    return vertices, torch.tensor([[0, 1, 2]]), torch.eye(4, dtype=torch.float64), 8, 6
+
+
+def _mesh_entry(name: str):
+    """The mesh entry point ``name`` as ``fn(vertices, faces, mvp, width, height, **knobs)``
+    (FusedVisibility: its constructor, which takes no matrix)."""
+    import course.triton_raster as fused
+
+    if name != "FusedVisibility":
+        return getattr(fused, name)
+
+    def construct(vertices, faces, mvp, width, height, **knobs):
+        return fused.FusedVisibility(vertices, faces, width, height, **knobs)
+
+    construct.__name__ = name
+    return construct
+
+
+MESH_ENTRIES = ("screen_triangles_triton", "visibility_fused", "FusedVisibility")
+
+
+@needs_triton
+@pytest.mark.parametrize("entry", MESH_ENTRIES)
+def test_bad_mesh_arguments_are_named(entry):
+    """Each bad argument of the mesh entry points raises a ValueError naming it, whatever
+    the device: the device is checked last."""
+    from course.testing import expect_error
+
+    fn = _mesh_entry(entry)
+    v, f, mvp, w, h = _tiny_mesh()
+    cases = [  # (name, case, vertices, faces, mvp, width, height)
+        ("vertices", "a list of vertices", v.tolist(), f, mvp, w, h),
+        ("vertices", "(V, 2) vertices", v[:, :2], f, mvp, w, h),
+        ("vertices", "(1, V, 3) vertices", v[None], f, mvp, w, h),
+        ("vertices", "int32 vertices", v.int(), f, mvp, w, h),
+        ("vertices", "float16 vertices", v.half(), f, mvp, w, h),
+        ("faces", "a list of faces", v, f.tolist(), mvp, w, h),
+        ("faces", "(F, 2) faces", v, f[:, :2], mvp, w, h),
+        ("faces", "(3,) faces", v, f[0], mvp, w, h),
+        ("faces", "float32 faces", v, f.float(), mvp, w, h),
+        ("faces", "int16 faces", v, f.short(), mvp, w, h),
+        ("faces", "faces on another device than vertices", v, f.to("meta"), mvp, w, h),
+        ("width", "width = 0", v, f, mvp, 0, h),
+        ("width", "width = 2**15", v, f, mvp, 2**15, h),
+        ("width", "width = 8.0", v, f, mvp, 8.0, h),
+        ("width", "width = True", v, f, mvp, True, h),
+        ("height", "height = -1", v, f, mvp, w, -1),
+        ("height", "height = None", v, f, mvp, w, None),
+    ]
+    if entry != "FusedVisibility":  # its matrix comes with each call (next test)
+        cases += [
+            ("mvp", "a nested list as mvp", v, f, mvp.tolist(), w, h),
+            ("mvp", "a (3, 3) mvp", v, f, mvp[:3, :3], w, h),
+            ("mvp", "a (1, 4, 4) mvp", v, f, mvp[None], w, h),
+            ("mvp", "an int64 mvp", v, f, mvp.long(), w, h),
+        ]
+    for name, case, *args in cases:
+        expect_error(name, fn, *args, kinds=(ValueError,), case=case)
+    if entry != "screen_triangles_triton":  # the raster knobs
+        for name, value in (("depth_bits", 16), ("depth_bits", None), ("small_box", -1),
+                            ("small_box", None), ("small_box", 2.5), ("small_box", "32"),
+                            ("small_box", True)):
+            expect_error(name, fn, v, f, mvp, w, h, **{name: value}, kinds=(ValueError,),
+                         case=f"{name}={value!r}")
+
+
+@needs_triton
+@pytest.mark.parametrize("entry", MESH_ENTRIES)
+def test_cpu_mesh_needs_the_interpreter(entry):
+    """Compiled, the kernels need CUDA tensors: a CPU mesh is refused, naming vertices."""
+    from course.testing import expect_error
+    from course.triton_intersect import interpreting
+
+    if interpreting():
+        pytest.skip("TRITON_INTERPRET=1 is set in this process: CPU tensors are accepted")
+    expect_error("vertices", _mesh_entry(entry), *_tiny_mesh(), kinds=(ValueError,),
+                 case="a CPU mesh without TRITON_INTERPRET=1")
+
+
+@needs_triton
+def test_fused_visibility_call_checks_the_matrix(device, monkeypatch):
+    """FusedVisibility(...)(mvp) names a bad matrix: on CUDA before recording its graph,
+    elsewhere through visibility_fused. On the CPU, interpreting() is patched to True
+    (TRITON_INTERPRET=1 can only be set before triton's import) so that the object can be
+    made; the error comes before any launch."""
+    import course.triton_raster as fused
+    from course.testing import expect_error
+
+    if device == "cpu":
+        monkeypatch.setattr(fused, "interpreting", lambda: True)
+    v, f, mvp, w, h = _tiny_mesh()
+    frame = fused.FusedVisibility(v.to(device), f.to(device), w, h)
+    for bad, case in ((mvp.tolist(), "a nested list"), (mvp[:3, :3], "a (3, 3) matrix"),
+                      (mvp.long(), "an int64 matrix")):
+        expect_error("mvp", frame, bad, kinds=(ValueError,), case=case)
+    assert frame._graph is None, "a graph was recorded for a bad matrix"
+
+
+@needs_triton
+def test_bad_raster_arguments_are_named():
+    """rasterize_triton's checks before the device's (its out buffer is checked after)."""
+    from course.testing import expect_error
+    from course.triton_raster import rasterize_triton
+
+    screen = torch.zeros(2, 3, 4)
+    for name, case, args, kwargs in (
+            ("screen", "a list", (screen.tolist(), 8, 6), {}),
+            ("screen", "(K, 3, 3) triangles", (screen[..., :3], 8, 6), {}),
+            ("screen", "int32 triangles", (screen.int(), 8, 6), {}),
+            ("width", "width = 0", (screen, 0, 6), {}),
+            ("height", "height = 2**15", (screen, 8, 2**15), {}),
+            ("depth_bits", "depth_bits=16", (screen, 8, 6), {"depth_bits": 16}),
+            ("small_box", "small_box=-1", (screen, 8, 6), {"small_box": -1}),
+            ("huge_box", "huge_box=-1", (screen, 8, 6), {"huge_box": -1}),
+            ("huge_box", "huge_box=2.5", (screen, 8, 6), {"huge_box": 2.5})):
+        expect_error(name, rasterize_triton, *args, **kwargs, kinds=(ValueError,), case=case)
 
 
 if __name__ == "__main__":
