@@ -45,6 +45,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
 
 from course.bench import ResultTable, device_name, pareto_plot, time_fn
+from course.accel_support import pack_bvh
 from course.camera import primary_rays
 from course.device import default_device
 from course.scenes import load_scene
@@ -239,44 +240,57 @@ def trimesh_row(mesh, rays, mode, table, common, log):
 
 def run_fast_knobs(mode, device, table, log, headline=False):
     """The sync-free traversal on the bunny, one knob at a time (``headline``: only the
-    rows of the targets: eager, compiled, compiled with CUDA graphs; one compile)."""
+    rows of the targets: eager, compiled, compiled with CUDA graphs, and the pack).
+
+    Every row but the ``packed per call`` one traces a tree packed once (``walk=``), as a
+    renderer keeps its structure between frames; the pack's own time is a row."""
     scene = load("bunny", mode, device)
     mesh = scene.mesh
     rays = camera_rays(scene, mode["fast_size"], device)
     log(f"fast path knobs: bunny, {len(rays):,} primary rays")
-    settings = [(8, False, 4, True), (1, False, 4, True), (32, False, 4, True),
-                (8, False, 4, False), (8, False, 1, True), (8, False, 8, True)]
+    # (k, compile, leaf size, compact, packed per call)
+    settings = [(8, False, 4, True, False), (1, False, 4, True, False),
+                (32, False, 4, True, False), (8, False, 4, False, False)]
+    compiled = [(k, m, 4, True, False) for m in (mode["compile"] or ("default",))
+                for k in (8, 16, 32)]
+    compiled += [(16, compiled[0][1], leaf, True, False) for leaf in (2, 8)]
+    compiled += [(16, compiled[0][1], 4, True, True), (16, compiled[0][1], 4, False, False)]
+    if device.type == "cuda":  # the same compiled steps replayed from CUDA graphs
+        compiled += [(k, "reduce-overhead", 4, True, False) for k in (8, 16, 32)]
+        compiled += [(16, "reduce-overhead", 4, True, True)]
     if headline:
-        settings = [(8, False, 4, True), (8, "default", 4, True)]
-        if device.type == "cuda":  # the same compiled step: no second compile
-            settings += [(k, "reduce-overhead", 4, True) for k in (8, 32)]
-            settings.append((32, "reduce-overhead", 4, False))  # one capture, device-bound
-    elif mode["knob_compile"]:  # the small CPU run compiles once (minutes on 2 cores)
-        modes = mode["compile"] or ("default",)
-        settings += [(8, m, 4, True) for m in modes] + [(k, modes[0], 4, True) for k in (4, 32)]
-        if device.type == "cuda":  # CUDA graphs of the compiled step, captured by the solution
-            settings += [(k, "reduce-overhead", 4, True) for k in (8, 32)]
-    bvhs = {}
-    for k, compile_mode, leaf, compact in settings:
+        settings = settings[:1] + [c for c in compiled if c[2] == 4]
+    elif mode["knob_compile"]:
+        settings += compiled
+    bvhs, walks = {}, {}
+    for k, compile_mode, leaf, compact, per_call in settings:
         if leaf not in bvhs:
             bvhs[leaf] = lab.build_sah_bvh(mesh, leaf_size=leaf)
+            timing = time_fn(pack_bvh, bvhs[leaf], mesh, repeats=mode["repeats"], warmup=1,
+                             device=device)
+            walks[leaf] = pack_bvh(bvhs[leaf], mesh)
+            table.add(part="fast", scene="bunny", setting=f"pack_bvh, leaf {leaf}",
+                      triangles=mesh.num_faces, build_s=timing.median, leaf_size=leaf)
+            log(f"  pack_bvh (8 octants), leaf {leaf}: {timing.median * 1e3:.1f} ms")
         bvh = bvhs[leaf]
+        walk = None if per_call else walks[leaf]
         label = (f"k={k}, compile={compile_mode or 'off'}, leaf {leaf}"
-                 + ("" if compact else ", no compaction"))
+                 + ("" if compact else ", no compaction") + (", packed per call" if per_call
+                                                             else ""))
         try:
-            lab.bvh_closest_hit_fast(rays[:64], mesh, bvh, check_every=k, compile=compile_mode,
-                                     compact=compact)
+            lab.bvh_closest_hit_fast(rays, mesh, bvh, check_every=k, compile=compile_mode,
+                                     compact=compact, walk=walk)  # warm up (and compile)
             timing = time_fn(lab.bvh_closest_hit_fast, rays, mesh, bvh, check_every=k,
-                             compile=compile_mode, compact=compact, repeats=mode["repeats"],
-                             warmup=1, device=device)
+                             compile=compile_mode, compact=compact, walk=walk,
+                             repeats=mode["repeats"], warmup=1, device=device)
         except RuntimeError as error:
             log(f"  {label}: failed: {type(error).__name__}: {error}")
             continue
         row = table.add(part="fast", scene="bunny", setting=label, triangles=mesh.num_faces,
                         rays=len(rays), build_s=math.nan, rays_per_s=len(rays) / timing.median,
                         check_every=k, compile=str(compile_mode), leaf_size=leaf,
-                        compact=compact)
-        log(f"  {label:<44} {row['rays_per_s']:>14,.0f} rays/s")
+                        compact=compact, packed_per_call=per_call)
+        log(f"  {label:<56} {row['rays_per_s']:>14,.0f} rays/s")
 
 
 def run_lbvh_build(mode, device, table, log):
@@ -365,7 +379,7 @@ def write(table, out: Path, mode: dict):
             pareto_plot(rows, x="rays_per_s", y="build_s", label="setting",
                         path=out / f"pareto_{name}_trace_vs_build.png",
                         title=f"{name}: primary rays/s against build time")
-    rows = [r for r in table.rows if r.get("part") == "fast"]
+    rows = [r for r in table.rows if r.get("part") == "fast" and "rays_per_s" in r]
     if rows:
         import matplotlib
         matplotlib.use("Agg")

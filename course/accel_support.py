@@ -430,74 +430,138 @@ class TreeLevels:
                             tri_hi)
 
 
-def pack_bvh(bvh: dict, mesh: Mesh) -> dict:
-    """Provided: a BVH dict laid out for the fixed-shape traversal (``bvh_closest_hit_fast``).
+def ray_octants(directions: torch.Tensor) -> torch.Tensor:
+    """Provided: each ray's direction octant, ``x_neg + 2 y_neg + 4 z_neg`` ((n,) int64).
 
-    bvh: any valid BVH dict (``build_lbvh``/``build_sah_bvh``); mesh: its mesh. Returns:
+    directions: (n, 3). A component is negative by its sign bit, so ``-0.0`` counts as
+    negative like ``-1``: either order of a node's children is right for a zero component.
+    """
+    neg = torch.signbit(directions).long()
+    return neg[:, 0] + 2 * neg[:, 1] + 4 * neg[:, 2]
+
+
+def pack_bvh(bvh: dict, mesh: Mesh, octants=None) -> dict:
+    """Provided: a BVH laid out for the sync-free walk (``bvh_closest_hit_fast``).
+
+    bvh: any valid BVH dict (``build_lbvh``/``build_sah_bvh``); mesh: its mesh; octants:
+    the ray octants (:func:`ray_octants`) to lay out, default all 8. Returns:
 
     ===============  ================  ==================================================
-    ``child``        (M, 2) int64      the two children of each inner node (-1, -1 for
-                                       leaves)
-    ``child_lo/hi``  (M, 2, 3) float   their boxes side by side: one gather per step reads
-                                       both (zeros for leaves)
-    ``first``        (M,) int64        a leaf's triangles are the packed slots
-    ``count``        (M,) int64        ``first .. first + count - 1``; 0 for inner nodes
-    ``v0, e1, e2``   (F, 3) float      each slot's vertex and edges ``v1 - v0``, ``v2 - v0``
-                                       (in leaf order: a leaf's triangles are contiguous)
-    ``tri``          (F,) int64        each slot's triangle index in the mesh
+    ``boxes``        (R * M, 6) float  ``lo, hi`` of every node, one depth-first array of
+                                       the M nodes per packed octant (R of them)
+    ``links``        (R * M, 3) int32  ``skip, first, count`` of the same rows: ``skip``
+                                       the row after the node's subtree (``M`` past the
+                                       end), a leaf's slots ``first .. first + count - 1``,
+                                       ``count`` 0 for inner nodes
+    ``base``         (8,) int64        octant -> its array's first row (-1: not packed)
+    ``slots``        (F, 9) float      ``v0, e1, e2`` per leaf slot (``e1 = v1 - v0``,
+                                       ``e2 = v2 - v0``; a leaf's triangles contiguous)
+    ``tri``          (F,) int32        each slot's triangle index in the mesh
     ``lo, hi``       (3,) float        the root's box
-    ``depth``        int               the tree's depth (root 0): a stack of ``depth + 2``
-                                       entries never overflows with near-first pushes
-    ``leaf_size``    int               the largest leaf: the slot loop's trip count
+    ``nodes``        int               M; ``depth`` the tree's depth (root 0);
+                                       ``leaf_size`` the largest leaf
     ===============  ================  ==================================================
 
-    The only host syncs are here, once per tree: ``depth`` and ``leaf_size`` are sizes.
+    In the array of an octant every inner node is followed by its **near** child's subtree,
+    then its far child's: near is the child whose box centre is lower along the node's
+    split axis (the axis along which the children's centres differ most) for rays going up
+    that axis, the other for rays going down. A walk that goes to ``i + 1`` after a hit
+    inner node and to ``skip`` otherwise then visits exactly the nodes a stack traversal
+    ordered by direction sign (pbrt's) pops, with no stack: the array *is* the traversal
+    order. ``kind`` is ``"bvh_walk"``; host syncs happen here only (one per tree level),
+    once per tree.
     """
     check_structure(bvh, "bvh", "bvh", mesh)
-    left, right = bvh["left"], bvh["right"]
+    octants = list(range(8)) if octants is None else sorted({int(o) for o in octants})
+    if not octants or not all(0 <= o < 8 for o in octants):
+        raise ValueError(f"octants: expected octants in 0..7, got {octants!r}")
+    left, right, lo, hi = bvh["left"], bvh["right"], bvh["lo"], bvh["hi"]
     m, device = len(left), left.device
     leaf = left < 0
-    child = torch.stack((left, right), dim=1)
-    safe = child.clamp(min=0)
-    child_lo = torch.where(leaf[:, None, None], 0.0, bvh["lo"][safe])
-    child_hi = torch.where(leaf[:, None, None], 0.0, bvh["hi"][safe])
-    # Depth by pointer jumping over parents: every round doubles the reach.
-    parent = torch.full((m,), -1, dtype=torch.int64, device=device)
     inner = (~leaf).nonzero()[:, 0]
+    parent = torch.full((m,), -1, dtype=torch.int64, device=device)
     parent[left[inner]] = inner
     parent[right[inner]] = inner
-    depth = (parent >= 0).long()
-    up = parent.clone()
-    for _ in range(64):
-        has = up >= 0
-        if not bool(has.any()):
+    levels = [torch.zeros(1, dtype=torch.int64, device=device)]  # breadth first, root down
+    while True:
+        below = levels[-1][~leaf[levels[-1]]]
+        if not len(below):
             break
-        depth = depth + torch.where(has, depth[up.clamp(min=0)], 0)
-        up = torch.where(has, up[up.clamp(min=0)], -1)
+        levels.append(torch.cat((left[below], right[below])))
+    size = torch.ones(m, dtype=torch.int64, device=device)  # nodes in each subtree
+    for level in reversed(levels[1:]):
+        size.index_add_(0, parent[level], size[level])
+    # Near child first, per octant: (R, M) bool "left child first".
+    safe_l, safe_r = left.clamp(min=0), right.clamp(min=0)
+    gap = (lo[safe_r] + hi[safe_r]) - (lo[safe_l] + hi[safe_l])
+    axis = gap.abs().argmax(1)
+    left_low = gap.gather(1, axis[:, None])[:, 0] >= 0
+    down = torch.tensor([[(o >> a) & 1 for a in range(3)] for o in octants], dtype=torch.bool,
+                        device=device)                                        # (R, 3)
+    left_first = left_low[None] ^ down[:, axis]
+    near = torch.where(left_first, left[None], right[None])
+    far = torch.where(left_first, right[None], left[None])
+    pos = torch.zeros((len(octants), m), dtype=torch.int64, device=device)
+    for level in levels[:-1]:  # children placed after their parent: top down
+        up = level[~leaf[level]]
+        a, b = near[:, up], far[:, up]
+        pos.scatter_(1, a, pos[:, up] + 1)
+        pos.scatter_(1, b, pos[:, up] + 1 + size[a])
+    order = torch.empty_like(pos).scatter_(1, pos, torch.arange(m, device=device).expand_as(pos))
+    skip = (pos + size).gather(1, order)
+    count = torch.where(leaf, bvh["count"], 0)[order]
+    first = torch.where(leaf, bvh["first"], 0)[order]
+    base = torch.full((8,), -1, dtype=torch.int64, device=device)
+    base[torch.tensor(octants, device=device)] = torch.arange(len(octants), device=device) * m
     corners = mesh.triangles()[bvh["triangles"]]
-    return {"child": child, "child_lo": child_lo, "child_hi": child_hi,
-            "first": torch.where(leaf, bvh["first"], 0), "count": torch.where(leaf, bvh["count"], 0),
-            "v0": corners[:, 0].contiguous(), "e1": (corners[:, 1] - corners[:, 0]).contiguous(),
-            "e2": (corners[:, 2] - corners[:, 0]).contiguous(), "tri": bvh["triangles"],
-            "lo": bvh["lo"][0], "hi": bvh["hi"][0], "depth": int(depth.max()),
-            "leaf_size": int(bvh["count"].max())}
+    return {"kind": "bvh_walk",
+            "boxes": torch.cat((lo[order], hi[order]), 2).reshape(-1, 6),
+            "links": torch.stack((skip, first, count), 2).reshape(-1, 3).int(),
+            "base": base,
+            "slots": torch.cat((corners[:, 0], corners[:, 1] - corners[:, 0],
+                                corners[:, 2] - corners[:, 0]), 1),
+            "tri": bvh["triangles"].int(), "lo": lo[0], "hi": hi[0], "nodes": m,
+            "depth": len(levels) - 1, "leaf_size": int(bvh["count"].max())}
+
+
+def check_walk(walk, mesh: Mesh, rays) -> None:
+    """Provided: ``walk`` must be :func:`pack_bvh`'s layout of a BVH of ``mesh``, packed
+    for every octant the ``rays`` go in (ValueError/TypeError naming ``walk``)."""
+    if not isinstance(walk, dict) or walk.get("kind") != "bvh_walk":
+        got = walk.get("kind") if isinstance(walk, dict) else type(walk).__name__
+        raise ValueError(f"walk: expected pack_bvh(bvh, mesh)'s dict (kind 'bvh_walk'), "
+                         f"got {got!r}")
+    for key in ("boxes", "links", "base", "slots", "tri"):
+        x = walk.get(key)
+        if not isinstance(x, torch.Tensor) or x.device != mesh.device:
+            raise ValueError(f"walk: expected a tensor on {mesh.device} under {key!r}")
+    if walk["slots"].dtype != mesh.dtype or len(walk["tri"]) != mesh.num_faces:
+        raise ValueError(f"walk: packed for {len(walk['tri'])} {walk['slots'].dtype} "
+                         f"triangles, the mesh has {mesh.num_faces} {mesh.dtype}")
+    need = torch.unique(ray_octants(rays.directions))
+    missing = need[walk["base"][need] < 0]
+    if len(missing):
+        raise ValueError(f"walk: not packed for octant(s) {missing.tolist()} of these rays: "
+                         f"pack_bvh(bvh, mesh, octants=...) with them, or all 8")
 
 
 def moller_trumbore_rows(o, d, v0, e1, e2, t_min, t_max):
     """Provided: Lab 1's Möller–Trumbore on precomputed edges, one ray per row.
 
-    o, d, v0, e1, e2: (n, 3) float (``e1 = v1 - v0``, ``e2 = v2 - v0``); t_min, t_max: (n,).
+    o, d, v0, e1, e2: (n, 3) float (``e1 = v1 - v0``, ``e2 = v2 - v0``), or each a tuple of
+    its three (n,) columns; t_min, t_max: (n,).
     Returns ``(t, u, v, hit)``, each (n,): unmasked ``t, u, v`` and whether they are a hit
     (inside, not parallel, ``t`` in ``[t_min, t_max]``). The parallel test is relative:
-    ``|det| <= eps |d| |e1| |e2|`` (max-norms). Cross and dot products are written out as
-    elementwise ops, so that ``torch.compile`` can fuse the whole test into one kernel.
+    ``|det| <= eps |d| |e1| |e2|`` (max-norms). Every product is written out on (n,)
+    columns: elementwise ops that ``torch.compile`` fuses into the kernel of its caller.
     """
+    o, d, v0, e1, e2 = (_columns(x) for x in (o, d, v0, e1, e2))
     p = _cross(d, e2)
     det = _dot(e1, p)
-    scale = d.abs().amax(-1) * e1.abs().amax(-1) * e2.abs().amax(-1)
+    scale = _max_abs(d) * _max_abs(e1) * _max_abs(e2)
     not_parallel = det.abs() > torch.finfo(det.dtype).eps * scale
     inv_det = 1 / det
-    s = o - v0
+    s = tuple(a - b for a, b in zip(o, v0))
     u = _dot(s, p) * inv_det
     q = _cross(s, e1)
     v = _dot(d, q) * inv_det
@@ -506,16 +570,23 @@ def moller_trumbore_rows(o, d, v0, e1, e2, t_min, t_max):
     return t, u, v, hit
 
 
+def _columns(x):
+    """(n, 3) tensor or 3 columns -> a tuple of three (n,) columns."""
+    return tuple(x.unbind(-1)) if isinstance(x, torch.Tensor) else tuple(x)
+
+
 def _cross(a, b):
-    """``a x b`` over the last axis, written out: elementwise ops a compiler fuses."""
-    return torch.stack((a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                        a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                        a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]), dim=-1)
+    """``a x b`` on column tuples."""
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 def _dot(a, b):
-    """``a . b`` over the last axis, written out."""
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+    """``a . b`` on column tuples."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _max_abs(a):
+    return torch.maximum(torch.maximum(a[0].abs(), a[1].abs()), a[2].abs())
 
 
 def scene_statistics(mesh: Mesh) -> dict:

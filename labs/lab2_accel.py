@@ -129,6 +129,7 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     check_structure,
     check_trace_inputs,
     check_two_level_knobs,
+    check_walk,
     choose_structure,
     expand_ranges,
     grid_resolutions,
@@ -138,6 +139,7 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     new_counters,
     pack_bvh,
     pair_chunks,
+    ray_octants,
     slab_test,
     surface_area,
     test_ranges,
@@ -753,45 +755,57 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
 
 
 def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
-                         check_every: int = 8, compile=False, compact: bool = True):
-    """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop.
+                         check_every: int = 8, compile=False, compact: bool = True,
+                         walk: dict | None = None):
+    """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop,
+    and no stack: a step any compiler can fuse with the next.
 
     rays: N rays; mesh: the BVH's mesh; bvh: a BVH dict; any_hit: stop each ray at its
     first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
     steps run between two looks at the rays (one host sync each); compile: False, True or
-    a ``torch.compile`` mode (``"reduce-overhead"``: CUDA graphs) for the ``k``-step body;
-    compact: at a look, drop finished rays if at most half are still running.
-    Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = nodes popped
-    and not culled, ``"tests"`` = triangle tests); with ``any_hit`` the hit of a ray is
-    *a* hit in its interval (the first found), not necessarily the closest.
+    a ``torch.compile`` mode for the ``k`` steps; ``"reduce-overhead"`` compiles them as
+    ``"default"`` and, on a GPU, replays them from a CUDA graph per number of rays
+    (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (a
+    quarter with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
+    once and trace it many times (default: packed here, for the octants of these rays).
+    Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = node boxes
+    tested, as :func:`bvh_closest_hit_stackless` counts them, ``"tests"`` = triangle tests);
+    with ``any_hit`` the hit of a ray is *a* hit in its interval (the first found), not
+    necessarily the closest.
 
     :func:`bvh_closest_hit` compacts the active rays every step (``nonzero``) and sizes
     its stack from ``sp.max()``: each is a host sync, and on a GPU a sync per step (plus
-    a hundred small kernel launches) is the whole cost. Here:
+    a hundred small kernel launches) is the whole cost. A stack in a tensor is also a
+    scatter per push, which ends every fused kernel. Here:
 
+    * :func:`pack_bvh` lays the tree out once per ray octant, near child first, with skip
+      links: the stackless walk of :func:`bvh_closest_hit_stackless` over the array of the
+      ray's octant visits the nodes an ordered stack traversal would, and a ray's whole
+      state is a few numbers: node, leaf slot, closest hit, counters;
     * every tensor keeps its shape: all rays step together, finished ones masked
-      (``sp == 0``); the stack is ``(N, depth + 2)`` (:func:`pack_bvh`'s depth bound), a
-      push writes slot ``sp`` unconditionally (free slots hold garbage) and then
-      ``sp += pushed``;
-    * a step pops one node per ray: an inner node slab-tests both children at once
-      (``child_lo/hi``: one gather), pushes the far hit child, then the near one; a
-      leaf runs a **fixed** loop of ``leaf_size`` slots, each a Möller–Trumbore test in
-      the mesh's dtype, masked by ``slot < count``, keeping the closest hit (ties: lowest
-      triangle index);
-    * the host looks only every ``k`` steps: stop when no stack holds anything, and
-      compact if few rays are left;
-    * the ``k`` steps are one function of tensors with no data-dependent Python control
-      flow, so ``torch.compile`` can fuse each step into a few kernels.
+      (``node == M``); rays that miss the root box never start;
+    * a step does **one** box test and **one** triangle test per ray and keeps what its
+      state asks for: outside a leaf, the node's box (hit: descend to ``i + 1``, or enter
+      the leaf's slots; miss or beyond the closest hit: ``skip``); inside a leaf, the next
+      slot (Möller–Trumbore in the mesh's dtype; ties to the lowest triangle index);
+      after the last slot, ``skip``;
+    * the host looks only every ``k`` steps: stop when every ray is done, compact if few
+      rays are left;
+    * the ``k`` steps are gathers from read-only tables and elementwise ops, nothing else,
+      so ``torch.compile`` turns all ``k`` into **one kernel** (one thread per ray, the
+      state in registers): the lecture's kernel, written in torch.
 
     The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
     in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
     (rounding may decide a ray grazing an edge differently when the ops are fused).
-    
-    Hints: ``pack_bvh`` (provided) lays the tree out for you: ``depth`` sizes the stack,
-    ``leaf_size`` the slot loop. Write the ``k`` steps as one function of tensors (state in,
-    state out: ``gather``/``scatter_`` on the stack, ``torch.where`` for the masked
-    updates); ``moller_trumbore_rows`` (provided) is the triangle test. Compile that function
-    once (``torch.compile(fn, mode=..., dynamic=True)``) and keep it, not per call.
+
+    Hints: ``pack_bvh`` (provided) lays the tree out for you (``boxes``, ``links``,
+    ``base``, ``slots``, ``tri``; ``ray_octants`` gives each ray's array). Write one step as
+    a function of (n,) columns, state in and state out, with ``torch.where`` for the masked
+    updates and plain indexing (``boxes[row, 0]``) for the gathers: no ``scatter_``, no
+    in-place writes, no ``nonzero`` inside it. ``moller_trumbore_rows`` (provided) is the
+    triangle test; it takes column tuples. Compile the ``k`` steps once
+    (``torch.compile(fn, dynamic=True)``) and keep them, not per call.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_trace_inputs(rays, mesh, moller_trumbore_rows)
@@ -800,4 +814,6 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
                        "max-autotune-no-cudagraphs"):
         raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
+    if walk is not None:
+        check_walk(walk, mesh, rays)
     raise NotImplementedError("not implemented yet: bvh_closest_hit_fast (task 7)")

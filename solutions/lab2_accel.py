@@ -127,6 +127,7 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     check_structure,
     check_trace_inputs,
     check_two_level_knobs,
+    check_walk,
     choose_structure,
     expand_ranges,
     grid_resolutions,
@@ -136,6 +137,7 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     new_counters,
     pack_bvh,
     pair_chunks,
+    ray_octants,
     slab_test,
     surface_area,
     test_ranges,
@@ -1474,38 +1476,45 @@ def _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray, sub
 
 
 def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
-                         check_every: int = 8, compile=False, compact: bool = True):
-    """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop.
+                         check_every: int = 8, compile=False, compact: bool = True,
+                         walk: dict | None = None):
+    """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop,
+    and no stack: a step any compiler can fuse with the next.
 
     rays: N rays; mesh: the BVH's mesh; bvh: a BVH dict; any_hit: stop each ray at its
     first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
     steps run between two looks at the rays (one host sync each); compile: False, True or
-    a ``torch.compile`` mode for the step; ``"reduce-overhead"`` (CUDA graphs) compiles it
-    as ``"default"`` and, on a GPU, captures it in a CUDA graph per number of rays
-    (:class:`_StepGraph`: inductor's own graphs skip a step that mutates its stack);
-    compact: at a look, drop finished rays if at most half (a quarter with graphs) are
-    still running.
-    Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = nodes popped
-    and not culled, ``"tests"`` = triangle tests); with ``any_hit`` the hit of a ray is
-    *a* hit in its interval (the first found), not necessarily the closest.
+    a ``torch.compile`` mode for the ``k`` steps; ``"reduce-overhead"`` compiles them as
+    ``"default"`` and, on a GPU, replays them from a CUDA graph per number of rays
+    (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (a
+    quarter with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
+    once and trace it many times (default: packed here, for the octants of these rays).
+    Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = node boxes
+    tested, as :func:`bvh_closest_hit_stackless` counts them, ``"tests"`` = triangle tests);
+    with ``any_hit`` the hit of a ray is *a* hit in its interval (the first found), not
+    necessarily the closest.
 
     :func:`bvh_closest_hit` compacts the active rays every step (``nonzero``) and sizes
     its stack from ``sp.max()``: each is a host sync, and on a GPU a sync per step (plus
-    a hundred small kernel launches) is the whole cost. Here:
+    a hundred small kernel launches) is the whole cost. A stack in a tensor is also a
+    scatter per push, which ends every fused kernel. Here:
 
+    * :func:`pack_bvh` lays the tree out once per ray octant, near child first, with skip
+      links: the stackless walk of :func:`bvh_closest_hit_stackless` over the array of the
+      ray's octant visits the nodes an ordered stack traversal would, and a ray's whole
+      state is a few numbers: node, leaf slot, closest hit, counters;
     * every tensor keeps its shape: all rays step together, finished ones masked
-      (``sp == 0``); the stack is ``(N, depth + 2)`` (:func:`pack_bvh`'s depth bound), a
-      push writes slot ``sp`` unconditionally (free slots hold garbage) and then
-      ``sp += pushed``;
-    * a step pops one node per ray: an inner node slab-tests both children at once
-      (``child_lo/hi``: one gather), pushes the far hit child, then the near one; a
-      leaf runs a **fixed** loop of ``leaf_size`` slots, each a Möller–Trumbore test in
-      the mesh's dtype, masked by ``slot < count``, keeping the closest hit (ties: lowest
-      triangle index);
-    * the host looks only every ``k`` steps: stop when no stack holds anything, and
-      compact if few rays are left;
-    * the ``k`` steps are one function of tensors with no data-dependent Python control
-      flow, so ``torch.compile`` can fuse each step into a few kernels.
+      (``node == M``); rays that miss the root box never start;
+    * a step does **one** box test and **one** triangle test per ray and keeps what its
+      state asks for: outside a leaf, the node's box (hit: descend to ``i + 1``, or enter
+      the leaf's slots; miss or beyond the closest hit: ``skip``); inside a leaf, the next
+      slot (Möller–Trumbore in the mesh's dtype; ties to the lowest triangle index);
+      after the last slot, ``skip``;
+    * the host looks only every ``k`` steps: stop when every ray is done, compact if few
+      rays are left;
+    * the ``k`` steps are gathers from read-only tables and elementwise ops, nothing else,
+      so ``torch.compile`` turns all ``k`` into **one kernel** (one thread per ray, the
+      state in registers): the lecture's kernel, written in torch.
 
     The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
     in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
@@ -1517,90 +1526,86 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
                        "max-autotune-no-cudagraphs"):
         raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
-    tree = pack_bvh(bvh, mesh)
+    o, d, inv = rays.origins, rays.directions, 1 / rays.directions
+    octant = ray_octants(d)  # the array whose order is near-first for the ray
+    if walk is None:  # only the octants these rays go in
+        walk = pack_bvh(bvh, mesh, torch.unique(octant).tolist())
+    else:
+        check_walk(walk, mesh, rays)
     n, device, dtype = len(rays), rays.device, rays.dtype
-    inv = 1 / rays.directions
-    t_root, _, hit_root = slab_test(rays.origins, inv, tree["lo"], tree["hi"], rays.t_min,
-                                    rays.t_max)
-    depth = tree["depth"] + 2
+    m = walk["nodes"]
+    _, _, hit_root = slab_test(o, inv, walk["lo"], walk["hi"], rays.t_min, rays.t_max)
     out = {"t": torch.full((n,), math.inf, dtype=dtype, device=device),
-           "tri": torch.full((n,), -1, dtype=torch.int64, device=device),
+           "tri": torch.full((n,), -1, dtype=torch.int32, device=device),
            "u": torch.zeros(n, dtype=dtype, device=device),
            "v": torch.zeros(n, dtype=dtype, device=device),
-           "steps": torch.zeros(n, dtype=torch.int64, device=device),
-           "tests": torch.zeros(n, dtype=torch.int64, device=device)}
-    ray = torch.arange(n, device=device)
-    state = [rays.origins, rays.directions, inv, rays.t_min, rays.t_max,
-             torch.zeros((n, depth), dtype=torch.int32, device=device),   # stack: nodes
-             torch.where(hit_root, t_root, math.inf)[:, None].expand(n, depth).contiguous(),
-             hit_root.long()] + [out[k].clone() for k in ("t", "tri", "u", "v", "steps",
-                                                          "tests")]
+           "steps": torch.zeros(n, dtype=torch.int32, device=device),
+           "tests": torch.zeros(n, dtype=torch.int32, device=device)}
     names = ("t", "tri", "u", "v", "steps", "tests")
-    # "reduce-overhead": inductor's own CUDA graphs skip a step that mutates its inputs
-    # (the stack), so compile it as "default" and capture the k steps in a graph here.
+    ray = hit_root.nonzero()[:, 0]  # the rest miss everything: they never start
+    # Per ray: read-only columns, then the state the steps carry.
+    fixed = [*o[ray].unbind(1), *d[ray].unbind(1), *inv[ray].unbind(1), rays.t_min[ray],
+             rays.t_max[ray], walk["base"][octant[ray]].int()]
+    zero = torch.zeros(len(ray), dtype=torch.int32, device=device)
+    state = [zero, zero, zero] + [out[name][ray] for name in names]  # node, slot, end, ...
+    tables = (walk["boxes"], walk["links"], walk["slots"], walk["tri"])
     graphs = compile == "reduce-overhead" and device.type == "cuda"
-    step = (_fast_step if compile is False
-            else _compiled_fast_step("default" if graphs else compile))
-    # One row per node and per slot: one gather reads all a step needs of each.
-    tensors = (torch.cat((tree["child"], tree["first"][:, None], tree["count"][:, None]),
-                         1).int(),
-               torch.cat((tree["child_lo"], tree["child_hi"]), 2).reshape(-1, 12),
-               torch.cat((tree["v0"], tree["e1"], tree["e2"]), 1), tree["tri"])
-    graph, warm = None, False
-    for _ in range(0, 2 * len(tree["child"]) + 1, check_every):
+    steps = (_fast_steps if compile is False
+             else _compiled_fast_steps("default" if graphs else compile))
+    graph = None
+    for _ in range(0, m + mesh.num_faces + 1, check_every):  # a step per node or slot, at most
+        if not len(ray):
+            break
         if graphs:
             if graph is None:  # a graph per number of rays: captured after each compaction
-                graph = _StepGraph(step, state, tensors, tree["leaf_size"], bool(any_hit),
-                                   warm)
-                warm = True
-            state = graph.run(check_every)
+                graph = _StepGraph(steps, fixed, state, tables, m, check_every, bool(any_hit))
+            state = graph.run()
         else:
-            state = list(_fast_steps(step, state, tensors, check_every, tree["leaf_size"],
-                                     bool(any_hit)))
-        running = state[7] > 0
+            state = list(steps(fixed, state, tables, m, check_every, bool(any_hit)))
+        running = state[0] < m
         active = int(running.sum())  # the one host sync per k steps
         if active == 0:
             break
-        # With graphs a compaction costs a capture (a compiled call, ~1 ms of host time):
-        # compact only when at most a quarter of the rays run.
+        # With graphs a compaction costs a capture (a compiled call): compact less often.
         if compact and active <= len(ray) // (4 if graphs else 2):
             for i, name in enumerate(names):
-                out[name][ray] = state[8 + i]
+                out[name][ray] = state[3 + i]
             keep = running.nonzero()[:, 0]
             ray = ray[keep]
+            fixed = [x[keep] for x in fixed]
             state = [x[keep] for x in state]
             graph = None
     for i, name in enumerate(names):
-        out[name][ray] = state[8 + i]
-    return (Hits(t=out["t"], triangle=out["tri"], u=out["u"], v=out["v"]),
-            {"steps": out["steps"], "tests": out["tests"]})
+        out[name][ray] = state[3 + i]
+    return (Hits(t=out["t"], triangle=out["tri"].long(), u=out["u"], v=out["v"]),
+            {"steps": out["steps"].long(), "tests": out["tests"].long()})
 
 
-def _fast_steps(step, state, tree, k: int, leaf_size: int, any_hit: bool):
-    """``k`` steps of :func:`bvh_closest_hit_fast`: ``step`` (:func:`_fast_step`, or its
-    compiled form) called ``k`` times; nothing here waits for the device."""
+def _fast_steps(fixed, state, tables, m: int, k: int, any_hit: bool):
+    """``k`` steps of :func:`bvh_closest_hit_fast`: ``fixed`` (ray columns), ``state`` in,
+    the new state out; nothing here waits for the device (what ``torch.compile`` fuses)."""
     for _ in range(k):
-        state = step(*state, *tree, leaf_size, any_hit)
+        state = _fast_step(*fixed, *state, *tables, m, any_hit)
     return state
 
 
 class _StepGraph:
-    """One step of :func:`bvh_closest_hit_fast` captured in a CUDA graph and replayed:
-    one graph launch per step instead of a compiled call (about 1 ms of host time for the
-    wrapper and its kernel launches, far more than the step's device time) per step.
+    """``k`` compiled steps of :func:`bvh_closest_hit_fast` captured in a CUDA graph and
+    replayed: one graph launch instead of a compiled call (its Python wrapper costs more
+    host time than the kernel's device time).
 
-    The state lives in static buffers; the graph runs the step and copies the new state
-    back into them, so each replay advances it by one step. A new number of rays (after a
-    compaction) needs a new capture."""
+    The state lives in static buffers; the graph runs the steps and copies the new state
+    back into them, so each replay advances it by ``k`` steps. A new number of rays
+    (after a compaction) needs a new capture."""
 
-    def __init__(self, step, state, tensors, leaf_size, any_hit, warm):
+    def __init__(self, steps, fixed, state, tables, m, k, any_hit):
         self.state = [x.clone() for x in state]
-        if not warm:  # warm up on a copy, on a side stream (lazy initialisation)
-            side = torch.cuda.Stream()
-            side.wait_stream(torch.cuda.current_stream())
-            with torch.cuda.stream(side):
-                _fast_steps(step, [x.clone() for x in state], tensors, 1, leaf_size, any_hit)
-            torch.cuda.current_stream().wait_stream(side)
+        args = (tables, m, k, any_hit)
+        side = torch.cuda.Stream()  # warm up (lazy initialisation) on a copy, off the stream
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side):
+            steps(fixed, [x.clone() for x in state], *args)
+        torch.cuda.current_stream().wait_stream(side)
         # capture_begin/end on a side stream, not the torch.cuda.graph context: that one
         # runs gc.collect() and empties the cache at every capture (tens of ms each).
         self.graph = torch.cuda.CUDAGraph()
@@ -1608,87 +1613,75 @@ class _StepGraph:
         side.wait_stream(torch.cuda.current_stream())
         with torch.cuda.stream(side):
             self.graph.capture_begin()
-            new = _fast_steps(step, self.state, tensors, 1, leaf_size, any_hit)
-            for old, x in zip(self.state, new):
-                if x.data_ptr() != old.data_ptr():
-                    old.copy_(x)
+            for old, x in zip(self.state, steps(fixed, self.state, *args)):
+                old.copy_(x)
             self.graph.capture_end()
         torch.cuda.current_stream().wait_stream(side)
 
-    def run(self, k: int):
-        for _ in range(k):
-            self.graph.replay()
+    def run(self):
+        self.graph.replay()
         return self.state
 
 
-def _fast_step(o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, best_u, best_v,
-               steps, tests, nodes, boxes, slots, tri_of, leaf_size: int, any_hit: bool):
-    """One step of :func:`bvh_closest_hit_fast` for every ray: the same shapes in and out
-    (``stack``, (N, D) int32, and ``stack_t`` are updated in place), no host sync, no
-    data-dependent Python control flow (what ``torch.compile`` fuses).
-    nodes: (M, 4) int32 ``[left, right, first, count]``; boxes: (M, 12) the two children's
-    ``lo, hi``; slots: (F, 9) ``v0, e1, e2`` per leaf slot; tri_of: (F,) their triangles."""
-    grow = 1 + 2 * gamma(3, o.dtype)  # the conservative slab test's far-side scale
-    depth = stack.shape[1]
-    num_slots = slots.shape[0]
-    active = sp > 0
-    top = (sp - 1).clamp(min=0)[:, None]
-    node = stack.gather(1, top)[:, 0].long().clamp(min=0)  # free slots hold garbage (-1)
-    node = torch.where(active, node, 0)  # finished rays all read node 0: cached, no traffic
-    t_node = stack_t.gather(1, top)[:, 0]
-    sp = sp - active.long()
-    live = active & (t_node <= best_t)
-    steps = steps + live.long()
-    info = nodes.index_select(0, node).long()
-    n_tri = info[:, 3]
-    leaf = live & (n_tri > 0)
-    inner = live & (n_tri == 0)
-    # Inner nodes: both children's slabs at once, (N, 2, 3).
-    box = boxes.index_select(0, torch.where(inner, node, 0)).view(-1, 2, 2, 3)
-    t0 = (box[:, :, 0] - o[:, None]) * inv[:, None]
-    t1 = (box[:, :, 1] - o[:, None]) * inv[:, None]
-    near, far = torch.minimum(t0, t1), torch.maximum(t0, t1) * grow
-    t_hi = torch.minimum(t_max, best_t)[:, None]
-    t_in = torch.fmax(torch.fmax(torch.fmax(near[..., 0], near[..., 1]), near[..., 2]),
-                      t_min[:, None])
-    t_out = torch.fmin(torch.fmin(torch.fmin(far[..., 0], far[..., 1]), far[..., 2]), t_hi)
-    hit = inner[:, None] & (t_in <= t_out) & (t_in < math.inf)
-    a_first = (t_in[:, :1] <= t_in[:, 1:]).long()
-    for chosen in (a_first, 1 - a_first):  # far child first: the near one pops next
-        slot = sp.clamp(max=depth - 1)[:, None]
-        stack.scatter_(1, slot, info[:, :2].gather(1, chosen).int())  # in place: no copy
-        stack_t.scatter_(1, slot, t_in.gather(1, chosen))
-        sp = sp + hit.gather(1, chosen)[:, 0].long()
-    # Leaves: a fixed loop over the slots, masked by the leaf's count.
-    for j in range(leaf_size):
-        ok = leaf & (j < n_tri)
-        s = torch.where(ok, info[:, 2] + j, 0).clamp(max=num_slots - 1)  # masked: slot 0
-        tri = slots.index_select(0, s)
-        t, u, v, h = moller_trumbore_rows(o, d, tri[:, 0:3], tri[:, 3:6], tri[:, 6:9], t_min,
-                                          t_max)
-        index = tri_of.index_select(0, s)
-        better = ok & h & ((t < best_t) | ((t == best_t) & (index < best_tri)))
-        best_t = torch.where(better, t, best_t)
-        best_tri = torch.where(better, index, best_tri)
-        best_u = torch.where(better, u, best_u)
-        best_v = torch.where(better, v, best_v)
-        tests = tests + ok.long()
+def _fast_step(ox, oy, oz, dx, dy, dz, ix, iy, iz, t_min, t_max, base,
+               node, slot, end, best_t, best_tri, best_u, best_v, steps, tests,
+               boxes, links, slots, tri_of, m: int, any_hit: bool):
+    """One step of :func:`bvh_closest_hit_fast` for every ray: (n,) columns in, the new
+    state out, no host sync, no scatter, no data-dependent Python control flow.
+    Rays: origin, direction, inverse direction columns, ``t_min, t_max`` and ``base`` (the
+    row of the octant's array, int32). State: ``node`` (``m`` = done), ``slot < end``: the
+    leaf slots still to test, closest ``t, triangle, u, v``, counters. Tables:
+    :func:`pack_bvh`'s ``boxes, links, slots, tri``."""
+    active = node < m
+    leafing = active & (slot < end)
+    row = base + torch.where(active, node, 0)  # finished rays all read row 0: cached
+    # The node's box, against [t_min, min(t_max, closest t)] (the conservative slab test).
+    grow = 1 + 2 * gamma(3, ox.dtype)
+    t_in, t_out = t_min, torch.minimum(t_max, best_t)
+    for a, (o, inv) in enumerate(((ox, ix), (oy, iy), (oz, iz))):
+        t0 = (boxes[row, a] - o) * inv
+        t1 = (boxes[row, 3 + a] - o) * inv
+        t_in = torch.fmax(t_in, torch.minimum(t0, t1))
+        t_out = torch.fmin(t_out, torch.maximum(t0, t1) * grow)
+    entered = active & ~leafing & (t_in <= t_out)
+    skip, first, count = links[row, 0], links[row, 1], links[row, 2]
+    # The leaf slot (slot 0 for rays that are not in a leaf: cached, the result unused).
+    s = torch.where(leafing, slot, 0)
+    tri = slots[s]
+    t, u, v, hit = moller_trumbore_rows((ox, oy, oz), (dx, dy, dz), tri[:, 0:3].unbind(1),
+                                        tri[:, 3:6].unbind(1), tri[:, 6:9].unbind(1), t_min,
+                                        t_max)
+    index = tri_of[s]
+    better = leafing & hit & ((t < best_t) | ((t == best_t) & (index < best_tri)))
+    best_t = torch.where(better, t, best_t)
+    best_tri = torch.where(better, index, best_tri)
+    best_u = torch.where(better, u, best_u)
+    best_v = torch.where(better, v, best_v)
+    steps = steps + (active & ~leafing).int()  # box tests
+    tests = tests + leafing.int()
+    # Next: descend into an inner node, enter a leaf's slots, or skip the subtree.
+    into_leaf = entered & (count > 0)
+    leaf_done = leafing & (slot + 1 >= end)
+    stay = into_leaf | (leafing & ~leaf_done)
+    down = entered & (count == 0)
+    node = torch.where(active & ~stay, torch.where(down, node + 1, skip), node)
+    slot = torch.where(leafing, slot + 1, torch.where(into_leaf, first, slot))
+    end = torch.where(into_leaf, first + count, end)
     if any_hit:
-        sp = torch.where(best_tri >= 0, 0, sp)
-    return (o, d, inv, t_min, t_max, stack, stack_t, sp, best_t, best_tri, best_u, best_v,
-            steps, tests)
+        node = torch.where(best_tri >= 0, m, node)
+    return node, slot, end, best_t, best_tri, best_u, best_v, steps, tests
 
 
 _COMPILED: dict = {}
 
 
-def _compiled_fast_step(mode):
-    """``torch.compile`` of :func:`_fast_step`, one per mode, kept across calls (dynamic
+def _compiled_fast_steps(mode):
+    """``torch.compile`` of :func:`_fast_steps`, one per mode, kept across calls (dynamic
     shapes: compaction changes the number of rays without a recompile)."""
     mode = "default" if mode is True else mode
     if mode not in _COMPILED:
-        # Every (leaf size, any-hit, dtype) is a specialisation of its own: allow enough of
-        # them that none falls back to eager after dynamo's default limit of 8.
+        # Every (k, any-hit, dtype) is a specialisation of its own: allow enough of them
+        # that none falls back to eager after dynamo's default limit of 8.
         torch._dynamo.config.recompile_limit = max(torch._dynamo.config.recompile_limit, 64)
-        _COMPILED[mode] = torch.compile(_fast_step, mode=mode, dynamic=True)
+        _COMPILED[mode] = torch.compile(_fast_steps, mode=mode, dynamic=True)
     return _COMPILED[mode]

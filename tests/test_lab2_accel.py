@@ -32,7 +32,7 @@ import math
 import pytest
 import torch
 
-from course.accel_support import STRUCTURES, choose_structure
+from course.accel_support import STRUCTURES, choose_structure, pack_bvh, ray_octants
 from course.scenes import load_scene
 from course.testing import (
     assert_close,
@@ -1536,8 +1536,12 @@ def test_fast_bvh_matches_brute_force(impl, device):
             mean = count["tests"].double().mean().item()
             assert mean <= 6.0, (
                 f"bvh_closest_hit_fast: {mean:.2f} triangle tests per ray into a closed "
-                f"icosphere; push the far child first (the near one is popped next) and cull "
-                f"popped nodes beyond the closest hit")
+                f"icosphere; visit the near child first and cull nodes beyond the closest hit")
+            nodes = count["steps"].double().mean().item()
+            assert nodes <= 45.0, (
+                f"bvh_closest_hit_fast: {nodes:.1f} node visits per ray into a closed icosphere "
+                f"(an ordered walk needs about 30): skip the subtree of a missed box, and cull "
+                f"boxes beyond the closest hit")
     # Coincident triangles: the tie goes to the lowest index.
     mesh = on(scene("coincident"), device)
     rays = Rays.create(torch.tensor([[0.4, 0.4, -1.0], [0.45, 0.4, 2.0]]),
@@ -1588,12 +1592,66 @@ def test_fast_bvh_any_hit_and_knobs(impl, device):
                          f"check_every=1)", where="ray")
         assert_equal(hits.triangle.cpu(), base_hits.triangle.cpu(), name=f"bvh_closest_hit_fast("
                      f"check_every={k}, compact={compact}): triangles", where="ray")
+    # A tree packed once and reused gives the same walk; one packed for other octants is
+    # refused, naming the argument.
+    hits, count = impl.bvh_closest_hit_fast(rays, mesh, bvh, walk=pack_bvh(bvh, mesh))
+    assert_equal(count["steps"].cpu(), base["steps"].cpu(), name="bvh_closest_hit_fast(walk="
+                 "pack_bvh(bvh, mesh)): counters['steps'] (the same as packing inside)",
+                 where="ray")
+    assert_equal(hits.triangle.cpu(), base_hits.triangle.cpu(), name="bvh_closest_hit_fast("
+                 "walk=pack_bvh(bvh, mesh)): triangles", where="ray")
+    other = int(ray_octants(rays.directions[:1].cpu())[0]) ^ 7
+    expect_error("walk", impl.bvh_closest_hit_fast, rays, mesh, bvh,
+                 walk=pack_bvh(bvh, mesh, octants=[other]), case="a walk without the rays' octants")
     expect_error("check_every", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 0,
                  case="check_every=0")
     expect_error("compile", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 8, "fast",
                  case="compile='fast'")
     expect_error("bvh", impl.bvh_closest_hit_fast, rays, mesh, impl.build_grid(mesh),
                  case="a grid passed as the bvh")
+
+
+def test_pack_bvh_lays_out_each_octant_near_first():
+    """The given layout of the sync-free walk: per octant, a depth-first array of the same
+    nodes with skip links, the child nearer along the split axis first; also for a BVH whose
+    nodes are not numbered depth first."""
+    mesh = scene("teapot")
+    bvh = median_bvh(mesh, 3)
+    m = len(bvh["left"])
+    perm = torch.cat((torch.zeros(1, dtype=torch.int64), 1 + torch.randperm(
+        m - 1, generator=generator(190))))  # the root stays node 0
+    new_id = torch.empty_like(perm).scatter_(0, perm, torch.arange(m))
+    shuffled = dict(bvh, lo=bvh["lo"][perm], hi=bvh["hi"][perm], first=bvh["first"][perm],
+                    count=bvh["count"][perm],
+                    **{k: torch.where(bvh[k][perm] >= 0, new_id[bvh[k][perm].clamp(min=0)], -1)
+                       for k in ("left", "right")})
+    for tree in (bvh, shuffled):
+        walk = pack_bvh(tree, mesh)
+        assert walk["nodes"] == m and walk["base"].tolist() == [o * m for o in range(8)]
+        boxes = walk["boxes"].view(8, m, 6)
+        skip, first, count = walk["links"].long().view(8, m, 3).unbind(2)
+        key = torch.cat((tree["lo"], tree["hi"]), 1)
+        for o in range(8):
+            # The same nodes (as boxes), every row's subtree ending where its skip link says.
+            assert torch.equal(torch.sort(boxes[o], 0).values, torch.sort(key, 0).values)
+            inner = (count[o] == 0).nonzero()[:, 0]
+            a, b = inner + 1, skip[o, inner + 1]
+            assert bool((skip[o, b] == skip[o, inner]).all()) and bool((b < skip[o, inner]).all())
+            leaf = count[o] > 0
+            assert torch.equal(skip[o, leaf], leaf.nonzero()[:, 0] + 1)
+            assert int(count[o].sum()) == mesh.num_faces
+            # Near first: along the axis the two centres differ most, the first child's centre
+            # is lower for rays going up that axis, higher for rays going down.
+            ca = boxes[o, a, :3] + boxes[o, a, 3:]
+            cb = boxes[o, b, :3] + boxes[o, b, 3:]
+            axis = (cb - ca).abs().argmax(1)
+            gap = (cb - ca).gather(1, axis[:, None])[:, 0]
+            down = torch.tensor([(o >> i) & 1 for i in range(3)], dtype=torch.bool)[axis]
+            assert bool(torch.where(down, gap <= 0, gap >= 0).all()), f"octant {o}: far child first"
+    walk = pack_bvh(bvh, mesh, octants=[5, 2])
+    assert walk["base"].tolist() == [-1, -1, 0, -1, -1, m, -1, -1]
+    assert ray_octants(torch.tensor([[1.0, -0.0, 2.0], [-1.0, 0.0, -3.0]])).tolist() == [2, 5]
+    expect_error("octants", pack_bvh, bvh, mesh, octants=[8], case="octant 8")
 
 
 # ---------------------------------------------------------------------------------------

@@ -110,26 +110,36 @@ MUTANTS = [
            replace="cell_id = cell[:, 0] + res[:, 0] * (cell[:, 1] + res[:, 1] * cell[:, 2])",
            tests=GRID2,
            why="indexes every sub-grid's cells from 0: all sub-grids read the first one's lists"),
-    Mutant(name="fast_leaf_slot_loop_one_short", module=M, function="_fast_step",
-           find="for j in range(leaf_size):", replace="for j in range(leaf_size - 1):",
-           tests="fast_bvh",
-           why="the fixed slot loop stops one slot short: the last triangle of every full "
-               "leaf is never tested"),
+    Mutant(name="fast_leaf_slots_one_short", module=M, function="_fast_step",
+           find="end = torch.where(into_leaf, first + count, end)",
+           replace="end = torch.where(into_leaf, first + count - 1, end)", tests="fast_bvh",
+           why="a leaf's slot range stops one short: the last triangle of every leaf is never "
+               "tested"),
     Mutant(name="fast_any_hit_never_stops", module=M, function="_fast_step",
-           find="sp = torch.where(best_tri >= 0, 0, sp)", replace="sp = sp",
+           find="node = torch.where(best_tri >= 0, m, node)", replace="node = node",
            tests="fast_bvh",
            why="any-hit mode keeps searching after the first hit: a shadow ray costs as much "
                "as a closest-hit ray"),
-    Mutant(name="fast_near_child_pushed_first", module=M, function="_fast_step",
-           find="for chosen in (a_first, 1 - a_first):",
-           replace="for chosen in (1 - a_first, a_first):", tests="fast_bvh",
-           why="pushes the near child first, so the far one is popped first: correct hits, "
-               "but no culling by the near side's hit"),
+    Mutant(name="fast_far_child_first", module=M, function="bvh_closest_hit_fast",
+           find="octant = ray_octants(d)", replace="octant = ray_octants(-d)",
+           tests="fast_bvh",
+           why="walks the array of the opposite octant, far child first: correct hits, but "
+               "the near side's hit never culls the far side"),
     Mutant(name="fast_tie_to_highest_index", module=M, function="_fast_step",
            find="((t == best_t) & (index < best_tri))",
            replace="((t == best_t) & (index > best_tri))", tests="fast_bvh",
            why="among hits at the same t keeps the highest triangle index, not brute force's "
                "lowest"),
+    Mutant(name="fast_miss_descends", module=M, function="_fast_step",
+           find="torch.where(down, node + 1, skip)", replace="torch.where(active, node + 1, skip)",
+           tests="fast_bvh",
+           why="goes to node + 1 after a missed box too, instead of skipping its subtree: "
+               "right hits, but the walk tests every triangle"),
+    Mutant(name="fast_no_cull_by_closest_hit", module=M, function="_fast_step",
+           find="t_in, t_out = t_min, torch.minimum(t_max, best_t)",
+           replace="t_in, t_out = t_min, t_max", tests="fast_bvh",
+           why="tests boxes against [t_min, t_max] only: boxes behind the closest hit are "
+               "still entered (right hits, wasted work)"),
     Mutant(name="auto_builds_a_fallback_too", module=M, function="closest_hit",
            find="        structure = build(mesh, kind, **knobs)\n",
            replace="        fallback = build(mesh, \"bvh\", method=\"lbvh\")  # just in case\n"
