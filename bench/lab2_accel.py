@@ -40,6 +40,7 @@ import time
 from pathlib import Path
 
 import torch
+from torch._inductor import metrics as inductor_metrics
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
@@ -248,22 +249,24 @@ def run_fast_knobs(mode, device, table, log, headline=False):
     mesh = scene.mesh
     rays = camera_rays(scene, mode["fast_size"], device)
     log(f"fast path knobs: bunny, {len(rays):,} primary rays")
-    # (k, compile, leaf size, compact, packed per call)
-    settings = [(8, False, 4, True, False), (1, False, 4, True, False),
-                (32, False, 4, True, False), (8, False, 4, False, False)]
-    compiled = [(k, m, 4, True, False) for m in (mode["compile"] or ("default",))
-                for k in (8, 16, 32)]
-    compiled += [(16, compiled[0][1], leaf, True, False) for leaf in (2, 8)]
-    compiled += [(16, compiled[0][1], 4, True, True), (16, compiled[0][1], 4, False, False)]
-    if device.type == "cuda":  # the same compiled steps replayed from CUDA graphs
-        compiled += [(k, "reduce-overhead", 4, True, False) for k in (8, 16, 32)]
-        compiled += [(16, "reduce-overhead", 4, True, True)]
+    # (k, compile, leaf size, compact, packed per call, steps fused per compiled call)
+    settings = [(8, False, 4, True, False, 1), (1, False, 4, True, False, 1),
+                (32, False, 4, True, False, 1), (8, False, 4, False, False, 1)]
+    first = (mode["compile"] or ("default",))[0]
+    compiled = [(k, first, 4, True, False, 1) for k in (8, 16, 32)]
+    if device.type == "cuda":  # the same compiled step replayed from CUDA graphs
+        compiled += [(k, "reduce-overhead", 4, True, False, 1) for k in (16, 32)]
+        compiled += [(16, "reduce-overhead", 4, True, True, 1),
+                     (16, "reduce-overhead", 4, False, False, 1)]
+    graphs = "reduce-overhead" if device.type == "cuda" else first
+    compiled += [(16, graphs, leaf, True, False, 1) for leaf in (2, 8)]
+    compiled += [(16, graphs, 4, True, False, 8)]  # last: the longest compile
     if headline:
         settings = settings[:1] + [c for c in compiled if c[2] == 4]
     elif mode["knob_compile"]:
         settings += compiled
-    bvhs, walks = {}, {}
-    for k, compile_mode, leaf, compact, per_call in settings:
+    bvhs, walks, reference = {}, {}, {}
+    for k, compile_mode, leaf, compact, per_call, fuse in settings:
         if leaf not in bvhs:
             bvhs[leaf] = lab.build_sah_bvh(mesh, leaf_size=leaf)
             timing = time_fn(pack_bvh, bvhs[leaf], mesh, repeats=mode["repeats"], warmup=1,
@@ -275,22 +278,34 @@ def run_fast_knobs(mode, device, table, log, headline=False):
         bvh = bvhs[leaf]
         walk = None if per_call else walks[leaf]
         label = (f"k={k}, compile={compile_mode or 'off'}, leaf {leaf}"
-                 + ("" if compact else ", no compaction") + (", packed per call" if per_call
-                                                             else ""))
+                 + (f", {fuse} steps per kernel" if fuse > 1 else "")
+                 + ("" if compact else ", no compaction")
+                 + (", packed per call" if per_call else ""))
+        knobs = dict(check_every=k, compile=compile_mode, compact=compact, walk=walk,
+                     fuse_steps=fuse)
         try:
-            lab.bvh_closest_hit_fast(rays, mesh, bvh, check_every=k, compile=compile_mode,
-                                     compact=compact, walk=walk)  # warm up (and compile)
-            timing = time_fn(lab.bvh_closest_hit_fast, rays, mesh, bvh, check_every=k,
-                             compile=compile_mode, compact=compact, walk=walk,
-                             repeats=mode["repeats"], warmup=1, device=device)
+            kernels = inductor_metrics.generated_kernel_count
+            (hits, counters), warm_s = seconds(lab.bvh_closest_hit_fast, rays, mesh, bvh,
+                                               device=device, **knobs)  # warm up (and compile)
+            kernels = inductor_metrics.generated_kernel_count - kernels
+            timing = time_fn(lab.bvh_closest_hit_fast, rays, mesh, bvh, repeats=mode["repeats"],
+                             warmup=1, device=device, **knobs)
         except RuntimeError as error:
             log(f"  {label}: failed: {type(error).__name__}: {error}")
             continue
+        # The same leaf size must find the same triangles whatever the other knobs.
+        first_hits = reference.setdefault(leaf, hits.triangle)
+        differ = (hits.triangle != first_hits).double().mean().item()
         row = table.add(part="fast", scene="bunny", setting=label, triangles=mesh.num_faces,
                         rays=len(rays), build_s=math.nan, rays_per_s=len(rays) / timing.median,
+                        differ_from_first_row=differ,
                         check_every=k, compile=str(compile_mode), leaf_size=leaf,
-                        compact=compact, packed_per_call=per_call)
-        log(f"  {label:<56} {row['rays_per_s']:>14,.0f} rays/s")
+                        compact=compact, packed_per_call=per_call, fuse_steps=fuse,
+                        first_call_s=warm_s, kernels_generated=kernels,
+                        steps=counters["steps"].double().mean().item(),
+                        tests=counters["tests"].double().mean().item())
+        log(f"  {label:<60} {row['rays_per_s']:>14,.0f} rays/s  (first call {warm_s:6.1f} s, "
+            f"{kernels} kernels generated, {differ:.2g} differ)")
 
 
 def run_lbvh_build(mode, device, table, log):

@@ -756,18 +756,21 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
 
 def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
                          check_every: int = 8, compile=False, compact: bool = True,
-                         walk: dict | None = None):
+                         walk: dict | None = None, fuse_steps: int = 1):
     """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop,
     and no stack: a step any compiler can fuse with the next.
 
     rays: N rays; mesh: the BVH's mesh; bvh: a BVH dict; any_hit: stop each ray at its
     first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
     steps run between two looks at the rays (one host sync each); compile: False, True or
-    a ``torch.compile`` mode for the ``k`` steps; ``"reduce-overhead"`` compiles them as
-    ``"default"`` and, on a GPU, replays them from a CUDA graph per number of rays
-    (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (a
+    a ``torch.compile`` mode for the steps; ``"reduce-overhead"`` compiles them as
+    ``"default"`` and, on a GPU, replays the ``k`` steps from a CUDA graph per number of
+    rays (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (a
     quarter with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
-    once and trace it many times (default: packed here, for the octants of these rays).
+    once and trace it many times (default: packed here, for the octants of these rays);
+    fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
+    stays in registers across them, but the compile time grows with them (on 2 CPU cores
+    about a minute for 1, minutes for 8).
     Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = node boxes
     tested, as :func:`bvh_closest_hit_stackless` counts them, ``"tests"`` = triangle tests);
     with ``any_hit`` the hit of a ray is *a* hit in its interval (the first found), not
@@ -811,6 +814,7 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     check_trace_inputs(rays, mesh, moller_trumbore_rows)
     check_structure(bvh, "bvh", "bvh", mesh)
     _positive_int(check_every, "check_every", 1, 1024)
+    _positive_int(fuse_steps, "fuse_steps", 1, 64)
     if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
                        "max-autotune-no-cudagraphs"):
         raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")

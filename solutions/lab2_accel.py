@@ -1477,18 +1477,21 @@ def _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray, sub
 
 def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
                          check_every: int = 8, compile=False, compact: bool = True,
-                         walk: dict | None = None):
+                         walk: dict | None = None, fuse_steps: int = 1):
     """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop,
     and no stack: a step any compiler can fuse with the next.
 
     rays: N rays; mesh: the BVH's mesh; bvh: a BVH dict; any_hit: stop each ray at its
     first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
     steps run between two looks at the rays (one host sync each); compile: False, True or
-    a ``torch.compile`` mode for the ``k`` steps; ``"reduce-overhead"`` compiles them as
-    ``"default"`` and, on a GPU, replays them from a CUDA graph per number of rays
-    (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (a
+    a ``torch.compile`` mode for the steps; ``"reduce-overhead"`` compiles them as
+    ``"default"`` and, on a GPU, replays the ``k`` steps from a CUDA graph per number of
+    rays (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (a
     quarter with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
-    once and trace it many times (default: packed here, for the octants of these rays).
+    once and trace it many times (default: packed here, for the octants of these rays);
+    fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
+    stays in registers across them, but the compile time grows with them (on 2 CPU cores
+    about a minute for 1, minutes for 8).
     Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = node boxes
     tested, as :func:`bvh_closest_hit_stackless` counts them, ``"tests"`` = triangle tests);
     with ``any_hit`` the hit of a ray is *a* hit in its interval (the first found), not
@@ -1523,6 +1526,7 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     check_trace_inputs(rays, mesh, moller_trumbore_rows)
     check_structure(bvh, "bvh", "bvh", mesh)
     _positive_int(check_every, "check_every", 1, 1024)
+    _positive_int(fuse_steps, "fuse_steps", 1, 64)
     if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
                        "max-autotune-no-cudagraphs"):
         raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
@@ -1552,16 +1556,23 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     graphs = compile == "reduce-overhead" and device.type == "cuda"
     steps = (_fast_steps if compile is False
              else _compiled_fast_steps("default" if graphs else compile))
-    graph = None
-    for _ in range(0, m + mesh.num_faces + 1, check_every):  # a step per node or slot, at most
+    # k steps as calls of `fuse` steps each (eager: one call of k); extra steps of finished
+    # rays change nothing, so the counters never depend on the knobs.
+    fuse = check_every if compile is False else min(fuse_steps, check_every)
+    calls = -(-check_every // fuse)
+    graph, warm = None, False
+    for _ in range(0, m + mesh.num_faces + 1, calls * fuse):  # a step per node or slot
         if not len(ray):
             break
         if graphs:
             if graph is None:  # a graph per number of rays: captured after each compaction
-                graph = _StepGraph(steps, fixed, state, tables, m, check_every, bool(any_hit))
+                graph = _StepGraph(steps, fixed, state, (tables, m, fuse, bool(any_hit)),
+                                   calls, warm)
+                warm = True
             state = graph.run()
         else:
-            state = list(steps(fixed, state, tables, m, check_every, bool(any_hit)))
+            for _ in range(calls):
+                state = list(steps(fixed, state, tables, m, fuse, bool(any_hit)))
         running = state[0] < m
         active = int(running.sum())  # the one host sync per k steps
         if active == 0:
@@ -1590,22 +1601,22 @@ def _fast_steps(fixed, state, tables, m: int, k: int, any_hit: bool):
 
 
 class _StepGraph:
-    """``k`` compiled steps of :func:`bvh_closest_hit_fast` captured in a CUDA graph and
-    replayed: one graph launch instead of a compiled call (its Python wrapper costs more
-    host time than the kernel's device time).
+    """``calls`` compiled calls of :func:`bvh_closest_hit_fast`'s steps captured in a CUDA
+    graph and replayed: one graph launch instead of the compiled calls (each one's Python
+    wrapper costs more host time than its kernel's device time).
 
     The state lives in static buffers; the graph runs the steps and copies the new state
-    back into them, so each replay advances it by ``k`` steps. A new number of rays
-    (after a compaction) needs a new capture."""
+    back into them, so each replay advances it by ``k`` steps. A new number of rays (after
+    a compaction) needs a new capture; ``warm``: the compiled code already ran once."""
 
-    def __init__(self, steps, fixed, state, tables, m, k, any_hit):
+    def __init__(self, steps, fixed, state, args, calls, warm):
         self.state = [x.clone() for x in state]
-        args = (tables, m, k, any_hit)
-        side = torch.cuda.Stream()  # warm up (lazy initialisation) on a copy, off the stream
-        side.wait_stream(torch.cuda.current_stream())
-        with torch.cuda.stream(side):
-            steps(fixed, [x.clone() for x in state], *args)
-        torch.cuda.current_stream().wait_stream(side)
+        if not warm:  # warm up (lazy initialisation) on a copy, on a side stream
+            side = torch.cuda.Stream()
+            side.wait_stream(torch.cuda.current_stream())
+            with torch.cuda.stream(side):
+                steps(fixed, [x.clone() for x in state], *args)
+            torch.cuda.current_stream().wait_stream(side)
         # capture_begin/end on a side stream, not the torch.cuda.graph context: that one
         # runs gc.collect() and empties the cache at every capture (tens of ms each).
         self.graph = torch.cuda.CUDAGraph()
@@ -1613,7 +1624,10 @@ class _StepGraph:
         side.wait_stream(torch.cuda.current_stream())
         with torch.cuda.stream(side):
             self.graph.capture_begin()
-            for old, x in zip(self.state, steps(fixed, self.state, *args)):
+            new = self.state
+            for _ in range(calls):
+                new = steps(fixed, new, *args)
+            for old, x in zip(self.state, new):
                 old.copy_(x)
             self.graph.capture_end()
         torch.cuda.current_stream().wait_stream(side)
