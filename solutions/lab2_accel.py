@@ -1550,26 +1550,26 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     # Per ray: read-only columns, then the state the steps carry.
     fixed = [*o[ray].unbind(1), *d[ray].unbind(1), *inv[ray].unbind(1), rays.t_min[ray],
              rays.t_max[ray], walk["base"][octant[ray]].int()]
-    zero = torch.zeros(len(ray), dtype=torch.int32, device=device)
-    state = [zero, zero, zero] + [out[name][ray] for name in names]  # node, slot, end, ...
+    # node, slot, end, then the outputs: distinct tensors (aliased inputs would make
+    # torch.compile specialise the first call of every traversal apart).
+    state = [torch.zeros(len(ray), dtype=torch.int32, device=device) for _ in range(3)]
+    state += [out[name][ray] for name in names]
     tables = (walk["boxes"], walk["links"], walk["slots"], walk["tri"])
     graphs = compile == "reduce-overhead" and device.type == "cuda"
-    steps = (_fast_steps if compile is False
-             else _compiled_fast_steps("default" if graphs else compile))
+    steps = (_fast_steps if compile is False else _compiled_fast_steps(
+        "in place" if graphs else compile))
     # k steps as calls of `fuse` steps each (eager: one call of k); extra steps of finished
     # rays change nothing, so the counters never depend on the knobs.
     fuse = check_every if compile is False else min(fuse_steps, check_every)
     calls = -(-check_every // fuse)
-    graph, warm = None, False
+    graph = None
     for _ in range(0, m + mesh.num_faces + 1, calls * fuse):  # a step per node or slot
         if not len(ray):
             break
         if graphs:
             if graph is None:  # a graph per number of rays: captured after each compaction
-                graph = _StepGraph(steps, fixed, state, (tables, m, fuse, bool(any_hit)),
-                                   calls, warm)
-                warm = True
-            state = graph.run()
+                graph = _StepGraph(steps, fixed, state, (tables, m, fuse, bool(any_hit)))
+            state = graph.run(calls)
         else:
             for _ in range(calls):
                 state = list(steps(fixed, state, tables, m, fuse, bool(any_hit)))
@@ -1601,22 +1601,23 @@ def _fast_steps(fixed, state, tables, m: int, k: int, any_hit: bool):
 
 
 class _StepGraph:
-    """``calls`` compiled calls of :func:`bvh_closest_hit_fast`'s steps captured in a CUDA
-    graph and replayed: one graph launch instead of the compiled calls (each one's Python
-    wrapper costs more host time than its kernel's device time).
+    """One compiled call of :func:`bvh_closest_hit_fast`'s steps, updating the state in
+    place (:func:`_fast_steps_in_place`), captured in a CUDA graph and replayed: a graph
+    launch instead of a compiled call (whose Python wrapper costs more host time than its
+    kernel's device time), and no copies: the kernel writes the state where it read it.
 
-    The state lives in static buffers; the graph runs the steps and copies the new state
-    back into them, so each replay advances it by ``k`` steps. A new number of rays (after
-    a compaction) needs a new capture; ``warm``: the compiled code already ran once."""
+    A capture costs about one compiled call, so a compaction (a new number of rays, a new
+    capture) stays cheap."""
 
-    def __init__(self, steps, fixed, state, args, calls, warm):
+    def __init__(self, steps, fixed, state, args):
         self.state = [x.clone() for x in state]
-        if not warm:  # warm up (lazy initialisation) on a copy, on a side stream
-            side = torch.cuda.Stream()
-            side.wait_stream(torch.cuda.current_stream())
-            with torch.cuda.stream(side):
-                steps(fixed, [x.clone() for x in state], *args)
-            torch.cuda.current_stream().wait_stream(side)
+        # Warm up on a copy, off the capture: whatever the compiler still has to (re)compile
+        # for these shapes must happen outside it.
+        side = torch.cuda.Stream()
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side):
+            steps(fixed, [x.clone() for x in state], *args)
+        torch.cuda.current_stream().wait_stream(side)
         # capture_begin/end on a side stream, not the torch.cuda.graph context: that one
         # runs gc.collect() and empties the cache at every capture (tens of ms each).
         self.graph = torch.cuda.CUDAGraph()
@@ -1624,16 +1625,13 @@ class _StepGraph:
         side.wait_stream(torch.cuda.current_stream())
         with torch.cuda.stream(side):
             self.graph.capture_begin()
-            new = self.state
-            for _ in range(calls):
-                new = steps(fixed, new, *args)
-            for old, x in zip(self.state, new):
-                old.copy_(x)
+            steps(fixed, self.state, *args)
             self.graph.capture_end()
         torch.cuda.current_stream().wait_stream(side)
 
-    def run(self):
-        self.graph.replay()
+    def run(self, calls: int):
+        for _ in range(calls):
+            self.graph.replay()
         return self.state
 
 
@@ -1686,16 +1684,27 @@ def _fast_step(ox, oy, oz, dx, dy, dz, ix, iy, iz, t_min, t_max, base,
     return node, slot, end, best_t, best_tri, best_u, best_v, steps, tests
 
 
+def _fast_steps_in_place(fixed, state, tables, m: int, k: int, any_hit: bool):
+    """:func:`_fast_steps` writing the new state into ``state``'s tensors (for a CUDA graph
+    replayed many times); elementwise, so each ray reads its state before it writes it."""
+    for x, new in zip(state, _fast_steps(fixed, state, tables, m, k, any_hit)):
+        x.copy_(new)
+    return state
+
+
 _COMPILED: dict = {}
 
 
 def _compiled_fast_steps(mode):
-    """``torch.compile`` of :func:`_fast_steps`, one per mode, kept across calls (dynamic
-    shapes: compaction changes the number of rays without a recompile)."""
+    """``torch.compile`` of :func:`_fast_steps` (``"in place"``: of
+    :func:`_fast_steps_in_place`, as ``"default"``), one per mode, kept across calls
+    (dynamic shapes: compaction changes the number of rays without a recompile)."""
     mode = "default" if mode is True else mode
     if mode not in _COMPILED:
         # Every (k, any-hit, dtype) is a specialisation of its own: allow enough of them
         # that none falls back to eager after dynamo's default limit of 8.
         torch._dynamo.config.recompile_limit = max(torch._dynamo.config.recompile_limit, 64)
-        _COMPILED[mode] = torch.compile(_fast_steps, mode=mode, dynamic=True)
+        fn = _fast_steps_in_place if mode == "in place" else _fast_steps
+        _COMPILED[mode] = torch.compile(fn, mode="default" if mode == "in place" else mode,
+                                        dynamic=True)
     return _COMPILED[mode]
