@@ -1,0 +1,65 @@
+"""Profile one sync-free BVH traversal (Lab 2) on CUDA: where its device time goes.
+
+    python bench/lab2_profile.py --size 1024 --compile reduce-overhead --out DIR
+
+Traces the bunny's primary rays once to compile and warm up, then once under
+``torch.profiler``: writes the kernel table (``profile.txt``), and the rays that still run
+after every look at them (how much of the work compaction can save).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
+
+from course.accel_support import pack_bvh
+from course.camera import primary_rays
+from course.scenes import load_scene
+from solutions import lab2_accel as lab
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--size", type=int, default=1024)
+    parser.add_argument("--compile", default="reduce-overhead")
+    parser.add_argument("--check-every", type=int, default=16)
+    parser.add_argument("--no-compact", action="store_true")
+    parser.add_argument("--out", default=".")
+    args = parser.parse_args(argv)
+    scene = load_scene("bunny", device="cuda")
+    mesh = scene.mesh
+    bvh = lab.build_sah_bvh(mesh)
+    walk = pack_bvh(bvh, mesh)
+    rays = primary_rays(dataclasses.replace(scene.camera, width=args.size, height=args.size),
+                        device="cuda")
+    knobs = dict(check_every=args.check_every, compile=args.compile, walk=walk,
+                 compact=not args.no_compact)
+    hits, counters = lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)  # compile, warm up
+    lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)
+    torch.cuda.synchronize()
+    with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU,
+                                            torch.profiler.ProfilerActivity.CUDA]) as prof:
+        lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)
+        torch.cuda.synchronize()
+    table = prof.key_averages().table(sort_by="cuda_time_total", row_limit=25)
+    steps = counters["steps"] + counters["tests"]
+    started = int((steps > 0).sum())
+    lines = [f"{len(rays):,} rays, {started:,} start (hit the root box); steps per ray: "
+             f"mean {steps.double().mean():.1f}, max {int(steps.max())}",
+             "still running after s steps: " + ", ".join(
+                 f"{s}: {int((steps > s).sum()):,}" for s in (16, 32, 48, 64, 96, 128, 192))]
+    text = "\n".join(lines) + "\n\n" + table
+    print(text)
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    (Path(args.out) / "profile.txt").write_text(f"{' '.join(sys.argv)}\n\n{text}\n")
+
+
+if __name__ == "__main__":
+    main()
