@@ -766,7 +766,7 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     a ``torch.compile`` mode for the steps; ``"reduce-overhead"`` compiles them as
     ``"default"`` and, on a GPU, replays the ``k`` steps from a CUDA graph per number of
     rays (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (a
-    quarter with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
+    eighth with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
     once and trace it many times (default: packed here, for the octants of these rays);
     fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
     stays in registers across them, but the compile time grows with them (on 2 CPU cores

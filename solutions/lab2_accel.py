@@ -1487,7 +1487,7 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     a ``torch.compile`` mode for the steps; ``"reduce-overhead"`` compiles them as
     ``"default"`` and, on a GPU, replays the ``k`` steps from a CUDA graph per number of
     rays (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (a
-    quarter with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
+    eighth with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
     once and trace it many times (default: packed here, for the octants of these rays);
     fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
     stays in registers across them, but the compile time grows with them (on 2 CPU cores
@@ -1547,9 +1547,10 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
            "tests": torch.zeros(n, dtype=torch.int32, device=device)}
     names = ("t", "tri", "u", "v", "steps", "tests")
     ray = hit_root.nonzero()[:, 0]  # the rest miss everything: they never start
-    # Per ray: read-only columns, then the state the steps carry.
-    fixed = [*o[ray].unbind(1), *d[ray].unbind(1), *inv[ray].unbind(1), rays.t_min[ray],
-             rays.t_max[ray], walk["base"][octant[ray]].int()]
+    # Per ray: read-only columns (one (11, n) tensor: a compaction gathers it at once) and
+    # the row of its octant's array, then the state the steps carry.
+    fixed = (torch.cat((o[ray], d[ray], inv[ray], rays.t_min[ray, None], rays.t_max[ray, None]),
+                       1).T.contiguous(), walk["base"][octant[ray]].int())
     # node, slot, end, then the outputs: distinct tensors (aliased inputs would make
     # torch.compile specialise the first call of every traversal apart).
     state = [torch.zeros(len(ray), dtype=torch.int32, device=device) for _ in range(3)]
@@ -1577,13 +1578,14 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
         active = int(running.sum())  # the one host sync per k steps
         if active == 0:
             break
-        # With graphs a compaction costs a capture (a compiled call): compact less often.
-        if compact and active <= len(ray) // (4 if graphs else 2):
+        # A compaction is ~20 small ops of host time, and with graphs a capture: compact
+        # only when it saves the device far more (the rays still running fall fast).
+        if compact and active <= len(ray) // (8 if graphs else 2):
             for i, name in enumerate(names):
                 out[name][ray] = state[3 + i]
             keep = running.nonzero()[:, 0]
             ray = ray[keep]
-            fixed = [x[keep] for x in fixed]
+            fixed = (fixed[0][:, keep], fixed[1][keep])
             state = [x[keep] for x in state]
             graph = None
     for i, name in enumerate(names):
@@ -1593,10 +1595,12 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
 
 
 def _fast_steps(fixed, state, tables, m: int, k: int, any_hit: bool):
-    """``k`` steps of :func:`bvh_closest_hit_fast`: ``fixed`` (ray columns), ``state`` in,
-    the new state out; nothing here waits for the device (what ``torch.compile`` fuses)."""
+    """``k`` steps of :func:`bvh_closest_hit_fast`: ``fixed`` (the (11, n) ray columns and
+    the (n,) octant rows), ``state`` in, the new state out; nothing here waits for the
+    device (what ``torch.compile`` fuses)."""
+    columns, base = fixed
     for _ in range(k):
-        state = _fast_step(*fixed, *state, *tables, m, any_hit)
+        state = _fast_step(*columns.unbind(0), base, *state, *tables, m, any_hit)
     return state
 
 
@@ -1606,18 +1610,14 @@ class _StepGraph:
     launch instead of a compiled call (whose Python wrapper costs more host time than its
     kernel's device time), and no copies: the kernel writes the state where it read it.
 
-    A capture costs about one compiled call, so a compaction (a new number of rays, a new
-    capture) stays cheap."""
+    The state tensors (fresh after each compaction) are the graph's buffers. A capture
+    costs about one compiled call, so a compaction (a new number of rays) stays cheap."""
 
     def __init__(self, steps, fixed, state, args):
-        self.state = [x.clone() for x in state]
-        # Warm up on a copy, off the capture: whatever the compiler still has to (re)compile
-        # for these shapes must happen outside it.
-        side = torch.cuda.Stream()
-        side.wait_stream(torch.cuda.current_stream())
-        with torch.cuda.stream(side):
-            steps(fixed, [x.clone() for x in state], *args)
-        torch.cuda.current_stream().wait_stream(side)
+        self.state = state
+        # One real call first, outside the capture: whatever the compiler still has to
+        # (re)compile for these shapes happens there (its steps are steps of the walk).
+        steps(fixed, state, *args)
         # capture_begin/end on a side stream, not the torch.cuda.graph context: that one
         # runs gc.collect() and empties the cache at every capture (tens of ms each).
         self.graph = torch.cuda.CUDAGraph()
@@ -1625,7 +1625,7 @@ class _StepGraph:
         side.wait_stream(torch.cuda.current_stream())
         with torch.cuda.stream(side):
             self.graph.capture_begin()
-            steps(fixed, self.state, *args)
+            steps(fixed, state, *args)
             self.graph.capture_end()
         torch.cuda.current_stream().wait_stream(side)
 
