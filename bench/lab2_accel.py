@@ -216,27 +216,34 @@ def run_scene(name, mode, device, table, log):
 
 
 def trimesh_row(mesh, rays, mode, table, common, log):
-    """trimesh's own ray query on a subsample of the same rays (CPU)."""
+    """trimesh's own ray queries on the same rays (CPU): its numpy intersector (with an
+    rtree of boxes) on a subsample, and Embree (through ``embreex``, where installed) on
+    all of them."""
     import trimesh
 
     tm = trimesh.Trimesh(mesh.vertices.cpu().double().numpy(), mesh.faces.cpu().numpy(),
                          process=False)
     n = min(len(rays), mode["trimesh_rays"])
     pick = torch.linspace(0, len(rays) - 1, n).long().unique()
-    o, d = rays.origins[pick].cpu().double().numpy(), rays.directions[pick].cpu().double().numpy()
-    query = trimesh.ray.ray_triangle.RayMeshIntersector(tm)  # numpy, with an rtree of boxes
-    start = time.perf_counter()
-    try:
-        query.intersects_first(o, d)
-    except ImportError as error:  # it needs the rtree package
-        log(f"  trimesh: unavailable ({error})")
-        return
-    elapsed = time.perf_counter() - start
-    kind = "RayMeshIntersector"
-    log(f"  trimesh ({kind}) {len(pick) / elapsed:,.0f} rays/s ({len(pick)} rays)")
-    table.add(**common, setting=f"trimesh {kind}", rays=len(pick), build_s=math.nan,
-              rays_per_s=len(pick) / elapsed, shadow_rays_per_s=math.nan, steps=math.nan,
-              tests=math.nan, bytes=0, error=math.nan)
+    queries = [("RayMeshIntersector", "trimesh.ray.ray_triangle", pick),
+               ("Embree", "trimesh.ray.ray_pyembree", torch.arange(len(rays)))]
+    for kind, module, rows in queries:
+        o = rays.origins[rows].cpu().double().numpy()
+        d = rays.directions[rows].cpu().double().numpy()
+        try:
+            import importlib
+
+            query = importlib.import_module(module).RayMeshIntersector(tm)
+            start = time.perf_counter()
+            query.intersects_first(o, d)
+        except (ImportError, AttributeError) as error:  # rtree / embreex not installed
+            log(f"  trimesh ({kind}): unavailable ({error})")
+            continue
+        elapsed = time.perf_counter() - start
+        log(f"  trimesh ({kind}) {len(rows) / elapsed:,.0f} rays/s ({len(rows)} rays)")
+        table.add(**common, setting=f"trimesh {kind}", rays=len(rows), build_s=math.nan,
+                  rays_per_s=len(rows) / elapsed, shadow_rays_per_s=math.nan, steps=math.nan,
+                  tests=math.nan, bytes=0, error=math.nan)
 
 
 def run_fast_knobs(mode, device, table, log, headline=False):
@@ -249,6 +256,9 @@ def run_fast_knobs(mode, device, table, log, headline=False):
     mesh = scene.mesh
     rays = camera_rays(scene, mode["fast_size"], device)
     log(f"fast path knobs: bunny, {len(rays):,} primary rays")
+    if mode["trimesh_rays"] and device.type == "cpu":  # the same rays, in the same run
+        trimesh_row(mesh, rays, mode, table, {"part": "fast", "scene": "bunny",
+                                              "triangles": mesh.num_faces}, log)
     # (k, compile, leaf size, compact, packed per call, steps fused per compiled call)
     settings = [(8, False, 4, True, False, 1), (1, False, 4, True, False, 1),
                 (32, False, 4, True, False, 1), (8, False, 4, False, False, 1)]
@@ -261,8 +271,9 @@ def run_fast_knobs(mode, device, table, log, headline=False):
     graphs = "reduce-overhead" if device.type == "cuda" else first
     compiled += [(16, graphs, leaf, True, False, 1) for leaf in (2, 8)]
     compiled += [(16, graphs, 4, True, False, 8)]  # last: the longest compile
-    if headline:  # leaf 4, one step per compiled call
-        settings = settings[:1] + [c for c in compiled if c[2] == 4 and c[5] == 1]
+    if headline:  # leaf 4; on a GPU one step per compiled call (8 compile for minutes)
+        settings = settings[:1] + [c for c in compiled
+                                   if c[2] == 4 and (c[5] == 1 or device.type == "cpu")]
     elif mode["knob_compile"]:
         settings += compiled
     bvhs, walks, reference = {}, {}, {}

@@ -83,13 +83,13 @@ The two-level grid and the sync-free traversal (``bench/lab2_accel.py --small --
 * teapot in a stadium (3.9K triangles): the uniform grid tests 2,900 triangles per ray and
   runs at x0.7 brute force; the two-level grid tests 9 (8 cells per ray) and runs 10x the
   uniform grid (x7 brute force), close to the SAH BVH's stack traversal.
-* bunny, primary rays: the stack traversal 7.6K rays/s (65K rays, 2 threads); the
-  sync-free one 0.09 M rays/s eager (compaction every k = 8 steps: 5x faster than none),
-  0.25 M rays/s under ``torch.compile`` (k = 4); trimesh's numpy query 100 rays/s. On an
-  H200 with 1M rays: 0.25 M (stack), 2 M (sync-free, eager), 20 M rays/s (compiled); on
-  an H100 (``bench/results/nvidia-h100-80gb-hbm3/lab2_speed/``) the compiled step with a
-  CUDA graph per step 20 M rays/s, twice the plain compiled step of the same run. The
-  LBVH of bunny_x16 (1.1M triangles) builds in 10 ms there.
+* bunny, primary rays: the stack traversal 7.6K rays/s (65K rays, 2 threads); trimesh's
+  numpy query 100 rays/s. The sync-free walk (``bench/results/cpu-2cores/lab2_fused/``,
+  262K rays, 2 threads, one run): 0.54 M rays/s eager, **2.4 M rays/s** under
+  ``torch.compile``, next to Embree through trimesh at 2.9 M rays/s. On an H200 with 1M
+  rays (``bench/results/nvidia-h200/lab2_fused/``): 2.9 M eager, 21 M compiled,
+  **105-137 M rays/s** compiled and replayed from CUDA graphs (k = 16-32); the stack
+  traversal 0.25 M. The LBVH of bunny_x16 (1.1M triangles) builds in 10 ms there.
 * ``choose_structure`` (given) reads triangle count, crowding and size spread and picks:
   a grid for small even scenes, the two-level grid for crowded scenes with few rays, the
   SAH BVH for many rays, the LBVH when the build dominates; never the kd-tree (slowest
