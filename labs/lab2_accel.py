@@ -768,12 +768,13 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     steps run between two looks at the rays (one host sync each); compile: False, True or
     a ``torch.compile`` mode for the steps; ``"reduce-overhead"`` compiles them as
     ``"default"`` and, on a GPU, replays the ``k`` steps from a CUDA graph per number of
-    rays (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (a
+    rays (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (an
     eighth with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
     once and trace it many times (default: packed here, for the octants of these rays);
     fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
-    stays in registers across them, but the compile time grows with them (on 2 CPU cores
-    about a minute for 1, minutes for 8).
+    could stay in registers across them, but the compile time grows with them (2 CPU
+    cores: 21 s for 1 step, 2 minutes for 8) and 8 ran slower than 1 on the CPU and on an
+    H200 (``bench/lab2_accel.py`` measures it).
     Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = node boxes
     tested, as :func:`bvh_closest_hit_stackless` counts them, ``"tests"`` = triangle tests);
     with ``any_hit`` the hit of a ray is *a* hit in its interval (the first found), not
@@ -797,9 +798,10 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
       after the last slot, ``skip``;
     * the host looks only every ``k`` steps: stop when every ray is done, compact if few
       rays are left;
-    * the ``k`` steps are gathers from read-only tables and elementwise ops, nothing else,
-      so ``torch.compile`` turns all ``k`` into **one kernel** (one thread per ray, the
-      state in registers): the lecture's kernel, written in torch.
+    * a step is gathers from read-only tables and elementwise ops, nothing else, so
+      ``torch.compile`` turns it into **one kernel** (one thread per ray, the state in
+      registers): the lecture's kernel, written in torch; on a GPU a CUDA graph replays
+      it ``k`` times between two looks.
 
     The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
     in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
