@@ -1657,9 +1657,7 @@ def _fast_step(ox, oy, oz, dx, dy, dz, ix, iy, iz, t_min, t_max, base,
         t1 = (boxes[row, 3 + a] - o) * inv
         t_in = torch.fmax(t_in, torch.minimum(t0, t1))
         t_out = torch.fmin(t_out, torch.maximum(t0, t1) * grow)
-    # t_in = inf: an axis-parallel ray outside a slab ((lo - o) * inf) misses, even when
-    # t_out is inf too (no hit yet, t_max = inf).
-    entered = active & ~leafing & (t_in <= t_out) & (t_in < math.inf)
+    entered = active & ~leafing & (t_in <= t_out)  # d != 0: some axis bounds t_out
     skip, first, count = links[row, 0], links[row, 1], links[row, 2]
     # The leaf slot (slot 0 for rays that are not in a leaf: cached, the result unused).
     s = torch.where(leafing, slot, 0)
