@@ -458,8 +458,7 @@ def pack_bvh(bvh: dict, mesh: Mesh, octants=None) -> dict:
                                        ``e2 = v2 - v0``; a leaf's triangles contiguous)
     ``tri``          (F,) int32        each slot's triangle index in the mesh
     ``lo, hi``       (3,) float        the root's box
-    ``nodes``        int               M; ``depth`` the tree's depth (root 0);
-                                       ``leaf_size`` the largest leaf
+    ``nodes``        int               M
     ===============  ================  ==================================================
 
     In the array of an octant every inner node is followed by its **near** child's subtree,
@@ -520,8 +519,7 @@ def pack_bvh(bvh: dict, mesh: Mesh, octants=None) -> dict:
             "base": base,
             "slots": torch.cat((corners[:, 0], corners[:, 1] - corners[:, 0],
                                 corners[:, 2] - corners[:, 0]), 1),
-            "tri": bvh["triangles"].int(), "lo": lo[0], "hi": hi[0], "nodes": m,
-            "depth": len(levels) - 1, "leaf_size": int(bvh["count"].max())}
+            "tri": bvh["triangles"].int(), "lo": lo[0], "hi": hi[0], "nodes": m}
 
 
 def check_walk(walk, mesh: Mesh, rays) -> None:

@@ -1603,6 +1603,10 @@ def test_fast_bvh_any_hit_and_knobs(impl, device):
     other = int(ray_octants(rays.directions[:1].cpu())[0]) ^ 7
     expect_error("walk", impl.bvh_closest_hit_fast, rays, mesh, bvh,
                  walk=pack_bvh(bvh, mesh, octants=[other]), case="a walk without the rays' octants")
+    expect_error("walk", impl.bvh_closest_hit_fast, rays, mesh, bvh, walk=bvh,
+                 case="a BVH dict passed as the walk")
+    expect_error("fuse_steps", impl.bvh_closest_hit_fast, rays, mesh, bvh, fuse_steps=0,
+                 case="fuse_steps=0")
     expect_error("check_every", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 0,
                  case="check_every=0")
     expect_error("compile", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 8, "fast",
