@@ -45,8 +45,8 @@ from torch._inductor import metrics as inductor_metrics
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
 
-from course.bench import ResultTable, device_name, pareto_plot, time_fn
 from course.accel_support import pack_bvh
+from course.bench import ResultTable, device_name, pareto_plot, time_fn
 from course.camera import primary_rays
 from course.device import default_device
 from course.scenes import load_scene
@@ -292,8 +292,8 @@ def run_fast_knobs(mode, device, table, log, headline=False):
                  + (f", {fuse} steps per kernel" if fuse > 1 else "")
                  + ("" if compact else ", no compaction")
                  + (", packed per call" if per_call else ""))
-        knobs = dict(check_every=k, compile=compile_mode, compact=compact, walk=walk,
-                     fuse_steps=fuse)
+        knobs = {"check_every": k, "compile": compile_mode, "compact": compact, "walk": walk,
+                 "fuse_steps": fuse}
         try:
             kernels = inductor_metrics.generated_kernel_count
             (hits, counters), warm_s = seconds(lab.bvh_closest_hit_fast, rays, mesh, bvh,

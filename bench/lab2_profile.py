@@ -39,9 +39,9 @@ def main(argv=None):
     walk = pack_bvh(bvh, mesh)
     rays = primary_rays(dataclasses.replace(scene.camera, width=args.size, height=args.size),
                         device="cuda")
-    knobs = dict(check_every=args.check_every, compile=args.compile, walk=walk,
-                 compact=not args.no_compact)
-    hits, counters = lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)  # compile, warm up
+    knobs = {"check_every": args.check_every, "compile": args.compile, "walk": walk,
+             "compact": not args.no_compact}
+    _, counters = lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)  # compile, warm up
     lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)
     torch.cuda.synchronize()
     with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU,
@@ -51,10 +51,10 @@ def main(argv=None):
     table = prof.key_averages().table(sort_by="cuda_time_total", row_limit=25)
     steps = counters["steps"] + counters["tests"]
     started = int((steps > 0).sum())
-    lines = [f"{len(rays):,} rays, {started:,} start (hit the root box); steps per ray: "
-             f"mean {steps.double().mean():.1f}, max {int(steps.max())}",
-             "still running after s steps: " + ", ".join(
-                 f"{s}: {int((steps > s).sum()):,}" for s in (16, 32, 48, 64, 96, 128, 192))]
+    lines = [(f"{len(rays):,} rays, {started:,} start (hit the root box); steps per ray: "
+              f"mean {steps.double().mean():.1f}, max {int(steps.max())}"),
+             ("still running after s steps: " + ", ".join(
+                 f"{s}: {int((steps > s).sum()):,}" for s in (16, 32, 48, 64, 96, 128, 192)))]
     text = "\n".join(lines) + "\n\n" + table
     print(text)
     Path(args.out).mkdir(parents=True, exist_ok=True)

@@ -1643,7 +1643,11 @@ def test_pack_bvh_lays_out_each_octant_near_first():
             assert bool((skip[o, b] == skip[o, inner]).all()) and bool((b < skip[o, inner]).all())
             leaf = count[o] > 0
             assert torch.equal(skip[o, leaf], leaf.nonzero()[:, 0] + 1)
-            assert int(count[o].sum()) == mesh.num_faces
+            # The leaves' slot ranges tile the slots 0 .. F - 1 (each triangle in one leaf).
+            starts, ends = first[o, leaf], first[o, leaf] + count[o, leaf]
+            order = torch.argsort(starts)
+            assert int(starts[order[0]]) == 0 and int(ends[order[-1]]) == mesh.num_faces
+            assert torch.equal(starts[order[1:]], ends[order[:-1]])
             # Near first: along the axis the two centres differ most, the first child's centre
             # is lower for rays going up that axis, higher for rays going down.
             ca = boxes[o, a, :3] + boxes[o, a, 3:]
