@@ -1,0 +1,487 @@
+"""Generated mutants: systematic operator mutations of the reference solutions.
+
+The hand-written mutants (:mod:`course.grading.mutants`) are mistakes someone thought of.
+This module measures how much of the references' behaviour the graders pin down without
+anyone choosing: it walks the source of every function a student writes (those the
+skeleton leaves raising ``NotImplementedError``), makes one small change at a time --
+
+  * comparisons: ``<`` <-> ``<=``, ``>`` <-> ``>=``, ``==`` <-> ``!=``, and a flipped side;
+  * arithmetic: ``+`` <-> ``-``, ``*`` <-> ``/``, a dropped unary minus;
+  * constants: an int nudged by one, a float by 10 % (0.0 becomes 1e-3);
+  * precision: ``torch.float64`` -> ``torch.float32``, ``.double()`` -> ``.float()``;
+  * rounding: ``floor`` <-> ``ceil``, ``round``/``trunc`` -> ``floor``;
+  * dropped ``abs``/``clamp``/``clamp_min``/``clamp_max``/``nan_to_num``;
+  * swapped arguments of ``torch.where``/``cross``/``atan2``;
+  * ``&`` <-> ``|``, ``and`` <-> ``or``
+
+-- and grades each mutated module on the tests of that function (visible and hidden). A
+mutant the tests do not notice *survives*: either a test is missing, or the change does
+not alter the contract (an *equivalent* mutant, recorded with its reason in
+``solutions/mutants/generated_reviewed.py``). The mutation score of a lab is
+``killed / (generated - equivalent)``.
+
+Mutants are identified by ``module:function:kind:n`` where ``n`` counts the sites of that
+kind within the function in source order, so a review survives edits elsewhere.
+
+Each mutant runs in a warm worker process that grades one mutant after another in-process
+(torch and the test modules are imported once); a mutant that hangs is killed by its
+deadline (counted as caught: the real grader's time limit fails it) and the worker is
+restarted for the rest.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import math
+import os
+import random
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from course.grading.catalog import functions_of, lab_catalog, skeleton_functions
+from course.grading.runner import lab_test_files
+
+
+@dataclass(frozen=True)
+class Generated:
+    """One mutation: replace ``source[start:end]`` of the module by ``replacement``."""
+
+    id: str  # module:function:kind:n
+    module: str
+    function: str
+    kind: str
+    line: int
+    start: int
+    end: int
+    original: str
+    replacement: str
+
+    @property
+    def lab(self) -> int:
+        return int(self.module.split("_")[0].removeprefix("lab"))
+
+    def apply(self, source: str) -> str:
+        assert source[self.start:self.end] == self.original, self.id
+        return source[:self.start] + self.replacement + source[self.end:]
+
+
+_CMP_SWAP = {ast.Lt: ast.LtE, ast.LtE: ast.Lt, ast.Gt: ast.GtE, ast.GtE: ast.Gt,
+             ast.Eq: ast.NotEq, ast.NotEq: ast.Eq}
+_CMP_FLIP = {ast.Lt: ast.Gt, ast.LtE: ast.GtE, ast.Gt: ast.Lt, ast.GtE: ast.LtE}
+_BIN_SWAP = {ast.Add: ast.Sub, ast.Sub: ast.Add, ast.Mult: ast.Div, ast.Div: ast.Mult,
+             ast.BitAnd: ast.BitOr, ast.BitOr: ast.BitAnd}
+_ROUNDING = {"floor": "ceil", "ceil": "floor", "round": "floor", "trunc": "floor"}
+_DROPPED = {"abs", "clamp", "clamp_min", "clamp_max", "clip", "nan_to_num"}
+_SWAPPED = {"where": (1, 2), "cross": (0, 1), "atan2": (0, 1)}
+
+
+def _call_name(node: ast.Call) -> str | None:
+    func = node.func
+    return func.attr if isinstance(func, ast.Attribute) else (
+        func.id if isinstance(func, ast.Name) else None)
+
+
+def _is_docstring(node, parents) -> bool:
+    parent = parents.get(node)
+    return isinstance(parent, ast.Expr) and isinstance(node, ast.Constant) and isinstance(
+        node.value, str)
+
+
+def _in_raise(node, parents) -> bool:
+    """Error branches are the input contract's business, tested apart; their messages and
+    conditions would only add noise."""
+    while node in parents:
+        node = parents[node]
+        if isinstance(node, ast.Raise):
+            return True
+    return False
+
+
+def _is_axis_keyword(node, parents) -> bool:
+    """``dim=-1``-like arguments: a wrong axis fails at once on shape, it teaches nothing."""
+    parent = parents.get(node)
+    if isinstance(parent, ast.UnaryOp):
+        parent = parents.get(parent)
+    return isinstance(parent, ast.keyword) and parent.arg in ("dim", "axis", "device", "dtype")
+
+
+def _mutations(node: ast.AST) -> list[tuple[str, ast.AST]]:
+    """(kind, replacement node) for one AST node; the replacement is unparsed in place."""
+    out = []
+    if isinstance(node, ast.Compare) and len(node.ops) == 1:
+        op = type(node.ops[0])
+        if op in _CMP_SWAP:
+            out.append((f"cmp_{op.__name__}_{_CMP_SWAP[op].__name__}", ast.Compare(
+                node.left, [_CMP_SWAP[op]()], node.comparators)))
+        if op in _CMP_FLIP:
+            out.append((f"cmp_{op.__name__}_{_CMP_FLIP[op].__name__}", ast.Compare(
+                node.left, [_CMP_FLIP[op]()], node.comparators)))
+    elif isinstance(node, ast.BinOp) and type(node.op) in _BIN_SWAP:
+        new = _BIN_SWAP[type(node.op)]
+        out.append((f"op_{type(node.op).__name__}_{new.__name__}",
+                    ast.BinOp(node.left, new(), node.right)))
+    elif isinstance(node, ast.BoolOp):
+        new = ast.Or if isinstance(node.op, ast.And) else ast.And
+        out.append((f"bool_{type(node.op).__name__}_{new.__name__}", ast.BoolOp(new(), node.values)))
+    elif isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub) and not isinstance(
+            node.operand, ast.Constant):
+        out.append(("drop_neg", node.operand))
+    elif isinstance(node, ast.Constant) and type(node.value) in (int, float):
+        value = node.value
+        if isinstance(value, int):
+            out.append(("const_int", ast.Constant(value + 1)))
+        elif value == 0.0:
+            out.append(("const_float", ast.Constant(1e-3)))
+        elif math.isfinite(value):
+            out.append(("const_float", ast.Constant(value * 1.1)))
+    elif isinstance(node, ast.Attribute) and node.attr == "float64":
+        out.append(("narrow_dtype", ast.Attribute(node.value, "float32")))
+    elif isinstance(node, ast.Call):
+        name = _call_name(node)
+        method = isinstance(node.func, ast.Attribute)
+        if name == "double" and method and not node.args:
+            out.append(("narrow_double", ast.Call(ast.Attribute(node.func.value, "float"),
+                                                  [], [])))
+        if name in _ROUNDING and method:
+            out.append((f"round_{name}_{_ROUNDING[name]}", ast.Call(
+                ast.Attribute(node.func.value, _ROUNDING[name]), node.args, node.keywords)))
+        if name in _DROPPED:
+            # torch.abs(x) / x.abs(): keep x
+            is_torch = method and isinstance(node.func.value, ast.Name) and \
+                node.func.value.id in ("torch", "np", "math")
+            if is_torch and node.args:
+                out.append((f"drop_{name}", node.args[0]))
+            elif method and not is_torch:
+                out.append((f"drop_{name}", node.func.value))
+            elif not method and name == "abs" and node.args:
+                out.append(("drop_abs", node.args[0]))
+        if name in _SWAPPED:
+            i, j = _SWAPPED[name]
+            if len(node.args) > j:
+                args = list(node.args)
+                args[i], args[j] = args[j], args[i]
+                out.append((f"swap_{name}", ast.Call(node.func, args, node.keywords)))
+    return out
+
+
+def _offsets(source: str) -> list[int]:
+    starts, total = [], 0
+    for line in source.splitlines(keepends=True):
+        starts.append(total)
+        total += len(line)
+    starts.append(total)
+    return starts
+
+
+def _position(lines, starts, lineno, col_bytes) -> int:
+    """Character offset in the module of (line, UTF-8 byte column), as ``ast`` reports it."""
+    return starts[lineno - 1] + len(lines[lineno - 1].encode()[:col_bytes].decode())
+
+
+def _functions(tree, names):
+    """(qualified name, node) of each top-level def/class named in ``names``."""
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and node.name in names:
+            yield node.name, node
+
+
+def generate(module: str, source: str, functions) -> list[Generated]:
+    """Every mutation of the named top-level functions/classes of one module."""
+    tree = ast.parse(source)
+    parents = {child: parent for parent in ast.walk(tree) for child in ast.iter_child_nodes(parent)}
+    starts = _offsets(source)
+    lines = source.splitlines(keepends=True)
+    found = []
+    for qualname, top in _functions(tree, set(functions)):
+        counters: dict[str, int] = {}
+        body_nodes = [n for n in ast.walk(top) if hasattr(n, "lineno") and n is not top]
+        body_nodes.sort(key=lambda n: (n.lineno, n.col_offset))
+        for node in body_nodes:
+            if _is_docstring(node, parents) or _in_raise(node, parents):
+                continue
+            if isinstance(node, ast.Constant) and _is_axis_keyword(node, parents):
+                continue
+            for kind, new in _mutations(node):
+                n = counters.get(kind, 0)
+                counters[kind] = n + 1
+                start = _position(lines, starts, node.lineno, node.col_offset)
+                end = _position(lines, starts, node.end_lineno, node.end_col_offset)
+                original = source[start:end]
+                replacement = ast.unparse(new)
+                if isinstance(node, (ast.BinOp, ast.BoolOp, ast.Compare)) or kind == "drop_neg":
+                    replacement = f"({replacement})"
+                if replacement.strip("()") == original.strip("()"):
+                    continue
+                found.append(Generated(
+                    id=f"{module}:{qualname}:{kind}:{n}", module=module, function=qualname,
+                    kind=kind, line=node.lineno, start=start, end=end, original=original,
+                    replacement=replacement))
+    return found
+
+
+def _called_helpers(tree) -> dict[str, set[str]]:
+    """Top-level function name -> top-level names it refers to (the module's call graph)."""
+    tops = {n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    graph = {}
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            graph[node.name] = {n.id for n in ast.walk(node) if isinstance(n, ast.Name)
+                                and n.id in tops and n.id != node.name}
+    return graph
+
+
+@dataclass
+class LabPlan:
+    lab: int
+    module: str
+    mutants: list[Generated]
+    tests: dict[str, list[str]]  # function -> names of the graded tests exercising it
+    source: str  # the solution's text the mutants apply to
+
+
+def plan(root, labs=None) -> list[LabPlan]:
+    """The generated mutants of every lab (or the chosen ones) and their tests."""
+    root = Path(root)
+    catalog = lab_catalog(lab_test_files(root, labs))
+    plans = []
+    for number, info in catalog.items():
+        skeleton = root / "labs" / f"{info.module}.py"
+        solution = root / "solutions" / f"{info.module}.py"
+        if not (skeleton.is_file() and solution.is_file()):
+            continue
+        source = solution.read_text()
+        tree = ast.parse(source)
+        skeleton_tree = ast.parse(skeleton.read_text())
+        written = {n.name for n in skeleton_tree.body
+                   if isinstance(n, (ast.FunctionDef, ast.ClassDef))
+                   and any(isinstance(r, ast.Raise) and "NotImplementedError" in ast.unparse(r)
+                           for r in ast.walk(n))}
+        public = skeleton_functions(skeleton)
+        graph = _called_helpers(tree)
+        direct = {f: sorted({t.name for t in info.graded() if f in functions_of(t, public)})
+                  for f in public}
+        tests = {}
+        for name in sorted(written):
+            if name in direct:
+                tests[name] = direct[name]
+            else:  # a private helper: graded through the public functions that reach it
+                users = [f for f in public if _reaches(graph, f, name)]
+                tests[name] = sorted({t for f in users for t in direct.get(f, [])})
+        tests = {f: names for f, names in tests.items() if names}
+        plans.append(LabPlan(number, info.module, generate(info.module, source, tests), tests,
+                             source))
+    return plans
+
+
+def _reaches(graph, start, target) -> bool:
+    seen, stack = set(), [start]
+    while stack:
+        node = stack.pop()
+        if node == target:
+            return True
+        if node not in seen:
+            seen.add(node)
+            stack.extend(graph.get(node, ()))
+    return False
+
+
+def load_reviewed(root) -> dict[str, str]:
+    """Mutant id -> why it is equivalent (or outside the contract), as reviewed."""
+    path = Path(root, "solutions", "mutants", "generated_reviewed.py")
+    if not path.is_file():
+        return {}
+    from course.grading.wire import import_file
+
+    return dict(import_file(path, "rtcourse_generated_reviewed").EQUIVALENT)
+
+
+def sample(plans: list[LabPlan], per_lab: int | None, seed: int) -> list[Generated]:
+    """Every mutant, or ``per_lab`` of each lab drawn uniformly with ``seed``."""
+    chosen = []
+    for p in plans:
+        mutants = list(p.mutants)
+        if per_lab is not None and len(mutants) > per_lab:
+            mutants = random.Random(f"{seed}:{p.module}").sample(mutants, per_lab)
+            mutants.sort(key=lambda m: m.id)
+        chosen += mutants
+    return chosen
+
+
+# -- running ------------------------------------------------------------------------------
+
+class _Outcome:
+    """pytest plugin: did any selected graded test fail, and how many ran."""
+
+    def __init__(self):
+        self.failed, self.ran = [], 0
+
+    def pytest_runtest_logreport(self, report):
+        if report.when == "call" or report.failed:
+            if report.when == "call":
+                self.ran += 1
+            if report.failed and report.nodeid not in self.failed:
+                self.failed.append(report.nodeid)
+
+
+def _grade_one(root: Path, spec: dict, scratch: Path) -> dict:
+    """Worker side: write the mutated module to a fresh folder, run its tests."""
+    import contextlib
+    import io
+
+    import pytest
+
+    folder = scratch / spec["id"].replace(":", "__")
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{spec['module']}.py").write_text(spec["source"])
+    keyword = " or ".join(spec["tests"])
+    files = [str(f) for f in lab_test_files(root, [spec["module"].split("_")[0][3:]])]
+    outcome = _Outcome()
+    args = files + ["-p", "no:cacheprovider", "-c", str(root / "pyproject.toml"), "--rootdir",
+                    str(root), "--impl", str(folder), "--trusted", "-q", "-x", "-k", keyword,
+                    "-p", "no:warnings"]
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        pytest.main(args, plugins=[outcome])
+    return {"id": spec["id"], "killed": bool(outcome.failed), "ran": outcome.ran,
+            "by": outcome.failed[:1]}
+
+
+def worker_main(root: str, jobs: str, results: str, scratch: str):
+    """``python -m course.grading.mutate ROOT JOBS RESULTS SCRATCH``: grade each job (one JSON
+    spec a line), appending one JSON line of outcome per job, flushed as it goes."""
+    root_path, scratch_path = Path(root), Path(scratch)
+    specs = [json.loads(line) for line in Path(jobs).read_text().splitlines() if line.strip()]
+    with open(results, "a") as out:
+        for spec in specs:
+            out.write(json.dumps({"id": spec["id"], "started": True}) + "\n")
+            out.flush()
+            out.write(json.dumps(_grade_one(root_path, spec, scratch_path)) + "\n")
+            out.flush()
+
+
+def _run_queue(root: Path, specs: list[dict], deadline: float, scratch: Path,
+               tick=lambda n: None) -> list[dict]:
+    """One worker process over ``specs``; restarted after a mutant that hangs. ``tick(n)``
+    is told of every ``n`` mutants finished."""
+    done: dict[str, dict] = {}
+    remaining = list(specs)
+    env = dict(os.environ, CUDA_VISIBLE_DEVICES="", OMP_NUM_THREADS="1")
+    while remaining:
+        with tempfile.TemporaryDirectory(dir=scratch) as tmp:
+            jobs, results = Path(tmp, "jobs.jsonl"), Path(tmp, "results.jsonl")
+            jobs.write_text("".join(json.dumps(s) + "\n" for s in remaining))
+            results.touch()
+            proc = subprocess.Popen([sys.executable, "-m", "course.grading.mutate", str(root),
+                                     str(jobs), str(results), tmp], cwd=root, env=env,
+                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            current, since = None, time.monotonic()
+            while proc.poll() is None:
+                time.sleep(0.5)
+                lines = [json.loads(x) for x in results.read_text().splitlines() if x.strip()]
+                before = len(done)
+                for row in lines:
+                    if "killed" in row:
+                        done[row["id"]] = row
+                tick(len(done) - before)
+                started = [r["id"] for r in lines if r.get("started") and r["id"] not in done]
+                if started and started[-1] != current:
+                    current, since = started[-1], time.monotonic()
+                if current and time.monotonic() - since > deadline:
+                    proc.kill()
+                    proc.wait()
+                    done[current] = {"id": current, "killed": True, "ran": 0,
+                                     "by": [f"timed out after {deadline:.0f} s"]}
+            for row in (json.loads(x) for x in results.read_text().splitlines() if x.strip()):
+                if "killed" in row:
+                    done[row["id"]] = row
+            crashed = [s for s in remaining if s["id"] not in done]
+            if crashed and proc.returncode != -9:
+                # the worker died on this mutant (e.g. a crash at import): caught
+                done[crashed[0]["id"]] = {"id": crashed[0]["id"], "killed": True, "ran": 0,
+                                          "by": [f"worker exited {proc.returncode}"]}
+        remaining = [s for s in remaining if s["id"] not in done]
+    return [done[s["id"]] for s in specs]
+
+
+def run(root, mutants: list[Generated], plans: list[LabPlan], *, workers: int = 1,
+        deadline: float = 300.0, progress: bool = False) -> list[dict]:
+    """Grade every mutant with ``workers`` parallel workers; one outcome dict each.
+    ``progress`` shows a bar on a terminal."""
+    root = Path(root)
+    tests = {(p.module, f): names for p in plans for f, names in p.tests.items()}
+    sources = {p.module: p.source for p in plans}
+    specs = [{"id": m.id, "module": m.module, "tests": tests[(m.module, m.function)],
+              "source": m.apply(sources[m.module])} for m in mutants]
+    shards = [specs[i::workers] for i in range(workers)]
+    from concurrent.futures import ThreadPoolExecutor
+
+    from tqdm import tqdm
+
+    with tempfile.TemporaryDirectory(prefix="rtcourse-mutate-") as scratch, tqdm(
+            total=len(specs), unit="mutant", disable=not (progress and sys.stderr.isatty()),
+    ) as bar, ThreadPoolExecutor(max_workers=workers) as pool:
+        parts = list(pool.map(lambda s: _run_queue(root, s, deadline, Path(scratch), bar.update),
+                              [s for s in shards if s]))
+    by_id = {row["id"]: row for part in parts for row in part}
+    return [by_id[s["id"]] for s in specs]
+
+
+def score_table(mutants: list[Generated], outcomes: list[dict], reviewed: dict[str, str]):
+    """Per lab: generated, killed, equivalent (reviewed survivors), survivors, score."""
+    rows = {}
+    for m, o in zip(mutants, outcomes):
+        row = rows.setdefault(m.lab, {"lab": m.lab, "generated": 0, "killed": 0,
+                                      "equivalent": 0, "survived": []})
+        row["generated"] += 1
+        if o["killed"]:
+            row["killed"] += 1
+        elif m.id in reviewed:
+            row["equivalent"] += 1
+        else:
+            row["survived"].append(m.id)
+    for row in rows.values():
+        live = row["generated"] - row["equivalent"]
+        row["score"] = row["killed"] / live if live else 1.0
+    return [rows[k] for k in sorted(rows)]
+
+
+def main_cli(root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=None,
+             only=None) -> int:
+    """``rtcourse mutants --generated``: print the score table; 1 if a lab is under 90 %."""
+    root = Path(root)
+    plans = plan(root, labs)
+    mutants = sample(plans, per_lab, seed)
+    if only:
+        mutants = [m for m in mutants if re.search(only, m.id)]
+    reviewed = load_reviewed(root)
+    workers = workers or max(1, len(os.sched_getaffinity(0)))
+    total = sum(len(p.mutants) for p in plans)
+    how = f"all {total}" if per_lab is None else f"{len(mutants)} of {total} (<= {per_lab} " \
+        f"per lab, seed {seed})"
+    print(f"grading {how} generated mutants with {workers} worker(s)", flush=True)
+    started = time.monotonic()
+    outcomes = run(root, mutants, plans, workers=workers, progress=True)
+    table = score_table(mutants, outcomes, reviewed)
+    print(f"\n{'lab':>3} {'generated':>9} {'killed':>6} {'equiv':>5} {'survived':>8} {'score':>6}")
+    for row in table:
+        print(f"{row['lab']:>3} {row['generated']:>9} {row['killed']:>6} {row['equivalent']:>5} "
+              f"{len(row['survived']):>8} {row['score']:>6.1%}")
+    for row in table:
+        for mid in row["survived"]:
+            m = next(x for x in mutants if x.id == mid)
+            print(f"  survived {mid} (line {m.line}): {m.original!r} -> {m.replacement!r}")
+    if json_path:
+        Path(json_path).write_text(json.dumps({
+            "sampling": how, "seconds": round(time.monotonic() - started, 1),
+            "labs": table, "mutants": [dict(asdict(m), **o) for m, o in zip(mutants, outcomes)],
+        }, indent=1))
+    return 1 if any(row["score"] < 0.9 for row in table) else 0
+
+
+if __name__ == "__main__":
+    worker_main(*sys.argv[1:5])
