@@ -42,6 +42,11 @@ def cmd_mutants(args):
     from course.grading.mutants import grade_mutant, load_mutants
 
     root = _root()
+    if args.generated:
+        from course.grading.mutate import main_cli
+
+        return main_cli(root, labs=args.lab, per_lab=args.sample, seed=args.seed,
+                        workers=args.workers, json_path=args.json, only=args.only)
     survivors = 0
     for mutant in load_mutants(root):
         if args.lab and mutant.lab not in args.lab:
