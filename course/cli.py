@@ -109,6 +109,16 @@ def main(argv=None):
 
     p = sub.add_parser("mutants", help="grade every mutant; each must lose points")
     p.add_argument("--lab", type=int, action="append")
+    p.add_argument("--generated", action="store_true",
+                   help="systematic operator mutations of the references; a score per lab")
+    p.add_argument("--sample", type=int, default=None,
+                   help="with --generated: at most this many mutants per lab, drawn with --seed")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=None,
+                   help="with --generated: parallel workers (default: the usable cores)")
+    p.add_argument("--only", default=None,
+                   help="with --generated: only mutants whose id matches this regex")
+    p.add_argument("--json", default=None, help="with --generated: write the table here")
     p.set_defaults(func=cmd_mutants)
 
     p = sub.add_parser("release", help="write the student handout")
