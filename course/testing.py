@@ -8,6 +8,9 @@ index and the size of the error.
 from __future__ import annotations
 
 import math
+import os
+import re
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -226,3 +229,146 @@ def run_in_triton_interpreter(script, inputs, tmp_path, timeout: float = 300):
         pytest.fail(f"the interpreter subprocess failed (exit {proc.returncode}):\n"
                     f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
     return torch.load(target, weights_only=False)
+
+
+# ------------------------------------------------------------------ images that differ
+
+
+class ImageMismatch(AssertionError):
+    """An image (or depth/id buffer) comparison failed; ``pictures`` are the PNGs written
+    (expected, got, difference) for the student to look at."""
+
+    def __init__(self, message: str, pictures=()):
+        super().__init__(message)
+        self.pictures = [str(p) for p in pictures]
+
+
+def failure_dir() -> Path:
+    """Where failing image tests write their pictures: ``$RTCOURSE_FAILURE_DIR``, else
+    ``rtcourse-failures`` in the system's temporary folder."""
+    import tempfile
+
+    folder = os.environ.get("RTCOURSE_FAILURE_DIR")
+    return Path(folder) if folder else Path(tempfile.gettempdir()) / "rtcourse-failures"
+
+
+def _current_test() -> str:
+    """The running test's id (pytest sets PYTEST_CURRENT_TEST), as a folder name."""
+    test = os.environ.get("PYTEST_CURRENT_TEST", "image").rsplit(" (", 1)[0]
+    test = test.split("::", 1)[-1]
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", test).strip("_")[:120] or "image"
+
+
+def _grid(x: torch.Tensor, image_shape) -> torch.Tensor:
+    """(H, W) or (H, W, C) on the CPU in float64 (bool/int ids stay integer)."""
+    x = x.detach().cpu()
+    if image_shape is not None:
+        x = x.reshape(*image_shape, *x.shape[1:]) if x.dim() in (1, 2) and x.shape[0] == \
+            math.prod(image_shape) else x.reshape(*image_shape, -1)
+    if x.dim() == 1:
+        x = x[None]
+    if x.dim() == 3 and x.shape[-1] == 1:
+        x = x[..., 0]
+    return x
+
+
+def _ids_to_rgb(ids: torch.Tensor) -> np.ndarray:
+    """Distinct colours per id (a hash), black for negative ids (nothing there)."""
+    v = ids.to(torch.int64).numpy()
+    h = (v * 2654435761) & 0xFFFFFF
+    rgb = np.stack([(h >> 16) & 255, (h >> 8) & 255, h & 255], axis=-1).astype(np.uint8)
+    rgb = rgb // 2 + 96
+    rgb[v < 0] = 0
+    return rgb
+
+
+def _to_rgb(x: torch.Tensor, kind: str, lo: float, hi: float) -> np.ndarray:
+    """(H, W[, C]) -> (H, W, 3) uint8 for a PNG: colours through sRGB, scalars (depth)
+    as grey from ``lo`` (black) to ``hi`` (white), ids hashed; NaN is magenta."""
+    from course.image import to_srgb8
+
+    if kind == "id":
+        return _ids_to_rgb(x if x.dim() == 2 else x[..., 0])
+    v = x.to(torch.float64)
+    bad = torch.isnan(v) if v.dim() == 2 else torch.isnan(v).any(-1)
+    if kind == "color" and v.dim() == 3 and v.shape[-1] in (3, 4):
+        rgb = to_srgb8(v[..., :3].nan_to_num(0.0).clamp(0, 1).float()).numpy()
+    else:
+        v = v if v.dim() == 2 else v.abs().amax(-1)
+        span = hi - lo if hi > lo else 1.0
+        grey = ((v.nan_to_num(nan=lo, posinf=hi, neginf=lo) - lo) / span).clamp(0, 1)
+        rgb = (grey * 255).round().to(torch.uint8)[..., None].expand(*v.shape, 3).numpy()
+    rgb = np.array(rgb, dtype=np.uint8)
+    rgb[bad.numpy()] = (255, 0, 255)
+    return rgb
+
+
+def write_pictures(actual, expected, bad, *, folder, kind: str = "color",
+                   image_shape=None) -> list[Path]:
+    """Write ``expected.png``, ``got.png`` and ``difference.png`` (the pixels out of
+    tolerance in red over the expected picture, darkened) into ``folder``."""
+    from PIL import Image
+
+    e, a = _grid(_as_tensor(expected, "expected"), image_shape), \
+        _grid(_as_tensor(actual, "actual"), image_shape)
+    finite = e.to(torch.float64)
+    finite = finite[torch.isfinite(finite)]
+    lo, hi = (float(finite.min()), float(finite.max())) if finite.numel() else (0.0, 1.0)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    pictures = {"expected": _to_rgb(e, kind, lo, hi), "got": _to_rgb(a, kind, lo, hi)}
+    b = _grid(_as_tensor(bad, "bad").to(torch.bool), image_shape)
+    b = b if b.dim() == 2 else b.any(-1)
+    diff = pictures["expected"] // 3
+    diff[b.numpy()] = (255, 32, 32)
+    pictures["difference"] = diff
+    paths = []
+    for title, rgb in pictures.items():
+        path = folder / f"{title}.png"
+        Image.fromarray(np.ascontiguousarray(rgb)).save(path, format="PNG")
+        paths.append(path)
+    return paths
+
+
+def assert_image_close(actual, expected, *, name: str, atol: float = 0.0, rtol: float = 0.0,
+                       kind: str = "color", image_shape=None, where: str = "pixel",
+                       mask=None, exact: bool = False, folder=None) -> None:
+    """Compare an image, depth buffer or id buffer like :func:`assert_close` (or, with
+    ``exact``, :func:`assert_equal`); on a failure also write the expected, the submitted
+    and a difference picture and name their folder in the message.
+
+    actual, expected: (H, W), (H, W, C), or (N[, C]) with ``image_shape=(H, W)`` for
+    per-ray results of an H x W camera. ``kind``: "color" (linear RGB), "depth" (a
+    scalar shown in grey) or "id" (integers, one colour each, negative = nothing).
+    ``folder``: where the pictures go (default: one per test under :func:`failure_dir`).
+    """
+    if kind not in ("color", "depth", "id"):
+        raise ValueError(f"kind: expected 'color', 'depth' or 'id', got {kind!r}")
+    try:
+        if exact:
+            assert_equal(actual, expected, name=name, where=where)
+        else:
+            assert_close(actual, expected, name=name, atol=atol, rtol=rtol, where=where,
+                         mask=mask)
+    except AssertionError as exc:
+        a = _as_tensor(actual, name).detach().cpu()
+        e = _as_tensor(expected, f"expected {name}").detach().cpu()
+        if tuple(a.shape) != tuple(e.shape):
+            raise  # nothing to draw side by side
+        if exact:
+            bad = a != e
+        else:
+            ad, ed = a.to(torch.float64), e.to(torch.float64)
+            diff = torch.where(ad == ed, torch.zeros_like(ad), (ad - ed).abs())
+            bad = ~(diff <= atol + rtol * ed.abs()) & ~(torch.isnan(ad) & torch.isnan(ed))
+            if mask is not None:
+                bad &= _as_tensor(mask, "mask").cpu().to(torch.bool)
+        target = Path(folder) if folder is not None else failure_dir() / _current_test() / \
+            re.sub(r"[^A-Za-z0-9_.-]+", "_", name)[:60].strip("_")
+        try:
+            paths = write_pictures(a, e, bad, folder=target, kind=kind,
+                                   image_shape=image_shape)
+        except (OSError, ValueError, RuntimeError) as why:  # the message matters more
+            raise ImageMismatch(f"{exc}\n  (could not write the pictures: {why})") from None
+        raise ImageMismatch(f"{exc}\n  pictures: expected.png, got.png, difference.png in "
+                            f"{target}", paths) from None

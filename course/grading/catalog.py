@@ -129,12 +129,37 @@ def read_grader(path) -> LabInfo:
                     name=node.name, task=marks.get("task"), points=points,
                     visibility=marks.get("visibility", "visible"),
                     needs=tuple(m for m in ("gpu", "slow") if m in marks),
-                    calls=frozenset(n.attr for n in ast.walk(node)
-                                    if isinstance(n, ast.Attribute)
-                                    and isinstance(n.value, ast.Name) and n.value.id == "impl")))
+                    calls=frozenset(_impl_calls(node, helpers))))
 
+    helpers = {node.name: node for node in tree.body
+               if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+               and not node.name.startswith("test")}
     visit(tree.body, base)
     return info
+
+
+def _impl_calls(node, helpers, seen=None) -> set[str]:
+    """Names X of ``impl.X`` in ``node``'s body and in the grader's module-level helper
+    functions it calls (``march(impl, ...)`` calls ``impl.march_box``), transitively."""
+    seen = set() if seen is None else seen
+    found = set()
+    for n in ast.walk(node):
+        if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) \
+                and n.value.id == "impl":
+            found.add(n.attr)
+        elif isinstance(n, ast.Name) and n.id in helpers and n.id not in seen:
+            seen.add(n.id)
+            if not _dispatches(helpers[n.id]):
+                found |= _impl_calls(helpers[n.id], helpers, seen)
+    return found
+
+
+def _dispatches(helper) -> bool:
+    """Whether a grader helper picks its kernel by name (``getattr(impl, variant)``): what
+    it calls depends on the caller's arguments, so it says nothing about one test."""
+    return any(isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
+               and n.func.id == "getattr" and n.args and isinstance(n.args[0], ast.Name)
+               and n.args[0].id == "impl" for n in ast.walk(helper))
 
 
 def lab_catalog(test_files) -> dict[int, LabInfo]:
@@ -173,5 +198,125 @@ def functions_of(test: GradedTest, functions) -> list[str]:
     """The lab functions a test exercises: those it calls as ``impl.<fn>`` and those its
     name mentions (the graders' naming rule ``test_<fn>_<what>``, which also covers calls
     made through a helper)."""
-    return [f for f in functions if f in test.calls
-            or re.search(rf"(^test|_){re.escape(f)}(_|$)", test.name)]
+    named = [f for f in functions if re.search(rf"(^test|_){re.escape(f)}(_|$)", test.name)]
+    # test_grid_closest_hit_... names grid_closest_hit, not closest_hit.
+    named = [f for f in named if not any(f != g and f in g for g in named)]
+    return [f for f in functions if f in test.calls or f in named]
+
+
+# --------------------------------------------------------- what each task asks for
+
+_NOT_YET = re.compile(r"not implemented yet:\s*([A-Za-z_][\w.]*)(?:[^()]*\(task (\d+)\))?")
+
+
+def parse_not_implemented(message: str) -> tuple[str | None, int | None]:
+    """``("moller_trumbore", 2)`` from "not implemented yet: moller_trumbore (task 2)"; the
+    task is None where the message names none, both are None for another message."""
+    match = _NOT_YET.search(message or "")
+    if not match:
+        return None, None
+    return match.group(1), int(match.group(2)) if match.group(2) else None
+
+
+@dataclass
+class Stub:
+    """A ``raise NotImplementedError(...)`` in a skeleton: what the student writes there."""
+
+    name: str  # the module-level function or class it sits in
+    qualname: str  # "FrameDownloader.submit" for a method
+    task: int | None  # the task its message names ("(task 2)"), if any
+    line: int
+
+
+def skeleton_stubs(lab_file) -> list[Stub]:
+    """Every ``NotImplementedError`` a skeleton raises, with the function (public or
+    private, method or function) it belongs to."""
+    tree = ast.parse(Path(lab_file).read_text())
+    stubs = []
+
+    def scan(node, owner: str, qualname: str):
+        for n in ast.walk(node):
+            if isinstance(n, ast.Raise) and n.exc is not None \
+                    and "NotImplementedError" in ast.unparse(n.exc):
+                text = " ".join(c.value for c in ast.walk(n.exc)
+                                if isinstance(c, ast.Constant) and isinstance(c.value, str))
+                stubs.append(Stub(owner, qualname, parse_not_implemented(text)[1], n.lineno))
+
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            scan(node, node.name, node.name)
+        elif isinstance(node, ast.ClassDef):
+            for item in node.body:
+                if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    scan(item, node.name, f"{node.name}.{item.name}")
+    return stubs
+
+
+def function_tasks(lab: LabInfo, lab_file) -> dict[str, int | None]:
+    """Each function (or class) the skeleton asks for -> the task that asks for it: the task
+    its ``NotImplementedError`` names, else the first task whose tests exercise it (None when
+    neither says)."""
+    stubs = skeleton_stubs(lab_file)
+    names = list(dict.fromkeys(s.name for s in stubs))
+    owners: dict[str, int | None] = {}
+    for name in names:
+        stated = [s.task for s in stubs if s.name == name and s.task is not None]
+        tested = [t.task for t in lab.tests if t.task is not None and functions_of(t, [name])]
+        owners[name] = min(stated) if stated else (min(tested) if tested else None)
+    return owners
+
+
+@dataclass
+class TaskInfo:
+    number: int
+    title: str
+    points: float
+    functions: list[str]  # what this task asks the student to write
+    needs: dict[int, list[str]]  # earlier tasks whose functions its tests call
+
+
+def lab_tasks(lab: LabInfo, lab_file) -> list[TaskInfo]:
+    """The tasks of ``lab`` with the functions each asks for and what its tests need from
+    other tasks (read from the skeleton ``lab_file`` and the graders)."""
+    owners = function_tasks(lab, lab_file) if Path(lab_file).is_file() else {}
+    tasks = []
+    for number, title in sorted(lab.tasks.items()):
+        mine = [f for f, t in owners.items() if t == number]
+        needs: dict[int, list[str]] = {}
+        for test in lab.tests:
+            if test.task != number:
+                continue
+            for f in functions_of(test, list(owners)):
+                if owners[f] is not None and owners[f] != number and f not in needs.get(
+                        owners[f], []):
+                    needs.setdefault(owners[f], []).append(f)
+        tasks.append(TaskInfo(number, str(title), lab.points(number), mine,
+                              dict(sorted(needs.items()))))
+    return tasks
+
+
+_COPY_SUFFIX = re.compile(r"(\s*\(\d+\)|\s*-\s*copy|\s+copy|[\s_-]+\d+|\s*-\s*\d+)$")
+
+
+def lab_file_rank(filename: str, module: str) -> int | None:
+    """0 when ``filename`` is ``module.py``; 1 for a near miss a student (or an upload
+    site) makes of it: other letter case, a copy suffix ("lab1_intersect (1).py",
+    "lab1_intersect-2.py", "lab1_intersect copy.py"), spaces for underscores; else None."""
+    if filename == f"{module}.py":
+        return 0
+    if not filename.lower().endswith(".py"):
+        return None
+    stem = filename[:-3].strip()
+    for _ in range(2):
+        stem = _COPY_SUFFIX.sub("", stem)
+    normal = re.sub(r"[\s-]+", "_", stem.lower())
+    return 1 if normal == module.lower() else None
+
+
+def near_misses(folder, module: str) -> list[Path]:
+    """Files of ``folder`` that look like ``module.py`` but are not named exactly that."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(p for p in folder.iterdir() if p.is_file()
+                  and lab_file_rank(p.name, module) == 1)

@@ -6,7 +6,14 @@ It provides
     runs in a sandboxed worker (see :mod:`course.grading.sandbox`);
   * the ``impl`` fixture: the lab module named by the test module's ``LAB_MODULE``;
   * the ``device`` parametrisation: ``cpu`` always, ``cuda`` when present;
-  * markers ``points(n)``, ``task(k)``, ``visibility(v)``, ``gpu``, ``slow``.
+  * markers ``points(n)``, ``task(k)``, ``visibility(v)``, ``gpu``, ``slow``;
+  * ``--task K`` / ``--task N.K``: only the tests that award task K's points (of lab N);
+  * short feedback: a failing graded test shows its teaching message and the student's
+    line (:mod:`course.grading.feedback`); ``-v`` or ``--feedback full`` shows pytest's
+    whole traceback;
+  * submission problems said once: a missing ``--impl`` folder is a usage error, a
+    missing lab file (or a near miss of its name) and a lab file that does not import are
+    one line each, and every test of that lab fails with that one reason.
 
 Tests under ``tests/hidden/`` are the instructor's hidden tests: ``rtcourse release`` leaves
 them out of the handout, ``rtcourse gradescope`` ships them, and unless marked otherwise
@@ -16,11 +23,15 @@ Gradescope shows them to students only after the due date.
 from __future__ import annotations
 
 import os
+import re
+from functools import cache
 from pathlib import Path
 
 import pytest
 import torch
 
+from course.grading.catalog import function_tasks, near_misses, read_grader
+from course.grading.feedback import IMPORT_FAILED, Feedback, short_feedback
 from course.grading.sandbox import LocalLab, SandboxedLab, Worker
 from course.grading.wire import import_file
 
@@ -50,11 +61,49 @@ def pytest_addoption(parser):
                     default=float(os.environ.get("RTCOURSE_MEMORY_GB", "4")),
                     help="GiB of extra memory the student code may use (sandboxed runs)")
     group.addoption("--runslow", action="store_true", help="also run tests marked slow")
+    group.addoption("--task", action="append", default=[], metavar="[N.]K",
+                    help="run only the tests that award task K's points (of lab N: "
+                         "--task 4.2); repeatable")
+    group.addoption("--feedback", choices=("short", "full"), default=None,
+                    help="failing graded tests: short (the message and your line; the "
+                         "default) or full (pytest's traceback with the test's source and "
+                         "tensors; also with -v)")
 
 
 def pytest_configure(config):
     for marker in MARKERS:
         config.addinivalue_line("markers", marker)
+    impl = config.getoption("--impl", None)
+    if impl and impl not in ("solutions", "labs") and not Path(impl).expanduser().is_dir():
+        raise pytest.UsageError(f"--impl {impl}: no such folder (give the folder that holds "
+                                f"your lab files, or labs / solutions)")
+    for spec in config.getoption("--task", None) or ():
+        parse_task(spec)
+
+
+def parse_task(spec: str) -> tuple[int | None, int]:
+    """``"2"`` -> (None, 2); ``"4.2"`` -> (4, 2)."""
+    match = re.fullmatch(r"\s*(?:(\d+)\.)?(\d+)\s*", str(spec))
+    if not match:
+        raise pytest.UsageError(f"--task {spec}: expected a task number K or LAB.K "
+                                f"(e.g. --task 2 or --task 4.2)")
+    return (int(match.group(1)) if match.group(1) else None), int(match.group(2))
+
+
+def lab_number(item) -> int | None:
+    match = re.match(r"lab(\d+)_", getattr(getattr(item, "module", None), "LAB_MODULE", "")
+                     or "")
+    return int(match.group(1)) if match else None
+
+
+def awards_task(item, specs) -> bool:
+    """Whether ``item`` is a graded test of one of the tasks ``specs`` ((lab, task) pairs,
+    lab None for any lab): exactly the tests whose points make up those tasks' points."""
+    points, task = item.get_closest_marker("points"), item.get_closest_marker("task")
+    if points is None or task is None or not task.args:
+        return False
+    lab = lab_number(item)
+    return any(task.args[0] == k and n in (None, lab) for n, k in specs)
 
 
 VISIBILITIES = ("visible", "hidden", "after_due_date", "after_published")
@@ -62,6 +111,17 @@ HIDDEN_DEFAULT = "after_due_date"  # tests in a hidden/ folder unless marked oth
 
 
 def pytest_collection_modifyitems(config, items):
+    specs = [parse_task(s) for s in config.getoption("--task") or ()]
+    if specs:
+        keep = [item for item in items if awards_task(item, specs)]
+        if not keep:
+            raise pytest.UsageError(
+                f"--task {' '.join(config.getoption('--task'))}: no graded test of "
+                f"{' or '.join(f'task {k}' + (f' of lab {n}' if n is not None else '') for n, k in specs)}"
+                f" among the {len(items)} tests collected (check the lab and task numbers "
+                f"in labs/README.md)")
+        config.hook.pytest_deselected(items=[i for i in items if i not in keep])
+        items[:] = keep
     has_cuda = torch.cuda.is_available()
     for item in items:
         visibility = item.get_closest_marker("visibility")
@@ -102,6 +162,28 @@ def resolve_impl(config) -> tuple[Path, bool]:
     return folder, trusted
 
 
+def missing_file(folder: Path, name: str) -> str:
+    """The one line for a lab file that is not in the submission."""
+    text = f"no {name}.py in {folder}: the submission must contain the file {name}.py"
+    close = near_misses(folder, name)
+    if close:
+        text += (f" (found {', '.join(repr(p.name) for p in close)}: rename it to "
+                 f"{name}.py)")
+    return text
+
+
+def syntax_problem(path: Path, name: str) -> str | None:
+    """A lab file that cannot even be compiled, in one line (compiling runs none of it)."""
+    try:
+        compile(path.read_bytes(), str(path), "exec", dont_inherit=True)
+    except SyntaxError as exc:
+        return (f"{name}.py failed to import: {type(exc).__name__}: {exc.msg} "
+                f"({name}.py, line {exc.lineno})")
+    except (ValueError, RecursionError, MemoryError) as exc:
+        return f"{name}.py failed to import: {type(exc).__name__}: {exc}"
+    return None
+
+
 class _Labs:
     """Lab modules loaded for this session; one warm worker serves every sandboxed lab."""
 
@@ -110,21 +192,37 @@ class _Labs:
         self.folder, self.trusted = resolve_impl(config)
         self.loaded: dict[str, object] = {}
         self.worker: Worker | None = None
+        self.problems: dict[str, str] = {}  # lab module -> why none of its tests can pass
 
     def get(self, name: str):
+        if name in self.problems:
+            pytest.fail(self.problems[name], pytrace=False)
         if name not in self.loaded:
             path = self.folder / f"{name}.py"
             if not path.is_file():
-                pytest.fail(f"no {name}.py in {self.folder}: the submission must contain "
-                            f"the file {name}.py", pytrace=False)
+                self.problems[name] = missing_file(self.folder, name)
+            elif not self.trusted:
+                problem = syntax_problem(path, name)
+                if problem:
+                    self.problems[name] = problem
+            if name in self.problems:
+                pytest.fail(self.problems[name], pytrace=False)
             if self.trusted:
-                self.loaded[name] = LocalLab(name, import_file(path, f"trusted_{name}"))
+                try:
+                    module = import_file(path, f"trusted_{name}")
+                except Exception as exc:  # noqa: BLE001 (a lab file may raise anything)
+                    import traceback
+
+                    self.problems[name] = _import_problem_text(name, exc, traceback, path)
+                    pytest.fail(self.problems[name], pytrace=False)
+                self.loaded[name] = LocalLab(name, module)
             else:
                 limit = self.config.getoption("--time-limit")
                 if self.worker is None:
                     self.worker = Worker(str(self.folder), memory_bytes=int(
                         self.config.getoption("--memory-limit") * 2**30))
-                self.loaded[name] = SandboxedLab(name, self.worker, limit)
+                self.loaded[name] = SandboxedLab(name, self.worker, limit,
+                                                 root=self.config.rootpath)
         return self.loaded[name]
 
     def close(self):
@@ -149,8 +247,18 @@ def pytest_collection_finish(session):
     names = {getattr(item.module, "LAB_MODULE", None) for item in session.items
              if hasattr(item, "module") and "impl" in getattr(item, "fixturenames", ())}
     present = sorted(n for n in names if n and (labs.folder / f"{n}.py").is_file())
-    if present:
-        labs.get(present[0])._worker.launch()
+    for name in present:
+        try:
+            labs.get(name)._worker.launch()
+            return
+        except pytest.fail.Exception:  # a broken lab file: its tests say why
+            continue
+
+
+def _import_problem_text(name, exc, traceback, path) -> str:
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename == str(path)]
+    where = f" ({name}.py, line {frames[-1].lineno})" if frames else ""
+    return f"{name}.py failed to import: {type(exc).__name__}: {exc}{where}"
 
 
 def pytest_unconfigure(config):
@@ -180,10 +288,83 @@ _LAB_KEY = pytest.StashKey()
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
-    """Attach what the submission printed to the report of the phase that ran it."""
+    """Attach what the submission printed to the report of the phase that ran it, and
+    give a failing graded test its short feedback."""
     outcome = yield
+    report = outcome.get_result()
     worker = getattr(item.stash.get(_LAB_KEY, None), "_worker", None)
     if worker is not None:
         text = worker.take_output()
         if text.strip():
-            outcome.get_result().sections.append((f"submission output {call.when}", text))
+            report.sections.append((f"submission output {call.when}", text))
+    if report.failed and call.excinfo is not None \
+            and item.get_closest_marker("points") is not None:
+        _give_feedback(item, call, report)
+
+
+def long_feedback(config) -> bool:
+    choice = config.getoption("--feedback", None)
+    return choice == "full" or (choice is None and config.getoption("verbose", 0) > 0)
+
+
+@cache
+def _function_tasks(test_file: str, root: str, module: str) -> dict:
+    """What the lab's skeleton asks for, per task (empty where it cannot be read)."""
+    skeleton = Path(root) / "labs" / f"{module}.py"
+    try:
+        return function_tasks(read_grader(test_file), skeleton) if skeleton.is_file() else {}
+    except (OSError, SyntaxError, ValueError):
+        return {}
+
+
+def _frames(excinfo) -> list[tuple[str, int, str, str]]:
+    frames = []
+    for entry in excinfo.traceback:
+        try:
+            source = str(entry.statement).strip().splitlines()[0]
+        except (OSError, IndexError, ValueError, TypeError):  # no source to show
+            source = ""
+        frames.append((str(entry.path), entry.lineno + 1, entry.name, source))
+    return frames
+
+
+def _header(item, task) -> str:
+    title = getattr(item.module, "TASKS", {}).get(task, "")
+    lab = lab_number(item)
+    where = (f"lab {lab} " if lab is not None else "") + (f"task {task}" if task else "")
+    return f"{item.name}: {where}" + (f" ({title})" if title else "")
+
+
+def _give_feedback(item, call, report):
+    labs = _labs(item.config)
+    module = getattr(item.module, "LAB_MODULE", "")
+    task_marker = item.get_closest_marker("task")
+    task = task_marker.args[0] if task_marker and task_marker.args else None
+    exc = call.excinfo.value
+    tasks = _function_tasks(str(item.path), str(item.config.rootpath), module)
+    if module in labs.problems and str(exc) == labs.problems[module]:
+        feedback = Feedback(labs.problems[module], problem=labs.problems[module])
+    else:
+        feedback = short_feedback(exc=exc, frames=_frames(call.excinfo), test_file=item.path,
+                                  folder=labs.folder, task=task, task_of=tasks.get,
+                                  lab_module=module, header=_header(item, task))
+    if IMPORT_FAILED in str(exc) and module and module not in labs.problems:
+        labs.problems[module] = feedback.text  # the rest of the lab's tests fail at once
+    problem = labs.problems.get(module)
+    if problem is not None and (feedback.problem or str(exc) == problem):
+        report.user_properties.append(("problem", problem))
+    report.user_properties.append(("feedback", feedback.text))
+    pictures = getattr(exc, "pictures", None)
+    if pictures:
+        report.user_properties.append(("pictures", [str(p) for p in pictures]))
+    if not long_feedback(item.config):
+        report.longrepr = feedback.text
+
+
+def pytest_terminal_summary(terminalreporter, config):
+    """Each submission problem once, after the failures it caused."""
+    labs = config.stash.get(_LABS_KEY, None)
+    if labs is not None and labs.problems:
+        terminalreporter.section("submission problems")
+        for text in labs.problems.values():
+            terminalreporter.write_line(text)

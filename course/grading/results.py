@@ -2,11 +2,17 @@
 
 The score comes only from the outcomes of the checks this process ran; a
 submission's output, files or environment changes cannot add to it.
-``results.json`` follows Gradescope's format and is written atomically.
+``results.json`` follows Gradescope's format and is written atomically. Each test's
+output there is the short feedback of :mod:`course.grading.feedback` (message first, at
+most ``OUTPUT_LIMIT`` characters of text); a test whose images differ also shows the
+expected, the submitted and the difference picture inline (``output_format: "html"``).
 """
 
 from __future__ import annotations
 
+import base64
+import html
+import io
 import json
 import os
 import re
@@ -16,7 +22,11 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-_OUTPUT_LIMIT = 6000
+from course.grading.feedback import HINT
+
+OUTPUT_LIMIT = 1024  # characters of text per test in results.json
+_PRINTED_LIMIT = 300  # of those, at most this much of what the submission printed
+_THUMBNAIL = 128  # pixels: the inline pictures' longer side
 
 
 @dataclass
@@ -32,6 +42,10 @@ class TestResult:
     output: str = ""
     duration: float = 0.0
     visibility: str = "visible"
+    message: str = ""  # the short feedback of its first failure
+    printed: str = ""  # what the submission printed while it ran
+    pictures: list = field(default_factory=list)  # expected, got, difference PNGs
+    problem: str = ""  # the submission problem that failed it (missing/broken lab file)
 
 
 def _lab_number(module_name: str):
@@ -39,10 +53,33 @@ def _lab_number(module_name: str):
     return int(match.group(1)) if match else None
 
 
-def _short(text: str) -> str:
-    if len(text) <= _OUTPUT_LIMIT:
+def _cap(text: str, limit: int) -> str:
+    """``text`` cut to ``limit`` characters from its start (the message comes first)."""
+    if len(text) <= limit:
         return text
-    return text[:_OUTPUT_LIMIT // 2] + "\n...\n" + text[-_OUTPUT_LIMIT // 2:]
+    return text[:limit - 18].rstrip() + "\n... (cut short)"
+
+
+def _properties(report) -> dict:
+    return dict(getattr(report, "user_properties", ()) or ())
+
+
+def _thumbnail_html(path: str) -> str:
+    """An inline ``<img>`` of a small copy of the PNG at ``path`` ("" if unreadable)."""
+    try:
+        from PIL import Image
+
+        with Image.open(path) as image:
+            image.thumbnail((_THUMBNAIL, _THUMBNAIL), Image.NEAREST)
+            buffer = io.BytesIO()
+            image.save(buffer, format="PNG", optimize=True)
+    except (OSError, ValueError):
+        return ""
+    data = base64.b64encode(buffer.getvalue()).decode("ascii")
+    title = html.escape(Path(path).stem)
+    return (f'<figure style="display:inline-block;margin:4px"><img alt="{title}" '
+            f'src="data:image/png;base64,{data}" style="image-rendering:pixelated;'
+            f'width:{_THUMBNAIL}px"><figcaption>{title}</figcaption></figure>')
 
 
 @dataclass
@@ -51,6 +88,12 @@ class ScoreKeeper:
 
     results: dict = field(default_factory=dict)
     started: float = field(default_factory=time.monotonic)
+    problems: dict = field(default_factory=dict)  # submission problems, each said once
+    collect_errors: list = field(default_factory=list)  # graders that failed to load
+    show_progress: bool = True
+    _bar: object = None
+    _bar_lab: object = None
+    _left: dict = field(default_factory=dict)  # lab -> tests still to report
 
     def pytest_collection_finish(self, session):
         # After -k/-m deselection: only the tests that run count.
@@ -76,24 +119,73 @@ class ScoreKeeper:
                 max_score=marker.args[0] / counts[(item.module.__name__, item.originalname)],
                 visibility=hidden.args[0] if hidden else "visible",
             )
+        self._left = defaultdict(int)
+        for r in self.results.values():
+            self._left[r.lab] += 1
+
+    def pytest_collectreport(self, report):
+        if report.failed:
+            text = report.longreprtext.strip().splitlines()
+            self.collect_errors.append(f"{report.nodeid}: " + (text[-1] if text else "error"))
 
     def pytest_runtest_logreport(self, report):
         result = self.results.get(report.nodeid)
         if result is None:
             return
         result.duration += report.duration
+        props = _properties(report)
         if report.failed:
+            first = result.status != "failed" or not result.message
             result.status, result.score = "failed", 0.0
-            text = report.longreprtext
+            if first:
+                result.message = props.get("feedback") or _cap(report.longreprtext, 600)
+                result.pictures = list(props.get("pictures", ()))
+            if props.get("problem"):
+                result.problem = props["problem"]
+                self.problems.setdefault(result.lab_module, props["problem"])
             for title, content in report.sections:
                 if "submission output" in title:
-                    text += f"\n--- {title} ---\n{content}"
-            result.output = _short(result.output + text)
+                    result.printed += content
         elif report.skipped:
             # Skipped for lack of hardware or time: not part of this grading run.
             result.status = "skipped"
         elif report.when == "call":
             result.status, result.score = "passed", result.max_score
+        if report.when == "teardown" or (report.when == "setup" and not report.passed):
+            self._advance(result)
+        result.output = self._output(result)
+
+    def _advance(self, result):
+        """One more test of ``result``'s lab reported: the lab's progress bar moves on."""
+        if not self.show_progress:
+            return
+        from course.progress import progress
+
+        if self._bar_lab != result.lab:
+            self.close_progress()
+            self._bar = progress(total=self._left.get(result.lab, 0),
+                                 desc=f"lab {result.lab}", unit="test")
+            self._bar_lab = result.lab
+        self._bar.update(1)
+
+    def close_progress(self):
+        if self._bar is not None:
+            self._bar.close()
+        self._bar, self._bar_lab = None, None
+
+    def pytest_sessionfinish(self, session):
+        self.close_progress()
+
+    @staticmethod
+    def _output(result: TestResult) -> str:
+        """The test's text for results.json: the message first, at most OUTPUT_LIMIT."""
+        if result.status != "failed":
+            return ""
+        text = result.message
+        if result.printed.strip():
+            printed = _cap(result.printed.strip(), _PRINTED_LIMIT)
+            text += f"\n--- what your code printed ---\n{printed}"
+        return _cap(text, OUTPUT_LIMIT)
 
     # ---------------------------------------------------------------- reports
     def graded(self) -> list[TestResult]:
@@ -104,7 +196,9 @@ class ScoreKeeper:
         return sum(r.score for r in graded), sum(r.max_score for r in graded)
 
     def table(self) -> str:
-        rows = defaultdict(lambda: [0.0, 0.0, 0, 0, ""])
+        """Per task: tests passed and points; under each task that lost points, the
+        message of its first failure. Submission problems come first, once each."""
+        rows = defaultdict(lambda: [0.0, 0.0, 0, 0, "", ""])
         for r in self.graded():
             row = rows[(r.lab, r.task)]
             row[0] += r.score
@@ -112,12 +206,23 @@ class ScoreKeeper:
             row[2] += r.status == "passed"
             row[3] += 1
             row[4] = r.task_title
-        lines = [f"{'lab':>3}  {'task':>4}  {'title':<34} {'passed':>9}  {'score':>13}"]
+            if r.status == "failed" and not row[5] and not r.problem:
+                row[5] = r.message
+        lines = []
+        if self.problems or self.collect_errors:
+            lines += ["submission problems (each fails every test of its lab):"]
+            lines += [f"  {text}" for text in self.problems.values()]
+            lines += [f"  grader not loaded: {text}" for text in self.collect_errors]
+            lines.append("")
+        lines += [f"{'lab':>3}  {'task':>4}  {'title':<34} {'passed':>9}  {'score':>13}"]
         by_lab = defaultdict(lambda: [0.0, 0.0])
-        for (lab, task), (score, top, passed, count, title) in sorted(
+        for (lab, task), (score, top, passed, count, title, message) in sorted(
                 rows.items(), key=lambda kv: (kv[0][0] or 0, kv[0][1] or 0)):
             lines.append(f"{lab!s:>3}  {task!s:>4}  {title[:34]:<34} {passed:>4}/{count:<4}  "
                          f"{score:>6.2f}/{top:<6.2f}")
+            if message:
+                body = [line for line in message.splitlines() if line != HINT]
+                lines += [f"{'':11}{line}" for line in body[:6]]
             by_lab[lab][0] += score
             by_lab[lab][1] += top
         lines.append("")
@@ -136,14 +241,20 @@ class ScoreKeeper:
             label = f"Lab {r.lab} task {r.task}"
             if r.task_title:
                 label += f" ({r.task_title})"
-            tests.append({
+            test = {
                 "name": f"{label}: {name}", "number": number,
                 # Unrounded: a task's points split over 66 parametrised tests (cpu and
                 # cuda) rounded one by one drift by 4e-4 from the task's points.
                 "score": r.score, "max_score": r.max_score,
                 "status": "passed" if r.status == "passed" else "failed",
                 "output": r.output, "visibility": r.visibility,
-            })
+            }
+            pictures = [_thumbnail_html(p) for p in r.pictures] if r.output else []
+            if any(pictures):
+                test["output"] = (f"<pre>{html.escape(r.output)}</pre>"
+                                  f"<div>{''.join(pictures)}</div>")
+                test["output_format"] = "html"
+            tests.append(test)
         return {"score": round(score, 4), "max_score": round(top, 4),
                 "execution_time": round(time.monotonic() - self.started, 2),
                 "output": self.table(), "tests": tests}

@@ -1,22 +1,29 @@
-"""``rtcourse grade``: run the graders, print the score table, write results.json."""
+"""``rtcourse grade``: run the graders, print the score table, write results.json.
+
+Quiet by default: a progress bar per lab (on a terminal), then the table with each
+task's points and the first failure message of every task that lost points. ``-v``
+(``quiet=False``) prints pytest's whole log as well.
+"""
 
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
-import pytest
 
-from course.grading.results import ScoreKeeper, write_json_atomically
+class GradeError(SystemExit):
+    """A grading run that cannot start or selects nothing: one line, a non-zero exit."""
 
 
-def repo_root() -> Path:
-    """The course checkout (or handout) this command runs in: the folder holding tests/."""
+def repo_root(command: str = "rtcourse") -> Path:
+    """The course checkout (or handout) this command runs in: the folder holding tests/.
+    ``command`` names the command in the error ("rtcourse release")."""
     here = Path.cwd().resolve()
     for folder in (here, *here.parents):
         if (folder / "tests").is_dir() and (folder / "pyproject.toml").is_file():
             return folder
-    raise SystemExit("rtcourse grade: run this inside the course folder (no tests/ found)")
+    raise SystemExit(f"{command}: run this inside the course folder (no tests/ and "
+                     f"pyproject.toml in {here} or above it)")
 
 
 def lab_test_files(root: Path, labs=None) -> list[Path]:
@@ -31,27 +38,67 @@ def lab_test_files(root: Path, labs=None) -> list[Path]:
     return files
 
 
+def task_specs(labs, tasks) -> list[str]:
+    """``--task`` values for pytest: ``K`` of each chosen lab (``N.K``), or as given."""
+    specs = []
+    for task in tasks or ():
+        task = str(task)
+        if "." in task or not labs:
+            specs.append(task)
+        else:
+            specs += [f"{int(n)}.{task}" for n in labs]
+    return specs
+
+
+def _selection(labs, keyword, tasks) -> str:
+    parts = [f"lab {', '.join(map(str, labs))}" if labs else "every lab"]
+    if tasks:
+        parts.append(f"task {', '.join(map(str, tasks))}")
+    if keyword:
+        parts.append(f"-k {keyword!r}")
+    return ", ".join(parts)
+
+
 def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, trusted=False,
-          quiet=True, extra_args=()) -> dict:
-    """Grade ``impl`` and return the Gradescope dictionary (also written to ``json_path``)."""
-    root = repo_root()
+          quiet=True, extra_args=(), tasks=None) -> dict:
+    """Grade ``impl`` and return the Gradescope dictionary (also written to ``json_path``).
+
+    ``tasks``: task numbers K (of each lab in ``labs``) or ``"N.K"``; only the tests that
+    award those tasks' points run. Raises :class:`GradeError` (one line, exit status 2)
+    for a folder that does not exist and for a selection that matches no graded test.
+    """
+    root = repo_root("rtcourse grade")
+    if impl and impl not in ("solutions", "labs") and not Path(impl).expanduser().is_dir():
+        raise GradeError(f"rtcourse grade: --impl {impl}: no such folder (give the folder "
+                         f"that holds your lab files, or labs / solutions)")
     files = lab_test_files(root, labs)
     if not files:
-        raise SystemExit(f"rtcourse grade: no graders found for labs {labs}")
+        raise GradeError(f"rtcourse grade: no graders found for lab {labs} in "
+                         f"{root / 'tests'}")
+    import pytest
+
+    from course.grading.results import ScoreKeeper, write_json_atomically
+
     args = [str(f) for f in files] + ["-p", "no:cacheprovider", "-c", str(root / "pyproject.toml"),
                                       "--rootdir", str(root)]
     if impl:
         args += ["--impl", impl]
-    args += ["-q", "--no-header", "-rN"] if quiet else ["-rf"]
+    # Quiet: no pytest log at all, the table says it all; -v: pytest's log, long tracebacks.
+    args += ["-p", "no:terminal"] if quiet else ["-rf", "--feedback", "full"]
     if trusted:
         args.append("--trusted")
     if keyword:
         args += ["-k", keyword]
+    for spec in task_specs(labs, tasks):
+        args += ["--task", spec]
     args += list(extra_args)
-    keeper = ScoreKeeper()
+    keeper = ScoreKeeper(show_progress=quiet)
     code = pytest.main(args, plugins=[keeper])
+    if code == 5 or (code == 4 and not keeper.results):
+        raise GradeError(f"rtcourse grade: no graded test matches {_selection(labs, keyword, tasks)}"
+                         f" (pytest exit code {int(code)})")
     data = keeper.to_gradescope()
-    if code not in (0, 1, 5):  # interrupted, internal or usage error: say so in the output
+    if code not in (0, 1):  # interrupted, internal or usage error: say so in the output
         data["output"] += f"\n(the test run ended abnormally: pytest exit code {int(code)})"
     print()
     print(data["output"])
