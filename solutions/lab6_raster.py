@@ -134,9 +134,11 @@ def clip_triangles(clip):
     output corner in its source triangle: attributes follow with the same weights).
 
     1. Reject a triangle with a NaN/inf coordinate, or whose three corners all lie outside
-       one of the six planes ``x < -w``, ``x > w``, ``y < -w``, ``y > w``, ``z < -w``,
-       ``z > w`` (it cannot be visible; the planes are half-spaces of homogeneous space,
-       so this is exact even for corners behind the eye).
+       one of the seven half-spaces ``x < -w``, ``x > w``, ``y < -w``, ``y > w``,
+       ``z < -w``, ``z > w`` and ``w <= 0`` (it cannot be visible: the half-spaces are
+       those of homogeneous space, so this is exact even for corners behind the eye; the
+       view volume has ``w >= |x|, |y|, |z|``, so none of it lies at ``w <= 0`` but its
+       apex, the origin).
     2. With ``d = z + w`` (>= 0 on the visible side of the near plane), count the inside
        corners: 3 -> keep the triangle; 1 -> one smaller triangle; 2 -> a quad, two
        triangles. Rotate the corners (a rotation keeps the winding) so that the corner
@@ -144,6 +146,12 @@ def clip_triangles(clip):
        one inside (A): ``(A, AB, AC)``; two inside (B, C): ``(BA, B, C)`` and
        ``(BA, C, CA)``, where ``XY = X + t (Y - X)``, ``t = d_X / (d_X - d_Y)``, is
        computed from the inside corner X (see ``crossing``).
+    3. Drop a triangle whose clipped part has a corner at ``w <= 0`` (all its outputs). On
+       the visible side of the near plane such a corner has ``z >= |w|``: it lies at or
+       beyond the far plane, so no perspective camera makes one (there ``z + w >= 0``
+       means ``w >= near > 0``), but degenerate clip coordinates can (a zero matrix,
+       every ``w = 0``); dividing by its ``w`` would put inf/NaN or a flipped corner on
+       screen. Every output corner has ``w > 0``.
     The near plane must be clipped: a corner behind the eye has ``w < 0`` and its
     perspective divide flips it to the other side of the screen. The other five planes
     need no clipping: the bounding box is clamped to the screen (a "guard band").
@@ -153,7 +161,7 @@ def clip_triangles(clip):
     x, y, z, w = clip.unbind(-1)  # (F, 3) each
     finite = torch.isfinite(clip).all(-1).all(-1)
     outside = ((x < -w).all(-1) | (x > w).all(-1) | (y < -w).all(-1) | (y > w).all(-1)
-               | (z < -w).all(-1) | (z > w).all(-1))
+               | (z < -w).all(-1) | (z > w).all(-1) | (w <= 0).all(-1))
     keep = finite & ~outside
     d = z + w
     inside = d >= 0
@@ -180,6 +188,8 @@ def clip_triangles(clip):
     tris = torch.stack([first_tri, torch.stack([BA, C, CA], 1)], 1)  # (F, 2, 3, 4)
     weights = torch.stack([first_w, torch.stack([w_BA, wC, w_CA], 1)], 1)
     valid = torch.stack([keep, keep & (n_in == 2)], 1)  # (F, 2): row-major keeps F's order
+    behind = valid & ~(tris[..., 3] > 0).all(-1)  # step 3: a corner at w <= 0 (or NaN)
+    valid &= ~behind.any(1, keepdim=True)
     source = torch.arange(F, device=clip.device)[:, None].expand(F, 2)
     return tris[valid], source[valid], weights[valid]
 

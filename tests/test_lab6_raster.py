@@ -429,16 +429,27 @@ def near_plane_cases(device, dtype):
 
 def exact_clip_fraction(clip):
     """Per triangle: the fraction of its (barycentric) area on the side z + w >= 0, and
-    whether the six-plane trivial reject keeps it. float64."""
+    whether it is kept: not rejected by the seven half-spaces (the six planes and w <= 0),
+    and no corner of its clipped polygon at w <= 0 (there the divide would give inf/NaN).
+    Also the smallest |w| of a polygon corner (how clear that decision is). float64."""
     d = clip[..., 2] + clip[..., 3]
     x, y, z, w = clip.unbind(-1)
     outside = ((x < -w).all(-1) | (x > w).all(-1) | (y < -w).all(-1) | (y > w).all(-1)
-               | (z < -w).all(-1) | (z > w).all(-1))
+               | (z < -w).all(-1) | (z > w).all(-1) | (w <= 0).all(-1))
     keep = torch.isfinite(clip).all(-1).all(-1) & ~outside
     frac = torch.zeros(clip.shape[0], dtype=F64)
+    margin = torch.full((clip.shape[0],), math.inf, dtype=F64)
     for i in range(clip.shape[0]):
-        di = d[i].tolist()
+        di, wi = d[i].tolist(), w[i].tolist()
         inside = [x >= 0 for x in di]
+        # The polygon's corners: the inside corners, and where edges cross d = 0.
+        corners_w = [wi[k] for k in range(3) if inside[k]]
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            if inside[a] != inside[b]:
+                corners_w.append(wi[a] + di[a] / (di[a] - di[b]) * (wi[b] - wi[a]))
+        if corners_w:
+            margin[i] = min(abs(c) for c in corners_w)
+            keep[i] &= min(corners_w) > 0
         if all(inside):
             frac[i] = 1.0
         elif any(inside):
@@ -448,15 +459,16 @@ def exact_clip_fraction(clip):
             a, b, c = lone, (lone + 1) % 3, (lone + 2) % 3
             corner = (di[a] / (di[a] - di[b])) * (di[a] / (di[a] - di[c]))
             frac[i] = corner if inside[a] else 1 - corner
-    return frac, keep
+    return frac, keep, margin
 
 
 @pytest.mark.task(1)
 @pytest.mark.points(1)
 def test_clip_triangles_near_plane(impl, device):
     clip64 = near_plane_cases(device, F64)
-    frac, keep = exact_clip_fraction(clip64)
+    frac, keep, margin = exact_clip_fraction(clip64)
     assert 20 < int(((frac > 0) & (frac < 1) & keep).sum()), "test set-up: too few crossings"
+    assert bool((margin > 1e-4).all()), "test set-up: a clipped corner too close to w = 0"
     for dtype, tol in ((torch.float32, 2e-5), (torch.float64, 1e-12)):
         clip = clip64.to(dtype)
         result = impl.clip_triangles(clip.to(device))
@@ -499,14 +511,16 @@ def test_clip_triangles_near_plane(impl, device):
         want = torch.where(keep, frac, torch.zeros_like(frac))
         assert_close(area, want, atol=1e-4 if dtype == torch.float32 else 1e-9, name=(
             f"{case}: the area of each input triangle's outputs, as a fraction of its own "
-            f"(expected: the part with z + w >= 0; 0 for rejected, NaN or fully-clipped ones)"),
+            f"(expected: the part with z + w >= 0; 0 for rejected, NaN or fully-clipped ones, "
+            f"and for those with a clipped corner at w <= 0)"),
             where="input triangle")
         counts = torch.bincount(source, minlength=clip64.shape[0])
         n_in = ((clip64[..., 2] + clip64[..., 3]) >= 0).sum(-1)
         want_counts = torch.where(keep, torch.tensor([0, 1, 2, 1])[n_in], 0)
         assert_equal(counts, want_counts, name=(
             f"{case}: triangles out per triangle in (3 corners inside: 1, two: 2 (a quad), "
-            f"one: 1, none or outside one plane or NaN: 0)"), where="input triangle")
+            f"one: 1, none or outside one plane or NaN or a clipped corner at w <= 0: 0)"),
+            where="input triangle")
     empty = impl.clip_triangles(torch.zeros(0, 3, 4, device=device))
     assert [tuple(x.shape) for x in empty] == [(0, 3, 4), (0,), (0, 3, 3)], \
         f"clip_triangles of no triangles: got shapes {[tuple(x.shape) for x in empty]}"
@@ -568,6 +582,54 @@ def test_clip_triangles_ground_plane_behind_camera(impl, device):
             f"(row {i // camera.width}, col {i % camera.width}) "
             f"{'hits' if bool(want[i]) else 'misses'} it. Clip at z + w = 0 before dividing "
             f"by w.")
+
+
+W_CASES = {  # clip coordinates (x, y, z, w) no perspective camera makes; a degenerate one can
+    "every coordinate 0 (a zero matrix)": [[0.0, 0.0, 0.0, 0.0]] * 3,
+    "every w = 0 and z = 0": [[-1.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]],
+    "every w = 0, z mixed (a quad after the near clip)": [[-1.0, -1.0, 0.0, 0.0],
+                                                          [1.0, -1.0, 1.0, 0.0],
+                                                          [0.0, 1.0, -1.0, 0.0]],
+    "one corner at w < 0 beyond the far plane": [[0.0, 0.0, 0.0, 1.0], [0.5, 0.0, 0.0, 1.0],
+                                                 [0.0, 0.5, 1.0, -0.5]],
+    "one corner at w = 0, z = 0": [[0.0, 0.0, 0.0, 1.0], [0.5, 0.0, 0.0, 1.0],
+                                   [0.3, 0.2, 0.0, 0.0]],
+    "a quad whose cut lands at w < 0": [[0.0, 0.0, 2.0, -1.5], [0.5, 0.0, 2.0, -1.5],
+                                        [0.0, 0.5, -3.0, 1.0]],
+}
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(1)
+def test_clip_triangles_w_at_or_behind_the_eye(impl, device):
+    # Every output corner must have w > 0: the divide by w of a corner at w = 0 gives
+    # inf/NaN on screen, and at w < 0 flips it. On the visible side of the near plane such
+    # a corner lies at or beyond the far plane, so the triangle is dropped.
+    control = [[-0.5, -0.5, 0.0, 1.0], [0.5, -0.5, 0.0, 1.0], [0.0, 0.5, 0.0, 1.0]]
+    names = list(W_CASES)
+    for dtype in (torch.float32, F64):
+        clip = torch.tensor([W_CASES[n] for n in names] + [control], dtype=dtype)
+        clipped, source, _ = impl.clip_triangles(clip.to(device))
+        source = source.cpu()
+        kept = [names[i] for i in source.tolist() if i < len(names)]
+        assert not kept, (
+            f"clip_triangles ({dtype}): the triangles with {', '.join(sorted(set(kept)))} "
+            f"came out: a corner at w <= 0 (at or beyond the far plane here) must never "
+            f"reach the divide by w; drop the triangle (reject every w <= 0, and drop outputs "
+            f"with a corner at w <= 0)")
+        assert source.tolist() == [len(names)], (
+            f"clip_triangles ({dtype}): the control triangle in front of the camera must come "
+            f"out once, got sources {source.tolist()}")
+        screen = impl.to_screen(clipped, 16, 16).cpu()
+        assert bool(torch.isfinite(screen).all()) and bool((screen[..., 3] > 0).all()), \
+            f"to_screen after clip_triangles ({dtype}): NaN/inf or 1/w <= 0 on screen"
+    # A zero view-projection matrix puts every vertex at the origin of clip space.
+    mesh, _ = ground_scene(device, torch.float32)
+    clip = impl.to_clip_space(mesh.vertices, torch.zeros(4, 4, dtype=F64, device=device))
+    clipped, source, _ = impl.clip_triangles(clip[mesh.faces])
+    assert clipped.shape[0] == 0, (
+        f"clip_triangles of a mesh seen through a zero matrix (every clip coordinate 0): "
+        f"{clipped.shape[0]} triangles came out, to be divided by w = 0")
 
 
 # ---------------------------------------------------------------------------------------
