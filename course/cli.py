@@ -6,11 +6,13 @@ import argparse
 import sys
 from pathlib import Path
 
+_COMMAND = ["rtcourse"]  # the command that runs ("rtcourse release"), named in its errors
+
 
 def _root() -> Path:
     from course.grading.runner import repo_root
 
-    return repo_root()
+    return repo_root(_COMMAND[0])
 
 
 def cmd_demo(args):
@@ -32,7 +34,7 @@ def cmd_grade(args):
     from course.grading.runner import grade
 
     data = grade(args.impl, labs=args.lab, json_path=args.json, keyword=args.k,
-                 trusted=args.trusted, quiet=not args.verbose)
+                 trusted=args.trusted, quiet=not args.verbose, tasks=args.task)
     return 0 if data["max_score"] > 0 else 1
 
 
@@ -102,9 +104,13 @@ def main(argv=None):
     p.add_argument("--lab", type=int, action="append", help="grade only this lab (repeatable)")
     p.add_argument("--json", default=None, help="write Gradescope results.json here")
     p.add_argument("-k", default=None, help="pytest -k expression selecting tests")
+    p.add_argument("--task", action="append", metavar="K",
+                   help="grade only task K (of each --lab; or N.K for lab N): exactly the "
+                        "tests that award its points (repeatable)")
     p.add_argument("--trusted", action="store_true",
                    help="run the implementation in-process (only for code you trust)")
-    p.add_argument("-v", "--verbose", action="store_true")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="also print pytest's whole log with full tracebacks")
     p.set_defaults(func=cmd_grade)
 
     p = sub.add_parser("mutants", help="grade every mutant; each must lose points")
@@ -138,6 +144,7 @@ def main(argv=None):
     p.set_defaults(func=cmd_slides)
 
     args = parser.parse_args(argv)
+    _COMMAND[0] = f"rtcourse {args.command}"
     return args.func(args) or 0
 
 
