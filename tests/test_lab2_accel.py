@@ -8,11 +8,16 @@ must return *the* brute-force hit: same triangle (among equal ``t`` the lowest i
 ``t``, ``u``, ``v``. A different triangle is accepted only if it is hit at the same ``t`` to
 within rounding (a tie at a shared edge).
 
-Traversals are graded on trees built *here* (an object-median BVH, a spatial-median
-kd-tree with straddling triangles), so a task is graded on its own: a broken builder
-does not cost the traversal's points, and the other way round. The builders are judged by
-structure (every triangle in a leaf, boxes that contain their children and triangles, the
-depth-first layout) and by quality (the SAH cost of the tree, computed here).
+Traversals are graded on structures built *here* (a uniform grid, an object-median BVH, a
+spatial-median kd-tree with straddling triangles, a two-level grid), so a task is graded on
+its own: a broken builder does not cost the traversal's points, and the other way round.
+Where a function builds on another task's function (``closest_hit`` dispatching to the
+walks, ``build_two_level_grid`` building its top grid with ``build_grid``), it runs with
+stand-ins from this module in place of the lab's own (``with_given``). Only the last task
+(``END_TO_END``) runs the lab's whole chain: its own builders and walks together. The
+builders are judged by structure (every triangle in a leaf, boxes that contain their
+children and triangles, the depth-first layout) and by quality (the SAH cost of the tree,
+computed here).
 
 Scenes: random soups, "shards" (big random triangles that span many cells and straddle
 splits, among small ones), an icosphere (closed: rays from outside must find the near
@@ -26,13 +31,20 @@ triangles, a scene translated by 1e5, and t_min/t_max clipping.
 from __future__ import annotations
 
 import functools
+import inspect
 import itertools
 import math
 
 import pytest
 import torch
 
-from course.accel_support import STRUCTURES, choose_structure, pack_bvh, ray_octants
+from course.accel_support import (
+    STRUCTURES,
+    choose_structure,
+    grid_resolutions,
+    pack_bvh,
+    ray_octants,
+)
 from course.scenes import load_scene
 from course.testing import (
     assert_close,
@@ -46,9 +58,11 @@ from course.types import Hits, Mesh, Rays
 LAB_MODULE = "lab2_accel"
 TASKS = {1: "Uniform grid: build, 3D DDA, mailboxing", 2: "BVH builds: LBVH and binned SAH",
          3: "BVH traversal: stack and stackless", 4: "kd-tree: SAH build, packing, traversal",
-         5: "The common entry point and the work counters",
+         5: "The common entry point: dispatch and the structure chooser",
          6: "The two-level grid: teapot in a stadium",
-         7: "Sync-free BVH traversal: fixed shapes, any-hit"}
+         7: "Sync-free BVH traversal: fixed shapes, any-hit",
+         8: "End to end: your builders and walks on the teapot in a stadium"}
+END_TO_END = 8  # the one task graded on the lab's own chain; every other task on its own
 
 INF = math.inf
 F32, F64 = torch.float32, torch.float64
@@ -330,7 +344,7 @@ def compare(result, rays: Rays, mesh: Mesh, what: str, counters=("steps", "tests
 
 
 # ---------------------------------------------------------------------------------------
-# Trees built here, independent of the lab's builders
+# Structures built here, independent of the lab's builders
 
 
 def median_bvh(mesh: Mesh, leaf_size: int = 2) -> dict:
@@ -403,6 +417,130 @@ def median_kdtree(mesh: Mesh, max_depth: int = 10, leaf_size: int = 3) -> dict:
             "first": torch.tensor(first, dtype=torch.int64, device=device),
             "count": torch.tensor(count, dtype=torch.int64, device=device),
             "triangles": flat.to(torch.int64).to(device)}
+
+
+def grid_padding(lo: torch.Tensor, hi: torch.Tensor) -> float:
+    """A margin around the box [lo, hi]: relative to its size, plus a few ulps of its
+    coordinates (so that a scene far from the origin keeps it after rounding); 1 for a point."""
+    eps = torch.finfo(lo.dtype).eps
+    pad = 1e-3 * float((hi - lo).amax()) + 64 * eps * float(torch.maximum(lo.abs(),
+                                                                          hi.abs()).amax())
+    return pad if pad > 0 else 1.0
+
+
+def uniform_grid(mesh: Mesh, resolution=None, density: float = 2.0) -> dict:
+    """A uniform grid in the lab's layout, built here one triangle at a time (small meshes):
+    the padded scene box, ``grid_resolutions`` cells (or ``resolution``), every triangle in
+    each cell its padded bounds reach. It takes ``build_grid``'s arguments, so that a test
+    can also hand it to the lab in place of the lab's own builder."""
+    corners = mesh.triangles().cpu()
+    tri_lo, tri_hi = corners.amin(1), corners.amax(1)
+    pad = grid_padding(tri_lo.amin(0), tri_hi.amax(0))
+    lo, hi = tri_lo.amin(0) - pad, tri_hi.amax(0) + pad
+    if resolution is None:
+        res = grid_resolutions((hi - lo)[None], torch.tensor([mesh.num_faces]), density)[0]
+    else:
+        res = torch.tensor(resolution, dtype=torch.int64)
+    width = (hi - lo) / res
+    c_lo = torch.minimum(torch.floor((tri_lo - pad - lo) / width).long().clamp(min=0), res - 1)
+    c_hi = torch.minimum(torch.floor((tri_hi + pad - lo) / width).long().clamp(min=0), res - 1)
+    pairs = []
+    for t in range(mesh.num_faces):
+        xs, ys, zs = (torch.arange(int(c_lo[t, a]), int(c_hi[t, a]) + 1) for a in range(3))
+        z, y, x = torch.meshgrid(zs, ys, xs, indexing="ij")
+        cid = (x + res[0] * (y + res[1] * z)).reshape(-1)
+        pairs.append(torch.stack((cid, torch.full_like(cid, t)), 1))
+    pairs = torch.cat(pairs)
+    pairs = pairs[torch.argsort(pairs[:, 0] * mesh.num_faces + pairs[:, 1])]
+    count = torch.bincount(pairs[:, 0], minlength=int(res.prod()))
+    grid = {"kind": "grid", "lo": lo, "hi": hi, "resolution": res,
+            "cell_start": torch.cumsum(count, 0) - count, "cell_count": count,
+            "triangles": pairs[:, 1].contiguous(), "tri_cell_lo": c_lo, "tri_cell_hi": c_hi}
+    return {k: v.to(mesh.device) if isinstance(v, torch.Tensor) else v for k, v in grid.items()}
+
+
+# ---------------------------------------------------------------------------------------
+# Given stand-ins for the lab's own functions of other tasks. A function that builds on
+# another task's function (closest_hit dispatching to the walks, build_two_level_grid
+# building its top grid with build_grid) is graded with the stand-ins in place of the lab's
+# own, through ``with_given``: a mistake in the other task then costs that task's points
+# only. Each stand-in takes the arguments of the function it replaces.
+
+
+def given_bvh(mesh: Mesh, leaf_size: int = 4, *_, **__) -> dict:
+    """In place of build_sah_bvh / build_lbvh: the object-median BVH built here."""
+    return median_bvh(mesh, leaf_size)
+
+
+def given_kdtree(mesh: Mesh, *_, **__) -> dict:
+    """In place of build_kdtree: the spatial-median kd-tree built here."""
+    return median_kdtree(mesh)
+
+
+def given_two_level_grid(mesh: Mesh, *_, **__) -> dict:
+    """In place of build_two_level_grid: the two-level grid built here."""
+    return simple_two_level(mesh)
+
+
+def given_walk(rays: Rays, mesh: Mesh):
+    """In place of a structure's walk: brute force's hits, with counters of a walk (one
+    step, all F triangles tested, nothing skipped), on the rays' device."""
+    t, tri, u, v = reference(rays.to("cpu"), on(mesh, "cpu"))
+    device, n = rays.device, len(rays)
+    hits = Hits(t=t.to(device), triangle=tri.to(device), u=u.to(device), v=v.to(device))
+    return hits, {"steps": torch.ones(n, dtype=torch.int64, device=device),
+                  "tests": torch.full((n,), mesh.num_faces, dtype=torch.int64, device=device),
+                  "skipped": torch.zeros(n, dtype=torch.int64, device=device)}
+
+
+GIVEN_WALKS = {"grid_closest_hit": "given_walk", "two_level_closest_hit": "given_walk",
+               "bvh_closest_hit": "given_walk", "bvh_closest_hit_stackless": "given_walk",
+               "kd_closest_hit": "given_walk"}
+GIVEN_BUILDERS = {"build_grid": "uniform_grid", "build_two_level_grid": "given_two_level_grid",
+                  "build_lbvh": "given_bvh", "build_sah_bvh": "given_bvh",
+                  "build_kdtree": "given_kdtree"}
+
+
+def _bound(fn, args, kwargs) -> dict:
+    """The arguments of a call ``fn(*args, **kwargs)`` by parameter name, defaults filled."""
+    try:
+        bound = inspect.signature(fn).bind(*args, **kwargs)
+    except (TypeError, ValueError):
+        return dict(enumerate(args), **kwargs)
+    bound.apply_defaults()
+    return dict(bound.arguments)
+
+
+def with_given(lab, given: dict, call: str, *args, **kwargs):
+    """Run ``lab.<call>(*args, **kwargs)`` next to the lab with the lab's functions named in
+    ``given`` replaced by this module's stand-ins (lab function name -> stand-in name).
+    Returns ``(result, calls)``: ``calls`` lists, in order, each replaced function the call
+    used, as ``(name, options)``; a grid walk's options are ``{"mailbox": ...}``."""
+    calls, saved = [], {name: getattr(lab, name) for name in given}
+
+    def stand_in(name):
+        fn = globals()[given[name]]
+
+        def replaced(*a, **k):
+            if name not in GIVEN_WALKS:
+                calls.append((name, {}))
+                return fn(*a, **k)
+            bound = _bound(saved[name], a, k)
+            rays, mesh = bound.get("rays", bound.get(0)), bound.get("mesh", bound.get(1))
+            grid_walk = name in ("grid_closest_hit", "two_level_closest_hit")
+            calls.append((name, {"mailbox": bound.get("mailbox", bound.get(4, True))}
+                          if grid_walk else {}))
+            return fn(rays, mesh)
+        return replaced
+
+    try:
+        for name in given:
+            setattr(lab, name, stand_in(name))
+        result = getattr(lab, call)(*args, **kwargs)
+    finally:
+        for name, fn in saved.items():
+            setattr(lab, name, fn)
+    return result, calls
 
 
 # ---------------------------------------------------------------------------------------
@@ -634,9 +772,9 @@ def test_grid_closest_hit_matches_brute_force(impl, device):
         mesh = on(scene(name), device)
         rays = teapot_rays(200, 3) if name == "teapot" else rays_around(mesh, 240, 5)
         rays = rays.to(device)
-        grid = impl.build_grid(mesh, resolution)
+        grid = uniform_grid(mesh, resolution)  # built here: the walk is graded on its own
         compare(impl.grid_closest_hit(rays, mesh, grid, mt64), rays, mesh,
-                f"grid_closest_hit({name}, resolution={resolution})",
+                f"grid_closest_hit({name}, a grid built by the grader, resolution={resolution})",
                 counters=("steps", "tests", "skipped"))
 
 
@@ -655,7 +793,7 @@ def test_grid_dda_extremes(impl, device):
     # Exact step counts along an empty row of an 8 x 8 x 8 grid (y, z = 0.47, 0.53 avoid
     # every triangle), with -0.0 and +0.0 in the zero components.
     mesh = on(boundary_scene(), device)
-    grid = impl.build_grid(mesh, (8, 8, 8))
+    grid = uniform_grid(mesh, (8, 8, 8))
     o = torch.tensor([[-1.0, 0.47, 0.53], [2.0, 0.47, 0.53], [0.4, 0.47, 0.53],
                       [0.4, 0.47, 0.53], [0.47, -1.0, 0.53], [0.47, 0.53, 2.0],
                       [-1.0, 2.0, 0.5], [0.4, 0.47, 0.53]])
@@ -700,7 +838,7 @@ def test_grid_dda_extremes(impl, device):
     for name in ("shards", "single", "far", "coincident"):
         mesh = on(scene(name), device)
         rays = cat_rays(axis_rays(mesh, 53, 6), rays_around(mesh, 80, 54)).to(device)
-        compare(impl.grid_closest_hit(rays, mesh, impl.build_grid(mesh), mt64), rays, mesh,
+        compare(impl.grid_closest_hit(rays, mesh, uniform_grid(mesh), mt64), rays, mesh,
                 f"grid_closest_hit({name}: axis-parallel and random rays)",
                 counters=("steps", "tests", "skipped"))
 
@@ -711,7 +849,7 @@ def test_grid_mailboxing(impl, device):
     # Six big triangles, each listed in many of the 12^3 cells: without a mailbox a ray tests
     # one triangle once per cell it shares with it.
     mesh = on(scene("slabs"), device)
-    grid = impl.build_grid(mesh, (12, 12, 12))
+    grid = uniform_grid(mesh, (12, 12, 12))
     rays = rays_around(mesh, 300, 61, clip=0.0).to(device)
     ref = reference(rays.to("cpu"), on(mesh, "cpu"))
     with_box = compare(impl.grid_closest_hit(rays, mesh, grid, mt64, mailbox=True), rays, mesh,
@@ -1054,12 +1192,28 @@ def test_closest_hit_entry_point(impl, device):
         "brute_force_closest_hit: every ray tests every triangle (counters['tests'] == F)"
     compare(impl.brute_force_closest_hit(rays, mesh, mt64, 2**12), rays, mesh,
             "brute_force_closest_hit(memory_budget_bytes=4096)", ref=ref, walks=False)
-    structures = {"grid": impl.build_grid(mesh), "bvh": median_bvh(mesh, 2),
-                  "kd": median_kdtree(mesh)}
-    for kind, options in (("grid", {}), ("grid", {"mailbox": False}), ("bvh", {}),
+    # Structures built here, and the walks given (brute force standing in for the lab's own
+    # walks of tasks 1, 3, 4 and 6): closest_hit is graded on its dispatch alone. A walk it
+    # calls must be the structure's own, with the option passed on.
+    structures = {"grid": uniform_grid(mesh), "grid2": simple_two_level(mesh),
+                  "bvh": median_bvh(mesh, 2), "kd": median_kdtree(mesh)}
+    walk_of = {"grid": "grid_closest_hit", "grid2": "two_level_closest_hit",
+               "bvh": "bvh_closest_hit", "kd": "kd_closest_hit"}
+    for kind, options in (("grid", {}), ("grid", {"mailbox": False}), ("grid2", {}),
+                          ("grid2", {"mailbox": False}), ("bvh", {}),
                           ("bvh", {"stackless": True}), ("kd", {})):
-        compare(impl.closest_hit(rays, mesh, structures[kind], mt64, **options), rays, mesh,
-                f"closest_hit({kind}, {options})", ref=ref)
+        what = f"closest_hit({kind}, {options})"
+        result, calls = impl.probe(with_given, GIVEN_WALKS, "closest_hit", rays, mesh,
+                                   structures[kind], mt64, **options)
+        walk = "bvh_closest_hit_stackless" if options.get("stackless") else walk_of[kind]
+        want = (walk, {"mailbox": options.get("mailbox", True)} if kind.startswith("grid")
+                else {})
+        calls = [(name, dict(opts)) for name, opts in calls]
+        assert calls in ([], [want]), (
+            f"{what}: the structure must go to {walk}"
+            f"{'(..., mailbox=' + str(want[1]['mailbox']) + ')' if want[1] else ''}, once; "
+            f"closest_hit called {calls or 'no walk'}")
+        compare(result, rays, mesh, f"{what} (with the walks given)", ref=ref)
     compare(impl.closest_hit(rays, mesh, None, mt64), rays, mesh, "closest_hit(None)", ref=ref,
             walks=False)
     # Bad input, named.
@@ -1078,22 +1232,26 @@ def test_closest_hit_entry_point(impl, device):
                  case="memory_budget_bytes=0")
 
 
-@pytest.mark.task(5)
+@pytest.mark.task(END_TO_END)
 @pytest.mark.points(1)
 def test_counters_show_the_trade(impl, device):
-    # The teapot in a stadium: a uniform grid sized for the whole room puts the teapot into
-    # a cell or two, so its rays test hundreds of triangles; a BVH adapts. (So does an SAH
-    # kd-tree: test_kdtree_build; a spatial-median one would not.)
+    # End to end, with the lab's own builders and walks (every other test grades one of
+    # them on structures built here): the teapot in a stadium. A uniform grid sized for the
+    # whole room puts the teapot into a cell or two, so its rays test hundreds of
+    # triangles; a BVH adapts. (So does an SAH kd-tree: test_kdtree_build; a
+    # spatial-median one would not.)
     mesh = on(scene("teapot"), device)
     rays = teapot_rays(160, 141).to(device)
     at_teapot = torch.arange(len(rays)) % 4 != 3
     ref = reference(rays.to("cpu"), on(mesh, "cpu"))
     mean = {}
+    bvh = impl.build_sah_bvh(mesh, 4)
     for kind, structure, options in (("grid", impl.build_grid(mesh), {}),
-                                     ("bvh", median_bvh(mesh, 4), {}),
-                                     ("bvh stackless", median_bvh(mesh, 4), {"stackless": True})):
+                                     ("bvh", bvh, {}),
+                                     ("bvh stackless", bvh, {"stackless": True})):
         count = compare(impl.closest_hit(rays, mesh, structure, mt64, **options), rays, mesh,
-                        f"closest_hit({kind}) on the teapot in a stadium", ref=ref)
+                        f"your closest_hit on your {kind} (build_grid / build_sah_bvh) of the "
+                        f"teapot in a stadium", ref=ref)
         mean[kind] = {k: count[k][at_teapot].double().mean().item() for k in ("steps", "tests")}
     f = mesh.num_faces
     assert mean["grid"]["tests"] >= 0.1 * f, (
@@ -1108,6 +1266,8 @@ def test_counters_show_the_trade(impl, device):
         "BVH: the stackless walk (always left first, no culling by a near hit) should visit "
         f"more nodes than the stack traversal: {mean['bvh stackless']['steps']:.1f} vs "
         f"{mean['bvh']['steps']:.1f}")
+    compare_fast(impl.bvh_closest_hit_fast(rays, mesh, bvh), rays, mesh,
+                 "your bvh_closest_hit_fast on your build_sah_bvh(teapot)", ref=ref)
 
 
 # ---------------------------------------------------------------------------------------
@@ -1319,17 +1479,26 @@ def check_two_level(g, mesh: Mesh, what: str, density: float) -> None:
                              f"{density * int(counts[i]):g} (the heuristic of grid_resolution)")
 
 
+def two_level_of(impl, mesh: Mesh, *args, **kwargs) -> dict:
+    """The lab's ``build_two_level_grid`` with the top grid built by this module's
+    ``uniform_grid`` in place of the lab's ``build_grid`` (task 1), so that a mistake in
+    the uniform grid does not cost the two-level grid's points."""
+    grid, _ = impl.probe(with_given, {"build_grid": "uniform_grid"}, "build_two_level_grid",
+                         mesh, *args, **kwargs)
+    return grid
+
+
 @pytest.mark.task(6)
 @pytest.mark.points(1)
 def test_two_level_build(impl, device):
     for name in ("teapot", "soup", "shards", "far", "single", "coincident"):
         mesh = on(scene(name), device)
-        g = impl.build_two_level_grid(mesh)
+        g = two_level_of(impl, mesh)
         check_two_level(g, mesh, f"build_two_level_grid({name})", 2.0)
     # The teapot sits in crowded top cells: their sub-grids must hold (nearly) all of it, in
     # boxes about its size, not the stadium's.
     mesh = on(scene("teapot"), device)
-    g = impl.build_two_level_grid(mesh, top_density=1 / 16, density=2.0, min_triangles=16)
+    g = two_level_of(impl, mesh, top_density=1 / 16, density=2.0, min_triangles=16)
     in_sub = torch.unique(g["sub_triangles"].cpu())
     teapot = int((in_sub < 968).sum())
     assert teapot >= 0.95 * 968, (
@@ -1340,7 +1509,7 @@ def test_two_level_build(impl, device):
         f"build_two_level_grid(teapot in a stadium): a sub-grid {float(extent.max()):.3g} "
         f"across, for a teapot 0.2 across: bound each sub-grid by its *small* triangles "
         f"(the stadium's floor runs under the teapot: keep it out as a big triangle)")
-    g8 = impl.build_two_level_grid(mesh, density=8.0)
+    g8 = two_level_of(impl, mesh, density=8.0)
     check_two_level(g8, mesh, "build_two_level_grid(teapot, density=8)", 8.0)
     expect_error("min_triangles", impl.build_two_level_grid, mesh, 1 / 16, 2.0, -1,
                  case="min_triangles=-1")
@@ -1391,7 +1560,7 @@ def test_two_level_matches_brute_force(impl, device):
         rays = (teapot_rays(160, 156) if name == "teapot" else
                 cat_rays(rays_around(mesh, 120, 157), axis_rays(mesh, 158, 4)))
         rays = rays.to(device)
-        compare(impl.two_level_closest_hit(rays, mesh, impl.build_two_level_grid(mesh), mt64),
+        compare(impl.two_level_closest_hit(rays, mesh, two_level_of(impl, mesh), mt64),
                 rays, mesh, f"two_level_closest_hit on build_two_level_grid({name})",
                 counters=GRID2_COUNTERS)
 
@@ -1421,9 +1590,9 @@ def test_two_level_mailboxing_and_work(impl, device):
     mesh = on(scene("teapot"), device)
     rays = teapot_rays(160, 162).to(device)
     at_teapot = torch.arange(len(rays)) % 4 != 3
-    count = compare(impl.closest_hit(rays, mesh, impl.build_two_level_grid(mesh), mt64), rays,
-                    mesh, "closest_hit(two-level grid) on the teapot in a stadium",
-                    GRID2_COUNTERS)
+    count = compare(impl.two_level_closest_hit(rays, mesh, two_level_of(impl, mesh), mt64),
+                    rays, mesh, "two_level_closest_hit(build_two_level_grid(teapot in a "
+                    "stadium))", GRID2_COUNTERS)
     mean = count["tests"][at_teapot].double().mean().item()
     steps = count["steps"][at_teapot].double().mean().item()
     assert mean <= 0.05 * mesh.num_faces, (
@@ -1550,16 +1719,12 @@ def test_fast_bvh_matches_brute_force(impl, device):
     assert hits.triangle.tolist() == [0, 0], (
         f"bvh_closest_hit_fast: 40 coincident triangles hit at the same t: the lowest index "
         f"(0) must win, got {hits.triangle.tolist()}")
-    # float64 in, float64 out; and the lab's own SAH build.
+    # float64 in, float64 out.
     m64 = Mesh(vertices=scene("shards").vertices.double().to(device),
                faces=scene("shards").faces.to(device))
     rays = rays_around(m64, 80, 175, dtype=F64).to(device)
     compare_fast(impl.bvh_closest_hit_fast(rays, m64, median_bvh(m64, 3)), rays, m64,
                  "bvh_closest_hit_fast (float64)")
-    mesh = on(scene("teapot"), device)
-    rays = teapot_rays(160, 176).to(device)
-    compare_fast(impl.bvh_closest_hit_fast(rays, mesh, impl.build_sah_bvh(mesh)), rays, mesh,
-                 "bvh_closest_hit_fast on build_sah_bvh(teapot)")
 
 
 @pytest.mark.task(7)
@@ -1611,7 +1776,7 @@ def test_fast_bvh_any_hit_and_knobs(impl, device):
                  case="check_every=0")
     expect_error("compile", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 8, "fast",
                  case="compile='fast'")
-    expect_error("bvh", impl.bvh_closest_hit_fast, rays, mesh, impl.build_grid(mesh),
+    expect_error("bvh", impl.bvh_closest_hit_fast, rays, mesh, uniform_grid(mesh),
                  case="a grid passed as the bvh")
 
 
@@ -1665,34 +1830,13 @@ def test_pack_bvh_lays_out_each_octant_near_first():
 # ---------------------------------------------------------------------------------------
 # Task 5 (continued): closest_hit(structure="auto") builds what the chooser picks, only that
 
-BUILDERS = ("build_grid", "build_two_level_grid", "build_lbvh", "build_sah_bvh", "build_kdtree")
-
-
 def builds_of_auto(lab, rays, mesh, intersect):
     """Run ``closest_hit(rays, mesh, "auto", intersect)`` next to the lab with its builders
-    wrapped to record each outermost call (a two-level grid may build its top grid with
-    ``build_grid``); returns ``(builder names called, hit triangles)``."""
-    called, saved, depth = [], {name: getattr(lab, name) for name in BUILDERS}, [0]
-
-    def recording(name):
-        def builder(*args, **kwargs):
-            if depth[0] == 0:
-                called.append(name)
-            depth[0] += 1
-            try:
-                return saved[name](*args, **kwargs)
-            finally:
-                depth[0] -= 1
-        return builder
-
-    try:
-        for name in BUILDERS:
-            setattr(lab, name, recording(name))
-        hits, _ = lab.closest_hit(rays, mesh, "auto", intersect)
-    finally:
-        for name, fn in saved.items():
-            setattr(lab, name, fn)
-    return called, hits.triangle.cpu().tolist()
+    and walks given (this module's, recorded); returns ``(builder names called, hit
+    triangles)``."""
+    (hits, _), calls = with_given(lab, {**GIVEN_BUILDERS, **GIVEN_WALKS}, "closest_hit", rays,
+                                  mesh, "auto", intersect)
+    return [name for name, _ in calls if name in GIVEN_BUILDERS], hits.triangle.cpu().tolist()
 
 
 @pytest.mark.task(5)
