@@ -15,7 +15,8 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from course.grading.catalog import LabInfo, functions_of, lab_catalog, skeleton_functions
+from course.grading.catalog import LabInfo, lab_catalog, skeleton_functions
+from course.grading.taskdoc import task_table
 
 # Paths (relative to the repository root) that never ship to students.
 WITHHELD = ("solutions", "tests/meta", "tests/hidden", ".git", ".venv", ".ci", "out", "build",
@@ -90,25 +91,12 @@ def _lab_title(lab_file: Path, number: int) -> str:
 
 def _lab_section(root: Path, lab: LabInfo, hidden: LabInfo | None) -> list[str]:
     lab_file = root / "labs" / f"{lab.module}.py"
-    functions = skeleton_functions(lab_file) if lab_file.is_file() else []
     test_file = lab.files[0].relative_to(root).as_posix()
-    all_names = [t.name.lower() for t in lab.tests]
     your_file = (f"Your file: `labs/{lab.module}.py`" if lab_file.is_file() else
                  f"Your file `labs/{lab.module}.py` is not in this handout yet")
     lines = [f"## {_lab_title(lab_file, lab.number)}", "",
              f"{your_file} · its grader: `{test_file}` · {_pts(lab.points())} points", "",
-             "| task | title | points | you write | run only these tests |",
-             "|---:|---|---:|---|---|"]
-    for task, title in sorted(lab.tasks.items()):
-        tests = lab.graded(task)
-        names = sorted({f for t in tests for f in functions_of(t, functions)},
-                       key=functions.index)
-        # -k matches substrings of test names: use the functions that select some test.
-        selectable = [f for f in names if any(f.lower() in n for n in all_names)]
-        run = f'`-k "{" or ".join(selectable)}"`' if selectable else ""
-        you_write = ", ".join(f"`{f}`" for f in names)
-        title = str(title).replace("|", "\\|")  # a literal | inside a Markdown table cell
-        lines.append(f"| {task} | {title} | {_pts(lab.points(task))} | {you_write} | {run} |")
+             *task_table(lab, lab_file, test_file)]
     extra = [t for t in lab.tests if t.needs]
     notes = []
     if extra:
