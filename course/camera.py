@@ -37,10 +37,14 @@ def _camera_axes(eye, target, up) -> tuple[torch.Tensor, torch.Tensor, torch.Ten
     if forward.norm() == 0:
         raise ValueError(f"target: must differ from eye, both are {eye.tolist()}")
     forward = forward / forward.norm()
+    if up.norm() == 0:
+        raise ValueError(f"up: the vector is zero, {up.tolist()}; give the direction that "
+                         f"should point up in the image, e.g. (0, 1, 0)")
     right = torch.linalg.cross(forward, up)
     # A near-zero cross product means up is (anti)parallel to the view direction: no roll.
     if right.norm() <= 1e-12 * up.norm():
-        raise ValueError(f"up: must not be parallel to the view direction, got {up.tolist()}")
+        raise ValueError(f"up: must not be parallel to the view direction "
+                         f"{forward.tolist()} (target - eye, normalised), got {up.tolist()}")
     right = right / right.norm()
     return right, torch.linalg.cross(right, forward), -forward
 

@@ -53,11 +53,21 @@ def load_mesh(path_or_name: str | Path, device: str | torch.device | None = None
     Face order and winding are kept as stored.
     """
     path = _resolve(path_or_name)
-    loaded = trimesh.load(path, process=False)
+    kind = path.suffix.lstrip(".").upper() or "no extension"
+    try:
+        loaded = trimesh.load(path, process=False)
+    except Exception as exc:  # trimesh's loaders raise anything on bad bytes
+        supported = trimesh.available_formats()
+        if path.suffix.lstrip(".").lower() not in supported:
+            raise ValueError(f"path_or_name: {path}: the {kind} format is not supported "
+                             f"(trimesh reads {', '.join(sorted(supported)[:12])}, ...)") \
+                from exc
+        raise ValueError(f"path_or_name: {path} is not a readable {kind} file: "
+                         f"{type(exc).__name__}: {exc}") from exc
     parts = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
     parts = [p for p in parts if isinstance(p, trimesh.Trimesh) and len(p.faces) > 0]
     if not parts:
-        raise ValueError(f"path_or_name: {path} contains no triangles")
+        raise ValueError(f"path_or_name: {path} ({kind} file) contains no triangles")
     mesh = trimesh.util.concatenate(parts)
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
     return _mesh(mesh.vertices, mesh.faces, device, dtype)

@@ -1,0 +1,337 @@
+"""What a student reads when something fails: short messages first, submission problems
+said once, task selection that matches the points, pictures when images differ.
+
+Most checks grade tiny submissions of the toy lab (``toycourse/``) in a subprocess; the
+task-selection check collects every lab's graders once without running them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from course.grading.catalog import function_tasks, lab_catalog, lab_file_rank, skeleton_stubs
+from course.grading.feedback import MAX_LINES, short_feedback
+from course.grading.release import labs_readme
+from course.grading.results import OUTPUT_LIMIT, ScoreKeeper
+from course.grading.results import TestResult as Result
+from course.grading.runner import lab_test_files
+from course.testing import ImageMismatch, assert_image_close
+
+HERE = Path(__file__).parent
+ROOT = HERE.parents[1]
+
+WRONG = """\
+import torch
+
+
+def double(x):
+    print("debugging " * 400)
+    y = 3 * x
+    return y
+
+
+def norms(x):
+    raise NotImplementedError("not implemented yet: norms (task 2)")
+"""
+
+
+@pytest.fixture(scope="module")
+def toy(tmp_path_factory):
+    """The toy course and submissions: wrong, syntax error, misnamed, empty."""
+    base = tmp_path_factory.mktemp("feedback")
+    course = base / "course"
+    shutil.copytree(HERE / "toycourse", course)
+    subs = {}
+    for name, files in {"wrong": {"lab9_toy.py": WRONG},
+                        "syntax": {"lab9_toy.py": "import torch\n\ndef double(x)\n    return x\n"},
+                        "misnamed": {"lab9_toy (1).py": WRONG},
+                        "empty": {}}.items():
+        folder = base / name
+        folder.mkdir()
+        for file, text in files.items():
+            (folder / file).write_text(text)
+        subs[name] = folder
+    return course, subs
+
+
+def _run(args, cwd, timeout=300):
+    env = dict(os.environ, RTCOURSE_TIME_LIMIT="30", RTCOURSE_PROGRESS="0")
+    return subprocess.run([sys.executable, *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=timeout, check=False)
+
+
+def _failure_blocks(stdout: str) -> dict[str, list[str]]:
+    """Test name -> the lines pytest prints for its failure (between the ___ headers)."""
+    blocks, name = {}, None
+    for line in stdout.splitlines():
+        header = re.match(r"^_{3,} (?:ERROR at \w+ of )?(\S+) _{3,}$", line)
+        if header:
+            name = header.group(1)
+            blocks[name] = []
+        elif re.match(r"^={3,} ", line):
+            name = None
+        elif name:
+            blocks[name].append(line)
+    return blocks
+
+
+def test_pytest_failure_is_short_and_message_first(toy):
+    course, subs = toy
+    proc = _run(["-m", "pytest", "tests/test_lab9_toy.py", "--impl", str(subs["wrong"]),
+                 "-p", "no:cacheprovider"], course)
+    blocks = _failure_blocks(proc.stdout)
+    assert set(blocks) == {"test_double[cpu]", "test_norms[cpu]"}, proc.stdout[-3000:]
+    for lines in blocks.values():
+        shown = [ln for ln in lines if not ln.startswith("---") and "Captured" not in ln]
+        body = [ln for ln in shown if "debugging" not in ln]
+        assert len(body) <= MAX_LINES, "\n".join(lines)
+    assert blocks["test_norms[cpu]"][0] == "task 2: write `norms` (not implemented yet)"
+    double = blocks["test_double[cpu]"]
+    assert double[0] == "test_double[cpu]: lab 9 task 1 (double)"
+    assert "not close" in double[1], double
+    assert not any("def test_double" in ln or "tensor([" in ln for ln in double), double
+    verbose = _run(["-m", "pytest", "tests/test_lab9_toy.py", "--impl", str(subs["wrong"]),
+                    "-p", "no:cacheprovider", "-v", "-k", "double"], course)
+    assert "def test_double" in verbose.stdout, "-v should bring back pytest's traceback"
+
+
+def test_grade_prints_first_failure_per_task_and_caps_results_json(toy, tmp_path):
+    course, subs = toy
+    results = tmp_path / "results.json"
+    proc = _run(["-m", "course.cli", "grade", "--impl", str(subs["wrong"]), "--json",
+                 str(results)], course)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    lines = proc.stdout.strip().splitlines()
+    assert len(lines) <= 20, proc.stdout  # a table, not a log
+    row = next(i for i, ln in enumerate(lines) if re.match(r"\s+9\s+1\s+double", ln))
+    assert "not close" in "\n".join(lines[row + 1:row + 4])
+    assert any("task 2: write `norms` (not implemented yet)" in ln for ln in lines)
+    data = json.loads(results.read_text())
+    for test in data["tests"]:
+        assert len(test["output"]) <= OUTPUT_LIMIT, test["output"]
+    outputs = {t["name"].split(": ", 1)[1]: t["output"] for t in data["tests"]}
+    assert outputs["test_lab9_toy.py::test_norms[cpu]"] == \
+        "task 2: write `norms` (not implemented yet)"
+    double = outputs["test_lab9_toy.py::test_double[cpu]"]
+    assert double.startswith("test_double[cpu]: lab 9 task 1") and "not close" in double
+    assert "what your code printed" in double  # after the message, cut short
+
+
+def test_submission_problems_are_said_once(toy, tmp_path):
+    course, subs = toy
+    start = time.monotonic()
+    missing = _run(["-m", "course.cli", "grade", "--impl", str(tmp_path / "nowhere")], course)
+    assert missing.returncode != 0 and time.monotonic() - start < 10
+    assert missing.stderr.strip().splitlines() == [
+        (f"rtcourse grade: --impl {tmp_path / 'nowhere'}: no such folder (give the folder "
+         f"that holds your lab files, or labs / solutions)")]
+    pytest_missing = _run(["-m", "pytest", "tests/test_lab9_toy.py", "--impl",
+                           str(tmp_path / "nowhere"), "-p", "no:cacheprovider"], course)
+    assert pytest_missing.returncode == 4 and "no such folder" in pytest_missing.stderr
+
+    for name, needle in (("empty", "no lab9_toy.py in"),
+                         ("misnamed", "found 'lab9_toy (1).py': rename it to lab9_toy.py"),
+                         ("syntax", ("lab9_toy.py failed to import: SyntaxError: expected "
+                                     "':' (lab9_toy.py, line 3)"))):
+        results = tmp_path / f"{name}.json"
+        proc = _run(["-m", "course.cli", "grade", "--impl", str(subs[name]), "--json",
+                     str(results)], course)
+        assert proc.stdout.count(needle) == 1, proc.stdout
+        data = json.loads(results.read_text())
+        assert data["score"] == 0 and all(needle in t["output"] for t in data["tests"])
+        assert len({t["output"] for t in data["tests"]}) == 1  # one reason for every test
+
+    typo = _run(["-m", "course.cli", "grade", "--impl", str(subs["wrong"]), "-k", "dubble"],
+                course)
+    assert typo.returncode != 0 and "no graded test matches" in typo.stderr
+    no_task = _run(["-m", "course.cli", "grade", "--impl", str(subs["wrong"]), "--lab", "9",
+                    "--task", "7"], course)
+    assert no_task.returncode != 0 and "no graded test of task 7 of lab 9" in no_task.stderr
+
+
+def test_grade_task_runs_exactly_that_task(toy, tmp_path):
+    course, _ = toy
+    results = tmp_path / "results.json"
+    _run(["-m", "course.cli", "grade", "--impl", "solutions", "--lab", "9", "--task", "2",
+          "--json", str(results)], course)
+    data = json.loads(results.read_text())
+    assert {t["number"] for t in data["tests"]} == {"9.2"}
+    assert data["max_score"] == pytest.approx(2.0) and data["score"] == pytest.approx(2.0)
+
+
+PROBE = '''
+import json, os
+from course.grading.plugin import awards_task, parse_task
+
+def pytest_collection_finish(session):
+    points = {}
+    for item in session.items:
+        m = item.get_closest_marker("points")
+        if m is None or "gpu" in item.keywords or "slow" in item.keywords:
+            continue
+        task = item.get_closest_marker("task")
+        key = (item.module.__name__, item.originalname)
+        points.setdefault(key, [m.args[0], 0, task.args[0] if task else None, item])[1] += 1
+    out = {}
+    for spec in json.loads(os.environ["TASK_SPECS"]):
+        chosen = [item for item in session.items if awards_task(item, [parse_task(spec)])
+                  and "gpu" not in item.keywords and "slow" not in item.keywords]
+        out[spec] = sum(points[(i.module.__name__, i.originalname)][0]
+                        / points[(i.module.__name__, i.originalname)][1] for i in chosen)
+    with open(os.environ["TASK_OUT"], "w") as f:
+        json.dump(out, f)
+'''
+
+
+def test_task_option_selects_exactly_each_tasks_points(tmp_path):
+    files = lab_test_files(ROOT)
+    labs = lab_catalog(files)
+    specs = [f"{n}.{k}" for n, lab in labs.items() for k in lab.tasks]
+    (tmp_path / "task_probe.py").write_text(PROBE)
+    out = tmp_path / "points.json"
+    env = dict(os.environ, TASK_SPECS=json.dumps(specs), TASK_OUT=str(out),
+               PYTHONPATH=os.pathsep.join(filter(None, [str(tmp_path),
+                                                        os.environ.get("PYTHONPATH")])))
+    proc = subprocess.run([sys.executable, "-m", "pytest", *map(str, files), "--collect-only",
+                           "-q", "-p", "task_probe", "-p", "no:cacheprovider"], cwd=ROOT,
+                          env=env, capture_output=True, text=True, timeout=600, check=False)
+    assert out.is_file(), proc.stdout[-3000:] + proc.stderr[-3000:]
+    got = json.loads(out.read_text())
+    for n, lab in labs.items():
+        for k in lab.tasks:
+            assert got[f"{n}.{k}"] == pytest.approx(lab.points(k)), \
+                f"--task {n}.{k} selects {got[f'{n}.{k}']} points, the task is worth " \
+                f"{lab.points(k)}"
+
+
+def test_every_not_implemented_belongs_to_a_listed_task():
+    labs = lab_catalog(lab_test_files(ROOT))
+    readme = labs_readme(ROOT, hidden_root=ROOT)
+    for number, lab in labs.items():
+        skeleton = ROOT / "labs" / f"{lab.module}.py"
+        owners = function_tasks(lab, skeleton)
+        assert set(owners) == {s.name for s in skeleton_stubs(skeleton)}
+        section = readme.split(f"## Lab {number}", 1)[1].split("\n## ", 1)[0]
+        for fn, task in owners.items():
+            assert task in lab.tasks, f"lab {number}: `{fn}` raises NotImplementedError but " \
+                                      f"belongs to no task (task {task})"
+            row = next(ln for ln in section.splitlines() if ln.startswith(f"| {task} |"))
+            assert f"`{fn}`" in re.split(r"(?<!\\)\|", row)[4], f"lab {number} task {task} omits `{fn}`"
+            assert f"--task {task}`" in row
+    lab4 = readme.split("## Lab 4", 1)[1]
+    assert re.search(r"\| 2 \|[^\n]*\| task 1 \(`march_box`\) \|", lab4), "Lab 4 task 2 needs 1"
+
+
+def test_unwritten_dependency_names_its_task():
+    text = short_feedback(exc=NotImplementedError("not implemented yet: march_box (task 1)"),
+                          frames=[], test_file="tests/test_lab4_march.py", folder="labs",
+                          task=2, task_of={}.get).text
+    assert text == ("needs `march_box` (task 1) first: this test of task 2 calls it, and it "
+                    "is not implemented yet")
+    mine = short_feedback(exc=NotImplementedError("not implemented yet: FrameDownloader.submit"),
+                          frames=[], test_file="t.py", folder="labs", task=3,
+                          task_of={"FrameDownloader": 3}.get).text
+    assert mine == "task 3: write `FrameDownloader.submit` (not implemented yet)"
+
+
+def test_near_miss_lab_file_names():
+    for name in ("lab1_intersect (1).py", "Lab1_Intersect.py", "lab1_intersect-2.py",
+                 "lab1_intersect copy.py"):
+        assert lab_file_rank(name, "lab1_intersect") == 1, name
+    assert lab_file_rank("lab1_intersect.py", "lab1_intersect") == 0
+    assert lab_file_rank("lab1_intersects.py", "lab1_intersect") is None
+    assert lab_file_rank("lab2_accel.py", "lab1_intersect") is None
+
+
+def test_image_mismatch_writes_three_pictures_and_html(tmp_path, monkeypatch):
+    monkeypatch.setenv("RTCOURSE_FAILURE_DIR", str(tmp_path))
+    expected = torch.rand(12, 16, 3, generator=torch.Generator().manual_seed(3))
+    got = expected.clone()
+    got[4:6, 5:9] += 0.5
+    assert_image_close(expected.clone(), expected, name="same", atol=1e-6)
+    with pytest.raises(ImageMismatch) as info:
+        assert_image_close(got, expected, name="render(scene)", atol=1e-3, where="pixel")
+    exc = info.value
+    assert [Path(p).name for p in exc.pictures] == ["expected.png", "got.png", "difference.png"]
+    assert all(Path(p).is_file() and Path(p).parent.is_relative_to(tmp_path)
+               for p in exc.pictures)
+    assert str(Path(exc.pictures[0]).parent) in str(exc) and "8 of 16" not in str(exc)
+    assert str(exc).startswith("render(scene): 24 of 576 values are off")
+    from PIL import Image
+
+    diff = Image.open(exc.pictures[2]).convert("RGB")
+    assert diff.size == (16, 12) and diff.getpixel((6, 5)) == (255, 32, 32)
+    ids = torch.arange(20).reshape(4, 5)
+    with pytest.raises(ImageMismatch):  # an id buffer, compared exactly, as (N,) rays
+        assert_image_close(ids.flatten().flip(0), ids.flatten(), name="ids", exact=True,
+                           kind="id", image_shape=(4, 5), folder=tmp_path / "ids")
+    assert (tmp_path / "ids" / "difference.png").is_file()
+
+    keeper = ScoreKeeper(show_progress=False)
+    result = Result(nodeid="tests/test_lab6_x.py::test_y[cpu]", lab=6,
+                        lab_module="lab6_raster", task=3, task_title="t", max_score=1.0,
+                        message=str(exc), pictures=exc.pictures)
+    result.output = keeper._output(result)
+    keeper.results[result.nodeid] = result
+    test = keeper.to_gradescope()["tests"][0]
+    assert test["output_format"] == "html" and test["output"].startswith("<pre>render(scene)")
+    assert test["output"].count("data:image/png;base64,") == 3
+
+
+def test_progress_only_on_a_terminal(monkeypatch):
+    from course.progress import progress, progress_enabled
+
+    monkeypatch.delenv("RTCOURSE_PROGRESS", raising=False)
+
+    class Pipe:
+        def isatty(self):
+            return False
+
+    assert not progress_enabled(Pipe())
+    monkeypatch.setenv("RTCOURSE_PROGRESS", "1")
+    assert progress_enabled(Pipe())
+    monkeypatch.setenv("RTCOURSE_PROGRESS", "0")
+    assert list(progress(range(3), desc="x")) == [0, 1, 2]
+
+
+def test_bad_mesh_file_is_named(tmp_path):
+    from course.scenes import load_mesh
+
+    for suffix, data in ((".obj", b"v 0 0 0\nf 1 2 3 4 5\nv nonsense\x00\xff"),
+                         (".glb", b"glTF\x02\x00\x00\x00garbage"),
+                         (".ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 9\n"),
+                         (".xyz", b"1 2 3\n")):
+        path = tmp_path / f"broken{suffix}"
+        path.write_bytes(data)
+        with pytest.raises(ValueError) as info:
+            load_mesh(path)
+        message = str(info.value)
+        assert str(path) in message and suffix.lstrip(".").upper() in message.upper(), message
+
+
+def test_camera_rejects_degenerate_up():
+    from course.camera import Camera
+
+    with pytest.raises(ValueError, match="up.*zero"):
+        Camera(eye=(0, 0, 3), target=(0, 0, 0), up=(0, 0, 0))
+    with pytest.raises(ValueError, match="up.*parallel"):
+        Camera(eye=(0, 0, 3), target=(0, 0, 0), up=(0, 0, 2))
+
+
+def test_commands_name_themselves_outside_the_course(tmp_path):
+    proc = _run(["-m", "course.cli", "release", str(tmp_path / "out")], tmp_path, timeout=60)
+    assert proc.returncode != 0
+    assert proc.stderr.strip().startswith("rtcourse release: run this inside the course"), \
+        proc.stderr
+
+
