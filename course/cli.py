@@ -65,7 +65,7 @@ def cmd_mutants(args):
 def cmd_release(args):
     from course.grading.release import release
 
-    files = release(_root(), args.out)
+    files = release(_root(), args.out, notes=args.notes)
     print(f"wrote {len(files)} files of the student handout to {Path(args.out).resolve()}")
 
 
@@ -82,7 +82,11 @@ def cmd_gradescope(args):
 def cmd_slides(args):
     from course.slides import render_slides
 
-    rows = render_slides(_root(), Path(args.out), execute=args.execute)
+    try:
+        rows = render_slides(_root(), Path(args.out), execute=args.execute,
+                             names=args.notebooks)
+    except ValueError as exc:
+        raise SystemExit(f"rtcourse slides: {exc}") from None
     print(f"\nslides and lecture notes: {Path(args.out).resolve() / 'index.html'}")
     return 1 if any(row["errors"] for row in rows) else 0
 
@@ -129,6 +133,9 @@ def main(argv=None):
 
     p = sub.add_parser("release", help="write the student handout")
     p.add_argument("out", help="output folder")
+    p.add_argument("--notes", action=argparse.BooleanOptionalAction, default=True,
+                   help="run the lecture notebooks on the references and ship their outputs, "
+                        "figures and rendered notes (default; --no-notes: the notebooks as saved)")
     p.set_defaults(func=cmd_release)
 
     p = sub.add_parser("gradescope", help="build a Gradescope autograder zip")
@@ -138,6 +145,8 @@ def main(argv=None):
     p.set_defaults(func=cmd_gradescope)
 
     p = sub.add_parser("slides", help="render slides/*.ipynb to reveal.js slides and notes")
+    p.add_argument("notebooks", nargs="*", metavar="NOTEBOOK",
+                   help="render only these (a name in slides/ such as 04_march, or a path)")
     p.add_argument("--out", default="out/slides", help="output folder (default: out/slides)")
     p.add_argument("--execute", action=argparse.BooleanOptionalAction, default=True,
                    help="run the notebooks first (RTCOURSE_SMALL=1 unless set; default)")

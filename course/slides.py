@@ -1,14 +1,20 @@
 """``rtcourse slides``: the lecture notebooks as reveal.js slides and as lecture notes.
 
-Every ``slides/*.ipynb`` is executed top to bottom (nbclient, in the folder ``slides/``,
-with ``RTCOURSE_SMALL=1`` unless the caller set it: CPU-sized demos), so every number and
-figure on a slide comes from the code on it. Each executed notebook is then written twice:
+Every ``slides/*.ipynb`` (or only the notebooks named) is executed top to bottom
+(nbclient, in the notebook's folder, with ``RTCOURSE_SMALL=1`` unless the caller set it:
+CPU-sized demos), so every number and figure on a slide comes from the code on it. Each
+executed notebook is then written twice:
 
     NAME.slides.html   reveal.js slides (nbconvert's SlidesExporter)
     NAME.html          a static lecture-notes page (HTMLExporter)
 
 plus ``index.html`` linking them. A cell that raises is kept, error and all, so the
 rest of the notebook still renders; the command reports it and fails.
+
+The pages work without a network: reveal.js, MathJax 2 (the version nbconvert's templates
+configure), require.js and jQuery are copied from ``course/assets/web`` into ``_static/``
+next to the pages, and the pages point there instead of at a CDN (nbconvert's Mermaid
+loader, which no lecture uses, is left out).
 
 Slide breaks come from each cell's ``metadata.slideshow.slide_type``. Where a notebook
 leaves it out, a markdown cell that starts with a heading opens a new slide (``#``/``##``)
@@ -22,6 +28,8 @@ import copy
 import html
 import os
 import re
+import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -29,11 +37,47 @@ import nbformat
 
 _HEADING = re.compile(r"^\s*(#{1,6})\s+(.+?)\s*#*\s*$")
 
+ASSETS = Path(__file__).resolve().parent / "assets" / "web"
+STATIC = "_static"  # the pages' folder of browser files, next to them
+_REVEAL = f"{STATIC}/reveal"
+PAGE_URLS = {  # nbconvert's CDN addresses, replaced by the copies in STATIC
+    "reveal_url_prefix": _REVEAL,
+    "mathjax_url": f"{STATIC}/mathjax/MathJax.js?config=TeX-AMS_CHTML-full,Safe",
+    "require_js_url": f"{STATIC}/requirejs/require.js",
+    "jquery_url": f"{STATIC}/jquery/jquery.min.js",
+}
+# nbconvert's page templates, less the Mermaid module it imports from a CDN.
+_TEMPLATE = "rtcourse_offline.html.j2"
+_TEMPLATE_TEXT = ("{%- extends 'index.html.j2' -%}\n"
+                  "{% block html_head_js_mermaidjs %}{% endblock html_head_js_mermaidjs %}\n")
+
 
 def notebooks(root) -> list[Path]:
     """The lecture notebooks in lecture order: the overview first, then by file name."""
     return sorted(Path(root, "slides").glob("*.ipynb"),
                   key=lambda p: (not p.stem.endswith("_overview"), p.name))
+
+
+def select_notebooks(root, names=None) -> list[Path]:
+    """The notebooks ``names`` picks (a path to a notebook, or a name in ``root/slides``
+    with or without ``.ipynb``), in lecture order; every notebook when ``names`` is empty."""
+    every = notebooks(root)
+    if not names:
+        return every
+    by_name = {p.stem: p for p in every} | {p.name: p for p in every}
+    chosen = []
+    for name in names:
+        path = Path(name)
+        found = by_name.get(str(name)) or (path.resolve() if path.suffix == ".ipynb"
+                                           and path.is_file() else None)
+        if found is None:
+            known = ", ".join(p.stem for p in every) or "none"
+            raise ValueError(f"notebook {name!r}: no such notebook in "
+                             f"{Path(root, 'slides')} (there are: {known})")
+        if found not in chosen:
+            chosen.append(found)
+    order = {p: i for i, p in enumerate(every)}
+    return sorted(chosen, key=lambda p: (order.get(p, len(order)), p.name))
 
 
 def _heading(cell) -> tuple[int, str] | None:
@@ -88,9 +132,43 @@ def execute(notebook, folder: Path, timeout: float = 600) -> str | None:
     return None
 
 
-def render_notebook(path: Path, out: Path, *, execute_first=True) -> dict:
-    """Execute one notebook and write its slides and notes; return its index row."""
-    notebook = nbformat.read(path, as_version=4)
+# ------------------------------------------------------------------ offline pages
+
+
+def copy_static(out) -> Path:
+    """Copy the pages' browser files into ``out/_static`` (once: files already there and
+    of the same size are kept); return that folder."""
+    target = Path(out) / STATIC
+    for source in ASSETS.rglob("*"):
+        if source.is_file():
+            dest = target / source.relative_to(ASSETS)
+            if not dest.is_file() or dest.stat().st_size != source.stat().st_size:
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(source, dest)
+    return target
+
+
+def _exporter(kind):
+    import jinja2
+
+    urls = {k: v for k, v in PAGE_URLS.items() if k in kind.class_trait_names()}
+    return kind(extra_loaders=[jinja2.DictLoader({_TEMPLATE: _TEMPLATE_TEXT})],
+                template_file=_TEMPLATE, **urls)
+
+
+def _local_reveal(page: str) -> str:
+    """reveal.js's files sit in ``_static/reveal`` without the package's ``dist/`` folder
+    (a name that ``.gitignore`` files skip)."""
+    return page.replace(f"{_REVEAL}/dist/", f"{_REVEAL}/")
+
+
+def render_notebook(path: Path, out: Path, *, execute_first=True, notebook=None) -> dict:
+    """Execute one notebook (or take ``notebook``, already read) and write its slides and
+    notes into ``out``; return its index row."""
+    from nbconvert import HTMLExporter, SlidesExporter
+
+    path = Path(path)
+    notebook = nbformat.read(path, as_version=4) if notebook is None else notebook
     title = title_of(notebook, path.stem)
     row = {"name": path.stem, "title": title, "slides": f"{path.stem}.slides.html",
            "notes": f"{path.stem}.html", "seconds": None, "stopped": None}
@@ -100,39 +178,75 @@ def render_notebook(path: Path, out: Path, *, execute_first=True) -> dict:
         row["seconds"] = time.perf_counter() - start
     row["errors"] = error_cells(notebook) + (row["stopped"] is not None)
 
-    from nbconvert import HTMLExporter, SlidesExporter
-
     resources = {"metadata": {"name": title}}
-    slides, _ = SlidesExporter(reveal_scroll=True).from_notebook_node(
-        with_slide_types(notebook), resources=copy.deepcopy(resources))
-    notes, _ = HTMLExporter().from_notebook_node(notebook, resources=copy.deepcopy(resources))
-    (out / row["slides"]).write_text(slides, encoding="utf-8")
+    slides_exporter = _exporter(SlidesExporter)
+    slides_exporter.reveal_scroll, slides_exporter.reveal_theme = True, "white"
+    slides, _ = slides_exporter.from_notebook_node(with_slide_types(notebook),
+                                                   resources=copy.deepcopy(resources))
+    notes, _ = _exporter(HTMLExporter).from_notebook_node(notebook,
+                                                          resources=copy.deepcopy(resources))
+    out = Path(out)
+    copy_static(out)
+    (out / row["slides"]).write_text(_local_reveal(slides), encoding="utf-8")
     (out / row["notes"]).write_text(notes, encoding="utf-8")
     return row
 
 
-def render_slides(root, out, *, execute=True, log=print) -> list[dict]:
-    """Render every notebook of ``root/slides`` into ``out``; write ``out/index.html``."""
+def progress_bar(total: int, desc: str):
+    """A per-notebook progress bar (tqdm) on a terminal; None when output goes elsewhere
+    (a log, a pipe, CI), where the callers print one line per notebook instead."""
+    if not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="notebook", desc=desc, file=sys.stderr)
+
+
+def render_slides(root, out, *, execute=True, log=print, names=None) -> list[dict]:
+    """Render the notebooks ``names`` picks (default: every notebook of ``root/slides``)
+    into ``out``; write ``out/index.html``, which also lists the pages of notebooks
+    rendered there earlier. Returns the rows of the notebooks rendered now."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = notebooks(root)
+    paths = select_notebooks(root, names)
     if not paths:
         raise SystemExit(f"rtcourse slides: no notebooks in {Path(root, 'slides')}")
+    out.mkdir(parents=True, exist_ok=True)
+    bar = progress_bar(len(paths), "slides")
+    say = log if bar is None else bar.write
     rows = []
-    for step, path in enumerate(paths, 1):
-        log(f"[{step}/{len(paths)}] {path.name}: " + ("executing and " if execute else "")
-            + "rendering ...")
-        row = render_notebook(path, out, execute_first=execute)
-        rows.append(row)
-        seconds = f" in {row['seconds']:.1f} s" if row["seconds"] is not None else ""
-        problem = (f"; stopped early ({row['stopped']})" if row["stopped"] else
-                   f"; {row['errors']} cell(s) raised" if row["errors"] else "")
-        log(f"    done{seconds}{problem}")
-    _write_index(out, rows, executed=execute)
+    try:
+        for step, path in enumerate(paths, 1):
+            doing = ("executing and " if execute else "") + "rendering"
+            if bar is None:
+                say(f"[{step}/{len(paths)}] {path.name}: {doing} ...")
+            else:
+                bar.set_postfix_str(f"{path.name}: {doing}")
+            row = render_notebook(path, out, execute_first=execute)
+            rows.append(row)
+            seconds = f" in {row['seconds']:.1f} s" if row["seconds"] is not None else ""
+            problem = (f"; stopped early ({row['stopped']})" if row["stopped"] else
+                       f"; {row['errors']} cell(s) raised" if row["errors"] else "")
+            say(f"    {path.name} done{seconds}{problem}" if bar is not None
+                else f"    done{seconds}{problem}")
+            if bar is not None:
+                bar.update()
+    finally:
+        if bar is not None:
+            bar.close()
+    rendered = {row["name"] for row in rows}
+    earlier = [{"name": p.stem, "title": p.stem, "slides": f"{p.stem}.slides.html",
+                "notes": f"{p.stem}.html", "earlier": True} for p in notebooks(root)
+               if p.stem not in rendered and (out / f"{p.stem}.html").is_file()]
+    order = {p.stem: i for i, p in enumerate(notebooks(root))}
+    listed = sorted(rows + earlier, key=lambda r: (order.get(r["name"], len(order)),
+                                                   r["name"]))
+    write_index(out, listed, executed=execute)
     return rows
 
 
 def _status(row, executed: bool) -> str:
+    if row.get("earlier"):
+        return "rendered by an earlier run"
     if not executed:
         return "outputs as saved"
     if row["stopped"]:
@@ -141,20 +255,24 @@ def _status(row, executed: bool) -> str:
     return status + (f", {row['errors']} cell(s) raised" if row["errors"] else "")
 
 
-def _write_index(out: Path, rows: list[dict], *, executed: bool):
+def write_index(out: Path, rows: list[dict], *, executed: bool, note: str | None = None):
+    """``out/index.html``: one line per lecture, linking its slides and notes. ``note``
+    replaces the sentence that says where the outputs come from."""
     esc = html.escape
     items = "".join(
         f"<tr><td>{esc(row['title'])}</td><td><a href=\"{esc(row['slides'])}\">slides</a></td>"
         f"<td><a href=\"{esc(row['notes'])}\">notes</a></td>"
         f"<td>{esc(_status(row, executed))}</td></tr>" for row in rows)
     small = os.environ.get("RTCOURSE_SMALL", "1")
-    (out / "index.html").write_text(
+    if note is None:
+        note = (f"Outputs and figures come from running every notebook "
+                f"(RTCOURSE_SMALL={small})." if executed else
+                "Outputs are those saved in the notebooks.")
+    Path(out, "index.html").write_text(
         "<!doctype html><meta charset=utf-8><title>GPU ray tracing with PyTorch: lectures"
         "</title><style>body{font-family:sans-serif;margin:2em}td,th{padding:.3em 1em;"
         "text-align:left}</style><h1>GPU ray tracing with PyTorch: lectures</h1>"
         "<p>Each lecture as reveal.js slides (arrow keys to move, <kbd>Esc</kbd> for an overview) "
-        "and as a static page of lecture notes. "
-        + (f"Outputs and figures come from running every notebook (RTCOURSE_SMALL={esc(small)})."
-           if executed else "Outputs are those saved in the notebooks.")
+        "and as a static page of lecture notes. " + esc(note)
         + "</p><table><tr><th>lecture</th><th></th><th></th><th>outputs</th></tr>"
         + items + "</table>", encoding="utf-8")

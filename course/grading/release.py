@@ -6,6 +6,13 @@ course itself stay behind. In the handout the graders default to ``labs/`` becau
 there is no ``solutions/``. The handout also gets ``labs/README.md``, generated from
 the graders: each lab's tasks and points, how to test one lab or one function, and
 how to see one's score.
+
+With ``notes`` (``rtcourse release`` does it unless ``--no-notes``) the handout also gets
+the lecture as the references draw it: every notebook is executed here, on the reference
+solutions (``RTCOURSE_SMALL=1``), and shipped with its outputs in ``slides/``, rendered as
+slides and lecture notes into ``notes/`` (offline pages, see ``course.slides``), and its
+figures and tables are kept per cell in ``slides/figures/``, where a notebook run on the
+student's unwritten labs finds them (``course.lecture``).
 """
 
 from __future__ import annotations
@@ -13,6 +20,7 @@ from __future__ import annotations
 import ast
 import shutil
 import subprocess
+import time
 from pathlib import Path
 
 from course.grading.catalog import LabInfo, lab_catalog, skeleton_functions
@@ -56,8 +64,10 @@ def course_files(root, withheld=WITHHELD) -> list[Path]:
     return sorted(rel for rel in files if not _under(rel, withheld) and (root / rel).is_file())
 
 
-def release(root, out) -> list[Path]:
-    """Copy the handout of the course at ``root`` into ``out``; return the files written."""
+def release(root, out, *, notes=False, log=print) -> list[Path]:
+    """Copy the handout of the course at ``root`` into ``out``; return the files written.
+    ``notes``: also ship the executed lecture notebooks, their rendered notes and their
+    reference figures (True: every notebook; or a list of notebook names)."""
     root, out = Path(root).resolve(), Path(out).resolve()
     if out == root or root in out.parents and not _withheld(out.relative_to(root)):
         raise ValueError(f"out: the handout folder {out} must lie outside the course folder")
@@ -70,7 +80,72 @@ def release(root, out) -> list[Path]:
     if (out / "labs").is_dir():
         (out / LABS_README).write_text(labs_readme(out, hidden_root=root))
         written.append(LABS_README)
+    if notes:
+        written += lecture_notes(root, out, names=None if notes is True else notes, log=log)
     return written
+
+
+NOTES = Path("notes")
+
+
+def lecture_notes(root, out, names=None, log=print) -> list[Path]:
+    """Execute the lecture notebooks of ``root`` (on its reference solutions) and write
+    into the handout ``out``: each executed notebook over ``slides/NAME.ipynb``, its
+    slides and notes into ``notes/`` with an index, and its cells' figures and tables into
+    ``slides/figures/``. Returns the files written, relative to ``out``. A notebook that
+    raises on the references stops the release: its notes would teach an error."""
+    import nbformat
+
+    from course.lecture import FIGURES, save_reference_outputs
+    from course.lecture import write_index as write_figures
+    from course.slides import (
+        error_cells,
+        execute,
+        progress_bar,
+        render_notebook,
+        select_notebooks,
+        write_index,
+    )
+
+    root, out = Path(root), Path(out)
+    paths = select_notebooks(root, names)
+    entries, rows = {}, []
+    bar = progress_bar(len(paths), "lecture notes")
+    say = log if bar is None else bar.write
+    try:
+        for step, path in enumerate(paths, 1):
+            if bar is None:
+                say(f"[{step}/{len(paths)}] lecture notes: executing {path.name} on the "
+                    f"references ...")
+            notebook = nbformat.read(path, as_version=4)
+            start = time.perf_counter()
+            stopped = execute(notebook, path.parent)
+            if stopped or error_cells(notebook):
+                raise RuntimeError(f"{path.name}: " + (f"stopped early ({stopped})" if stopped
+                                   else f"{error_cells(notebook)} cell(s) raised")
+                                   + " on the reference solutions; fix it before a release "
+                                   "(rtcourse slides shows the error)")
+            seconds = time.perf_counter() - start
+            entries.update(save_reference_outputs(notebook, path.stem, out / FIGURES))
+            shipped = out / "slides" / path.name
+            shipped.parent.mkdir(parents=True, exist_ok=True)
+            nbformat.write(notebook, shipped)
+            row = render_notebook(shipped, out / NOTES, execute_first=False, notebook=notebook)
+            rows.append(dict(row, seconds=seconds))
+            say(f"    {path.name}: lecture notes in {seconds:.1f} s")
+            if bar is not None:
+                bar.update()
+    finally:
+        if bar is not None:
+            bar.close()
+    write_figures(out / FIGURES, entries)
+    write_index(out / NOTES, rows, executed=True,
+                note="Outputs and figures are those of the reference solutions, from running "
+                     "every notebook when this handout was made (RTCOURSE_SMALL=1). Run a "
+                     "notebook in slides/ to see your own.")
+    return sorted(p.relative_to(out) for folder in (out / NOTES, out / FIGURES)
+                  for p in folder.rglob("*") if p.is_file()) + [
+        Path("slides") / p.name for p in paths]
 
 
 # ------------------------------------------------------------------ labs/README.md
