@@ -345,8 +345,14 @@ def _grade_one(root: Path, spec: dict, scratch: Path) -> dict:
     args = files + ["-p", "no:cacheprovider", "-c", str(root / "pyproject.toml"), "--rootdir",
                     str(root), "--impl", str(folder), "--trusted", "-q", "-x", "-k", keyword,
                     "-p", "no:warnings"]
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        pytest.main(args, plugins=[outcome])
+    log = io.StringIO()
+    with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+        code = int(pytest.main(args, plugins=[outcome]))
+    if code not in (0, 1) or not outcome.ran:
+        # a broken grader or an empty selection proves nothing about the mutant
+        return {"id": spec["id"], "killed": False, "error": f"pytest exit {code}, "
+                f"{outcome.ran} tests ran: {log.getvalue()[-400:]}", "ran": outcome.ran,
+                "by": []}
     return {"id": spec["id"], "killed": bool(outcome.failed), "ran": outcome.ran,
             "by": outcome.failed[:1]}
 
@@ -436,16 +442,18 @@ def score_table(mutants: list[Generated], outcomes: list[dict], reviewed: dict[s
     rows = {}
     for m, o in zip(mutants, outcomes):
         row = rows.setdefault(m.lab, {"lab": m.lab, "generated": 0, "killed": 0,
-                                      "equivalent": 0, "survived": []})
+                                      "equivalent": 0, "survived": [], "errors": []})
         row["generated"] += 1
-        if o["killed"]:
+        if o.get("error"):
+            row["errors"].append(m.id)
+        elif o["killed"]:
             row["killed"] += 1
         elif m.id in reviewed:
             row["equivalent"] += 1
         else:
             row["survived"].append(m.id)
     for row in rows.values():
-        live = row["generated"] - row["equivalent"]
+        live = row["generated"] - row["equivalent"] - len(row["errors"])
         row["score"] = row["killed"] / live if live else 1.0
     return [rows[k] for k in sorted(rows)]
 
@@ -467,10 +475,14 @@ def main_cli(root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=N
     started = time.monotonic()
     outcomes = run(root, mutants, plans, workers=workers, progress=True)
     table = score_table(mutants, outcomes, reviewed)
-    print(f"\n{'lab':>3} {'generated':>9} {'killed':>6} {'equiv':>5} {'survived':>8} {'score':>6}")
+    print(f"\n{'lab':>3} {'generated':>9} {'killed':>6} {'equiv':>5} {'survived':>8} "
+          f"{'errors':>6} {'score':>6}")
     for row in table:
         print(f"{row['lab']:>3} {row['generated']:>9} {row['killed']:>6} {row['equivalent']:>5} "
-              f"{len(row['survived']):>8} {row['score']:>6.1%}")
+              f"{len(row['survived']):>8} {len(row['errors']):>6} {row['score']:>6.1%}")
+    errors = [o for o in outcomes if o.get("error")]
+    for o in errors[:3]:
+        print(f"  error {o['id']}: {o['error']}")
     for row in table:
         for mid in row["survived"]:
             m = next(x for x in mutants if x.id == mid)
@@ -480,7 +492,7 @@ def main_cli(root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=N
             "sampling": how, "seconds": round(time.monotonic() - started, 1),
             "labs": table, "mutants": [dict(asdict(m), **o) for m, o in zip(mutants, outcomes)],
         }, indent=1))
-    return 1 if any(row["score"] < 0.9 for row in table) else 0
+    return 1 if errors or any(row["score"] < 0.9 for row in table) else 0
 
 
 if __name__ == "__main__":

@@ -96,3 +96,14 @@ def test_a_hanging_mutant_is_caught_by_its_deadline(tmp_path):
     outcomes = run(course, hang, plans, workers=1, deadline=8)
     assert outcomes[0]["killed"] and "timed out" in outcomes[0]["by"][0], outcomes
     assert __import__("time").monotonic() - started < 60
+
+
+def test_a_selection_that_runs_nothing_is_an_error_not_a_survivor(tmp_path):
+    course = _toy(tmp_path)
+    plans = plan(course)
+    plans[0].tests["double"] = ["test_that_does_not_exist"]
+    mutants = plans[0].mutants[:1]
+    outcomes = run(course, mutants, plans, workers=1, deadline=120)
+    assert "error" in outcomes[0] and not outcomes[0]["killed"], outcomes
+    table = score_table(mutants, outcomes, {})
+    assert table[0]["errors"] == [mutants[0].id] and not table[0]["survived"]
