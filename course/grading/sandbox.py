@@ -2,31 +2,63 @@
 
 ``SandboxedLab`` looks like the lab module: ``lab.pack_rgba8(x)`` sends the call
 to a warm worker process (:mod:`course.grading.worker`), waits for it under the
-current time limit while watching its memory, and rebuilds the result as plain
-tensors. A crash, ``os._exit``, a hang or a memory blow-up costs the current call
-(an exception in the test) and the worker is restarted for the next one.
+current time limit while watching the memory of the worker and of everything it started,
+and rebuilds the result as plain tensors. A crash, ``os._exit``, a hang or a memory
+blow-up costs the current call (an exception in the test) and the worker is restarted
+for the next one.
+
+What a grading run may cost is bounded whatever the submission does:
+
+* **time**: a call that ran out of time is not run again in that run (its later calls
+  fail at once with the same message), and the submission's code has a budget per lab
+  (``RTCOURSE_LAB_TIME_BUDGET`` seconds, default 150) after which every call fails at
+  once: a lab whose every function hangs, or sleeps just under the limit, ends in about
+  the budget;
+* **memory**: a reply is at most ``RTCOURSE_REPLY_MB`` (default 256) MB, checked before
+  it is read, and decodes to no more; a bigger one fails its test. The worker's tree
+  (the submission's children included) shares one memory limit;
+* **leftovers**: the worker works in a temporary folder removed when it stops, and every
+  process the submission started is killed with it.
+
+Which arguments a kernel may write (``out``, ``*_out``) is read from the reference's
+signature (``solutions/`` where it exists, else the skeleton in ``labs/``), never from
+the submission's. Text that comes from the worker (errors, what the submission printed)
+is cleaned of any line of the hidden graders' source before a student sees it.
 
 ``LocalLab`` gives the trusted reference solutions the same interface in-process,
 with the same input-mutation check, so tests read the same either way.
 
 With ``RTCOURSE_WORKER_USER`` set (the Gradescope autograder sets it when it runs as root)
-the worker runs as that unprivileged user, so a submission cannot read what only the
+the submission runs as that unprivileged user, so it cannot read what only the
 grader may (the reference solutions shipped in the autograder) or touch the results.
 """
 
 from __future__ import annotations
 
+import ast
+import inspect
 import os
+import shutil
+import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from multiprocessing.connection import Connection
+from pathlib import Path
 
 import torch
 
 from course.grading import wire
-from course.grading.worker import call_checked, is_output_name, parameter_names
+from course.grading.worker import Changed, call_checked, check_written, too_large_message
+
+DEFAULT_LAB_TIME_BUDGET = 150.0  # seconds of submitted code per lab
+DEFAULT_REPLY_MB = 256.0
+_MEMORY_POLL = 0.2  # seconds between looks at the worker tree's memory
+BUDGET_MESSAGE = ("the time budget of the lab used up: the submission's code ran for "
+                  "{budget:.0f} s in this lab's tests, so {where} was not run (a hang or a "
+                  "slow loop in an earlier test?)")
 
 
 class WorkerCrashed(RuntimeError):
@@ -37,47 +69,137 @@ class TimeLimitExceeded(TimeoutError):
     """A call ran past the test's time limit; the worker was killed."""
 
 
+class TimeBudgetExceeded(TimeLimitExceeded):
+    """The submission's code used up the lab's time budget."""
+
+
 class MemoryLimitExceeded(MemoryError):
     """A call used more memory than allowed; the worker was killed."""
 
 
-def _raise_student_error(err: dict, where: str):
+class ReplyTooLarge(RuntimeError):
+    """A call's result is bigger than a reply may be."""
+
+
+def _env_float(name, default):
+    value = os.environ.get(name)
+    return float(value) if value else default
+
+
+# ------------------------------------------------------------ what the student may see
+
+
+class Redactor:
+    """Removes every line of the hidden graders' source from text shown to students."""
+
+    def __init__(self, root=None):
+        self.lines: set[str] = set()
+        if root is None:
+            return
+        root = Path(root)
+        visible = set()
+        for path in [*root.glob("tests/test_*.py"), *root.glob("labs/*.py"),
+                     *root.glob("solutions/*.py")]:
+            visible |= _source_lines(path)
+        for path in root.glob("tests/hidden/*.py"):
+            self.lines |= _source_lines(path) - visible
+
+    def __call__(self, text: str) -> str:
+        if not self.lines or not text:
+            return text
+        out = []
+        for line in text.splitlines(keepends=True):
+            stripped = line.strip()
+            if any(hidden in stripped for hidden in self._candidates(stripped)):
+                out.append("[a line of a hidden test was removed]\n")
+            else:
+                out.append(line)
+        return "".join(out)
+
+    def _candidates(self, stripped):
+        if stripped in self.lines:
+            return (stripped,)
+        if len(stripped) < 16:
+            return ()
+        return [h for h in self.lines if h in stripped]
+
+
+def _source_lines(path) -> set[str]:
+    try:
+        text = Path(path).read_text(errors="replace")
+    except OSError:
+        return set()
+    return {line.strip() for line in text.splitlines() if len(line.strip()) >= 16}
+
+
+def _raise_student_error(err: dict, where: str, redact=None):
     """Re-raise a submission's exception as the closest builtin exception type,
     so ``pytest.raises(ValueError)`` works across the process boundary."""
     __tracebackhide__ = True  # a student's failure report shows their call, not the sandbox
     import builtins
 
-    text = f"{err['type']}: {err['message']}" if err["type"] not in (
-        "NotImplementedError",) else err["message"]
-    for name in err["kinds"]:
-        cls = getattr(builtins, name, None)
+    redact = redact or (lambda t: t)
+    if not isinstance(err, dict) or not all(isinstance(err.get(k), str) for k in
+                                            ("type", "message", "traceback")):
+        raise WorkerCrashed(f"the worker sent a malformed error during {where}")
+    message, trace = redact(err["message"]), redact(err["traceback"])
+    text = f"{err['type']}: {message}" if err["type"] != "NotImplementedError" else message
+    kinds = err.get("kinds") if isinstance(err.get("kinds"), list) else []
+    for name in kinds:
+        cls = getattr(builtins, name, None) if isinstance(name, str) else None
         if isinstance(cls, type) and issubclass(cls, Exception) and cls is not Exception:
             if cls is NotImplementedError:
-                raise NotImplementedError(err["message"])
-            raise cls(f"{text}\n(raised in {where}; traceback from the worker:)\n"
-                      f"{err['traceback']}")
-    raise RuntimeError(f"{text}\n(raised in {where})\n{err['traceback']}")
+                raise NotImplementedError(message)
+            tail = f"\n(raised in {where}" + (f"; {trace}" if trace else ")")
+            raise cls(text + tail)
+    raise RuntimeError(f"{text}\n(raised in {where})\n{trace}")
 
 
-def _check_written(written_names, where):
-    bad = [n for n in written_names if not is_output_name(n)]
-    if bad:
-        raise AssertionError(
-            f"{where} modified its input argument(s) {', '.join(map(repr, bad))}. Kernels must "
-            f"leave their inputs untouched (only an `out` argument may be written): a caller "
-            f"that reuses the input would silently get wrong results."
-        )
+# ------------------------------------------------------------ the reference's signatures
 
 
-def _copy_back(target: torch.Tensor, value: torch.Tensor):
-    with torch.no_grad():
-        target.copy_(value.to(target.device))
+def reference_file(root, name: str) -> Path | None:
+    """The file whose signatures say which arguments are outputs: the reference
+    (course repository, Gradescope package), else the skeleton (student handout)."""
+    if root is None:
+        return None
+    for folder in ("solutions", "labs"):
+        path = Path(root) / folder / f"{name}.py"
+        if path.is_file():
+            return path
+    return None
 
 
-def _as_user(name: str | None) -> dict:
-    """``Popen`` arguments that start the worker as user ``name`` (none when unset)."""
+def reference_signatures(path) -> dict[str, list[str]] | None:
+    """Positional parameter names of every function, class (its ``__init__``) and method
+    (``Class.method``) of a lab file, read from its source without running it."""
+    if path is None:
+        return None
+    tree = ast.parse(Path(path).read_text())
+    table: dict[str, list[str]] = {}
+
+    def names(fn, drop_first):
+        params = [a.arg for a in fn.args.posonlyargs + fn.args.args]
+        return params[1:] if drop_first else params
+
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            table[node.name] = names(node, False)
+        elif isinstance(node, ast.ClassDef):
+            table[node.name] = []
+            for item in node.body:
+                if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    static = any(isinstance(d, ast.Name) and d.id == "staticmethod"
+                                 for d in item.decorator_list)
+                    key = node.name if item.name == "__init__" else f"{node.name}.{item.name}"
+                    table[key] = names(item, not static)
+    return table
+
+
+def _as_user(name: str | None):
+    """(uid, gid) the submission runs as (None when unset)."""
     if not name:
-        return {}
+        return None
     import pwd
 
     try:
@@ -87,90 +209,170 @@ def _as_user(name: str | None) -> dict:
     if os.geteuid() != 0:
         raise RuntimeError(f"RTCOURSE_WORKER_USER={name}: only a grader running as root can "
                            f"start the worker as another user")
-    return {"user": entry.pw_uid, "group": entry.pw_gid, "extra_groups": []}
+    return entry.pw_uid, entry.pw_gid
+
+
+def _children(pid) -> list[int]:
+    found = []
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return found
+    for tid in tids:
+        try:
+            with open(f"/proc/{pid}/task/{tid}/children") as f:
+                found += [int(p) for p in f.read().split()]
+        except OSError:
+            pass
+    return found
+
+
+def _process_bytes(pid) -> int:
+    """Proportional resident size (shared pages split between their users), else RSS."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as f:
+            for line in f:
+                if line.startswith("Pss:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        with open(f"/proc/{pid}/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, IndexError, ValueError):
+        return 0
 
 
 class Worker:
-    """One worker process serving every lab file of a submission folder, restarted after a
-    failure.
+    """One worker serving every lab file of a submission folder, restarted after a failure.
 
-    One process for all labs: Python, torch and whatever the labs import (``torch._dynamo``
-    for the op counter and ``torch.compile``, Triton) are imported once per submission, not
-    once per lab; that import is most of what isolation costs. The labs of one submission
-    share the process, so a lab that ends it (``os._exit``, a crash) costs the others a
-    restart, never points: each request names its lab, whose module is imported again in
-    the fresh process.
+    One process tree for all labs: Python, torch and whatever the labs import are imported
+    once per submission, not once per lab; that import is most of what isolation costs.
+    The labs of one submission share the server process, so a lab that ends it
+    (``os._exit``, a crash) costs the others a restart, never points: each request names
+    its lab, whose module is imported again in the fresh process.
     """
 
-    def __init__(self, folder: str, *, memory_bytes: int, startup_timeout: float = 60.0):
+    def __init__(self, folder: str, *, memory_bytes: int, startup_timeout: float = 60.0,
+                 reply_bytes: int | None = None):
         self.folder = folder
         self.memory_bytes = memory_bytes
+        self.reply_bytes = int(reply_bytes or _env_float("RTCOURSE_REPLY_MB",
+                                                         DEFAULT_REPLY_MB) * 2**20)
         self.startup_timeout = startup_timeout
         self.proc = None
-        self.conn = None
+        self.conn = None      # to the server: calls
+        self.control = None   # to the keeper: probes
+        self.workdir = None
         self.starting = False
+        self.redact = Redactor()
+        self.last_seconds = 0.0  # how long the last request ran, start-up excluded
         self.output: list[str] = []  # what the submission printed, since the last take
 
     # -- process management
     def launch(self):
-        """Start the worker process without waiting for it: starting Python and torch
-        overlaps with whatever the grader does next."""
-        as_user = _as_user(os.environ.get("RTCOURSE_WORKER_USER"))
-        parent, child = socket.socketpair()
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        """Start the worker without waiting for it: starting Python and torch overlaps
+        with whatever the grader does next."""
+        user = _as_user(os.environ.get("RTCOURSE_WORKER_USER"))
+        self.workdir = tempfile.mkdtemp(prefix="rtcourse-worker-")
+        if user:
+            os.chown(self.workdir, *user)
+        ctl_parent, ctl_child = socket.socketpair()
+        data_parent, data_child = socket.socketpair()
+        env = dict(os.environ, PYTHONUNBUFFERED="1", TMPDIR=self.workdir,
+                   PYTORCH_NVML_BASED_CUDA_CHECK="1")
+        fds = (ctl_child.fileno(), data_child.fileno())
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "course.grading.worker", str(child.fileno()),
-             self.folder, str(self.memory_bytes)],
-            pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, env=env,
-            **as_user,
+            [sys.executable, "-m", "course.grading.worker", *map(str, fds), self.folder,
+             str(self.memory_bytes), str(self.reply_bytes), *map(str, user or ())],
+            pass_fds=fds, stdin=subprocess.DEVNULL, env=env, cwd=self.workdir,
+            start_new_session=True,
         )
-        child.close()
-        self.conn = Connection(parent.detach())
+        ctl_child.close()
+        data_child.close()
+        self.control = Connection(ctl_parent.detach())
+        self.conn = Connection(data_parent.detach())
         self.starting = True
 
     def _await_ready(self, deadline):
-        reply = self._receive(deadline, "starting the worker")
+        reply = self._receive(self.conn, deadline, "starting the worker")
         self.starting = False
-        self.output.append(reply.get("output", ""))
+        self._keep_output(reply)
 
     def stop(self):
+        """End the worker, everything the submission started, and its folder."""
+        for conn in (self.conn, self.control):
+            if conn is not None:
+                conn.close()
         if self.proc is not None:
             if self.proc.poll() is None:
-                self.proc.kill()
-            self.proc.wait()
-        if self.conn is not None:
-            self.conn.close()
-        self.proc = self.conn = None
+                self.proc.terminate()  # the keeper kills its tree, then itself
+                try:
+                    self.proc.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    self.proc.kill()
+                    self.proc.wait()
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)  # the rest of its process group
+            except OSError:
+                pass
+        if self.workdir is not None:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+        self.proc = self.conn = self.control = self.workdir = None
         self.starting = False
 
     def take_output(self) -> str:
         text = "".join(self.output)
         self.output.clear()
-        return text
+        return self.redact(text)
+
+    def _keep_output(self, reply):
+        text = reply.get("output", "")
+        if isinstance(text, str):
+            self.output.append(text[:8000])
 
     # -- requests
-    def request(self, message: dict, deadline: float, where: str) -> dict:
+    def request(self, message: dict, deadline: float, where: str, probe=False) -> dict:
+        """Send a call (to the server) or a probe (to the keeper, which runs it in a fresh
+        process) and wait for the reply until ``deadline``."""
         if self.proc is None or self.proc.poll() is not None:
             self.stop()
             self.launch()
         if self.starting:
             # Starting Python and torch is the grader's cost, not the test's.
             self._await_ready(max(deadline, time.monotonic() + self.startup_timeout))
-        self.conn.send_bytes(wire.dumps(message))
-        reply = self._receive(deadline, where)
-        self.output.append(reply.get("output", ""))
+        message["where"] = where
+        conn = self.control if probe else self.conn
+        started = time.monotonic()
+        try:
+            conn.send_bytes(wire.dumps(message))
+        except OSError:
+            self._crashed(where)
+        try:
+            reply = self._receive(conn, deadline, where)
+        finally:
+            self.last_seconds = time.monotonic() - started
+        if "crashed" in reply:
+            raise WorkerCrashed(
+                f"the submission ended the process of {where} (exit code {reply['crashed']}): "
+                f"sys.exit/os._exit or a crash in native code ends the grading of that call")
+        self._keep_output(reply)
         return reply
 
-    def _resident_bytes(self) -> int:
-        try:
-            with open(f"/proc/{self.proc.pid}/statm") as f:
-                return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-        except (OSError, IndexError, ValueError):
-            return 0
+    def _tree_bytes(self) -> int:
+        """Memory of every process below the keeper: the server, a probe, and whatever
+        the submission started (orphans are reparented to the keeper)."""
+        total, todo, seen = 0, _children(self.proc.pid), 0
+        while todo and seen < 4096:
+            pid = todo.pop()
+            seen += 1
+            total += _process_bytes(pid)
+            todo += _children(pid)
+        return total
 
-    def _ready(self) -> bool:
+    def _ready(self, conn) -> bool:
         try:
-            return self.conn.poll(0.02)
+            return conn.poll(0.02)
         except (EOFError, OSError):
             return True  # the next receive reports the crash
 
@@ -184,42 +386,80 @@ class Worker:
             f"the submission ended the worker process (exit code {code}) during {where}: "
             f"sys.exit/os._exit or a crash in native code ends the grading of that call")
 
-    def _receive(self, deadline: float, where: str) -> dict:
-        while not self._ready():
+    def _receive(self, conn, deadline: float, where: str) -> dict:
+        next_look = 0.0
+        while not self._ready(conn):
             if self.proc.poll() is not None:
                 self._crashed(where)
-            if self.memory_bytes > 0 and self._resident_bytes() > self.memory_bytes + 2**30:
-                self.stop()
-                raise MemoryLimitExceeded(
-                    f"{where} used more than {self.memory_bytes / 2**30:.1f} GiB of memory "
-                    f"and was stopped")
-            if time.monotonic() > deadline:
+            now = time.monotonic()
+            if self.memory_bytes > 0 and now >= next_look:
+                next_look = now + _MEMORY_POLL
+                if self._tree_bytes() > self.memory_bytes + 2**30:
+                    self.stop()
+                    raise MemoryLimitExceeded(
+                        f"{where} used more than {self.memory_bytes / 2**30:.1f} GiB of "
+                        f"memory and was stopped")
+            if now > deadline:
                 self.stop()
                 raise TimeLimitExceeded(f"{where} did not finish within the time limit and "
                                         f"was stopped (an infinite loop?)")
         try:
-            reply = wire.loads_plain(self.conn.recv_bytes())
-        except (EOFError, OSError):
+            # The length comes first: a longer message is refused before it is read.
+            data = conn.recv_bytes(self.reply_bytes + 2**20)
+        except EOFError:
             self._crashed(where)
+        except OSError as exc:
+            if "bad message length" not in str(exc):
+                self._crashed(where)
+            self.stop()
+            raise ReplyTooLarge(too_large_message(where, self.reply_bytes + 2**20,
+                                                  self.reply_bytes).replace(
+                "returned", "returned more than")) from None
+        try:
+            reply = wire.loads_plain(data)
         except Exception as exc:  # a reply that is not plain data: a hostile submission
             self.stop()
             raise WorkerCrashed(f"the worker sent a malformed reply during {where}: {exc}") \
                 from exc
+        finally:
+            del data
         if not isinstance(reply, dict):
             self.stop()
             raise WorkerCrashed(f"the worker sent a malformed reply during {where}")
         return reply
 
 
-class SandboxedLab:
-    """A lab module running in a :class:`Worker`; attribute access mirrors the module."""
+def _changed(reply, where) -> list[Changed]:
+    try:
+        return [Changed(pos, key, path, value) for pos, key, path, value in
+                reply.get("written", ())
+                if (pos is None or type(pos) is int) and (key is None or type(key) is str)
+                and type(path) is str]
+    except (TypeError, ValueError):
+        raise WorkerCrashed(f"the worker sent a malformed reply during {where}") from None
 
-    def __init__(self, name: str, worker: Worker, time_limit: float):
+
+class SandboxedLab:
+    """A lab module running in a :class:`Worker`; attribute access mirrors the module.
+
+    ``root``: the course folder (its ``solutions/`` or ``labs/`` give the reference's
+    signatures, its ``tests/hidden/`` the source no output may show).
+    """
+
+    def __init__(self, name: str, worker: Worker, time_limit: float, *, root=None,
+                 time_budget: float | None = None):
         self._name = name
         self._worker = worker
         self._time_limit = time_limit
         self._deadline = None
         self._callable_cache: dict = {}
+        self._budget = time_budget if time_budget is not None else _env_float(
+            "RTCOURSE_LAB_TIME_BUDGET", DEFAULT_LAB_TIME_BUDGET)
+        self._spent = 0.0
+        self._timed_out: dict[str, str] = {}  # where -> the message it failed with
+        self._signatures = reference_signatures(reference_file(root, name))
+        if root is not None and not worker.redact.lines:
+            worker.redact = Redactor(root)
 
     # The grading plugin resets the clock at the start of every test.
     def _start_clock(self, time_limit=None):
@@ -228,72 +468,119 @@ class SandboxedLab:
     def _remaining_deadline(self):
         return self._deadline or time.monotonic() + self._time_limit
 
-    def _request(self, message, where):
+    def _request(self, message, where, probe=False):
         __tracebackhide__ = True
+        if where in self._timed_out:  # it hung once: not again, same message
+            raise TimeLimitExceeded(self._timed_out[where])
+        left = self._budget - self._spent
+        if left <= 0:
+            raise TimeBudgetExceeded(BUDGET_MESSAGE.format(budget=self._budget, where=where))
         message["lab"] = self._name
-        reply = self._worker.request(message, self._remaining_deadline(), where)
+        now = time.monotonic()
+        test_deadline = self._remaining_deadline()
+        by_budget = now + left < test_deadline
+        try:
+            return self._worker.request(message, min(test_deadline, now + left), where,
+                                        probe=probe)
+        except TimeLimitExceeded as exc:
+            if by_budget:
+                raise TimeBudgetExceeded(BUDGET_MESSAGE.format(
+                    budget=self._budget, where=where)) from None
+            self._timed_out[where] = str(exc)
+            raise
+        finally:
+            self._spent += self._worker.last_seconds
+            self._worker.last_seconds = 0.0
+
+    def _fail(self, reply, where):
+        __tracebackhide__ = True
         if "error" in reply:
-            _raise_student_error(reply["error"], where)
-        return reply
+            _raise_student_error(reply["error"], where, self._worker.redact)
 
-    def _decode(self, value):
-        return wire.decode(value, make_ref=lambda i, t: RemoteObject(self, i, t))
+    def _decode(self, value, where="the call"):
+        try:
+            return wire.decode(value, make_ref=lambda i, t: RemoteObject(self, i, t),
+                               limit=self._worker.reply_bytes)
+        except wire.TooLarge as exc:
+            raise ReplyTooLarge(f"{where}: {exc}, more than a result may hold") from None
 
-    def _getattr(self, ref, name, where):
-        key = (ref, name)
-        if key in self._callable_cache:
-            return self._callable_cache[key]
+    def _positional(self, key):
+        """Positional parameter names of ``key`` in the reference (None: unknown)."""
+        if self._signatures is None:
+            return None
+        return self._signatures.get(key, [])
+
+    def _getattr(self, ref, name, where, key):
+        cache = (ref, name)
+        if cache in self._callable_cache:
+            return self._callable_cache[cache]
         reply = self._request({"op": "getattr", "ref": ref, "name": name}, where)
+        self._fail(reply, where)
         if reply.get("callable"):
-            method = RemoteCallable(self, ref, name, where)
-            self._callable_cache[key] = method
+            method = RemoteCallable(self, ref, name, where, key)
+            self._callable_cache[cache] = method
             return method
-        return self._decode(reply["value"])
+        return self._decode(reply.get("value"), where)
 
     def __getattr__(self, name):
         if name.startswith("_"):
             raise AttributeError(name)
-        return self._getattr(None, name, f"{self._name}.{name}")
+        return self._getattr(None, name, f"{self._name}.{name}", name)
 
     def probe(self, fn, *args, **kwargs):
-        """Run ``fn(lab_module, *args)`` next to the submission; return its plain result."""
+        """Run ``fn(lab_module, *args)`` in a fresh process next to the submission; return
+        its plain result."""
         where = f"probe {fn.__name__} of {self._name}"
         reply = self._request({"op": "probe", "probe": wire.encode(fn), "ref": None,
-                               "args": wire.encode(args), "kwargs": wire.encode(kwargs)}, where)
-        return self._decode(reply["value"])
+                               "args": wire.encode(args), "kwargs": wire.encode(kwargs),
+                               "signatures": self._signatures}, where, probe=True)
+        self._fail(reply, where)
+        return self._decode(reply.get("value"), where)
 
     def __repr__(self):
         return f"<sandboxed lab {self._name} from {self._worker.folder}>"
 
 
 class RemoteCallable:
-    def __init__(self, lab: SandboxedLab, ref, name, where):
+    def __init__(self, lab: SandboxedLab, ref, name, where, key):
         self._lab, self._ref, self._name, self._where = lab, ref, name, where
+        self._key = key  # the reference's name for it: "fn", "Class" or "Class.method"
 
     def __call__(self, *args, **kwargs):
         __tracebackhide__ = True
-        reply = self._lab._request(
+        lab = self._lab
+        reply = lab._request(
             {"op": "call", "ref": self._ref, "name": self._name,
              "args": wire.encode(args), "kwargs": wire.encode(kwargs)}, self._where)
-        written = reply.get("written", {})
-        _check_written(written, self._where)
-        for name, (pos, value) in written.items():
-            target = kwargs.get(name) if pos is None else args[pos]
-            if isinstance(target, torch.Tensor):
-                _copy_back(target, self._lab._decode(value))
-        return self._lab._decode(reply["value"])
+        outputs = check_written(_changed(reply, self._where), self._where,
+                                lab._positional(self._key))
+        lab._fail(reply, self._where)
+        for c in outputs:
+            target = kwargs.get(c.keyword) if c.position is None else args[c.position]
+            if isinstance(target, torch.Tensor) and c.value is not None:
+                value = lab._decode(c.value, self._where)
+                if isinstance(value, torch.Tensor) and value.shape == target.shape:
+                    with torch.no_grad():
+                        target.copy_(value.to(target.device))
+        value = lab._decode(reply.get("value"), self._where)
+        if isinstance(value, RemoteObject) and lab._signatures is not None \
+                and self._key in lab._signatures and "." not in self._key:
+            value._key = self._key  # an instance of the reference's class of that name
+        return value
 
 
 class RemoteObject:
     """An object that stays in the worker (e.g. an instance of a class the lab defines)."""
 
     def __init__(self, lab: SandboxedLab, ref_id: int, type_name: str):
-        self._lab, self._ref, self._type = lab, ref_id, type_name
+        self._lab, self._ref, self._type = lab, ref_id, str(type_name)
+        self._key = self._type
 
     def __getattr__(self, name):
         if name.startswith("_"):
             raise AttributeError(name)
-        return self._lab._getattr(self._ref, name, f"{self._type}.{name}")
+        return self._lab._getattr(self._ref, name, f"{self._type}.{name}",
+                                  f"{self._key}.{name}")
 
     def __repr__(self):
         return f"<{self._type} in the sandboxed worker>"
@@ -324,10 +611,20 @@ class LocalLab:
         return f"<lab {self._name} from {self._module.__file__}>"
 
 
+def _positional_names(fn):
+    try:
+        return [p.name for p in inspect.signature(fn).parameters.values()
+                if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    except (TypeError, ValueError):
+        return []
+
+
 def _checked(fn, where):
     def call(*args, **kwargs):
-        result, written = call_checked(fn, args, kwargs, parameter_names(fn, len(args)))
-        _check_written(written, where)
+        result, changed, error = call_checked(fn, args, kwargs)
+        check_written(changed, where, _positional_names(fn))
+        if error is not None:
+            raise error
         return result
 
     call.__name__ = getattr(fn, "__name__", "call")

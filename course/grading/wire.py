@@ -7,6 +7,11 @@ smuggle an object (a tensor subclass that compares equal to anything, a class
 with a malicious ``__reduce__``) into the checking process: a tensor arrives as
 raw bytes and is rebuilt here as a plain ``torch.Tensor``.
 
+A reply is bounded twice: the grader reads no message longer than its cap (the length comes
+first on the socket), and :func:`decode` counts what it builds against the same cap, so a
+small pickle that names one big tensor many times cannot make the grader build it many
+times. A tensor's bytes must match its shape and dtype.
+
 Tagged values are dicts with the key ``TAG``:
   tensor   {"dtype", "shape", "device", "data"}
   ndarray  {"dtype", "shape", "data"}
@@ -124,14 +129,46 @@ _ALLOWED_DTYPES = {
 }
 
 
-def _decode_tensor(d, device_map) -> torch.Tensor:
+class TooLarge(ValueError):
+    """A reply that decodes to more than the cap allows."""
+
+
+class _Budget:
+    """Bytes (and container slots, 8 bytes each) a decode may still build."""
+
+    def __init__(self, limit):
+        self.limit = self.left = limit
+
+    def take(self, nbytes):
+        self.left -= nbytes
+        if self.left < 0:
+            raise TooLarge(f"the result decodes to more than {self.limit / 2**20:.0f} MB")
+
+
+def _shape(d) -> tuple:
+    shape = d["shape"]
+    if type(shape) not in (tuple, list) or len(shape) > 64 or any(
+            type(s) is not int or s < 0 for s in shape):
+        raise TypeError(f"malformed shape {shape!r}")
+    return tuple(shape)
+
+
+def _decode_tensor(d, device_map, budget=None) -> torch.Tensor:
     dtype = _ALLOWED_DTYPES.get(d["dtype"])
     if dtype is None:
         raise TypeError(f"tensor of unsupported dtype {d['dtype']!r}")
-    shape = tuple(int(s) for s in d["shape"])
+    shape = _shape(d)
     data = d["data"]
     if not isinstance(data, (bytes, bytearray)):
         raise TypeError(f"tensor data of type {type(data).__name__}, expected bytes")
+    numel = 1
+    for s in shape:
+        numel *= s
+    if numel * torch.empty((), dtype=dtype).element_size() != len(data):
+        raise TypeError(f"tensor of shape {shape} and dtype {d['dtype']} with {len(data)} "
+                        f"bytes of data")
+    if budget is not None:
+        budget.take(len(data))
     if len(data) == 0:
         t = torch.empty(shape, dtype=dtype)
     else:
@@ -179,30 +216,52 @@ def import_file(path, name=None):
     return module
 
 
-def decode(obj, *, make_ref=None, allow_functions=False):
+def decode(obj, *, make_ref=None, allow_functions=False, limit=None):
     """Rebuild a value from its plain-data form.
 
     ``make_ref(id, type)`` turns a worker reference into a local handle (grader
     side). Functions are resolved only when ``allow_functions`` (worker side:
-    they come from the trusted grader).
+    they come from the trusted grader). ``limit``: the bytes the result may take (the
+    grader's cap on replies); more raises :class:`TooLarge`.
     """
+    budget = _Budget(limit) if limit is not None else None
+    try:
+        return _decode(obj, make_ref, allow_functions, budget)
+    except RecursionError:
+        raise TooLarge("the result is nested too deeply to rebuild") from None
+
+
+def _decode(obj, make_ref, allow_functions, budget):
     if isinstance(obj, _PLAIN):
+        if budget is not None and type(obj) in (str, bytes):
+            budget.take(len(obj))
         return obj
+    if budget is not None and type(obj) in (list, tuple, dict):
+        budget.take(8 * len(obj) + 64)
     if type(obj) is list:
-        return [decode(x, make_ref=make_ref, allow_functions=allow_functions) for x in obj]
+        return [_decode(x, make_ref, allow_functions, budget) for x in obj]
     if type(obj) is tuple:
-        return tuple(decode(x, make_ref=make_ref, allow_functions=allow_functions) for x in obj)
+        return tuple(_decode(x, make_ref, allow_functions, budget) for x in obj)
     if type(obj) is not dict or TAG not in obj:
         raise TypeError(f"malformed value of type {type(obj).__name__} from the other side")
     kind = obj[TAG]
-    sub = {"make_ref": make_ref, "allow_functions": allow_functions}
+
+    def sub(value):
+        return _decode(value, make_ref, allow_functions, budget)
+
     if kind == "tensor":
-        return _decode_tensor(obj, _local_device)
+        return _decode_tensor(obj, _local_device, budget)
     if kind == "ndarray":
         dtype = np.dtype(obj["dtype"])
         if dtype.kind not in "biufc":
             raise TypeError(f"array of unsupported dtype {dtype}")
-        return np.frombuffer(bytearray(obj["data"]), dtype=dtype).reshape(obj["shape"])
+        shape, data = _shape(obj), obj["data"]
+        if not isinstance(data, (bytes, bytearray)) or int(np.prod(shape)) * dtype.itemsize \
+                != len(data):
+            raise TypeError(f"array of shape {shape} and dtype {dtype} with malformed data")
+        if budget is not None:
+            budget.take(len(data))
+        return np.frombuffer(bytearray(data), dtype=dtype).reshape(shape)
     if kind == "dtype":
         dtype = _ALLOWED_DTYPES.get(obj["name"])
         if dtype is None:
@@ -211,7 +270,10 @@ def decode(obj, *, make_ref=None, allow_functions=False):
     if kind == "device":
         return torch.device(obj["name"])
     if kind == "dict":
-        return {decode(k, **sub): decode(v, **sub) for k, v in obj["items"]}
+        items = obj["items"]
+        if budget is not None:
+            budget.take(16 * len(items))
+        return {sub(k): sub(v) for k, v in items}
     if kind == "dataclass":
         module_name, qualname = obj["cls"].split(":")
         if not module_name.startswith("course."):
@@ -219,7 +281,7 @@ def decode(obj, *, make_ref=None, allow_functions=False):
         cls = getattr(importlib.import_module(module_name), qualname)
         if not dataclasses.is_dataclass(cls):
             raise TypeError(f"refused class {obj['cls']}")
-        fields = {k: decode(v, **sub) for k, v in obj["fields"].items()}
+        fields = {k: sub(v) for k, v in obj["fields"].items()}
         return _build_dataclass(cls, fields)
     if kind == "ref" and make_ref is not None:
         return make_ref(obj["id"], obj["type"])

@@ -1,76 +1,112 @@
 """The sandboxed worker: imports a submitted lab module and runs calls on it.
 
-Started by :mod:`course.grading.sandbox` as ``python -m course.grading.worker FD
-FOLDER MEMORY_BYTES``; ``FD`` is one end of a socket pair. Each request names its lab;
-the lab file ``FOLDER/<lab>.py`` is imported on the first request for it. Requests arrive as
-pickles from the trusted grader; replies go back as plain data (see
-:mod:`course.grading.wire`). Anything the submission prints lands in a file the
-grader reads after each request, never on the grader's own output.
+Started by :mod:`course.grading.sandbox` as ``python -m course.grading.worker CONTROL_FD
+DATA_FD FOLDER MEMORY_BYTES REPLY_BYTES [UID GID]``. The process it starts is the *keeper*:
+it imports torch and the grader's modules and never runs submitted code, so its state is
+the pristine one. It forks
+
+* the *server*, which imports ``FOLDER/<lab>.py`` on the first request naming that lab and
+  answers calls on ``DATA_FD`` until the grader closes it;
+* one fresh *probe* process per ``impl.probe`` request on ``CONTROL_FD``: the probe's
+  function is loaded before the submission is imported there, so nothing the submission
+  did in earlier calls is seen, and a probe whose process had the grader's own code changed
+  by the submission is refused (see :func:`fingerprint`).
+
+The keeper is a child subreaper: whatever the submission starts, even a grandchild that
+left its session, is reparented to it and killed when the server ends or the grader
+stops the worker. Children drop to ``UID``/``GID`` when given (the grader runs as root),
+cap their address space, and die with the keeper.
+
+Requests arrive as pickles from the trusted grader; replies go back as plain data (see
+:mod:`course.grading.wire`), never larger than ``REPLY_BYTES``. Anything the submission
+prints lands in a private file read back after each request, never on the grader's own
+output. Tracebacks keep only the submission's own frames: the grader's files (a hidden
+test's probe among them) are not shown.
 """
 
+# ruff: noqa: BLE001  (the worker catches whatever a submission raises, SystemExit too)
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import os
 import resource
+import signal
 import sys
 import tempfile
+import time
 import traceback
 from multiprocessing.connection import Connection
 
 _OUTPUT_LIMIT = 4000
+_PR_SET_PDEATHSIG = 1
+_PR_SET_CHILD_SUBREAPER = 36
 
 
-def _capture_output():
-    """Point fds 1 and 2 at a private file; return it for reading back."""
-    capture = tempfile.TemporaryFile(mode="w+b")
-    os.dup2(capture.fileno(), 1)
-    os.dup2(capture.fileno(), 2)
-    return capture
+# ------------------------------------------------------------- shared with the grader
 
 
-def _take_output(capture) -> str:
-    sys.stdout.flush()
-    sys.stderr.flush()
-    capture.seek(0)
-    text = capture.read().decode("utf-8", "replace")
-    capture.seek(0)
-    capture.truncate()
-    if len(text) > _OUTPUT_LIMIT:
-        text = text[:_OUTPUT_LIMIT] + f"\n... ({len(text) - _OUTPUT_LIMIT} more characters)"
-    return text
+def is_output_name(name) -> bool:
+    """Arguments a kernel may write into: ``out`` or ``..._out``."""
+    return isinstance(name, str) and (name == "out" or name.endswith("_out"))
 
 
-def _limit_memory(extra_bytes: int):
-    """Cap the address space at what is mapped now plus ``extra_bytes``.
+def input_mutation_message(where: str, names) -> str:
+    return (f"{where} modified its input argument(s) {', '.join(map(repr, names))}. Kernels "
+            f"must leave their inputs untouched (only an `out` argument may be written): a "
+            f"caller that reuses the input would silently get wrong results.")
 
-    Skipped when CUDA is usable: the driver reserves far more address space than
-    it uses. The grader then watches the resident size instead.
-    """
+
+def too_large_message(where: str, nbytes: int, limit: int) -> str:
+    return (f"{where} returned {nbytes / 2**20:.0f} MB of data, more than the "
+            f"{limit / 2**20:.0f} MB a result may hold; the test fails")
+
+
+# ---------------------------------------------------------------- input-mutation check
+
+
+def _tensor_like(value):
+    import numpy as np
     import torch
 
-    if extra_bytes <= 0 or torch.cuda.is_available():
+    if isinstance(value, torch.Tensor):
+        return value.layout == torch.strided
+    return isinstance(value, np.ndarray)
+
+
+def _walk(value, path="", depth=0):
+    """(path, array) for every tensor or numpy array in ``value``, inside lists, tuples,
+    dicts and dataclasses too (a ``Mesh`` or ``Rays`` argument holds tensors)."""
+    if _tensor_like(value):
+        yield path, value
         return
-    with open("/proc/self/statm") as f:
-        mapped = int(f.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
-    limit = mapped + extra_bytes
-    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    if depth >= 4:
+        return
+    if type(value) in (list, tuple) or isinstance(value, tuple):
+        for i, item in enumerate(value):
+            yield from _walk(item, f"{path}[{i}]", depth + 1)
+    elif type(value) is dict:
+        for key, item in list(value.items())[:64]:
+            yield from _walk(item, f"{path}[{key!r}]", depth + 1)
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        for f in dataclasses.fields(value):
+            yield from _walk(getattr(value, f.name, None), f"{path}.{f.name}", depth + 1)
 
 
-def _error(exc: BaseException) -> dict:
-    # Only names and text travel: the grader re-raises a builtin of the same kind.
-    kinds = [c.__name__ for c in type(exc).__mro__ if c.__module__ == "builtins"]
-    if isinstance(exc, SystemExit):
-        message = f"the code called sys.exit({exc.code!r})"
-    else:
-        message = str(exc)
-    tb = traceback.format_exception(type(exc), exc, exc.__traceback__)
-    return {"kinds": kinds, "type": type(exc).__name__, "message": message,
-            "traceback": "".join(tb[-6:])[-3000:]}
+def _copy(a):
+    import torch
+
+    return a.detach().clone() if isinstance(a, torch.Tensor) else a.copy()
 
 
 def _same_bits(a, b) -> bool:
+    import numpy as np
     import torch
 
+    if isinstance(a, np.ndarray):
+        return (a.shape == b.shape and a.dtype == b.dtype
+                and np.ascontiguousarray(a).tobytes() == np.ascontiguousarray(b).tobytes())
+    a = a.detach()
     if a.shape != b.shape or a.dtype != b.dtype:
         return False
     if a.dtype.is_floating_point or a.dtype.is_complex:
@@ -81,66 +117,260 @@ def _same_bits(a, b) -> bool:
     return torch.equal(a, b)
 
 
-def is_output_name(name) -> bool:
-    """Arguments a kernel may write into: ``out`` or ``..._out``."""
-    return isinstance(name, str) and (name == "out" or name.endswith("_out"))
+@dataclasses.dataclass
+class Changed:
+    """An argument (or a tensor inside one) whose bits a call changed."""
+
+    position: int | None  # index of a positional argument, else None
+    keyword: str | None   # name of a keyword argument, else None
+    path: str             # "" for the argument itself, ".origins" / "[2]" inside it
+    value: object         # the array after the call
 
 
-def call_checked(fn, args, kwargs, param_names):
-    """Call ``fn`` and report which tensor arguments it modified.
+def call_checked(fn, args, kwargs):
+    """Call ``fn``; return ``(result, changed, exception)``.
 
-    Returns ``(result, written)`` where ``written`` maps an argument's name to
-    ``(position, tensor after the call)`` for every tensor argument whose bits
-    changed; ``position`` is the index of a positional argument, else None.
+    ``changed`` lists every tensor or numpy array among the arguments (nested ones too)
+    whose bits differ after the call, whether it returned or raised: a kernel that zeroes
+    its inputs and then raises is caught as well. Which of them may be written (outputs)
+    is the caller's decision, made from the reference's signature.
+    """
+    before = []
+    for i, arg in enumerate(args):
+        before += [(i, None, p, a, _copy(a)) for p, a in _walk(arg)]
+    for key, arg in kwargs.items():
+        before += [(None, key, p, a, _copy(a)) for p, a in _walk(arg)]
+    result, error = None, None
+    try:
+        result = fn(*args, **kwargs)
+    except BaseException as exc:  # a submission may raise anything, SystemExit too
+        error = exc
+    changed = [Changed(pos, key, path, a) for pos, key, path, a, old in before
+               if not _same_bits(a, old)]
+    return result, changed, error
+
+
+def argument_name(changed: Changed, positional) -> str | None:
+    """The parameter a changed argument was passed as, by the reference's positional
+    parameter names ``positional`` (None: the reference is not known)."""
+    if changed.keyword is not None:
+        return changed.keyword
+    if positional is not None and changed.position < len(positional):
+        return positional[changed.position]
+    return None
+
+
+def check_written(changed, where, positional):
+    """Raise AssertionError if a call changed anything but its outputs; return the
+    changed outputs as ``(position, keyword, value)``."""
+    bad, outputs = [], []
+    for c in changed:
+        name = argument_name(c, positional)
+        if c.path == "" and is_output_name(name):
+            outputs.append(c)
+        else:
+            label = name or f"argument {c.position}"
+            bad.append(label + c.path)
+    if bad:
+        raise AssertionError(input_mutation_message(where, bad))
+    return outputs
+
+
+# ---------------------------------------------------------------- errors and output
+
+
+def _capture_output():
+    """Point fds 1 and 2 at a private file; return it for reading back."""
+    capture = tempfile.TemporaryFile(mode="w+b")  # noqa: SIM115  (lives as long as the process)
+    os.dup2(capture.fileno(), 1)
+    os.dup2(capture.fileno(), 2)
+    return capture
+
+
+def _take_output(capture) -> str:
+    with contextlib.suppress(Exception):  # a submission may have replaced them
+        sys.stdout.flush()
+        sys.stderr.flush()
+    capture.seek(0)
+    text = capture.read(_OUTPUT_LIMIT * 4).decode("utf-8", "replace")
+    capture.seek(0)
+    capture.truncate()
+    if len(text) > _OUTPUT_LIMIT:
+        text = text[:_OUTPUT_LIMIT] + "\n... (more output cut)"
+    return text
+
+
+def _error(exc: BaseException, folder: str) -> dict:
+    """Only names and text travel: the grader re-raises a builtin of the same kind. The
+    traceback keeps the submission's own frames (files under ``folder``)."""
+    kinds = [c.__name__ for c in type(exc).__mro__ if c.__module__ == "builtins"]
+    if isinstance(exc, SystemExit):
+        message = f"the code called sys.exit({exc.code!r})"
+    else:
+        try:
+            message = str(exc)
+        except Exception:
+            message = f"<{type(exc).__name__} whose message cannot be printed>"
+    root = os.path.realpath(folder) + os.sep
+    frames = [f for f in traceback.extract_tb(exc.__traceback__)
+              if os.path.realpath(f.filename).startswith(root)]
+    text = "".join(traceback.format_list(frames[-6:]))[-3000:]
+    if text:
+        text = "Traceback (the submission's frames, most recent call last):\n" + text
+    return {"kinds": kinds, "type": type(exc).__name__, "message": message[:3000],
+            "traceback": text}
+
+
+def _assertion(message: str) -> dict:
+    return {"kinds": ["AssertionError", "Exception", "BaseException"],
+            "type": "AssertionError", "message": message, "traceback": ""}
+
+
+def _reply_bytes(reply: dict, wire, limit: int, where: str, folder: str) -> bytes:
+    """The reply pickled, or an error saying why it could not be."""
+    try:
+        data = wire.dumps(reply)
+    except BaseException as exc:
+        data = wire.dumps({"error": _error(exc, folder), "output": reply.get("output", "")})
+    if len(data) > limit:
+        size = len(data)
+        del data
+        data = wire.dumps({"error": _assertion(too_large_message(where, size, limit)),
+                           "output": reply.get("output", "")})
+    return data
+
+
+# ---------------------------------------------------------------- the probe fingerprint
+
+def _watched_modules(wide):
+    for name, module in list(sys.modules.items()):
+        if module is None or name.startswith("submission_"):
+            continue
+        if name in ("course", "__main__") or name.startswith(("course.", "rtcourse_file_")) \
+                or wide and name in ("numpy", "torch", "numpy.testing", "torch.testing", "builtins",
+                                      "inspect", "types", "math", "dataclasses"):
+            yield name, module
+
+
+def fingerprint(wide=True):
+    """What the grader's code is made of, right now: every value of the grader's modules
+    (``course``, the test modules, the worker) with the code, defaults and globals of their
+    functions and the methods of their classes; ``wide`` adds builtins, the top level of
+    torch and numpy and ``torch.Tensor``'s methods (what a probe's observations rest on).
+    Objects are kept, not ids, so nothing is recycled in between."""
+    import torch
+
+    seen = {}
+    for name, module in _watched_modules(wide):
+        entries = {}
+        for key, value in list(vars(module).items()):
+            if value is None:
+                continue  # a lazily filled cache (``_MODULE = None``)
+            entries[key] = (value, getattr(value, "__code__", None),
+                            getattr(value, "__defaults__", None),
+                            getattr(value, "__kwdefaults__", None))
+            if (isinstance(value, type) and getattr(value, "__module__", None) == name
+                    and name.startswith(("course", "rtcourse_file_", "__main__"))):
+                seen[f"{name}.{key}"] = (value, dict(vars(value)))
+        seen[name] = (module, entries)
+    if wide:
+        seen["torch.Tensor"] = (torch.Tensor, dict(vars(torch.Tensor)))
+        seen["torch._C.TensorBase"] = (torch._C.TensorBase, dict(vars(torch._C.TensorBase)))
+    return seen
+
+
+def fingerprint_changes(before) -> list[str]:
+    """Names of the grader's values that changed since ``before`` (new names are fine:
+    lazy imports add them)."""
+    changed = []
+    now_modules = dict(sys.modules)
+    for name, (obj, entries) in before.items():
+        if isinstance(obj, type):
+            now = vars(obj)
+            changed += [f"{name}.{k}" for k, v in entries.items() if now.get(k, changed) is not v]
+            continue
+        if now_modules.get(name, obj) is not obj:
+            changed.append(name)
+            continue
+        now = vars(obj)
+        for key, (value, code, defaults, kwdefaults) in entries.items():
+            current = now.get(key, changed)
+            if current is not value or getattr(current, "__code__", None) is not code \
+                    or getattr(current, "__defaults__", None) is not defaults \
+                    or getattr(current, "__kwdefaults__", None) is not kwdefaults:
+                changed.append(f"{name}.{key}")
+    return changed
+
+
+# ---------------------------------------------------------------- checked lab (probes)
+
+
+class _CheckedLab:
+    """The lab module as a probe sees it: every call goes through the input-mutation
+    check, with the outputs named by the reference's signatures."""
+
+    def __init__(self, module, signatures, where):
+        self._module, self._signatures, self._where = module, signatures, where
+
+    def __getattr__(self, name):
+        value = getattr(self._module, name)
+        return _wrap(value, name, self._signatures, f"{self._where}.{name}")
+
+
+class _CheckedObject:
+    def __init__(self, obj, cls_name, signatures):
+        self._obj, self._cls, self._signatures = obj, cls_name, signatures
+
+    def __getattr__(self, name):
+        value = getattr(self._obj, name)
+        return _wrap(value, f"{self._cls}.{name}", self._signatures, f"{self._cls}.{name}")
+
+
+def _wrap(value, key, signatures, where):
+    if not callable(value) or type(value).__name__ == "module":
+        return value
+    positional = signatures.get(key) if signatures is not None else None
+
+    def call(*args, **kwargs):
+        result, changed, error = call_checked(value, args, kwargs)
+        check_written(changed, where, positional)
+        if error is not None:
+            raise error
+        if isinstance(value, type):
+            return _CheckedObject(result, key, signatures)
+        return result
+
+    call.__name__ = getattr(value, "__name__", "call")
+    return call
+
+
+# ---------------------------------------------------------------- the processes
+
+
+def _prctl(option, value):
+    import ctypes
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(option, value, 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux: the process group is all there is
+        pass
+
+
+def _limit_memory(extra_bytes: int):
+    """Cap the address space at what is mapped now plus ``extra_bytes`` (inherited by
+    every process the submission starts).
+
+    Skipped when CUDA is usable: the driver reserves far more address space than
+    it uses. The grader then watches the resident size of the whole tree instead.
     """
     import torch
 
-    named = [(name, i, t) for i, (name, t) in enumerate(zip(param_names, args))]
-    named += [(name, None, t) for name, t in kwargs.items()]
-    before = [(name, pos, t, t.detach().clone()) for name, pos, t in named
-              if isinstance(t, torch.Tensor) and t.layout == torch.strided]
-    result = fn(*args, **kwargs)
-    written = {name: (pos, t) for name, pos, t, old in before
-               if not _same_bits(t.detach(), old)}
-    return result, written
-
-
-def parameter_names(fn, count):
-    import inspect
-
-    try:
-        params = list(inspect.signature(fn).parameters)
-    except (TypeError, ValueError):
-        params = []
-    return [params[i] if i < len(params) else f"argument {i}" for i in range(count)]
-
-
-def main(argv):
-    fd, folder, memory_bytes = int(argv[0]), argv[1], int(argv[2])
-    conn = Connection(fd)
-    capture = _capture_output()
-    os.chdir(tempfile.mkdtemp(prefix="rtcourse-worker-"))
-    sys.stdin = open(os.devnull)
-
-    from course.grading import wire  # imports torch
-
-    _limit_memory(memory_bytes)
-    labs = _Labs(folder, wire)
-    refs: dict[int, object] = {}
-    conn.send_bytes(wire.dumps({"ready": True, "output": _take_output(capture)}))
-
-    while True:
-        try:
-            request = wire.pickle.loads(conn.recv_bytes())
-        except EOFError:
-            return
-        reply = _serve(request, labs, refs, wire)
-        reply["output"] = _take_output(capture)
-        try:
-            data = wire.dumps(reply)
-        except BaseException as exc:
-            data = wire.dumps({"error": _error(exc), "output": reply["output"]})
-        conn.send_bytes(data)
+    if extra_bytes <= 0 or torch.cuda.is_available():
+        return
+    with open("/proc/self/statm") as f:
+        mapped = int(f.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    limit = mapped + extra_bytes
+    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
 
 
 class _Labs:
@@ -156,16 +386,20 @@ class _Labs:
             try:
                 self.modules[name] = (self.wire.import_file(path, "submission_" + name), None)
             except BaseException as exc:  # a submission may raise anything, SystemExit too
-                self.modules[name] = (None, _error(exc))
+                self.modules[name] = (None, _error(exc, self.folder))
         return self.modules[name]
+
+
+def _import_error(err):
+    return {"error": dict(err, message="the lab module failed to import: " + err["type"]
+                          + ": " + err["message"])}
 
 
 def _serve(request, labs, refs, wire):
     op = request["op"]
     module, import_error = labs.get(request["lab"])
     if import_error is not None:
-        return {"error": dict(import_error, message="the lab module failed to import: "
-                              + import_error["type"] + ": " + import_error["message"])}
+        return _import_error(import_error)
     try:
         target = module if request.get("ref") is None else refs[request["ref"]]
         if op == "release":
@@ -178,15 +412,245 @@ def _serve(request, labs, refs, wire):
             return {"value": wire.encode(value, refs)}
         args = wire.decode(request["args"], allow_functions=True, make_ref=refs.__getitem__)
         kwargs = wire.decode(request["kwargs"], allow_functions=True, make_ref=refs.__getitem__)
-        if op == "probe":
-            fn = wire.load_function(request["probe"])
-            return {"value": wire.encode(fn(module, *args, **kwargs), refs)}
         fn = getattr(target, request["name"])
-        result, written = call_checked(fn, args, kwargs, parameter_names(fn, len(args)))
-        return {"value": wire.encode(result, refs),
-                "written": {name: (pos, wire.encode(t)) for name, (pos, t) in written.items()}}
     except BaseException as exc:
-        return {"error": _error(exc)}
+        return {"error": _error(exc, labs.folder)}
+    result, changed, error = call_checked(fn, args, kwargs)
+    # Every changed array is reported (its data only when it could be an output: a
+    # top-level tensor); the grader decides by the reference's names what may change.
+    import torch
+
+    written = [(c.position, c.keyword, c.path,
+                wire.encode(c.value) if c.path == "" and isinstance(c.value, torch.Tensor)
+                else None) for c in changed]
+    if error is not None:
+        return {"error": _error(error, labs.folder), "written": written}
+    try:
+        return {"value": wire.encode(result, refs), "written": written}
+    except BaseException as exc:
+        return {"error": _error(exc, labs.folder), "written": written}
+
+
+def _child(ctl_fd, memory_bytes, uid, gid, keeper):
+    """What every process forked by the keeper does first."""
+    os.close(ctl_fd)  # the submission never talks to the keeper
+    if uid is not None:
+        os.setgroups([])
+        os.setgid(gid)
+        os.setuid(uid)
+    _prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)  # after setuid, which clears it
+    if os.getppid() != keeper:
+        os._exit(1)
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    capture = _capture_output()
+    _limit_memory(memory_bytes)
+    return capture
+
+
+def _tampered(changed) -> str:
+    shown = ", ".join(changed[:5]) + (" ..." if len(changed) > 5 else "")
+    return (f"the submission changed the grader's own code ({shown}): what the grader's "
+            f"side of the sandbox reports cannot be trusted, so the test fails")
+
+
+def _server(conn, folder, reply_bytes, capture, wire):
+    # Bound before any submission runs: replacing these names in the module changes nothing.
+    serve, changes_of, take, pack, loads = (_serve, fingerprint_changes, _take_output,
+                                            _reply_bytes, wire.pickle.loads)
+    labs = _Labs(folder, wire)
+    refs: dict[int, object] = {}
+    before = fingerprint(wide=False)
+    tampered = None
+    conn.send_bytes(wire.dumps({"ready": True, "output": take(capture)}))
+    while True:
+        try:
+            request = loads(conn.recv_bytes())
+        except (EOFError, OSError):
+            return
+        reply = serve(request, labs, refs, wire) if tampered is None else {}
+        changed = changes_of(before) if tampered is None else ()
+        if changed:
+            tampered = _tampered(changed)
+        if tampered is not None:  # from then on, every call fails
+            reply = {"error": _assertion(tampered)}
+        reply["output"] = take(capture)
+        conn.send_bytes(pack(reply, wire, reply_bytes, request.get("where", "the call"),
+                             folder))
+
+
+def _probe(request, folder, capture, wire) -> dict:
+    """Run one probe in this fresh process: load the probe and its arguments, take the
+    fingerprint, import the submission, run, check the fingerprint again."""
+    try:
+        fn = wire.load_function(request["probe"])
+        args = wire.decode(request["args"], allow_functions=True)
+        kwargs = wire.decode(request["kwargs"], allow_functions=True)
+    except BaseException as exc:
+        return {"error": _error(exc, folder)}
+    # Bound before the submission is imported: replacing these names changes nothing.
+    changes_of, encode, error_of, checked = fingerprint_changes, wire.encode, _error, _CheckedLab
+    before = fingerprint()
+    module, import_error = _Labs(folder, wire).get(request["lab"])
+    if import_error is not None:
+        return _import_error(import_error)
+    lab = checked(module, request.get("signatures"), request["lab"])
+    try:
+        value = fn(lab, *args, **kwargs)
+        encoded = encode(value)
+    except BaseException as exc:
+        return {"error": error_of(exc, folder)}
+    changed = changes_of(before)
+    if changed:
+        return {"error": _assertion(_tampered(changed))}
+    return {"value": encoded}
+
+
+def _kill_descendants():
+    """SIGKILL every process below the keeper (orphans included: it is their subreaper)
+    and reap them."""
+    end = time.monotonic() + 10
+    while time.monotonic() < end:
+        pids = _children(os.getpid())
+        for pid in pids:
+            for p in _tree(pid):
+                try:
+                    os.kill(p, signal.SIGKILL)
+                except OSError:
+                    pass
+        while True:
+            try:
+                pid, _ = os.waitpid(-1, os.WNOHANG)
+            except ChildProcessError:
+                return
+            if pid == 0:
+                break
+        if not pids:
+            time.sleep(0.01)
+
+
+def _children(pid) -> list[int]:
+    found = []
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return found
+    for tid in tids:
+        try:
+            with open(f"/proc/{pid}/task/{tid}/children") as f:
+                found += [int(p) for p in f.read().split()]
+        except OSError:
+            pass
+    return found
+
+
+def _tree(pid) -> list[int]:
+    """``pid`` and its descendants, parents first."""
+    out, todo = [], [pid]
+    while todo and len(out) < 10000:
+        p = todo.pop()
+        out.append(p)
+        todo += _children(p)
+    return out
+
+
+def _exit_like(status):
+    code = os.waitstatus_to_exitcode(status)
+    if code < 0:  # die of the same signal, so the grader sees it
+        signal.signal(-code, signal.SIG_DFL)
+        os.kill(os.getpid(), -code)
+    os._exit(code)
+
+
+def main(argv):
+    ctl_fd, data_fd = int(argv[0]), int(argv[1])
+    folder, memory_bytes, reply_bytes = argv[2], int(argv[3]), int(argv[4])
+    uid, gid = (int(argv[5]), int(argv[6])) if len(argv) > 6 else (None, None)
+    devnull = os.open(os.devnull, os.O_RDONLY)
+    os.dup2(devnull, 0)
+    os.close(devnull)
+
+    def stop(*_):  # the grader stops the worker, or died: the whole tree goes
+        _kill_descendants()
+        os._exit(0)
+
+    signal.signal(signal.SIGTERM, stop)
+    _prctl(_PR_SET_CHILD_SUBREAPER, 1)
+    _prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    ctl = Connection(ctl_fd)
+
+    from course.grading import wire  # imports torch: the pristine state children start from
+
+    keeper = os.getpid()
+    server = os.fork()
+    if server == 0:
+        capture = _child(ctl_fd, memory_bytes, uid, gid, keeper)
+        try:
+            _server(Connection(data_fd), folder, reply_bytes, capture, wire)
+        finally:
+            os._exit(0)
+    os.close(data_fd)
+
+    status = 0
+    while True:
+        pid, st = _reap(server)
+        if pid == server:
+            status = st
+            break
+        try:
+            if not ctl.poll(0.05):
+                continue
+            request = ctl.recv_bytes()
+        except (EOFError, OSError):
+            break
+        ctl.send_bytes(_run_probe(request, ctl_fd, folder, memory_bytes, reply_bytes, uid,
+                                  gid, wire))
+    _kill_descendants()
+    _exit_like(status)
+
+
+def _reap(server):
+    while True:
+        try:
+            pid, st = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return 0, 0
+        if pid == 0 or pid == server:
+            return pid, st
+
+
+def _run_probe(request_bytes, ctl_fd, folder, memory_bytes, reply_bytes, uid, gid, wire):
+    """Fork a fresh probe process for one request; its reply, or why there is none."""
+    request = wire.pickle.loads(request_bytes)
+    where = request.get("where", "the probe")
+    read_end, write_end = os.pipe()
+    keeper = os.getpid()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            os.close(read_end)
+            capture = _child(ctl_fd, memory_bytes, uid, gid, keeper)
+            reply = _probe(request, folder, capture, wire)
+            reply["output"] = _take_output(capture)
+            data = _reply_bytes(reply, wire, reply_bytes, where, folder)
+            with os.fdopen(write_end, "wb") as f:
+                f.write(len(data).to_bytes(8, "little") + data)
+        finally:
+            os._exit(0)
+    os.close(write_end)
+    # A length first: a process the probe started may hold the pipe open after it ends.
+    with os.fdopen(read_end, "rb") as f:
+        header = f.read(8)
+        size = int.from_bytes(header, "little") if len(header) == 8 else 0
+        data = f.read(size) if 0 < size <= reply_bytes else b""
+    if size > reply_bytes or len(data) < size:
+        os.kill(pid, signal.SIGKILL)
+    _, status = os.waitpid(pid, 0)
+    if size > reply_bytes:
+        return wire.dumps({"error": _assertion(too_large_message(where, size, reply_bytes))})
+    if size == 0 or len(data) < size:
+        return wire.dumps({"crashed": os.waitstatus_to_exitcode(status)})
+    return data
 
 
 if __name__ == "__main__":
