@@ -94,9 +94,12 @@ def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, t
     args += list(extra_args)
     keeper = ScoreKeeper(show_progress=quiet)
     code = pytest.main(args, plugins=[keeper])
-    if code == 5 or (code == 4 and not keeper.results):
-        raise GradeError(f"rtcourse grade: no graded test matches {_selection(labs, keyword, tasks)}"
-                         f" (pytest exit code {int(code)})")
+    if code == 5:
+        raise GradeError(f"rtcourse grade: no graded test matches "
+                         f"{_selection(labs, keyword, tasks)}")
+    if code == 4:  # pytest printed why (e.g. --task names a task with no tests)
+        raise GradeError(f"rtcourse grade: nothing graded ({_selection(labs, keyword, tasks)}; "
+                         f"see the error above)")
     data = keeper.to_gradescope()
     if code not in (0, 1):  # interrupted, internal or usage error: say so in the output
         data["output"] += f"\n(the test run ended abnormally: pytest exit code {int(code)})"
