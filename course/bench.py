@@ -139,10 +139,13 @@ class ResultTable:
     """
 
     def __init__(self, name: str = "", device: str | torch.device | None = None,
-                 metadata: dict | None = None, rows: list[dict] | None = None):
+                 metadata: dict | None = None, rows: list[dict] | None = None,
+                 total: int | None = None):
         self.name = name
         self.metadata = metadata if metadata is not None else self._collect_metadata(device)
         self.rows: list[dict] = list(rows or [])
+        self.total = total  # rows the benchmark will measure (for its progress bar)
+        self._bar = None
 
     @staticmethod
     def _collect_metadata(device) -> dict:
@@ -156,7 +159,21 @@ class ResultTable:
         """Append one row, e.g. ``add(variant="woop", seconds=t.median, max_error=e)``."""
         row = {key: _plain(value) for key, value in row.items()}
         self.rows.append(row)
+        self._progress()
         return row
+
+    def _progress(self):
+        """Count measured rows on a progress bar (only on a terminal; see course.progress):
+        a sweep shows it is alive, and with ``total`` how far it has come."""
+        from course.progress import progress, progress_enabled
+
+        if not progress_enabled():
+            return
+        if self._bar is None:
+            self._bar = progress(total=self.total, desc=self.name or "bench", unit="row")
+        self._bar.update(1)
+        if self.total is not None and self._bar.n >= self.total:
+            self._bar.close()
 
     def columns(self) -> list[str]:
         """Every key used by any row, in order of first appearance."""

@@ -17,6 +17,7 @@ import torch
 from course.bench import load_lab
 from course.grading.wire import import_file
 from course.image import save_png
+from course.progress import progress
 
 
 def showcases(root: Path) -> list[tuple[int, Path]]:
@@ -34,7 +35,11 @@ def build_gallery(root: Path, impl_folder: Path, device: str, out: Path, size: i
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     cases = showcases(root)
-    for step, (number, path) in enumerate(cases, 1):
+    bar = progress(cases, desc="gallery", unit="lab")
+    if log is print and not bar.disable:
+        log = bar.write  # lines above the bar, not through it
+    for step, (number, path) in enumerate(bar, 1):
+        bar.set_postfix_str(f"lab {number}")
         log(f"[{step}/{len(cases)}] lab {number}: rendering {path.stem} on {device} ...")
         try:
             lab = load_lab(f"lab{number}", str(impl_folder))

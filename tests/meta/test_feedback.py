@@ -303,6 +303,15 @@ def test_progress_only_on_a_terminal(monkeypatch):
     monkeypatch.setenv("RTCOURSE_PROGRESS", "0")
     assert list(progress(range(3), desc="x")) == [0, 1, 2]
 
+    from course.bench import ResultTable
+
+    monkeypatch.setenv("RTCOURSE_PROGRESS", "1")
+    table = ResultTable("sweep", device="cpu", total=2)
+    table.add(x=1)
+    assert table._bar is not None and table._bar.n == 1
+    table.add(x=2)
+    assert table._bar.n == 2 and len(table.rows) == 2
+
 
 def test_bad_mesh_file_is_named(tmp_path):
     from course.scenes import load_mesh
