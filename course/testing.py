@@ -260,8 +260,13 @@ def _current_test() -> str:
 
 
 def _grid(x: torch.Tensor, image_shape) -> torch.Tensor:
-    """(H, W) or (H, W, C) on the CPU in float64 (bool/int ids stay integer)."""
+    """(H, W) or (H, W, C) on the CPU. Per-pixel rows (N[, C]) take ``image_shape``, or
+    form a square when N is a square number (a size x size camera), else one row."""
     x = x.detach().cpu()
+    if image_shape is None and x.dim() in (1, 2) and x.shape[0] > 1:
+        side = math.isqrt(x.shape[0])
+        if side * side == x.shape[0] and (x.dim() == 1 or x.shape[1] <= 4):
+            image_shape = (side, side)
     if image_shape is not None:
         x = x.reshape(*image_shape, *x.shape[1:]) if x.dim() in (1, 2) and x.shape[0] == \
             math.prod(image_shape) else x.reshape(*image_shape, -1)
@@ -363,12 +368,21 @@ def assert_image_close(actual, expected, *, name: str, atol: float = 0.0, rtol: 
             bad = ~(diff <= atol + rtol * ed.abs()) & ~(torch.isnan(ad) & torch.isnan(ed))
             if mask is not None:
                 bad &= _as_tensor(mask, "mask").cpu().to(torch.bool)
-        target = Path(folder) if folder is not None else failure_dir() / _current_test() / \
-            re.sub(r"[^A-Za-z0-9_.-]+", "_", name)[:60].strip("_")
-        try:
-            paths = write_pictures(a, e, bad, folder=target, kind=kind,
-                                   image_shape=image_shape)
-        except (OSError, ValueError, RuntimeError) as why:  # the message matters more
-            raise ImageMismatch(f"{exc}\n  (could not write the pictures: {why})") from None
-        raise ImageMismatch(f"{exc}\n  pictures: expected.png, got.png, difference.png in "
-                            f"{target}", paths) from None
+        raise image_mismatch(str(exc), a, e, bad, name=name, kind=kind,
+                             image_shape=image_shape, folder=folder) from None
+
+
+def image_mismatch(message: str, actual, expected, bad, *, name: str, kind: str = "color",
+                   image_shape=None, folder=None) -> ImageMismatch:
+    """The :class:`ImageMismatch` to raise for a comparison a grader makes itself: writes
+    the three pictures (``bad``: the pixels to mark, same leading shape) and names their
+    folder after ``message``."""
+    target = Path(folder) if folder is not None else failure_dir() / _current_test() / \
+        (re.sub(r"[^A-Za-z0-9_.-]+", "_", name)[:60].strip("_") or "image")
+    try:
+        paths = write_pictures(actual, expected, bad, folder=target, kind=kind,
+                               image_shape=image_shape)
+    except (OSError, ValueError, RuntimeError) as why:  # the message matters more
+        return ImageMismatch(f"{message}\n  (could not write the pictures: {why})")
+    return ImageMismatch(f"{message}\n  pictures: expected.png, got.png, difference.png in "
+                         f"{target}", paths)
