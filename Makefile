@@ -1,6 +1,8 @@
 # Two commands do all set-up on a fresh machine:
 #   make demo   create .venv, install, render the gallery into out/
 #   make test   create .venv, install, run the test suite (graders, references, course)
+# and one opens the lecture notebooks:
+#   make lab    create .venv, install, start JupyterLab on slides/ (LAB_ARGS: its options)
 #
 # torch: on a machine without an NVIDIA GPU we ask for the CPU build explicitly, so
 # that pip never fetches a multi-GB CUDA build. Override TORCH_SPEC (and add an index
@@ -10,10 +12,13 @@ PYTHON ?= python3
 VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
 PIP_EXTRA ?=
+LAB_ARGS ?=
 PY := $(VENV)/bin/python
 HAS_GPU := $(shell command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/null 2>&1 && echo 1)
+# Jupyter refuses to start as root (a container, WSL's default user) without this flag.
+AS_ROOT := $(if $(filter 0,$(shell id -u 2>/dev/null)),--allow-root)
 
-.PHONY: demo test grade release clean
+.PHONY: demo test lab grade release clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +33,9 @@ demo: $(VENV)/.installed
 
 test: $(VENV)/.installed
 	$(PY) -m pytest -q -p no:cacheprovider
+
+lab: $(VENV)/.installed
+	$(VENV)/bin/jupyter lab $(AS_ROOT) $(LAB_ARGS) slides
 
 grade: $(VENV)/.installed
 	$(VENV)/bin/rtcourse grade --impl labs --json results.json
