@@ -6,6 +6,7 @@ from __future__ import annotations
 import base64
 import os
 import re
+import shutil
 import subprocess
 import sys
 from html.parser import HTMLParser
@@ -110,11 +111,18 @@ def _check_css(css: Path, seen: set):
             _check_css(target, seen)
 
 
-def test_pages_load_nothing_from_the_network(tmp_path):
-    _course(tmp_path)
-    proc = _slides(tmp_path, "--no-execute")
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory) -> Path:
+    """The toy course's pages, rendered with the network blocked."""
+    root = tmp_path_factory.mktemp("offline")
+    _course(root)
+    proc = _slides(root, "--no-execute")
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    out = tmp_path / "out"
+    return root / "out"
+
+
+def test_pages_load_nothing_from_the_network(rendered):
+    out = rendered
     pages = sorted(out.glob("*.html"))
     assert {p.name for p in pages} >= {"index.html", "01_maths.html", "01_maths.slides.html"}
     css_seen: set = set()
@@ -166,3 +174,26 @@ def test_slides_renders_only_the_notebooks_named(tmp_path, monkeypatch, capsys):
         main(["slides", "--no-execute", "--out", "out", "03_missing"])
     assert "03_missing" in str(stop.value) and "01_maths" in str(stop.value), \
         "an unknown notebook is named, with the ones there are"
+
+
+BROWSER = next((shutil.which(name) for name in ("chromium", "chromium-browser", "google-chrome")
+                if shutil.which(name)), None)
+
+
+@pytest.mark.skipif(BROWSER is None, reason="no headless Chromium on this machine to open "
+                                            "the pages with")
+@pytest.mark.parametrize("page", ["01_maths.html", "01_maths.slides.html"])
+def test_a_browser_without_network_typesets_the_formulas(rendered, page):
+    # A proxy that refuses every connection: only the files beside the page can load.
+    proc = subprocess.run([BROWSER, "--headless", "--no-sandbox", "--disable-gpu",
+                           "--proxy-server=127.0.0.1:9", "--virtual-time-budget=15000",
+                           "--dump-dom", (rendered / page).as_uri()],
+                          capture_output=True, text=True, timeout=120, check=False)
+    dom = proc.stdout
+    assert proc.returncode == 0 and dom, proc.stderr[-2000:]
+    typeset = re.findall(r'id="MathJax-Element-\d+-Frame"', dom)
+    assert len(typeset) >= 2, f"{page}: MathJax typeset {len(typeset)} of the 2 formulas offline"
+    assert "Math Processing Error" not in dom
+    if page.endswith(".slides.html"):
+        assert re.search(r'class="reveal [^"]*\bready\b', dom), \
+            f"{page}: reveal.js did not start offline"
