@@ -223,10 +223,13 @@ def compare_images(got, expected: torch.Tensor, what: str, dtype, device,
     rtol, atol = tol or TOL[dtype]
     off = ~((got - expected).abs() <= atol + rtol * expected.abs()).all(1)
     if off.double().mean() > flips:
-        assert_close(got, expected, rtol=rtol, atol=atol, where="(pixel, channel)",
-                     name=f"{what}: radiance against the float64 reference renderer "
-                          f"({int(off.sum())} of {n} pixels off; at most {flips:.0%} may "
-                          f"differ, where a shadow or edge decision flips in {dtype})")
+        from course.testing import assert_image_close  # writes expected/got/difference PNGs
+
+        assert_image_close(got, expected, rtol=rtol, atol=atol, where="(pixel, channel)",
+                           name=f"{what}: radiance against the float64 reference renderer "
+                                f"({int(off.sum())} of {n} pixels off; at most {flips:.0%} "
+                                f"may differ, where a shadow or edge decision flips in "
+                                f"{dtype})")
     return got
 
 

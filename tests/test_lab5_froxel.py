@@ -60,6 +60,7 @@ from course.testing import (
     assert_close,
     assert_equal,
     assert_fraction,
+    assert_image_close,
     check_tensor,
     expect_error,
     generator,
@@ -1033,7 +1034,8 @@ def test_render_froxels_models_only_what_is_needed(impl, device):
     empty = Scene(lights=(SUN, PointLight(position=(0.0, 2.0, -5.0))))
     image, report = impl.render_froxels(empty, CAMERA, depth, opaque, tile=TILE, slices=SLICES,
                                         near=NEAR, far=FAR)
-    assert_equal(image, opaque.cpu(), name="render_froxels without media: the opaque image")
+    assert_image_close(image, opaque.cpu(), exact=True,
+                       name="render_froxels without media: the opaque image")
     assert report["froxels_lit"] == 0 and report["light_evaluations"] == 0, \
         f"render_froxels without media must light nothing, report {report}"
     far_light = PointLight(position=(25.0, 1.0, -10.0), intensity=(5, 5, 5), range=2.0)
@@ -1093,8 +1095,8 @@ def test_render_froxels_temporal(impl, device):
                                    **args)
     assert rep["history_valid"] == 0, \
         f"render_froxels: after turning around no history is valid, got {rep['history_valid']}"
-    assert_close(image, alone, atol=1e-7, name="render_froxels after a camera move that puts "
-                 "all history outside the frustum: the frame without history")
+    assert_image_close(image, alone, atol=1e-7, name="render_froxels after a camera move that "
+                       "puts all history outside the frustum: the frame without history")
 
 
 @pytest.mark.task(7)
@@ -1111,8 +1113,8 @@ def test_render_froxels_extremes_and_bad_input(impl, device):
                       volumetric_shadows=False)
     ref, _ = render(impl, HOMOGENEOUS, device, near=1e-4, depth_value=INF,
                     volumetric_shadows=False)
-    assert_close(image, ref, rtol=1e-6, name="render_froxels: a depth beyond far reads the last "
-                 "slice, like the sky")
+    assert_image_close(image, ref, rtol=1e-6, name="render_froxels: a depth beyond far reads "
+                       "the last slice, like the sky")
     # float64 and float32 agree; float16 is rejected.
     f64, _ = render(impl, HEIGHT, device, dtype=F64)
     f32, _ = render(impl, HEIGHT, device, dtype=F32)

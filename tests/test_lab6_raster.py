@@ -46,9 +46,11 @@ from course.testing import (
     assert_close,
     assert_equal,
     assert_fraction,
+    assert_image_close,
     check_tensor,
     expect_error,
     generator,
+    image_mismatch,
     poisoned,
 )
 from course.types import Hits, Mesh
@@ -343,10 +345,12 @@ def check_visibility(face, mesh: Mesh, camera: Camera, case: str, agree: float,
                 + (f"; the ray meets triangle {int(a[j])}'s plane at barycentrics "
                    f"{[round(x, 5) for x in bary_a[j].tolist()]}, t={float(t_a[j]):.6g}"
                    if a[j] >= 0 else "") + ".")
-    assert rate <= 1 - agree, (
-        f"{case}: {int(differ.sum())} of {got.numel()} pixels ({rate:.2%}) differ from float64 "
-        f"ray tracing (all near edges), at most {1 - agree:.2%} expected: is the top-left rule "
-        f"evaluated consistently, and are pixel centres at +0.5?")
+    if rate > 1 - agree:
+        raise image_mismatch(
+            f"{case}: {int(differ.sum())} of {got.numel()} pixels ({rate:.2%}) differ from "
+            f"float64 ray tracing (all near edges), at most {1 - agree:.2%} expected: is the "
+            f"top-left rule evaluated consistently, and are pixel centres at +0.5?",
+            got, ref, differ, name=case, kind="id", image_shape=(camera.height, camera.width))
     return rate
 
 
@@ -1010,7 +1014,8 @@ def test_rasterize_visibility_buffer(impl, device):
             case = f"rasterize (depth_bits={depth_bits}, {dtype})"
             assert_equal(out, keys, name=f"{case}: the returned keys must be `out` itself",
                          where="pixel")
-            assert_equal(keys, want, name=(
+            assert_image_close(keys, want, exact=True, kind="id", image_shape=(height, width),
+                               name=(
                 f"{case}: keys of a layered scene (fronto-parallel triangles, exact duplicates "
                 f"at the end: equal depths go to the lower id; one triangle beyond the far "
                 f"plane). EMPTY = {EMPTY} where nothing is drawn"), where="pixel")
@@ -1196,7 +1201,8 @@ def test_traced_visibility_matches_raster(impl, device):
                           dtype=torch.int64, device=device).cpu()
     rays = primary_rays(camera, device="cpu", dtype=torch.float32)
     want = trace_suzanne(rays.origins, rays.directions, rays.t_min, rays.t_max).triangle
-    assert_equal(traced.reshape(-1), want, name=(
+    assert_image_close(traced.reshape(-1), want, exact=True, kind="id",
+                       image_shape=(camera.height, camera.width), name=(
         "traced_visibility: the triangle the tracer returns for each pixel's primary ray "
         "(course.camera.primary_rays, row-major)"), where="pixel")
     face, _ = pipeline(impl, mesh, camera)
