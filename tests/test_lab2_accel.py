@@ -31,7 +31,6 @@ triangles, a scene translated by 1e5, and t_min/t_max clipping.
 from __future__ import annotations
 
 import functools
-import inspect
 import itertools
 import math
 
@@ -52,6 +51,7 @@ from course.testing import (
     check_tensor,
     expect_error,
     generator,
+    replaced,
 )
 from course.types import Hits, Mesh, Rays
 
@@ -501,14 +501,9 @@ GIVEN_BUILDERS = {"build_grid": "uniform_grid", "build_two_level_grid": "given_t
                   "build_kdtree": "given_kdtree"}
 
 
-def _bound(fn, args, kwargs) -> dict:
-    """The arguments of a call ``fn(*args, **kwargs)`` by parameter name, defaults filled."""
-    try:
-        bound = inspect.signature(fn).bind(*args, **kwargs)
-    except (TypeError, ValueError):
-        return dict(enumerate(args), **kwargs)
-    bound.apply_defaults()
-    return dict(bound.arguments)
+def _walk_arguments(rays, mesh, structure, intersect, mailbox=True):
+    """A walk's parameters (``grid_closest_hit``'s; the others lack ``mailbox``)."""
+    return {"rays": rays, "mesh": mesh, "mailbox": mailbox}
 
 
 def with_given(lab, given: dict, call: str, *args, **kwargs):
@@ -516,30 +511,23 @@ def with_given(lab, given: dict, call: str, *args, **kwargs):
     ``given`` replaced by this module's stand-ins (lab function name -> stand-in name).
     Returns ``(result, calls)``: ``calls`` lists, in order, each replaced function the call
     used, as ``(name, options)``; a grid walk's options are ``{"mailbox": ...}``."""
-    calls, saved = [], {name: getattr(lab, name) for name in given}
+    calls = []
 
     def stand_in(name):
         fn = globals()[given[name]]
 
-        def replaced(*a, **k):
+        def replaced_by_given(*a, **k):
             if name not in GIVEN_WALKS:
                 calls.append((name, {}))
                 return fn(*a, **k)
-            bound = _bound(saved[name], a, k)
-            rays, mesh = bound.get("rays", bound.get(0)), bound.get("mesh", bound.get(1))
+            bound = _walk_arguments(*a, **k)
             grid_walk = name in ("grid_closest_hit", "two_level_closest_hit")
-            calls.append((name, {"mailbox": bound.get("mailbox", bound.get(4, True))}
-                          if grid_walk else {}))
-            return fn(rays, mesh)
-        return replaced
+            calls.append((name, {"mailbox": bound["mailbox"]} if grid_walk else {}))
+            return fn(bound["rays"], bound["mesh"])
+        return replaced_by_given
 
-    try:
-        for name in given:
-            setattr(lab, name, stand_in(name))
+    with replaced(lab, {name: stand_in(name) for name in given}):
         result = getattr(lab, call)(*args, **kwargs)
-    finally:
-        for name, fn in saved.items():
-            setattr(lab, name, fn)
     return result, calls
 
 
@@ -776,6 +764,8 @@ def test_grid_closest_hit_matches_brute_force(impl, device):
         compare(impl.grid_closest_hit(rays, mesh, grid, mt64), rays, mesh,
                 f"grid_closest_hit({name}, a grid built by the grader, resolution={resolution})",
                 counters=("steps", "tests", "skipped"))
+    expect_error("intersect", impl.grid_closest_hit, rays, mesh, grid, "mt",
+                 case="intersect='mt' (not callable)")
 
 
 def boundary_scene():
@@ -1057,6 +1047,14 @@ def test_bvh_traversal_extremes(impl, device):
         for fn in (impl.bvh_closest_hit, impl.bvh_closest_hit_stackless):
             label = getattr(fn, "__name__", None) or getattr(fn, "_name", "traversal")
             compare(fn(rays, mesh, bvh, mt64), rays, mesh, f"{label}({name})", ref=ref)
+    # Bad input, named.
+    mesh = on(scene("shards"), device)
+    rays = rays_around(mesh, 8, 106).to(device)
+    m64 = Mesh(vertices=mesh.vertices.double(), faces=mesh.faces)
+    expect_error("mesh", impl.bvh_closest_hit, rays, m64, median_bvh(m64), mt64,
+                 case="a float64 mesh with float32 rays")
+    expect_error("bvh", impl.bvh_closest_hit, rays, mesh, uniform_grid(mesh), mt64,
+                 case="a grid passed as the bvh")
     # Coincident triangles: the tie goes to the lowest index, whatever leaf it sits in.
     mesh = on(scene("coincident"), device)
     rays = Rays.create(torch.tensor([[0.4, 0.4, -1.0], [0.45, 0.4, 2.0]]),
@@ -1222,12 +1220,10 @@ def test_closest_hit_entry_point(impl, device):
     expect_error("rays", impl.closest_hit, (rays.origins, rays.directions), mesh, None, mt64,
                  case="a tuple instead of Rays")
     m64 = Mesh(vertices=mesh.vertices.double(), faces=mesh.faces)
-    expect_error("mesh", impl.bvh_closest_hit, rays, m64, structures["bvh"], mt64,
+    expect_error("mesh", impl.closest_hit, rays, m64, None, mt64,
                  case="a float64 mesh with float32 rays")
-    expect_error("intersect", impl.grid_closest_hit, rays, mesh, structures["grid"], "mt",
+    expect_error("intersect", impl.closest_hit, rays, mesh, None, "mt",
                  case="intersect='mt' (not callable)")
-    expect_error("bvh", impl.bvh_closest_hit, rays, mesh, structures["grid"], mt64,
-                 case="a grid passed as the bvh")
     expect_error("memory_budget_bytes", impl.brute_force_closest_hit, rays, mesh, mt64, 0,
                  case="memory_budget_bytes=0")
 

@@ -8,6 +8,10 @@ small fraction of pixels where a shadow or edge decision flips (a ray that meets
 exactly, a shadow ray that starts on the edge of two walls).
 
 The lab receives ``trace_brute_force`` (given) as its tracer, so it is graded without Lab 2.
+Each task is graded on its own: the renderers run with given building blocks (this module's
+``offset_origins``, ``reflect``, ``surface_at`` and ``shade_direct`` in place of the lab's,
+``with_blocks``), so a mistake in a block costs that block's points; only the last task
+(``END_TO_END``) renders with the lab's own blocks, and names the block that is wrong.
 
 Scenes: the Cornell box with a mirror box (closed: a magenta background shows a leak), a
 courtyard open to the sky (sun and point light, a mirror wall, rays that escape), the same
@@ -28,7 +32,14 @@ import pytest
 import torch
 
 from course.camera import primary_rays
-from course.testing import assert_close, assert_equal, check_tensor, expect_error, generator
+from course.testing import (
+    assert_close,
+    assert_equal,
+    check_tensor,
+    expect_error,
+    generator,
+    replaced,
+)
 from course.types import Hits, Mesh
 from course.whitted_support import (
     WhittedScene,
@@ -48,7 +59,9 @@ TASKS = {1: "Whitted backward tracing: offsets, reflection, shading with shadow 
          2: "Separate kernels (wavefront) with compaction and material sorting",
          3: "The uber kernel: fixed-size buffers under torch.compile",
          4: "Persistent workers: a pool of ray slots fed from a global queue",
-         5: "Geometry layouts: indexed, float4 triangles, Woop transforms"}
+         5: "Geometry layouts: indexed, float4 triangles, Woop transforms",
+         6: "End to end: your tracer with your own building blocks"}
+END_TO_END = 6  # the one task graded on the lab's own chain; every other task on its own
 
 F32, F64 = torch.float32, torch.float64
 INF = math.inf
@@ -313,6 +326,89 @@ def expect_render_errors(render, device, **extra) -> None:
                  case="material indices beyond the material table")
 
 
+# ---------------------------------------------------------------------------------------
+# Given building blocks: stand-ins for the lab's own task-1 functions. The renderers of
+# tasks 1, 2 and 4 are graded with these in place of the lab's offset_origins, reflect,
+# surface_at and shade_direct (``with_blocks``), so a mistake in a building block costs
+# that block's points only; the end-to-end task runs the lab's own blocks.
+
+
+def given_offset_origins(points, normals):
+    """``p + n * offset * max(1, |p|_inf)``."""
+    scale = points.abs().amax(dim=1, keepdim=True).clamp(min=1)
+    return points + normals * (offset_scale(points.dtype) * scale)
+
+
+def given_reflect(directions, normals):
+    """``d - 2 (d . n) n``, renormalised."""
+    r = directions - 2 * (directions * normals).sum(1, keepdim=True) * normals
+    return r / r.norm(dim=1, keepdim=True)
+
+
+def given_surface_at(scene, origins, directions, hits):
+    """Hit points, face normals turned towards the ray, materials; 0 / -1 on a miss."""
+    hit = hits.triangle >= 0
+    tri = hits.triangle.clamp(min=0)
+    t = torch.where(hit, hits.t, 0.0)
+    points = torch.where(hit[:, None], origins + t[:, None] * directions, 0.0)
+    n = face_normals(scene)[tri]
+    n = torch.where(((n * directions).sum(1) > 0)[:, None], -n, n)
+    return (points, torch.where(hit[:, None], n, 0.0),
+            torch.where(hit, scene.material[tri], -1))
+
+
+def given_shade_direct(scene, points, normals, directions, material, trace):
+    """The shading contract one light at a time (as ``render_reference`` has it), in the
+    scene's dtype: ambient, then each light above the surface with its shadow ray."""
+    kd, ks, s = scene.kd[material], scene.ks[material], scene.shininess[material]
+    radiance = scene.ambient * kd
+    p_off = given_offset_origins(points, normals)
+    eps = offset_scale(scene.dtype)
+    lights = [(pos - p_off, power, eps * max(1.0, pos.abs().max().item()))
+              for pos, power in zip(scene.point_positions, scene.point_intensities)]
+    lights += [(direction.expand_as(p_off), power, None)
+               for direction, power in zip(scene.dir_directions, scene.dir_irradiance)]
+    traced = 0
+    for to, power, light_offset in lights:
+        if light_offset is None:
+            l, irradiance = to, power.expand_as(p_off)
+            t_max = torch.full_like(p_off[:, 0], INF)
+        else:
+            dist = to.norm(dim=1)
+            l, irradiance, t_max = to / dist[:, None], power / (dist**2)[:, None], \
+                dist - light_offset
+        cos = (normals * l).sum(1)
+        up = cos > 0
+        blocked = torch.zeros_like(up)
+        if bool(up.any()):
+            blocked[up] = trace(scene, p_off[up], l[up], torch.zeros_like(t_max[up]),
+                                t_max[up], True).hit
+        traced += int(up.sum())
+        half = l - directions
+        half = half / half.norm(dim=1, keepdim=True)
+        lobe = (s + 8) / (8 * math.pi) * (normals * half).sum(1).clamp(min=0) ** s
+        brdf = kd / math.pi + ks * lobe[:, None]
+        radiance = radiance + torch.where((up & ~blocked)[:, None],
+                                          irradiance * cos[:, None] * brdf, 0.0)
+    return radiance, traced
+
+
+BLOCKS = {"offset_origins": "given_offset_origins", "reflect": "given_reflect",
+          "surface_at": "given_surface_at", "shade_direct": "given_shade_direct"}
+
+
+def render_with_blocks(lab, render: str, blocks, *args, **kwargs):
+    """``lab.<render>(*args, **kwargs)`` run next to the lab with the lab's building blocks
+    named in ``blocks`` replaced by the given ones above."""
+    with replaced(lab, {name: globals()[BLOCKS[name]] for name in blocks}):
+        return getattr(lab, render)(*args, **kwargs)
+
+
+def with_blocks(impl, render: str, *args, **kwargs):
+    """The lab's renderer ``render`` with every building block given."""
+    return impl.probe(render_with_blocks, render, tuple(BLOCKS), *args, **kwargs)
+
+
 # =======================================================================================
 # Task 1: Whitted building blocks and backward tracing
 
@@ -518,11 +614,11 @@ def test_render_whitted_matches_reference(impl, device, name):
         scene = scene_on(name, dtype, device)
         o, d = camera_rays(name, dtype, device)
         for max_depth in (0, 2):
-            image = impl.render_whitted(scene, o, d, trace_brute_force, max_depth)
+            image = with_blocks(impl, "render_whitted", scene, o, d, trace_brute_force, max_depth)
             compare_images(image, _reference(name, dtype, max_depth, "camera"),
                            f"render_whitted on {name}, max_depth={max_depth} ({dtype})",
                            dtype, device)
-    check_uses_trace(lambda s, o, d, t: impl.render_whitted(s, o, d, t), device,
+    check_uses_trace(lambda s, o, d, t: with_blocks(impl, "render_whitted", s, o, d, t), device,
                      "render_whitted")
 
 
@@ -530,7 +626,8 @@ def test_render_whitted_matches_reference(impl, device, name):
 @pytest.mark.points(1)
 def test_render_whitted_mirror_corridor(impl, device):
     for dtype in (F32, F64):
-        check_corridor(lambda s, o, d, k: impl.render_whitted(s, o, d, trace_brute_force, k),
+        check_corridor(lambda s, o, d, k: with_blocks(impl, "render_whitted", s, o, d,
+                                                      trace_brute_force, k),
                        dtype, device, f"render_whitted ({dtype})")
 
 
@@ -540,19 +637,19 @@ def test_render_whitted_extremes(impl, device):
     for dtype in (F32, F64):
         scene = scene_on("cornell_mirror", dtype, device)
         o, d = axis_rays(8, 5, dtype, device)
-        image = impl.render_whitted(scene, o, d, trace_brute_force)
+        image = with_blocks(impl, "render_whitted", scene, o, d, trace_brute_force)
         compare_images(image, _reference("cornell_mirror", dtype, 2, "axis"),
                        f"render_whitted: axis-parallel rays with +0.0/-0.0 components ({dtype})",
                        dtype, device)
         o, d = bad_rays(dtype, device)
-        check_background(impl.render_whitted(scene, o, d, trace_brute_force), scene,
+        check_background(with_blocks(impl, "render_whitted", scene, o, d, trace_brute_force), scene,
                          f"render_whitted ({dtype})")
         # Rays that escape the courtyard into the sky return the background, exactly.
         sky = scene_on("courtyard_both", dtype, device)
         o, d = camera_rays("courtyard_both", dtype, device, 16)
         zeros = torch.zeros(len(o), dtype=dtype, device=device)
         escaped = ~trace_brute_force(sky, o, d, zeros, zeros + INF).hit
-        image = impl.render_whitted(sky, o, d, trace_brute_force)
+        image = with_blocks(impl, "render_whitted", sky, o, d, trace_brute_force)
         check_tensor(image, "render_whitted: the image", shape=(len(o), 3), dtype=dtype,
                      device=device)
         assert_close(image.cpu()[escaped.cpu()], sky.background.cpu().expand(int(escaped.sum()), 3),
@@ -569,7 +666,7 @@ def test_render_whitted_far_from_origin(impl, device):
         scene = translated(scene_on("cornell_mirror", F64, device), offset)
         o, d = camera_rays("cornell_mirror", F64, device)
         o = o + torch.as_tensor(offset, dtype=F64, device=device)
-        image = impl.render_whitted(scene, o, d, trace_brute_force)
+        image = with_blocks(impl, "render_whitted", scene, o, d, trace_brute_force)
         got = compare_images(image, _reference("cornell_mirror", F64, 2, "camera"),
                              f"render_whitted, the Cornell box moved by {offset}", F64, device,
                              tol=FAR_TOL)
@@ -615,16 +712,17 @@ def test_render_wavefront_matches_reference(impl, device, sort):
         for dtype in (F32, F64):
             scene = scene_on(name, dtype, device)
             o, d = camera_rays(name, dtype, device)
-            image, _ = image_of(impl.render_wavefront(scene, o, d, trace_brute_force, 2, sort),
+            image, _ = image_of(with_blocks(impl, "render_wavefront", scene, o, d,
+                                            trace_brute_force, 2, sort),
                                 "render_wavefront", True)
             compare_images(image, _reference(name, dtype, 2, "camera"),
                            f"render_wavefront on {name}, sort_by_material={sort} ({dtype})",
                            dtype, device)
-    check_corridor(lambda s, o, d, k: impl.render_wavefront(s, o, d, trace_brute_force, k,
-                                                            sort)[0],
+    check_corridor(lambda s, o, d, k: with_blocks(impl, "render_wavefront", s, o, d,
+                                                  trace_brute_force, k, sort)[0],
                    F32, device, f"render_wavefront (sort_by_material={sort})")
-    check_uses_trace(lambda s, o, d, t: impl.render_wavefront(s, o, d, t, 2, sort)[0], device,
-                     "render_wavefront")
+    check_uses_trace(lambda s, o, d, t: with_blocks(impl, "render_wavefront", s, o, d, t, 2,
+                                                    sort)[0], device, "render_wavefront")
 
 
 @pytest.mark.task(2)
@@ -636,7 +734,8 @@ def test_render_wavefront_stats(impl, device):
     o, d = corridor_rays(40, 2, F64, device)
     n = len(o)
     for max_depth in (0, 3):
-        _, stats = image_of(impl.render_wavefront(scene, o, d, trace_brute_force, max_depth),
+        _, stats = image_of(with_blocks(impl, "render_wavefront", scene, o, d,
+                                        trace_brute_force, max_depth),
                             "render_wavefront", True)
         s = wavefront_stats(stats, max_depth, f"render_wavefront (corridor, "
                                               f"max_depth={max_depth})")
@@ -651,7 +750,7 @@ def test_render_wavefront_stats(impl, device):
     for sort in (False, True):
         scene = scene_on("cornell_mirror", F64, device)
         o, d = camera_rays("cornell_mirror", F64, device)
-        _, stats = impl.render_wavefront(scene, o, d, trace_brute_force, 2, sort)
+        _, stats = with_blocks(impl, "render_wavefront", scene, o, d, trace_brute_force, 2, sort)
         s = wavefront_stats(stats, 2, "render_wavefront (Cornell box)")
         zeros = torch.zeros(len(o), dtype=F64, device=device)
         hits = trace_brute_force(scene, o, d, zeros, zeros + INF)
@@ -689,15 +788,15 @@ def test_render_wavefront_extremes(impl, device):
     for dtype in (F32, F64):
         scene = scene_on("cornell_mirror", dtype, device)
         o, d = axis_rays(8, 5, dtype, device)
-        image, _ = impl.render_wavefront(scene, o, d, trace_brute_force)
+        image, _ = with_blocks(impl, "render_wavefront", scene, o, d, trace_brute_force)
         compare_images(image, _reference("cornell_mirror", dtype, 2, "axis"),
                        f"render_wavefront: axis-parallel rays ({dtype})", dtype, device)
         o, d = bad_rays(dtype, device)
-        image, _ = impl.render_wavefront(scene, o, d, trace_brute_force)
+        image, _ = with_blocks(impl, "render_wavefront", scene, o, d, trace_brute_force)
         check_background(image, scene, f"render_wavefront ({dtype})")
     scene = translated(scene_on("cornell_mirror", F64, device), 1e5)
     o, d = camera_rays("cornell_mirror", F64, device)
-    image, _ = impl.render_wavefront(scene, o + 1e5, d, trace_brute_force)
+    image, _ = with_blocks(impl, "render_wavefront", scene, o + 1e5, d, trace_brute_force)
     compare_images(image, _reference("cornell_mirror", F64, 2, "camera"),
                    "render_wavefront, the Cornell box moved by 1e5", F64, device, tol=FAR_TOL)
     expect_render_errors(impl.render_wavefront, device)
@@ -811,16 +910,18 @@ def test_render_persistent_matches_reference(impl, device, pool_size):
             size = 8 if pool_size == 1 else SIZE
             scene = scene_on(name, dtype, device)
             o, d = camera_rays(name, dtype, device, size)
-            image, _ = image_of(impl.render_persistent(scene, o, d, trace_brute_force, 2,
-                                                           pool_size), "render_persistent", True)
+            image, _ = image_of(with_blocks(impl, "render_persistent", scene, o, d,
+                                            trace_brute_force, 2, pool_size),
+                                "render_persistent", True)
             compare_images(image, _reference(name, dtype, 2, "camera", size),
                            f"render_persistent on {name}, pool_size={pool_size} ({dtype})",
                            dtype, device)
-    check_corridor(lambda s, o, d, k: impl.render_persistent(s, o, d, trace_brute_force, k,
-                                                             pool_size)[0],
+    check_corridor(lambda s, o, d, k: with_blocks(impl, "render_persistent", s, o, d,
+                                                  trace_brute_force, k, pool_size)[0],
                    F32, device, f"render_persistent (pool_size={pool_size})")
     if pool_size > 1:
-        check_uses_trace(lambda s, o, d, t: impl.render_persistent(s, o, d, t, 2, pool_size)[0],
+        check_uses_trace(lambda s, o, d, t: with_blocks(impl, "render_persistent", s, o, d, t,
+                                                        2, pool_size)[0],
                          device, "render_persistent")
 
 
@@ -833,7 +934,8 @@ def test_render_persistent_stats(impl, device):
     n, max_depth = len(o), 3
     for pool_size in (16, 40, 1000):
         what = f"render_persistent (two mirrors, {n} rays, pool_size={pool_size})"
-        _, stats = impl.render_persistent(scene, o, d, trace_brute_force, max_depth, pool_size)
+        _, stats = with_blocks(impl, "render_persistent", scene, o, d, trace_brute_force,
+                               max_depth, pool_size)
         s = persistent_stats(stats, pool_size, what)
         work = n * (max_depth + 1)
         assert s["work_generated"] == work and s["work_processed"] == work, (
@@ -850,7 +952,7 @@ def test_render_persistent_stats(impl, device):
                 f"({max_depth + 1}), took {s['steps']}")
     scene = scene_on("cornell_mirror", F64, device)
     o, d = camera_rays("cornell_mirror", F64, device)
-    _, stats = impl.render_persistent(scene, o, d, trace_brute_force, 2, 64)
+    _, stats = with_blocks(impl, "render_persistent", scene, o, d, trace_brute_force, 2, 64)
     s = persistent_stats(stats, 64, "render_persistent (Cornell box, pool_size=64)")
     # The mirror box is convex: its reflections never meet it again, one bounce at most.
     zeros = torch.zeros(len(o), dtype=F64, device=device)
@@ -866,8 +968,8 @@ def test_render_persistent_stats(impl, device):
     expect_error("pool_size", impl.render_persistent, scene, o, d, trace_brute_force, 2, 2.5,
                  case="pool_size=2.5")
     o, d = bad_rays(F64, device)
-    check_background(impl.render_persistent(scene, o, d, trace_brute_force, 2, 4)[0], scene,
-                     "render_persistent")
+    check_background(with_blocks(impl, "render_persistent", scene, o, d, trace_brute_force, 2,
+                                 4)[0], scene, "render_persistent")
     expect_render_errors(impl.render_persistent, device)
 
 
@@ -1001,3 +1103,41 @@ def test_intersect_layout(impl, device, dtype):
                 f"intersect_layout ({what}): ray {k} (NaN origin or zero direction) must miss")
     expect_error("layout", impl.intersect_layout, {"kind": "bvh"}, o, d, t_min, t_max,
                  case="a dict of kind 'bvh'")
+
+
+# =======================================================================================
+# Task 6: end to end, with the lab's own building blocks
+
+
+def _repairs(impl, block: str, scene, o, d, expected) -> bool:
+    """Whether render_whitted matches the reference with only ``block`` given."""
+    image = impl.probe(render_with_blocks, "render_whitted", (block,), scene, o, d,
+                       trace_brute_force, 2)
+    try:
+        compare_images(image, expected, "", F32, scene.device)
+    except AssertionError:
+        return False
+    return True
+
+
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(1)
+def test_whole_tracer_end_to_end(impl, device):
+    """render_whitted with the lab's own offset_origins, reflect, surface_at and shade_direct
+    (every other renderer test gives it those). When the image is wrong, each block is
+    swapped for the given one in turn: a swap that repairs the image names the wrong step."""
+    for name in ("cornell_mirror", "courtyard_both"):
+        scene = scene_on(name, F32, device)
+        o, d = camera_rays(name, F32, device)
+        expected = _reference(name, F32, 2, "camera")
+        what = f"render_whitted on {name} with your own building blocks (float32)"
+        try:
+            compare_images(impl.render_whitted(scene, o, d, trace_brute_force, 2), expected,
+                           what, F32, device)
+        except AssertionError as error:
+            wrong = [block for block in BLOCKS if _repairs(impl, block, scene, o, d, expected)]
+            hint = (f"the step that is wrong: {', '.join(wrong)} (with the given "
+                    f"{' or '.join(wrong)} in place of yours the image is right)" if wrong else
+                    "no single building block repairs the image when swapped for a given "
+                    "one: see the failing tests of each block and of render_whitted")
+            raise AssertionError(f"{what}: {hint}.\n{error}") from None

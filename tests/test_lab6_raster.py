@@ -7,6 +7,11 @@ and a brute-force float64 closest-hit tracer (Möller–Trumbore) for everything
 tracers handed to the lab are module-level functions of this file (``trace_suzanne`` ...),
 each building its scene itself, so they also run inside the sandboxed worker.
 
+Each task is graded on its own: ``rasterize`` runs with the given ``coverage`` and
+``bounding_boxes`` of this module in place of the lab's (task 2), and the tests of tasks 4
+and 5 start from the reference's visibility buffer and clipped triangles (the ``reference``
+fixture). Only the last task (``END_TO_END``) runs the lab's whole pipeline.
+
 What each extreme must survive:
 
 =====================================  ==================================================
@@ -36,11 +41,13 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from pathlib import Path
 
 import pytest
 import torch
 
 from course.camera import Camera, primary_rays
+from course.grading.wire import import_file
 from course.scenes import load_scene
 from course.testing import (
     assert_close,
@@ -52,6 +59,7 @@ from course.testing import (
     generator,
     image_mismatch,
     poisoned,
+    replaced,
 )
 from course.types import Hits, Mesh
 
@@ -59,7 +67,9 @@ LAB_MODULE = "lab6_raster"
 TASKS = {1: "MVP transform and near-plane clipping", 2: "Edge functions and the fill rule",
          3: "Packed depth|id keys and atomic-min visibility",
          4: "Perspective-correct interpolation and shading",
-         5: "Raster vs ray-traced visibility, hybrid shadows"}
+         5: "Raster vs ray-traced visibility, hybrid shadows",
+         6: "End to end: your whole pipeline against ray tracing"}
+END_TO_END = 6  # the one task graded on the lab's own chain; every other task on its own
 
 F64 = torch.float64
 EMPTY = torch.iinfo(torch.int64).max
@@ -82,6 +92,25 @@ def fragments(impl, screen, width, height, cull=False, device="cpu"):
     check_tensor(pixel, "coverage(...)[1] (pixel)", shape=(n,), dtype=torch.int64, device=device)
     check_tensor(bary, "coverage(...)[2] (bary)", shape=(n, 3), dtype=screen.dtype, device=device)
     return triangle.cpu(), pixel.cpu(), bary.cpu()
+
+
+@pytest.fixture
+def reference(request, impl):
+    """The reference lab module (trusted, run here) for the results of earlier tasks that a
+    task builds on (a visibility buffer, a clipped screen), so each task is graded on its
+    own. In the student handout, which has no solutions/, it is the lab itself: there an
+    early mistake can also show in a later task's tests."""
+    path = Path(request.config.rootpath) / "solutions" / f"{LAB_MODULE}.py"
+    return import_file(path, f"reference_{LAB_MODULE}") if path.is_file() else impl
+
+
+def reference_raster(reference, mesh: Mesh, camera: Camera):
+    """Tasks 1-3 by the reference: (keys, screen, source, weights) on the mesh's device."""
+    mvp = camera.view_projection(F64).to(mesh.device)
+    clip = reference.to_clip_space(mesh.vertices, mvp)
+    clipped, source, weights = reference.clip_triangles(clip[mesh.faces])
+    screen = reference.to_screen(clipped, camera.width, camera.height)
+    return reference.rasterize(screen, camera.width, camera.height), screen, source, weights
 
 
 def pipeline(impl, mesh: Mesh, camera: Camera, **kwargs):
@@ -999,16 +1028,65 @@ def probe_largest_tensor(lab, screen, width, height, budget):
     return Largest.largest, keys
 
 
+def given_bounding_boxes(screen, width: int, height: int):
+    """In place of the lab's ``bounding_boxes`` (task 2): the boxes by trying every pixel
+    centre (``box_reference``)."""
+    return box_reference(screen[..., :2].detach().to("cpu", F64), width, height)[0].to(
+        screen.device)
+
+
+def given_coverage(screen, width: int, height: int, cull_backfaces: bool = False):
+    """In place of the lab's ``coverage`` (task 2), for vertices on the 1/16-pixel grid:
+    the exact top-left coverage, fragments grouped by triangle, float64 barycentrics."""
+    xy = screen[..., :2].detach().to("cpu", F64)
+    inside = exact_coverage(xy, width, height)
+    if cull_backfaces:
+        v0, v1, v2 = xy[:, 0], xy[:, 1], xy[:, 2]
+        area = ((v0[:, 0] - v1[:, 0]) * (v2[:, 1] - v1[:, 1])
+                - (v0[:, 1] - v1[:, 1]) * (v2[:, 0] - v1[:, 0]))  # E_12(v0)
+        inside &= (area > 0)[:, None]
+    triangle, pixel = inside.nonzero(as_tuple=True)
+    px, py = (pixel % width).to(F64) + 0.5, (pixel // width).to(F64) + 0.5
+    t = xy[triangle]
+
+    def edge(i, j):
+        return ((px - t[:, i, 0]) * (t[:, j, 1] - t[:, i, 1])
+                - (py - t[:, i, 1]) * (t[:, j, 0] - t[:, i, 0]))
+
+    e = torch.stack([edge(1, 2), edge(2, 0), edge(0, 1)], -1)
+    bary = e / e.sum(-1, keepdim=True)
+    return (triangle.to(screen.device), pixel.to(screen.device),
+            bary.to(screen.device, screen.dtype))
+
+
+def rasterize_given_coverage(lab, screen, width: int, height: int, **kwargs):
+    """``lab.rasterize`` next to the lab, with the given ``coverage`` and ``bounding_boxes``
+    in place of the lab's (task 2): task 3 is graded on its own. Returns ``(keys, out)``."""
+    with replaced(lab, {"coverage": given_coverage, "bounding_boxes": given_bounding_boxes}):
+        keys = lab.rasterize(screen, width, height, **kwargs)
+    return keys, kwargs.get("out")
+
+
+def rasterized(impl, screen, width: int, height: int, **kwargs):
+    """The lab's ``rasterize`` with task 2 given (see ``rasterize_given_coverage``)."""
+    keys, out = impl.probe(rasterize_given_coverage, screen, width, height, **kwargs)
+    if "out" in kwargs:
+        kwargs["out"].copy_(out)  # the buffer the lab wrote, next to it
+    return keys
+
+
 @pytest.mark.task(3)
 @pytest.mark.points(1)
 def test_rasterize_visibility_buffer(impl, device):
+    # With coverage and bounding_boxes given (task 2), except where the memory the lab's own
+    # chunking allocates is measured.
     screen, width, height = layered_scene(121)
     for depth_bits in (32, 24):
         for dtype in (torch.float32, torch.float64):
             want = reference_keys(screen.float().double(), width, height, depth_bits, dtype)
             s = screen.float().to(device, dtype)
             out = poisoned((width * height,), torch.int64, device)
-            keys = impl.rasterize(s, width, height, depth_bits=depth_bits, out=out)
+            keys = rasterized(impl, s, width, height, depth_bits=depth_bits, out=out)
             check_tensor(keys, "rasterize(...)", shape=(width * height,), dtype=torch.int64,
                          device=device)
             case = f"rasterize (depth_bits={depth_bits}, {dtype})"
@@ -1023,12 +1101,12 @@ def test_rasterize_visibility_buffer(impl, device):
     perm = torch.randperm(screen.shape[0], generator=generator(122))
     shuffled = screen[perm].float().to(device)
     want = reference_keys(screen[perm].float().double(), width, height)
-    assert_equal(impl.rasterize(shuffled, width, height), want,
+    assert_equal(rasterized(impl, shuffled, width, height), want,
                  name="rasterize with the triangles shuffled", where="pixel")
-    full = impl.rasterize(screen.float().to(device), width, height).cpu()
+    full = rasterized(impl, screen.float().to(device), width, height).cpu()
     for budget in (2**10, 2**14):
-        keys = impl.rasterize(screen.float().to(device), width, height,
-                              memory_budget_bytes=budget)
+        keys = rasterized(impl, screen.float().to(device), width, height,
+                          memory_budget_bytes=budget)
         assert_equal(keys, full, name=f"rasterize with memory_budget_bytes={budget} (chunks)",
                      where="pixel")
     # Memory: 12 triangles over the whole 8x8 screen (one of them 1e6 pixels across).
@@ -1046,10 +1124,10 @@ def test_rasterize_visibility_buffer(impl, device):
         f"clamped box of at most 8x8 pixels needs). Chunk the triangles by their box sizes.")
     # Culling, an empty scene, bad input.
     reversed_ = screen[:, [0, 2, 1]].float().to(device)
-    culled = impl.rasterize(reversed_, width, height, cull_backfaces=True).cpu()
+    culled = rasterized(impl, reversed_, width, height, cull_backfaces=True).cpu()
     assert bool((culled == EMPTY).all()), \
         "rasterize(cull_backfaces=True) of clockwise (back-facing) triangles draws nothing"
-    empty = impl.rasterize(torch.zeros(0, 3, 4, device=device), 5, 3)
+    empty = rasterized(impl, torch.zeros(0, 3, 4, device=device), 5, 3)
     assert_equal(empty, torch.full((15,), EMPTY), name="rasterize of no triangles",
                  where="pixel")
     expect_error("depth_bits", impl.rasterize, shuffled, width, height, depth_bits=16,
@@ -1104,10 +1182,12 @@ def slanted_scene(device, dtype):
 
 @pytest.mark.task(4)
 @pytest.mark.points(1)
-def test_perspective_correct_exact_surface_point(impl, device):
+def test_perspective_correct_exact_surface_point(impl, reference, device):
+    # resolve_pixels on the reference's visibility buffer and clipped triangles (tasks 1-3):
+    # the barycentrics must be those of the exact point the pixel's ray meets.
     for dtype, tol in ((torch.float32, 2e-4), (torch.float64, 1e-9)):
         mesh, uv, camera = slanted_scene(device, dtype)
-        face, bary = pipeline(impl, mesh, camera)
+        face, bary = resolved(impl, reference, mesh, camera)
         covered = face >= 0
         assert int(covered.sum()) > 600, "test set-up: the slanted planes fill the view"
         rays = primary_rays(camera, device="cpu", dtype=F64)
@@ -1116,7 +1196,7 @@ def test_perspective_correct_exact_surface_point(impl, device):
         exact, _ = ray_plane_barycentrics(tris[f], rays.origins[covered.reshape(-1)],
                                           rays.directions[covered.reshape(-1)])
         got = bary[covered].double()
-        case = f"rasterize_mesh ({dtype})"
+        case = f"resolve_pixels ({dtype}, on a visibility buffer and clipped triangles given)"
         assert bool((exact.amin(-1) > -1e-3).all()), (
             f"{case}: a pixel shows a face its ray does not pass through")
         assert_close(got, exact, atol=tol, name=(
@@ -1132,10 +1212,20 @@ def test_perspective_correct_exact_surface_point(impl, device):
             f"interpolate ({dtype}): UVs at the visible points vs their exact values"),
             where="covered pixel")
         assert bool((texcoords[~covered] == 0).all()), "interpolate: 0 where face == -1"
-        if device != "cpu" and dtype == torch.float32:
-            cpu_face, _ = pipeline(impl, mesh.to("cpu"), camera)
-            assert_equal(face, cpu_face, name="rasterize_mesh on CUDA vs the CPU (face ids)",
-                         where="pixel")
+
+
+def resolved(impl, reference, mesh: Mesh, camera: Camera):
+    """``resolve_pixels`` on the reference's tasks 1-3, checked: (face, bary) on the CPU."""
+    keys, screen, source, weights = reference_raster(reference, mesh, camera)
+    result = impl.resolve_pixels(keys, screen, source, weights, camera.width, camera.height)
+    assert isinstance(result, tuple) and len(result) == 2, \
+        "resolve_pixels: expected a tuple (face, bary)"
+    shape = (camera.height, camera.width)
+    face = check_tensor(result[0], "resolve_pixels(...)[0] (face)", shape=shape,
+                        dtype=torch.int64, device=mesh.device)
+    bary = check_tensor(result[1], "resolve_pixels(...)[1] (bary)", shape=(*shape, 3),
+                        dtype=mesh.dtype, device=mesh.device)
+    return face.cpu(), bary.cpu()
 
 
 def sphere_scene(device):
@@ -1147,9 +1237,9 @@ def sphere_scene(device):
 
 @pytest.mark.task(4)
 @pytest.mark.points(1)
-def test_shade_flat_smooth(impl, device):
+def test_shade_flat_smooth(impl, reference, device):
     mesh, camera = sphere_scene(device)
-    face, bary = pipeline(impl, mesh, camera)
+    face, bary = (x.cpu() for x in reference.rasterize_mesh(mesh, camera))  # tasks 1-4 given
     covered = face >= 0
     light = torch.tensor([0.6, 0.8, 0.5])
     l64 = (light / light.norm()).double()
@@ -1193,9 +1283,8 @@ def test_shade_flat_smooth(impl, device):
 
 @pytest.mark.task(5)
 @pytest.mark.points(1)
-def test_traced_visibility_matches_raster(impl, device):
-    mesh, camera = scene("suzanne")
-    mesh = mesh.to(device)
+def test_traced_visibility_primary_hits(impl, device):
+    _, camera = scene("suzanne")
     traced = check_tensor(impl.traced_visibility(trace_suzanne, camera, device),
                           "traced_visibility(...)", shape=(camera.height, camera.width),
                           dtype=torch.int64, device=device).cpu()
@@ -1205,6 +1294,22 @@ def test_traced_visibility_matches_raster(impl, device):
                        image_shape=(camera.height, camera.width), name=(
         "traced_visibility: the triangle the tracer returns for each pixel's primary ray "
         "(course.camera.primary_rays, row-major)"), where="pixel")
+    expect_error("trace", impl.traced_visibility, "not a tracer", camera, device,
+                 case="a string as the tracer")
+
+
+# ---------------------------------------------------------------------------------------
+# Task 6: end to end, the lab's whole pipeline
+
+
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(1)
+def test_rasterize_mesh_matches_ray_tracing(impl, device):
+    # Your rasterize_mesh: to_clip_space, clip_triangles, to_screen, rasterize (coverage,
+    # pack_depth_id, depth_test) and resolve_pixels together; every other task's tests give
+    # a task the reference's results of the tasks before it.
+    mesh, camera = scene("suzanne")
+    mesh = mesh.to(device)
     face, _ = pipeline(impl, mesh, camera)
     rate = check_visibility(face, mesh.to("cpu"), camera, "rasterize_mesh of Suzanne (96x64)",
                             agree=0.995)
@@ -1219,11 +1324,22 @@ def test_traced_visibility_matches_raster(impl, device):
         cpu_face, _ = pipeline(impl, mesh.to("cpu"), camera)
         assert_equal(face, cpu_face, name="rasterize_mesh: CUDA vs CPU id buffers (bit-identical)",
                      where="pixel")
-    expect_error("trace", impl.traced_visibility, "not a tracer", camera, device,
-                 case="a string as the tracer")
+    # Perspective-correct barycentrics through the whole pipeline, the near plane crossed.
+    for dtype, tol in ((torch.float32, 2e-4), (torch.float64, 1e-9)):
+        slanted, _, slanted_camera = slanted_scene(device, dtype)
+        face, bary = pipeline(impl, slanted, slanted_camera)
+        covered = face >= 0
+        rays = primary_rays(slanted_camera, device="cpu", dtype=F64)
+        f = face.reshape(-1)[covered.reshape(-1)]
+        exact, _ = ray_plane_barycentrics(slanted.triangles().cpu().to(F64)[f],
+                                          rays.origins[covered.reshape(-1)],
+                                          rays.directions[covered.reshape(-1)])
+        assert_close(bary[covered].double(), exact, atol=tol, name=(
+            f"rasterize_mesh ({dtype}) of a floor crossing the near plane: barycentrics vs the "
+            f"exact ray/plane point"), where="covered pixel")
 
 
-@pytest.mark.task(5)
+@pytest.mark.task(END_TO_END)
 @pytest.mark.points(1)
 def test_raster_far_from_origin_fp64_and_tiny_viewports(impl, device):
     mesh, camera = scene("suzanne_far")
@@ -1276,10 +1392,10 @@ def reference_shadows(mesh: Mesh, camera: Camera, light):
 
 @pytest.mark.task(5)
 @pytest.mark.points(1)
-def test_hybrid_shadows_match_traced(impl, device):
+def test_hybrid_shadows_match_traced(impl, reference, device):
     mesh, camera = scene("shadow_scene")
     light = torch.tensor([0.5, -0.4, 1.0])
-    face, bary = pipeline(impl, mesh.to(device), camera)
+    face, bary = (x.cpu() for x in reference.rasterize_mesh(mesh.to(device), camera))
     shadowed = check_tensor(
         impl.hybrid_shadows(trace_shadow_scene, mesh.to(device), face.to(device),
                             bary.to(device), light.to(device)),

@@ -82,7 +82,7 @@ def _thumbnail_html(path: str) -> str:
             f'width:{_THUMBNAIL}px"><figcaption>{title}</figcaption></figure>')
 
 
-@dataclass
+@dataclass(eq=False)  # hashable: pluggy keeps plugins in sets
 class ScoreKeeper:
     """A pytest plugin object: pass it to ``pytest.main(plugins=[...])``."""
 

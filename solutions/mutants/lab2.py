@@ -14,6 +14,13 @@ GRID = "grid_closest_hit or grid_dda or grid_mailboxing"
 GRID2 = "two_level_matches or two_level_mailboxing"  # the traversal's tests
 
 MUTANTS = [
+    Mutant(name="grid_cells_one_short", module=M, function="build_grid",
+           find="c_hi = torch.minimum(torch.floor((tri_hi + pad - lo) / cell).long().clamp(min=0), top)",
+           replace="c_hi = torch.minimum(torch.floor((tri_hi + pad - lo) / cell).long().clamp(min=0) "
+                   "- 1, top).clamp(min=c_lo)",
+           tests="grid_resolution_and_build",
+           why="an off-by-one in the last cell of a triangle's box: a triangle that reaches "
+               "into the next cell is not listed there, and rays through that cell miss it"),
     Mutant(name="dda_lower_face_when_stepping_up", module=M, function="grid_closest_hit",
            find="boundary = lo + (cell + (step > 0).long()) * width",
            replace="boundary = lo + cell * width", tests=GRID,
