@@ -11,14 +11,20 @@ precision (fp16, bf16, fp32, fp64) it measures
 * error against a float64 watertight reference on the same rays: the hit/miss
   disagreement rate, the rate of hits on another triangle, and the median and maximum
   relative error of t where both chose the same triangle;
-* the crack rate: rays aimed at the shared edge midpoints and vertices of a closed
-  icosphere, from outside, must all hit; the fraction that miss, with the sphere at the
-  origin and translated by 1e6.
+* the crack (pass-through) rate: rays aimed at the vertices and at points of the shared
+  edges of a closed icosphere, from outside and from its centre, with the sphere at the
+  origin and translated by 1e5, 1e6 and 1e7; a ray passed through a crack when its first hit
+  is not one of the triangles sharing the aimed vertex or edge (it missed, or it slipped
+  through to a triangle behind).
 
 On CUDA it adds ``torch.compile`` of Möller–Trumbore (fp32) and the Triton kernels of
 ``course.triton_intersect``: registers and spills of each compiled configuration, the
 occupancy they allow (``course.occupancy``) and the throughput, over num_warps x rays per
 thread (block sizes): occupancy against speed.
+
+``--crack-table`` prints only the float32 pass-through table, the one quoted in the lab's
+docstring (``tests/meta/test_lab1_crack_table.py`` re-runs it and compares), and writes it to
+``lab1_cracks.md``.
 
 Writes ``lab1_intersect.json`` (a ResultTable with the command line), ``lab1_intersect.md``
 and Pareto plots (throughput against disagreement and against crack rate) into ``--out``,
@@ -53,7 +59,7 @@ VARIANTS, closest_hit, moller_trumbore = LAB.VARIANTS, LAB.closest_hit, LAB.moll
 
 DTYPES = {"fp16": torch.float16, "bf16": torch.bfloat16, "fp32": torch.float32,
           "fp64": torch.float64}
-OFFSETS = {"origin": 0.0, "1e6": 1e6}
+OFFSETS = {"0": 0.0, "1e5": 1e5, "1e6": 1e6, "1e7": 1e7}
 
 # Sizes: (rays, triangles) of the torch variants, rays of the Triton kernels, icosphere level;
 # memory: closest_hit's budget for its (rays, triangles) tiles; on a GPU a small budget
@@ -140,22 +146,121 @@ def soup_rays(n: int, seed: int = 1) -> Rays:
     return Rays.create(origins, target - origins)
 
 
-def crack_scene(mesh: Mesh, offset: float, dtype: torch.dtype) -> tuple[Rays, Mesh]:
+def crack_scene(mesh: Mesh, offset: float, dtype: torch.dtype):
     """The closed ``mesh`` moved by ``offset`` (on every axis) and rounded to ``dtype``, with
-    rays through its vertices and the points at 1/2 and 1/4 of every edge, computed from the
-    *rounded* vertices: from outside towards the centre and from the centre outwards. Every
-    ray must hit; one that hits nothing found a crack. (The grader's construction.)"""
+    rays aimed at its vertices and at the points at 1/2 and 1/4 of every edge, computed from
+    the *rounded* vertices: from outside towards the centre (the first ``T`` rays), then from
+    the centre outwards (the next ``T``). (The grader's construction.)
+
+    Returns ``(rays, mesh, incident)``: ``incident`` (2T, F) bool marks the triangles that
+    share the aimed vertex or edge. On a convex closed mesh the first hit of every such ray
+    is one of them; a ray whose first hit is not (a miss, or a triangle behind the aimed point)
+    has passed through a crack."""
     vertices = (mesh.vertices + offset).to(dtype)
     exact = vertices.double()
-    edges = torch.cat([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]], mesh.faces[:, [2, 0]]])
+    faces = mesh.faces
+    edges = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     edges = edges.sort(1).values.unique(dim=0)
     targets = torch.cat([exact] + [exact[edges[:, 0]] * (1 - f) + exact[edges[:, 1]] * f
                                    for f in (0.5, 0.25)])
+    has = (faces[None, :, :] == torch.arange(len(exact))[:, None, None]).any(-1)  # (V, F)
+    on_edge = has[edges[:, 0]] & has[edges[:, 1]]
+    incident = torch.cat([has, on_edge, on_edge]).repeat(2, 1)
     centre = torch.full((3,), offset, dtype=torch.float64)
     radial = (targets - centre) / (targets - centre).norm(dim=1, keepdim=True)
     origins = torch.cat([centre + 3 * radial, centre.expand_as(targets)]).to(dtype)
     directions = (targets.repeat(2, 1) - origins.double()).to(dtype)
-    return Rays.create(origins, directions), Mesh(vertices, mesh.faces)
+    return Rays.create(origins, directions), Mesh(vertices, faces), incident
+
+
+def pass_through(hits: Hits, incident: torch.Tensor) -> torch.Tensor:
+    """(R,) bool: rays of ``crack_scene`` whose first hit is not a triangle sharing the
+    aimed vertex or edge (including rays that hit nothing)."""
+    triangle = hits.triangle.cpu()
+    there = incident.gather(1, triangle.clamp(min=0)[:, None])[:, 0]
+    return ~(there & (triangle >= 0))
+
+
+def crack_rates(trace, ico: Mesh, dtype: torch.dtype, device) -> dict:
+    """Pass-through rates of the rays of ``crack_scene``, per offset and side.
+
+    trace(rays, mesh) -> Hits runs one variant on rays and mesh in ``dtype``. Keys:
+    ``crack_out_<offset>`` (rays from outside), ``crack_in_<offset>`` (from the centre),
+    ``crack_origin``, ``crack_1e6`` (both sides together, what the Pareto plots show) and
+    ``aim_err_<offset>``: the largest ``|t - 1|`` among the rays that did hit there (``t = 1``
+    is the aimed point: how far from it, in units of the distance to it, the hit was put)."""
+    rates = {}
+    for name, offset in OFFSETS.items():
+        rays, mesh, incident = crack_scene(ico, offset, dtype)
+        hits = trace(rays.to(device), mesh.to(device))
+        passed = pass_through(hits, incident)
+        half = len(passed) // 2
+        err = (hits.t.cpu().double() - 1).abs()[~passed]
+        rates[f"aim_err_{name}"] = err.max().item() if len(err) else math.nan
+        rates[f"crack_out_{name}"] = passed[:half].double().mean().item()
+        rates[f"crack_in_{name}"] = passed[half:].double().mean().item()
+        if name in ("0", "1e6"):
+            rates["crack_origin" if name == "0" else "crack_1e6"] = \
+                passed.double().mean().item()
+    return rates
+
+
+def crack_table(ico_level: int, device, dtype: torch.dtype = torch.float32,
+                variants=None) -> str:
+    """The pass-through table of the lab's docstring: every variant in ``dtype`` on the
+    icosphere of ``ico_level``, rays from outside / from the centre, per offset."""
+    variants = list(variants or VARIANTS)
+    _, ico, _ = load_meshes(1, ico_level)
+    rays, _, _ = crack_scene(ico, 0.0, dtype)
+    rates = {}
+    for variant in variants:
+        def trace(r, m, variant=variant):
+            return closest_hit(r, m, variant=variant)
+        rates[variant] = crack_rates(trace, ico, dtype, device)
+    dname = next(k for k, v in DTYPES.items() if v == dtype)
+    first = (f"Pass-throughs ({dname}, icosphere level {ico_level}: {len(rays) // 2} rays aimed "
+             f"at its {ico.num_vertices} vertices")
+    second = ("and at 1/2 and 1/4 of its edges, from outside / from the centre; the sphere moved "
+              "by the offset):")
+    lines = [first, second, ""]
+    width = max(len(v) for v in variants) + 2
+    rule = "=" * 8 + "  " + "  ".join("=" * width for _ in variants)
+    lines += [rule, "offset    " + "  ".join(v.ljust(width) for v in variants).rstrip(), rule]
+    for name in OFFSETS:
+        cells = [f"{_pct(rates[v][f'crack_out_{name}'])} / {_pct(rates[v][f'crack_in_{name}'])}"
+                 for v in variants]
+        lines.append(name.ljust(10) + "  ".join(c.ljust(width) for c in cells).rstrip())
+    lines += [rule, "", "Largest |t - 1| of the rays that hit there (t = 1 at the aimed point):", "",
+              rule, "offset    " + "  ".join(v.ljust(width) for v in variants).rstrip(), rule]
+    for name in OFFSETS:
+        cells = [f"{rates[v][f'aim_err_{name}']:.1g}" for v in variants]
+        lines.append(name.ljust(10) + "  ".join(c.ljust(width) for c in cells).rstrip())
+    shape = _rounded_mesh(ico, dtype)
+    distinct = ", ".join(str(v) for v, _ in shape.values())
+    flat = ", ".join(_pct(z) for _, z in shape.values())
+    offsets = ", ".join(OFFSETS)
+    lines += [rule, "", f"The mesh after rounding, offsets {offsets}: distinct vertices {distinct};",
+              f"zero-area triangles {flat}."]
+    return "\n".join(lines)
+
+
+def _rounded_mesh(ico: Mesh, dtype: torch.dtype) -> dict:
+    """Per offset: (distinct vertices, fraction of zero-area triangles) of the rounded mesh."""
+    shape = {}
+    for name, offset in OFFSETS.items():
+        _, mesh, _ = crack_scene(ico, offset, dtype)
+        tri = mesh.triangles().double()
+        normal = torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        shape[name] = (len(mesh.vertices.unique(dim=0)),
+                       (normal == 0).all(-1).double().mean().item())
+    return shape
+
+
+def _pct(rate: float) -> str:
+    """A rate as the table prints it: 0 exactly, else a percentage to 2 significant digits."""
+    if rate == 0:
+        return "0"
+    return f"{100 * rate:.2g}%" if rate < 0.1 else f"{100 * rate:.0f}%"
 
 
 # --------------------------------------------------------------------------------------
@@ -172,18 +277,6 @@ def accuracy(hits: Hits, ref: Hits) -> dict:
             "wrong_triangle": (got & want & ~same).double().mean().item(),
             "t_rel_err_median": rel.median().item() if len(rel) else math.nan,
             "t_rel_err_max": rel.max().item() if len(rel) else math.nan}
-
-
-def crack_rates(trace, ico: Mesh, dtype: torch.dtype, device) -> dict:
-    """Fraction of the edge/vertex rays of `crack_scene` that miss, per offset.
-
-    trace(rays, mesh) -> Hits runs one variant on rays and mesh in ``dtype``."""
-    rates = {}
-    for name, offset in OFFSETS.items():
-        rays, mesh = crack_scene(ico, offset, dtype)
-        hits = trace(rays.to(device), mesh.to(device))
-        rates[f"crack_{name}"] = (~hits.hit).double().mean().item()
-    return rates
 
 
 # --------------------------------------------------------------------------------------
@@ -364,8 +457,9 @@ def write_outputs(table: ResultTable, out: Path) -> None:
     legend = ("tests_per_s: ray-triangle tests per second; disagreement: hit/miss differs from "
               "the float64 watertight reference; wrong_triangle: both hit, other triangle; "
               "t_rel_err_*: on rays where both chose the same triangle; crack_*: fraction of "
-              "rays through shared edges/vertices of a closed icosphere (at the origin, moved "
-              "by 1e6) that miss.")
+              "rays aimed at shared edges/vertices of a closed icosphere whose first hit is "
+              "not a triangle sharing them (crack_out_X: from outside, crack_in_X: from the "
+              "centre, the sphere moved by X; crack_origin, crack_1e6: both sides).")
     header = [f"# {table.name}", "", device, "", f"Command: `{meta['command']}`", "", legend, ""]
     (out / "lab1_intersect.md").write_text("\n".join(header) + table.to_markdown() + "\n")
     rows = plot_rows(table)
@@ -393,6 +487,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--dtypes", nargs="+", default=list(DTYPES), choices=list(DTYPES))
     parser.add_argument("--no-compile", action="store_true", help="skip torch.compile (CUDA)")
+    parser.add_argument("--crack-table", action="store_true",
+                        help="print only the float32 pass-through table of the lab's docstring")
     parser.add_argument("--out", type=Path, help="output folder "
                         "(default: bench/results/<device_name>/lab1)")
     args = parser.parse_args(argv)
@@ -403,6 +499,19 @@ def main(argv: list[str] | None = None) -> None:
         if getattr(args, key) is not None:
             cfg[key] = getattr(args, key)
     out = args.out or REPO / "bench" / "results" / device_name(device) / "lab1"
+
+    if args.crack_table:
+        text = crack_table(cfg["ico_level"], device, variants=args.variants)
+        command = shlex.join(["python", "bench/lab1_intersect.py",
+                              *(sys.argv[1:] if argv is None else argv)])
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "lab1_cracks.md").write_text(
+            f"# Lab 1: pass-throughs at shared edges and vertices\n\nDevice: "
+            f"{device_name(device)}; torch {torch.__version__}.\n\nCommand: `{command}`\n\n"
+            f"```\n{text}\n```\n")
+        print(text)
+        print(f"wrote {out / 'lab1_cracks.md'}")
+        return
 
     torch.manual_seed(0)
     soup, ico, source = load_meshes(cfg["tris"], cfg["ico_level"])

@@ -1,0 +1,46 @@
+"""The pass-through table in Lab 1's docstring is the bench's output, re-run here.
+
+``python bench/lab1_intersect.py --device cpu --crack-table`` prints the table; the docstring
+of ``solutions/lab1_intersect.py`` and of the student's ``labs/lab1_intersect.py`` quote it
+verbatim, so every crack figure a student reads is one the bench produces on this checkout.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import torch
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("bench_lab1", REPO / "bench" /
+                                                  "lab1_intersect.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench
+
+
+def _quoted_table(text: str) -> str:
+    """The block from "Pass-throughs (" to the line that ends the table's notes."""
+    start = text.index("Pass-throughs (")
+    end = text.index("zero-area triangles ", start)
+    return text[start:text.index("\n", end)]
+
+
+def test_docstring_crack_table_is_the_benchs_output():
+    torch.manual_seed(0)
+    bench = _bench()
+    measured = bench.crack_table(ico_level=2, device=torch.device("cpu"))
+    for folder in ("solutions", "labs"):
+        text = (REPO / folder / "lab1_intersect.py").read_text()
+        quoted = _quoted_table(text)
+        if quoted != measured:
+            diff = [f"  docstring: {a}\n  bench:     {b}" for a, b in
+                    zip(quoted.splitlines(), measured.splitlines()) if a != b]
+            raise AssertionError(
+                f"{folder}/lab1_intersect.py: the pass-through table differs from "
+                f"`python bench/lab1_intersect.py --device cpu --crack-table`; paste the "
+                f"bench's output. Differing lines:\n" + "\n".join(diff[:8]))
