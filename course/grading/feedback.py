@@ -17,7 +17,7 @@ from course.grading.catalog import parse_not_implemented
 
 MAX_LINES = 15
 _MESSAGE_LINES = 10
-_LINE_WIDTH = 200
+_LINE_WIDTH = 400
 HINT = "(the full traceback with the test's source and tensors: add -v)"
 
 # A frame of a traceback printed by Python (the worker's traceback travels as text).
@@ -123,7 +123,8 @@ def short_feedback(*, exc: BaseException, frames, test_file, folder, task, task_
         return Feedback(problem, problem=problem)
     own = _RAISED_IN.split(text, maxsplit=1)
     message = own[0]
-    if kind not in ("AssertionError", "Failed") and not message.startswith(kind):
+    if not isinstance(exc, AssertionError) and kind != "Failed" \
+            and not message.startswith(kind):
         message = f"{kind}: {message}"
     lines = ([header] if header else []) + _message_lines(message)
     yours = frame_in(text_frames(text), folder) or frame_in(frames, folder)
