@@ -197,3 +197,16 @@ def test_a_browser_without_network_typesets_the_formulas(rendered, page):
     if page.endswith(".slides.html"):
         assert re.search(r'class="reveal [^"]*\bready\b', dom), \
             f"{page}: reveal.js did not start offline"
+
+
+def test_a_terminal_gets_a_progress_bar_per_notebook(tmp_path, capsys, monkeypatch):
+    from course.slides import render_slides
+
+    _course(tmp_path)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    rows = render_slides(tmp_path, tmp_path / "out", execute=False)
+    captured = capsys.readouterr()
+    assert len(rows) == 2 and "2/2" in captured.err and "notebook" in captured.err, \
+        captured.err[-500:]
+    assert "01_maths.ipynb done" in captured.out, "each notebook's line goes above the bar"
+    assert "[1/2]" not in captured.out, "no plain progress lines beside the bar"
