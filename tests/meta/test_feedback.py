@@ -344,3 +344,25 @@ def test_commands_name_themselves_outside_the_course(tmp_path):
         proc.stderr
 
 
+
+
+def test_student_line_from_the_worker_traceback(tmp_path):
+    lab = tmp_path / "labs" / "lab1_intersect.py"
+    text = ("IndexError: index 9 is out of bounds\n(raised in lab1_intersect.moller_trumbore; "
+            "traceback from the worker:)\nTraceback (most recent call last):\n"
+            '  File "/site/course/grading/worker.py", line 180, in _serve\n'
+            "    result = fn(*args)\n"
+            f'  File "{lab}", line 42, in moller_trumbore\n'
+            "    t = e[9]\n"
+            "IndexError: index 9 is out of bounds\n")
+    frames = [(str(ROOT / "tests" / "test_lab1_intersect.py"), 120, "test_x", "impl.f()")]
+    feedback = short_feedback(exc=IndexError(text), frames=frames,
+                              test_file=ROOT / "tests" / "test_lab1_intersect.py",
+                              folder=lab.parent, task=2, task_of={}.get,
+                              header="test_x[cpu]: lab 1 task 2 (Möller–Trumbore)").text
+    assert feedback.splitlines() == [
+        "test_x[cpu]: lab 1 task 2 (Möller–Trumbore)",
+        "IndexError: index 9 is out of bounds",
+        "your code: labs/lab1_intersect.py:42 in moller_trumbore: t = e[9]",
+        "checked at tests/test_lab1_intersect.py:120",
+        "(the full traceback with the test's source and tensors: add -v)"]
