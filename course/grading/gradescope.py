@@ -29,7 +29,7 @@ import sys
 import zipfile
 from pathlib import Path
 
-from course.grading.catalog import lab_catalog
+from course.grading.catalog import lab_catalog, lab_file_rank
 from course.grading.release import course_files
 from course.grading.runner import lab_test_files
 
@@ -161,10 +161,14 @@ def collect_submission(submission, dest, modules) -> dict[str, Path | None]:
                         key=lambda p: (len(p.relative_to(submission).parts), str(p)))
     for module in modules:
         found[module] = None
-        for path in candidates:
-            if path.name == f"{module}.py" and not path.is_symlink() and path.is_file() \
+        # The exact name first, then a near miss an upload makes of it ("lab1_intersect
+        # (1).py", "Lab1_Intersect.py"), copied under the exact name.
+        ranked = sorted((p for p in candidates if lab_file_rank(p.name, module) is not None),
+                        key=lambda p: lab_file_rank(p.name, module))
+        for path in ranked:
+            if not path.is_symlink() and path.is_file() \
                     and path.stat().st_size <= _MAX_LAB_FILE:
-                shutil.copyfile(path, dest / path.name, follow_symlinks=False)
+                shutil.copyfile(path, dest / f"{module}.py", follow_symlinks=False)
                 found[module] = path.relative_to(submission)
                 break
     return found

@@ -366,3 +366,18 @@ def test_student_line_from_the_worker_traceback(tmp_path):
         "your code: labs/lab1_intersect.py:42 in moller_trumbore: t = e[9]",
         "checked at tests/test_lab1_intersect.py:120",
         "(the full traceback with the test's source and tensors: add -v)"]
+
+
+def test_gradescope_accepts_a_renamed_upload(tmp_path):
+    from course.grading.gradescope import collect_submission
+
+    sub = tmp_path / "submission"
+    (sub / "labs").mkdir(parents=True)
+    (sub / "Lab0_Interop (1).py").write_text("A = 1\n")
+    (sub / "lab1_intersect (2).py").write_text("B = 1\n")
+    (sub / "labs" / "lab1_intersect.py").write_text("C = 1\n")  # the exact name wins
+    found = collect_submission(sub, tmp_path / "work", ["lab0_interop", "lab1_intersect"])
+    assert found == {"lab0_interop": Path("Lab0_Interop (1).py"),
+                     "lab1_intersect": Path("labs/lab1_intersect.py")}
+    assert (tmp_path / "work" / "lab0_interop.py").read_text() == "A = 1\n"
+    assert (tmp_path / "work" / "lab1_intersect.py").read_text() == "C = 1\n"
