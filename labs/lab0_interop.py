@@ -81,7 +81,9 @@ def pack_rgba8(rgba: torch.Tensor) -> torch.Tensor:
     """Pack ``rgba: (H, W, 4) uint8`` into one int32 word per pixel, ``(H, W)``.
 
     word = R | G << 8 | B << 16 | A << 24, stored as two's complement int32 (alpha >= 128
-    gives a negative word). Same device as the input.
+    gives a negative word). Same device as the input; any H, W >= 1 and any strided input
+    (a crop, every other column, a channel-last view of a planar image) give the words of
+    its pixels; the result is a new contiguous tensor.
 
     Example: RGBA (0x12, 0x34, 0x56, 0x78) -> 0x78563412; (255, 0, 0, 255) -> 0xFF0000FF,
     which as an int32 is 0xFF0000FF - 2**32 = -16776961.

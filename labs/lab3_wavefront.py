@@ -160,7 +160,8 @@ def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Ten
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_scene(scene)
-    check_vectors(scene.vertices, origins=origins, directions=directions)
+    n = check_vectors(  # noqa: F841 (n: the number of rays, for your code)
+        scene.vertices, origins=origins, directions=directions)
     raise NotImplementedError("not implemented yet: surface_at (task 1)")
 
 
@@ -193,7 +194,8 @@ def shade_direct(scene: WhittedScene, points: torch.Tensor, normals: torch.Tenso
     ``(cos > 0).nonzero(as_tuple=True)`` lists the (hit, light) pairs that need a shadow ray.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_surface_inputs(scene, points, normals, directions, material, trace)
+    n = check_surface_inputs(  # noqa: F841 (n: the number of points, for your code)
+        scene, points, normals, directions, material, trace)
     raise NotImplementedError("not implemented yet: shade_direct (task 1)")
 
 
@@ -220,7 +222,8 @@ def render_whitted(scene: WhittedScene, origins: torch.Tensor, directions: torch
     ``reflect``, and ``torch.where(alive[:, None], new, old)`` to update the buffers.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_render_inputs(scene, origins, directions, trace, max_depth)
+    n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
+        scene, origins, directions, trace, max_depth)
     raise NotImplementedError("not implemented yet: render_whitted (task 1)")
 
 
@@ -265,7 +268,8 @@ def render_wavefront(scene: WhittedScene, origins: torch.Tensor, directions: tor
     ``with clock("trace"): ...``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_render_inputs(scene, origins, directions, trace, max_depth)
+    n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
+        scene, origins, directions, trace, max_depth)
     if not isinstance(sort_by_material, bool):
         raise TypeError(f"sort_by_material: expected a bool, got {sort_by_material!r}")
     raise NotImplementedError("not implemented yet: render_wavefront (task 2)")
@@ -306,7 +310,8 @@ def render_uber(scene: WhittedScene, origins: torch.Tensor, directions: torch.Te
     cache the compiled functions (``functools.cache``) so a second call does not recompile.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_render_inputs(scene, origins, directions, trace, max_depth)
+    n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
+        scene, origins, directions, trace, max_depth)
     if not (isinstance(compile, (bool, str)) or callable(compile)):
         raise TypeError(f"compile: expected a bool or a torch.compile backend (a name or a "
                         f"callable), got {compile!r}")
@@ -349,7 +354,8 @@ def render_persistent(scene: WhittedScene, origins: torch.Tensor, directions: to
     empty slots; the queue's head index is a Python int.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_render_inputs(scene, origins, directions, trace, max_depth)
+    n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
+        scene, origins, directions, trace, max_depth)
     check_pool_size(pool_size)
     raise NotImplementedError("not implemented yet: render_persistent (task 4)")
 
@@ -388,7 +394,7 @@ def layout_float4(mesh: Mesh, order: torch.Tensor | None = None) -> dict:
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_mesh(mesh)
-    check_order(order, mesh)
+    index = check_order(order, mesh)  # noqa: F841 (the permutation; arange(F) for None)
     raise NotImplementedError("not implemented yet: layout_float4 (task 5)")
 
 
@@ -433,5 +439,6 @@ def intersect_layout(layout: dict, origins: torch.Tensor, directions: torch.Tens
     ``pair_tiles(N, F)`` yields them.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_layout_inputs(layout, origins, directions, t_min, t_max)
+    kind, f = check_layout_inputs(  # noqa: RUF059 (the layout's kind and F, for your code)
+        layout, origins, directions, t_min, t_max)
     raise NotImplementedError("not implemented yet: intersect_layout (task 5)")

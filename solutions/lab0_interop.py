@@ -63,7 +63,9 @@ def pack_rgba8(rgba: torch.Tensor) -> torch.Tensor:
     """Pack ``rgba: (H, W, 4) uint8`` into one int32 word per pixel, ``(H, W)``.
 
     word = R | G << 8 | B << 16 | A << 24, stored as two's complement int32 (alpha >= 128
-    gives a negative word). Same device as the input.
+    gives a negative word). Same device as the input; any H, W >= 1 and any strided input
+    (a crop, every other column, a channel-last view of a planar image) give the words of
+    its pixels; the result is a new contiguous tensor.
     """
     if not isinstance(rgba, torch.Tensor):
         raise TypeError(f"rgba: expected a torch.Tensor (H, W, 4) uint8, got {type(rgba).__name__}")
