@@ -1190,7 +1190,9 @@ def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
     with ``stackless=True``, ``bvh_closest_hit_stackless``, and ``kd_closest_hit``.
     Returns ``(Hits, counters)``; every structure returns the brute-force hits, so only
     the counters (and the clock) tell them apart. ValueError naming ``structure`` for
-    anything else, or an option the structure does not take.
+    anything else, or an option the structure does not take; bad ``rays``, ``mesh`` (e.g. a
+    float64 mesh with float32 rays) or an ``intersect`` that is not callable raise the
+    error naming them that the called function raises (its provided checks).
     """
     if structure is None:
         return brute_force_closest_hit(rays, mesh, intersect, **options)
