@@ -10,13 +10,16 @@ unwritten lab function prints one line,
     write `march_box` (Lab 4, task 1) to see your own
 
 and shows the reference outputs of that cell instead of a traceback, and the notebook runs
-on (a cell that fails only because an earlier demo did not run, a ``NameError``, is
-treated the same). Any other error shows its usual traceback. Outputs are found by the
-cell's source, so an edited cell has none: it prints the line alone.
+on. A cell that fails because it uses a name that such a cell should have made (a
+``NameError``, or any error of a cell that reads a variable a stopped demo assigned, such
+as the dict it was filling) is treated the same, with the line of the function that
+stopped. Any other error shows its usual traceback. Outputs are found by the cell's
+source, so an edited cell has none: it prints the line alone.
 """
 
 from __future__ import annotations
 
+import ast
 import base64
 import hashlib
 import json
@@ -135,6 +138,40 @@ def _task_from_graders(root: Path, lab: int, function: str) -> int | None:
     return min(tasks) if tasks else None
 
 
+def names_assigned(code: str) -> set[str]:
+    """Top-level names a cell's code binds or assigns into (``x = ...``, ``x[k] = ...``,
+    ``x.a = ...``, loops, imports, definitions); empty where it does not parse."""
+    try:
+        tree = ast.parse(code)
+    except SyntaxError:
+        return set()
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and isinstance(node.ctx, (ast.Store, ast.Del)):
+            found.add(node.id)
+        elif isinstance(node, (ast.Subscript, ast.Attribute)) and isinstance(
+                node.ctx, (ast.Store, ast.Del)):
+            root = node.value
+            while isinstance(root, (ast.Subscript, ast.Attribute)):
+                root = root.value
+            if isinstance(root, ast.Name):
+                found.add(root.id)
+        elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            found.add(node.name)
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            found |= {(a.asname or a.name).split(".")[0] for a in node.names}
+    return found
+
+
+def names_read(code: str) -> set[str]:
+    try:
+        tree = ast.parse(code)
+    except SyntaxError:
+        return set()
+    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)
+            and isinstance(n.ctx, ast.Load)}
+
+
 class _Fallback:
     """The IPython hooks: remember the running cell's source; on an error caused by an
     unwritten lab function print the line and show the cell's reference outputs."""
@@ -143,7 +180,7 @@ class _Fallback:
         self.root = root
         self.folder = root / FIGURES
         self.source = ""
-        self.missing: Unwritten | None = None  # the last unwritten function met
+        self.unmade: dict[str, Unwritten] = {}  # names a stopped cell left unmade or partial
         self.handled = False
         self._index = None
 
@@ -163,18 +200,35 @@ class _Fallback:
         # The cell was shown as the lecture shows it: it did not fail, so "run all" goes on.
         if self.handled and result is not None:
             result.error_in_exec = None
+        elif self.unmade and result is not None and result.success:
+            for name in names_assigned(self.source):  # made now, by a cell that ran
+                self.unmade.pop(name, None)
         self.handled = False
 
-    def handle(self, shell, etype, value, tb, tb_offset=None):
+    def cause(self, value, code: str) -> Unwritten | None:
+        """The unwritten function this error comes from, or None for an error of its own."""
         found = unwritten_function(value, self.root)
-        if found is None and not (self.missing is not None and isinstance(value, NameError)):
+        if found is not None:
+            return found
+        if isinstance(value, NameError):
+            return self.unmade.get(getattr(value, "name", None))
+        return next((self.unmade[n] for n in sorted(names_read(code)) if n in self.unmade),
+                    None)
+
+    def handle(self, shell, etype, value, tb, tb_offset=None):
+        try:
+            code = shell.transform_cell(self.source)
+        except Exception:  # noqa: BLE001  (a cell IPython cannot transform: use it as typed)
+            code = self.source
+        found = self.cause(value, code)
+        if found is None:
             shell.showtraceback(running_compiled_code=True)
             return
-        self.missing = found or self.missing
+        self.unmade.update(dict.fromkeys(names_assigned(code), found))
         self.handled = True
         if "matplotlib.pyplot" in sys.modules:  # a half-drawn figure of the failed demo
             sys.modules["matplotlib.pyplot"].close("all")
-        print(self.missing.line())
+        print(found.line())
         self.show_reference()
 
     def show_reference(self):

@@ -14,7 +14,14 @@ from nbclient import NotebookClient
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
 
 from course.grading.release import release
-from course.lecture import FIGURES, INDEX, Unwritten, unwritten_function
+from course.lecture import (
+    FIGURES,
+    INDEX,
+    Unwritten,
+    names_assigned,
+    names_read,
+    unwritten_function,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 LINE = "write `wave` (Lab 9, task 2) to see your own"
@@ -36,8 +43,9 @@ DEMO = textwrap.dedent("""\
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(2, 1))
-    ys = lab.wave(8)   # the figure is half drawn when an unwritten wave raises
-    ax.plot(ys)
+    waves = {}
+    waves["long"] = lab.wave(8)   # the figure is half drawn when an unwritten wave raises
+    ax.plot(waves["long"])
     plt.show()""")
 
 
@@ -75,7 +83,7 @@ def _toy_course(root: Path):
         new_markdown_cell("# Toy lecture"), new_code_cell(SETUP),
         new_code_cell("print('scale:', lab.scale(21))"),
         new_markdown_cell("## A wave"), new_code_cell(DEMO),
-        new_code_cell("print('the wave ends at', ys[-1])"),
+        new_code_cell("print('the wave ends at', waves['long'][-1])"),
         new_code_cell("print('after the demo')"),
     ]), root / "slides" / "01_toy.ipynb")
 
@@ -130,7 +138,8 @@ def test_unwritten_demo_shows_the_reference_figure_and_one_line(handout):
     assert _text(demo).strip() == LINE, f"expected the one line {LINE!r}, got {_text(demo)!r}"
     images = [o for o in demo.outputs if "image/png" in o.get("data", {})]
     assert len(images) == 1, "the reference figure, and not the half-drawn one, is shown"
-    assert _text(after_demo).strip() == LINE, "a cell that needs the demo's variables too"
+    assert _text(after_demo).strip() == LINE, \
+        "a cell that fails on what the demo left unmade (its dict without the key) too"
     assert "after the demo" in _text(after)
     assert [o.ename for o in bug.outputs if o.output_type == "error"] == ["KeyError"], \
         "any other error still shows its traceback"
@@ -158,3 +167,11 @@ def test_unwritten_function_names_lab_and_task_from_the_message_or_graders():
         raise NotImplementedError("torch has no such kernel")
     except NotImplementedError as exc:
         assert unwritten_function(exc) is None, "only a lab file's stub counts"
+
+
+def test_names_a_cell_assigns_and_reads():
+    code = ("import numpy as np\nfor i in range(3):\n    rows[i] = f(i)\nstate.x = 1\n"
+            "def g():\n    pass\nbest = max(rows)")
+    assert names_assigned(code) == {"np", "i", "rows", "state", "g", "best"}
+    assert {"range", "rows", "f", "max"} <= names_read(code)
+    assert names_assigned("%time x = 1") == set(), "IPython syntax: nothing known"
