@@ -55,11 +55,23 @@ def check_trace_inputs(rays, mesh, intersect) -> None:
                         f"v2, t_min, t_max) -> (t, u, v), got {type(intersect).__name__}")
 
 
-def check_mesh(mesh) -> None:
-    """Provided: ``mesh`` must be a valid ``course.types.Mesh`` (TypeError/ValueError)."""
+def check_mesh(mesh, finite: bool = False) -> None:
+    """Provided: ``mesh`` must be a valid ``course.types.Mesh`` (TypeError/ValueError).
+
+    finite: also require finite vertices (every builder does: a NaN or inf corner has no
+    bounds to sort by). Raises ValueError naming ``mesh``, the count and the first vertex.
+    """
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
     mesh.validate()
+    if finite:
+        bad = ~torch.isfinite(mesh.vertices).all(-1)
+        if bool(bad.any()):
+            first = int(bad.nonzero()[0, 0])
+            raise ValueError(
+                f"mesh: expected finite vertices to build a structure over, got "
+                f"{int(bad.sum())} of {len(bad)} with NaN or inf coordinates (first: vertex "
+                f"{first} = {mesh.vertices[first].tolist()}); repair or drop those triangles")
 
 
 def check_structure(structure, kind: str, name: str, mesh: Mesh) -> None:

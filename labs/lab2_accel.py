@@ -37,7 +37,10 @@ Conventions
 * Degenerate input is a case, not an error: rays with zero (``+0.0`` or ``-0.0``)
   direction components, rays starting inside or on a cell or box boundary, NaN/inf rays
   (they miss), one triangle, coincident triangles, flat scenes. Malformed input raises
-  ``ValueError``/``TypeError`` naming the argument.
+  ``ValueError``/``TypeError`` naming the argument; so does a mesh with NaN or inf
+  vertices given to any builder (``build_*``: there are no bounds to sort it by), with
+  the same ``mesh: expected finite vertices ...`` error from the provided
+  ``check_mesh(mesh, finite=True)``.
 
 Tasks (points)
 --------------
@@ -218,7 +221,7 @@ def build_grid(mesh: Mesh, resolution=None, density: float = 2.0) -> dict:
     minlength=C)`` make the CSR arrays.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_resolution(resolution)
     raise NotImplementedError("not implemented yet: build_grid (task 1)")
 
@@ -334,7 +337,7 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
     ``torch.searchsorted`` finds the first code ``>=`` a value.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_leaf_size(leaf_size)
     raise NotImplementedError("not implemented yet: build_lbvh (task 2)")
 
@@ -367,7 +370,7 @@ def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
     the right side); ``surface_area`` is provided. ``TreeLevels`` as in :func:`build_lbvh`.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_leaf_size(leaf_size)
     check_bins(bins)
     raise NotImplementedError("not implemented yet: build_sah_bvh (task 2)")
@@ -508,7 +511,7 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
     node's best cost. Create children in pairs (below, above) so that ``above = left + 1``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_leaf_size(leaf_size)
     max_depth = check_kd_knobs(mesh, max_depth, traversal_cost, intersect_cost, empty_bonus)
     raise NotImplementedError("not implemented yet: build_kdtree (task 4)")
@@ -711,7 +714,7 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
     sub-grids at once; then the (pair, cell) expansion and stable sort of ``build_grid``.
     """
     # Provided: validates the arguments (ValueError naming the argument).
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_two_level_knobs(top_density, density, min_triangles)
     raise NotImplementedError("not implemented yet: build_two_level_grid (task 6)")
 

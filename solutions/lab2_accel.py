@@ -30,7 +30,10 @@ Conventions
 * Degenerate input is a case, not an error: rays with zero (``+0.0`` or ``-0.0``)
   direction components, rays starting inside or on a cell or box boundary, NaN/inf rays
   (they miss), one triangle, coincident triangles, flat scenes. Malformed input raises
-  ``ValueError``/``TypeError`` naming the argument.
+  ``ValueError``/``TypeError`` naming the argument; so does a mesh with NaN or inf
+  vertices given to any builder (``build_*``: there are no bounds to sort it by), with
+  the same ``mesh: expected finite vertices ...`` error from the provided
+  ``check_mesh(mesh, finite=True)``.
 
 Tasks (points)
 --------------
@@ -213,7 +216,7 @@ def build_grid(mesh: Mesh, resolution=None, density: float = 2.0) -> dict:
     one ``repeat_interleave`` into (triangle, cell) pairs, one stable sort by cell, and a
     ``bincount`` for ``cell_count`` (``cell_start`` is its exclusive prefix sum).
     """
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_resolution(resolution)
     tri_lo, tri_hi = triangle_bounds(mesh)
     lo, hi = tri_lo.amin(dim=0), tri_hi.amax(dim=0)
@@ -411,7 +414,7 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
     :func:`_range_boxes`), and one sort by ``(first triangle, -size)`` is the depth-first
     order. It waits for the device three times, at any size.
     """
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_leaf_size(leaf_size)
     tri_lo, tri_hi = triangle_bounds(mesh)
     centres = (tri_lo + tri_hi) / 2
@@ -578,7 +581,7 @@ def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
     4. No valid split (all centroids in one bin on every axis: coincident triangles):
        split the range in the middle instead, so the build always ends.
     """
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_leaf_size(leaf_size)
     check_bins(bins)
     tri_lo, tri_hi = triangle_bounds(mesh)
@@ -832,7 +835,7 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
     its end event comes after it (so one lying in the plane goes to one side, and every
     triangle to at least one). Coincident triangles offer no plane inside the box: a leaf.
     """
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_leaf_size(leaf_size)
     max_depth = check_kd_knobs(mesh, max_depth, traversal_cost, intersect_cost, empty_bonus)
     f, device = mesh.num_faces, mesh.device
@@ -1271,7 +1274,7 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
     4. The sub cells' lists: as in :func:`build_grid`, one (entry, sub cell) pair per
        overlap, one stable sort by global sub cell: no loop over cells or triangles.
     """
-    check_mesh(mesh)
+    check_mesh(mesh, finite=True)
     check_two_level_knobs(top_density, density, min_triangles)
     top = build_grid(mesh, density=top_density)
     device = mesh.device

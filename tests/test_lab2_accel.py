@@ -1869,3 +1869,28 @@ def test_auto_builds_only_its_choice(impl, device):
         "choose_structure: a small, evenly tessellated sphere: a uniform grid"
     expect_error("structure", impl.closest_hit, rays_around(on(scene("soup"), device), 4, 193)
                  .to(device), on(scene("soup"), device), "octree", mt64, case="structure='octree'")
+
+
+def test_builders_reject_nonfinite_vertices(impl, device):
+    """Ungraded (the check is the provided ``check_mesh(mesh, finite=True)``): every builder
+    rejects a mesh with a NaN or inf vertex with the same ValueError naming ``mesh``."""
+    mesh = on(scene("ico"), device)
+    builders = ("build_grid", "build_lbvh", "build_sah_bvh", "build_kdtree",
+                "build_two_level_grid")
+    for bad in (math.nan, math.inf, -math.inf):
+        vertices = mesh.vertices.clone()
+        vertices[3, 1] = bad
+        broken = Mesh(vertices=vertices, faces=mesh.faces)
+        messages = set()
+        for name in builders:
+            try:
+                getattr(impl, name)(broken)
+            except ValueError as error:
+                messages.add(str(error).splitlines()[0])
+                continue
+            raise AssertionError(f"{name} accepted a mesh with a vertex coordinate {bad}: "
+                                 f"expected ValueError naming 'mesh' (keep the provided "
+                                 f"check_mesh(mesh, finite=True))")
+        assert len(messages) == 1 and next(iter(messages)).startswith("mesh: "), (
+            f"builders given a vertex coordinate {bad}: expected one and the same error "
+            f"naming 'mesh' from all of {', '.join(builders)}, got {sorted(messages)}")
