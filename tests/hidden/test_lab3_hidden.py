@@ -1,0 +1,206 @@
+"""Hidden grader for Lab 3 (not in the student handout; shown on Gradescope after the due
+date): the contracts of the visible grader on views, image sizes, depth limits, pool sizes
+and seeds it does not use, so a submission tuned to the visible inputs fails here.
+
+Views: the Cornell box from a low corner (13 x 13 rays), and the courtyard moved by
+(300, -20, 55) seen from the other side (float64 there: at that distance float32 has no
+room for the 1e-4 offset). The renderers run with the given building blocks, as in the
+visible grader, so each task is graded on its own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import pytest
+import test_lab3_wavefront as visible
+import torch
+from test_lab3_wavefront import (
+    F32,
+    F64,
+    INF,
+    check_layout_hits,
+    check_shadow_count,
+    compare_images,
+    expected_shadow_rays,
+    random_frames,
+    with_blocks,
+)
+
+from course.camera import primary_rays
+from course.testing import assert_close, check_tensor, generator
+from course.types import Mesh
+from course.whitted_support import (
+    face_normals,
+    make_scene,
+    offset_scale,
+    render_reference,
+    trace_brute_force,
+    translated,
+    whitted_camera,
+)
+
+LAB_MODULE = "lab3_wavefront"
+TASKS = visible.TASKS
+pytestmark = pytest.mark.visibility("after_due_date")
+
+OFFSET = (300.0, -20.0, 55.0)
+VIEWS = ("cornell_corner", "courtyard_moved")
+
+
+def view(name: str, dtype, device):
+    """(scene, origins, directions) of a hidden view."""
+    if name == "cornell_corner":
+        scene = visible.scene_on("cornell_mirror", dtype, device)
+        camera = dataclasses.replace(whitted_camera("cornell_mirror"), eye=(0.8, 0.25, 2.6),
+                                     target=(-0.3, 1.1, -0.4), width=13, height=13)
+        shift = torch.zeros(3, dtype=F64)
+    else:
+        scene = translated(visible.scene_on("courtyard_both", F64, device), OFFSET)
+        camera = dataclasses.replace(visible.COURTYARD_CAMERA, eye=(-1.7, 1.2, -3.4),
+                                     target=(0.3, 0.2, 0.1), width=11, height=11)
+        shift = torch.tensor(OFFSET, dtype=F64)
+    rays = primary_rays(camera, device="cpu", dtype=F64)
+    return scene, (rays.origins + shift).to(device, dtype), rays.directions.to(device, dtype)
+
+
+def views(device):
+    yield from (("cornell_corner", dtype) for dtype in (F32, F64))
+    yield "courtyard_moved", F64
+
+
+@functools.cache
+def expected(name: str, dtype, max_depth: int) -> torch.Tensor:
+    scene, o, d = view(name, dtype, "cpu")
+    return render_reference(scene, o, d, max_depth)
+
+
+def tol(name: str):
+    return visible.FAR_TOL if name == "courtyard_moved" else None
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+def test_offset_origins_reflect_hidden_frames(impl, device):
+    for dtype, seed in ((F32, 41), (F64, 42)):
+        points, normals = random_frames(131, seed, dtype)
+        got = check_tensor(impl.offset_origins(points.to(device), normals.to(device)),
+                           "offset_origins", shape=(131, 3), dtype=dtype, device=device).cpu()
+        p, n = points.double(), normals.double()
+        want = p + n * offset_scale(dtype) * p.abs().amax(1, keepdim=True).clamp(min=1)
+        assert_close(got, want.to(dtype), rtol=4 * torch.finfo(dtype).eps,
+                     atol=torch.finfo(dtype).tiny, where="(ray, axis)",
+                     name=f"offset_origins ({dtype}, hidden frames)")
+        d = torch.randn(131, 3, generator=generator(seed + 1), dtype=F64)
+        d = (d / d.norm(dim=1, keepdim=True)).to(dtype)
+        r = check_tensor(impl.reflect(d.to(device), normals.to(device)), "reflect",
+                         shape=(131, 3), dtype=dtype, device=device).cpu()
+        dd = d.double()
+        eps = 8 * torch.finfo(dtype).eps
+        assert_close(r, dd - 2 * (dd * n).sum(1, keepdim=True) * n, rtol=eps, atol=eps,
+                     where="(ray, axis)", name=f"reflect ({dtype}, hidden directions)")
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+def test_surface_at_shade_direct_hidden_views(impl, device):
+    for name, dtype in views(device):
+        scene, o, d = view(name, dtype, device)
+        zeros = torch.zeros(len(o), dtype=dtype, device=device)
+        hits = trace_brute_force(scene, o, d, zeros, zeros + INF)
+        points, normals, material = impl.surface_at(scene, o, d, hits)
+        h = hits.hit
+        n = face_normals(scene)[hits.triangle[h]]
+        n = torch.where(((n * d[h]).sum(1) > 0)[:, None], -n, n)
+        assert_close(normals[h].cpu().double(), n.cpu().double(),
+                     atol=16 * torch.finfo(dtype).eps, where="(hit, axis)",
+                     name=f"surface_at ({name}, {dtype}): normals facing the ray")
+        assert bool((material[~h] == -1).all()), f"surface_at ({name}): -1 where missed"
+        p = o[h] + hits.t[h, None] * d[h]
+        assert_close(points[h].cpu().double(), p.cpu().double(),
+                     rtol=16 * torch.finfo(dtype).eps, atol=16 * torch.finfo(dtype).eps,
+                     where="(hit, axis)", name=f"surface_at ({name}, {dtype}): points o + t d")
+        radiance, shadow_rays = impl.shade_direct(scene, p, n, d[h], scene.material[
+            hits.triangle[h]], trace_brute_force)
+        want = render_reference(scene.to("cpu"), o[h].cpu(), d[h].cpu(), 0)
+        compare_images(radiance, want, f"shade_direct on the hidden view {name} ({dtype})",
+                       dtype, device, tol=tol(name))
+        check_shadow_count(shadow_rays, expected_shadow_rays(scene, p, n),
+                           f"shade_direct on the hidden view {name} ({dtype})")
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+def test_render_whitted_hidden_views_and_depths(impl, device):
+    for name, dtype in views(device):
+        scene, o, d = view(name, dtype, device)
+        for max_depth in (1, 3):
+            image = with_blocks(impl, "render_whitted", scene, o, d, trace_brute_force,
+                                max_depth)
+            compare_images(image, expected(name, dtype, max_depth), f"render_whitted on the "
+                           f"hidden view {name}, max_depth={max_depth} ({dtype})", dtype,
+                           device, tol=tol(name))
+
+
+@pytest.mark.task(2)
+@pytest.mark.points(0.5)
+def test_render_wavefront_hidden_views_and_depths(impl, device):
+    for name, dtype in views(device):
+        scene, o, d = view(name, dtype, device)
+        for max_depth, sort in ((1, True), (3, False)):
+            image, stats = with_blocks(impl, "render_wavefront", scene, o, d, trace_brute_force,
+                                       max_depth, sort)
+            what = (f"render_wavefront on the hidden view {name}, max_depth={max_depth}, "
+                    f"sort_by_material={sort} ({dtype})")
+            compare_images(image, expected(name, dtype, max_depth), what, dtype, device,
+                           tol=tol(name))
+            assert stats["closest_rays"][0] == len(o), (
+                f"{what}: stats['closest_rays'][0] is {stats['closest_rays'][0]}, expected "
+                f"every primary ray ({len(o)})")
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.5)
+def test_render_uber_hidden_views(impl, device):
+    for name, dtype in views(device):
+        scene, o, d = view(name, dtype, device)
+        compare_images(impl.render_uber(scene, o, d, trace_brute_force, 3),
+                       expected(name, dtype, 3), f"render_uber on the hidden view {name}, "
+                       f"max_depth=3 ({dtype})", dtype, device, tol=tol(name))
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(0.5)
+def test_render_persistent_hidden_views_and_pools(impl, device):
+    for name, dtype in views(device):
+        scene, o, d = view(name, dtype, device)
+        for pool_size in (7, 333):
+            image, stats = with_blocks(impl, "render_persistent", scene, o, d,
+                                       trace_brute_force, 2, pool_size)
+            what = (f"render_persistent on the hidden view {name}, pool_size={pool_size} "
+                    f"({dtype})")
+            compare_images(image, expected(name, dtype, 2), what, dtype, device, tol=tol(name))
+            assert max(stats["active_lanes"]) <= pool_size, \
+                f"{what}: more active lanes than the pool has slots"
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(0.5)
+def test_intersect_layout_hidden_soup(impl, device):
+    for dtype, seed in ((F32, 77), (F64, 78)):
+        g = generator(seed)
+        corners = torch.rand(57, 3, 3, generator=g, dtype=F64).to(dtype)
+        mesh = Mesh(corners.reshape(-1, 3).to(device), torch.arange(171, device=device)
+                    .reshape(-1, 3))
+        scene = make_scene(mesh, torch.zeros(57, dtype=torch.int64),
+                           {"kd": [[1, 1, 1]], "ks": [[0, 0, 0]], "shininess": [1],
+                            "kr": [[0, 0, 0]]}, dir_lights=[((0, 1, 0), (1, 1, 1))])
+        o, d, t_min, t_max = visible.soup_rays(dtype, device, 170, seed)
+        want = trace_brute_force(scene, o, d, t_min, t_max)
+        order = torch.randperm(57, generator=g).to(device)
+        for what, layout in (("indexed", impl.layout_indexed(mesh)),
+                             ("float4 in a shuffled order", impl.layout_float4(mesh, order)),
+                             ("woop", impl.layout_woop(mesh))):
+            check_layout_hits(impl.intersect_layout(layout, o, d, t_min, t_max), want,
+                              f"intersect_layout ({what}, hidden soup, {dtype})", dtype)
