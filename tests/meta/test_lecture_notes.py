@@ -5,6 +5,7 @@ function shows the reference figure and one line, never a traceback."""
 from __future__ import annotations
 
 import json
+import os
 import textwrap
 from pathlib import Path
 
@@ -175,3 +176,56 @@ def test_names_a_cell_assigns_and_reads():
     assert names_assigned(code) == {"np", "i", "rows", "state", "g", "best"}
     assert {"range", "rows", "f", "max"} <= names_read(code)
     assert names_assigned("%time x = 1") == set(), "IPython syntax: nothing known"
+
+
+def _outputs_shown(cell) -> int:
+    """Figures, animations and tables a code cell shows."""
+    return sum(1 for o in cell.get("outputs", []) if o.get("output_type") in
+               ("display_data", "execute_result") and set(o.get("data", {})) - {"text/plain"})
+
+
+def _run_on_skeletons(handout_dir: Path, name: str):
+    """Execute the handout's notebook ``name`` from scratch (its labs are the skeletons)
+    as "run all" does; return the notebook as shipped and as run."""
+    shipped = nbformat.read(handout_dir / "slides" / f"{name}.ipynb", as_version=4)
+    run = nbformat.from_dict(json.loads(json.dumps(shipped)))
+    for cell in run.cells:
+        if cell.cell_type == "code":
+            cell.outputs, cell.execution_count = [], None
+    NotebookClient(run, timeout=600, kernel_name="python3",
+                   resources={"metadata": {"path": str(handout_dir / "slides")}}).execute(
+        env={**os.environ, "RTCOURSE_SMALL": "1"})
+    return shipped, run
+
+
+def _assert_every_figure_shown(shipped, run, name):
+    lines = 0
+    for number, (ref, got) in enumerate(zip(shipped.cells, run.cells)):
+        if ref.cell_type != "code":
+            continue
+        assert not [o for o in got.outputs if o.output_type == "error"], \
+            f"{name} cell {number}: an error in the handout before any lab is written"
+        assert _outputs_shown(got) == _outputs_shown(ref), \
+            f"{name} cell {number}: shows {_outputs_shown(got)} of the references' " \
+            f"{_outputs_shown(ref)} figures and tables"
+        lines += "to see your own" in _text(got)
+    assert lines, f"{name}: no demo needed an unwritten function, so nothing was checked"
+
+
+def test_a_real_lecture_is_whole_in_a_handout_before_any_lab_is_written(tmp_path):
+    out = tmp_path / "handout"
+    release(ROOT, out, notes=["00_interop"], log=lambda *_: None)
+    shipped, run = _run_on_skeletons(out, "00_interop")
+    _assert_every_figure_shown(shipped, run, "00_interop")
+    assert (out / "notes" / "00_interop.slides.html").is_file()
+
+
+@pytest.mark.slow
+def test_every_lecture_is_whole_in_a_handout_before_any_lab_is_written(tmp_path):
+    out = tmp_path / "handout"
+    release(ROOT, out, notes=True, log=lambda *_: None)
+    for path in sorted((out / "slides").glob("*.ipynb")):
+        if path.stem.endswith("_overview"):
+            continue  # the lecture plan runs no lab
+        shipped, run = _run_on_skeletons(out, path.stem)
+        _assert_every_figure_shown(shipped, run, path.stem)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import nbformat
@@ -22,3 +23,24 @@ def test_notebook_executes(path, monkeypatch):
     errors = [o for cell in notebook.cells if cell.cell_type == "code"
               for o in cell.get("outputs", []) if o.get("output_type") == "error"]
     assert not errors
+
+
+
+def test_every_notebook_that_imports_a_lab_falls_back_to_reference_figures():
+    # In the handout a lab is the student's skeleton: without the fallback, a demo of an
+    # unwritten function shows a traceback instead of the lecture's figure.
+    checked = 0
+    for path in NOTEBOOKS:
+        code = [c.source for c in nbformat.read(path, as_version=4).cells
+                if c.cell_type == "code"]
+        imports = [i for i, source in enumerate(code)
+                   if re.search(r"^\s*(import|from)\s+lab\d+_\w+", source, re.MULTILINE)]
+        if not imports:
+            continue
+        installed = [i for i, source in enumerate(code)
+                     if "show_reference_when_unwritten(ROOT)" in source]
+        assert installed and installed[0] <= imports[0], \
+            f"{path.name}: call course.lecture.show_reference_when_unwritten(ROOT) in the " \
+            f"cell that imports the lab (before its first demo)"
+        checked += 1
+    assert checked >= 7, f"only {checked} notebooks import a lab"
