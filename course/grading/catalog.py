@@ -72,7 +72,12 @@ def _marks(decorators, constants) -> dict[str, object]:
 def _value(node, constants):
     if isinstance(node, ast.Name) and node.id in constants:
         return constants[node.id]
-    return ast.literal_eval(node)
+    try:
+        return ast.literal_eval(node)
+    except ValueError:
+        raise ValueError(f"line {node.lineno}: a marker's argument {ast.unparse(node)!r} must "
+                         f"be a number or a module-level constant (NAME = literal, or one "
+                         f"imported from another grader)") from None
 
 
 def _constants(tree) -> dict[str, object]:
@@ -98,11 +103,29 @@ def _module_marks(tree, constants) -> dict[str, object]:
     return {}
 
 
+def _imported_constants(tree, path: Path) -> dict[str, object]:
+    """Constants a grader imports from another grader (``from test_lab6_raster import
+    END_TO_END``, as a hidden grader does), read from that file's source."""
+    found = {}
+    for node in tree.body:
+        if not isinstance(node, ast.ImportFrom) or not node.module or node.level:
+            continue
+        stem = node.module.split(".")[-1]
+        for folder in (path.parent, path.parent.parent):
+            source = folder / f"{stem}.py"
+            if stem.startswith("test_") and source.is_file() and source != path:
+                theirs = _constants(ast.parse(source.read_text(), filename=str(source)))
+                found.update({alias.asname or alias.name: theirs[alias.name]
+                              for alias in node.names if alias.name in theirs})
+                break
+    return found
+
+
 def read_grader(path) -> LabInfo:
     """The lab a grader module tests: its module name, tasks and graded tests."""
     path = Path(path)
     tree = ast.parse(path.read_text(), filename=str(path))
-    constants = _constants(tree)
+    constants = {**_imported_constants(tree, path), **_constants(tree)}
     module = constants.get("LAB_MODULE")
     match = re.match(r"lab(\d+)_", module or "")
     if not match:
@@ -134,7 +157,12 @@ def read_grader(path) -> LabInfo:
     helpers = {node.name: node for node in tree.body
                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
                and not node.name.startswith("test")}
-    visit(tree.body, base)
+    try:
+        visit(tree.body, base)
+    except ValueError as exc:
+        if str(exc).startswith("line "):
+            raise ValueError(f"{path}:{exc}") from None
+        raise
     return info
 
 
