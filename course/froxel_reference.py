@@ -7,12 +7,14 @@ step the light of every light source is evaluated there with the exact shadow te
 toward the sun against the occluder boxes, and a march of the extinction toward the light.
 
 It models the same scene as the pipeline (so a difference is the pipeline's approximation,
-not another model): media up to ``far``; the sun's and spot lights' light is attenuated by
-the media inside ``frustum_bounds(grid)`` (the region the pipeline's volumetric shadows
-cover), point lights by none (``point_light_shadows=True`` marches them too, to measure
-what that model leaves out); point and spot lights stop at ``range`` and are evaluated no
-closer than ``MIN_LIGHT_DISTANCE``. The media and lights are evaluated by code written here,
-independently of the lab's.
+not another model): media up to ``far``; every light's path is attenuated by the media
+inside ``volume_bounds(scene, grid)`` (the region the pipeline's volumetric shadows cover:
+the media's bounds within the frustum's), each shadow ray marched with ``shadow_steps``
+midpoint steps over only its part inside that box; point and spot lights stop at
+``range`` and are evaluated no closer than ``MIN_LIGHT_DISTANCE``.
+``point_light_shadows=False`` leaves point lights unattenuated, to measure what that
+model leaves out. The media and lights are evaluated by code written here, independently
+of the lab's.
 """
 
 from __future__ import annotations
@@ -28,11 +30,10 @@ from course.froxel_support import (
     DirectionalLight,
     FroxelGrid,
     HeightFog,
-    PointLight,
     SpotLight,
-    frustum_bounds,
     ray_boxes,
     sample_texture,
+    volume_bounds,
 )
 
 F64 = torch.float64
@@ -86,12 +87,10 @@ def _clip_to_box(o, d, lo, hi, t_max):
 
 def _optical_depth(scene, p, to_light, t_max, bounds, steps):
     """Optical depth from points p (N, 3) along unit to_light (N, 3) over the part of
-    ``[0, t_max]`` inside ``bounds`` (None: all of it), midpoint rule with ``steps`` steps."""
-    if bounds is None:
-        t0, t1 = torch.zeros_like(t_max), t_max
-    else:
-        t0, t1 = _clip_to_box(p, to_light, *bounds, t_max)
-    length = (t1 - t0).clamp(min=0)
+    ``[0, t_max]`` inside the box ``bounds``, midpoint rule with ``steps`` steps."""
+    t0, t1 = _clip_to_box(p, to_light, *bounds, t_max)
+    length = torch.nan_to_num(t1 - t0, nan=0.0).clamp(min=0)
+    t0 = torch.where(length > 0, t0, 0)
     tau = torch.zeros(len(p), dtype=F64)
     for i in range(steps):
         t = t0 + (i + 0.5) / steps * length
@@ -123,19 +122,19 @@ def _in_light(scene, light, p, view, g, phase, bounds, shadow_steps, point_light
         march = bounds is not None and (isinstance(light, SpotLight) or point_light_shadows)
     e = e * phase_value((view * to_light).sum(-1), g, phase)[:, None]
     if march:
-        box = None if isinstance(light, PointLight) else bounds
-        e = e * torch.exp(-_optical_depth(scene, p, to_light, t_max, box, shadow_steps))[:, None]
+        e = e * torch.exp(-_optical_depth(scene, p, to_light, t_max, bounds,
+                                          shadow_steps))[:, None]
     return e
 
 
 def reference_render(scene, camera, depth_image, opaque_image, *, near=0.1, far=100.0,
                      tile=8, slices=64, samples=256, shadow_steps=64, pixels=None, phase="hg",
-                     volumetric_shadows=True, point_light_shadows=False, chunk=2048):
+                     volumetric_shadows=True, point_light_shadows=True, chunk=2048):
     """Single scattering per pixel, by brute force, in float64 on the CPU.
 
     depth_image (H, W) view depths (+inf: sky), opaque_image (H, W, 3); pixels: None (all,
     row-major) or a (P,) int64 tensor of flat pixel indices ``row * W + col``. ``tile`` and
-    ``slices`` only name the grid whose ``frustum_bounds`` limit the volumetric shadows (they
+    ``slices`` only name the grid whose ``volume_bounds`` limit the volumetric shadows (they
     do not depend on them); ``chunk`` pixels are marched at once. Returns a dict of ``image`` (P, 3) = ``opaque T + L``,
     ``inscatter`` (P, 3) and ``transmittance`` (P,), float64.
     """
@@ -147,7 +146,7 @@ def reference_render(scene, camera, depth_image, opaque_image, *, near=0.1, far=
     pixels = pixels.to("cpu", torch.int64)
     depth = depth_image.detach().to("cpu", F64).reshape(-1)[pixels]
     opaque = opaque_image.detach().to("cpu", F64).reshape(-1, 3)[pixels]
-    bounds = frustum_bounds(grid) if volumetric_shadows else None
+    bounds = volume_bounds(scene, grid) if volumetric_shadows else None
     ambient = torch.tensor(scene.ambient, dtype=F64)
     out_l, out_t = [], []
     for start in range(0, len(pixels), chunk):

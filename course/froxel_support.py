@@ -460,6 +460,9 @@ def check_images(camera: Camera, depth_image, opaque_image):
 # ---------------------------------------------------------------------------------------
 # Light-space textures: sun shadow maps and transmittance volumes
 
+LIGHT_STEPS = 8
+"""Midpoint steps of a point light's transmittance march (``light_transmittance``): exact
+for a medium that is constant along the segment, whatever the count."""
 MIN_LIGHT_DISTANCE = 0.01
 """Point and spot lights are evaluated no closer than 1 cm (a bulb's radius): ``1 / d^2``
 stays finite for a froxel sample on top of a light inside fog."""
@@ -528,6 +531,92 @@ def frustum_bounds(grid: FroxelGrid):
                 corners.append(eye + z * (fwd + sx * hw * right + sy * hh * up))
     c = torch.stack(corners)
     return tuple(c.amin(0).tolist()), tuple(c.amax(0).tolist())
+
+
+def media_bounds(scene: Scene):
+    """World-space axis-aligned bounds ``(lo, hi)`` (3-tuples) of the scene's media, or None
+    when a medium is unbounded (constant fog, height fog) or there are no media. A fog
+    volume's bounds are those of its rotated box (an ellipsoid's are tight: per world axis
+    ``sqrt(sum_i (rotation[i][axis] half_size[i])^2)``)."""
+    if not scene.media or any(not isinstance(m, FogVolume) for m in scene.media):
+        return None
+    lo, hi = [math.inf] * 3, [-math.inf] * 3
+    for m in scene.media:
+        for axis in range(3):
+            terms = [m.rotation[i][axis] * m.half_size[i] for i in range(3)]
+            reach = (math.sqrt(sum(t * t for t in terms)) if m.shape == "ellipsoid"
+                     else sum(abs(t) for t in terms))
+            lo[axis] = min(lo[axis], m.center[axis] - reach)
+            hi[axis] = max(hi[axis], m.center[axis] + reach)
+    return tuple(lo), tuple(hi)
+
+
+def volume_bounds(scene: Scene, grid: FroxelGrid):
+    """The region the extinction and transmittance volumes cover: the smallest box holding
+    ``frustum_bounds(grid)`` and the position of every point or spot light whose range
+    reaches that box (so each path from a froxel to such a light lies inside it),
+    intersected with :func:`media_bounds` (no intersection when a medium is unbounded).
+    ``(lo, hi)``, or None when no medium lies inside: then nothing in view is shadowed by
+    the media and no volume is built. Media outside this region cast no volumetric shadows
+    (the pipeline's model, and the reference's): toward the sun, the part of its path that
+    leaves the frustum's bounds."""
+    if not scene.media:
+        return None
+    view_lo, view_hi = frustum_bounds(grid)
+    lo, hi = list(view_lo), list(view_hi)
+    for light in scene.lights:
+        if isinstance(light, DirectionalLight):
+            continue
+        p, r = light.position, light.range
+        if all(a - r <= x <= b + r for a, b, x in zip(view_lo, view_hi, p)):
+            lo = [min(a, x) for a, x in zip(lo, p)]
+            hi = [max(b, x) for b, x in zip(hi, p)]
+    lo, hi = tuple(lo), tuple(hi)
+    media = media_bounds(scene)
+    if media is not None:
+        lo = tuple(max(a, b) for a, b in zip(lo, media[0]))
+        hi = tuple(min(a, b) for a, b in zip(hi, media[1]))
+        if not all(a < b for a, b in zip(lo, hi)):
+            return None
+    return lo, hi
+
+
+VOLUME_RESOLUTION = 32
+"""Extinction and transmittance volume resolution for scenes without local fog volumes."""
+MAX_VOLUME_RESOLUTION = 64
+"""The automatic resolution's cap: 64^3 voxels, 64^2 x 128 samples per light."""
+VOXELS_PER_VOLUME = 16
+"""The automatic resolution puts this many voxels across the thinnest fog volume."""
+
+
+def auto_volume_resolution(scene: Scene, lo, hi) -> int:
+    """The volume resolution a scene requires over the region ``lo .. hi``: enough voxels
+    that the thinnest fog volume overlapping it spans ``VOXELS_PER_VOLUME`` of them
+    (``ceil(VOXELS_PER_VOLUME * largest extent / thinnest size)``), between
+    ``VOLUME_RESOLUTION`` and ``MAX_VOLUME_RESOLUTION``; ``VOLUME_RESOLUTION`` without fog
+    volumes. The region is :func:`volume_bounds`, so a fog volume alone in view is covered
+    by its own box and the default resolution resolves it."""
+    extent = max(b - a for a, b in zip(lo, hi))
+    sizes = []
+    for m in scene.media:
+        if not isinstance(m, FogVolume):
+            continue
+        box = media_bounds(Scene(media=(m,)))
+        if all(a < d and c < b for a, b, c, d in zip(lo, hi, *box)):
+            sizes.append(2 * min(m.half_size))
+    if not sizes:
+        return VOLUME_RESOLUTION
+    want = math.ceil(VOXELS_PER_VOLUME * extent / min(sizes))
+    return max(VOLUME_RESOLUTION, min(MAX_VOLUME_RESOLUTION, want))
+
+
+def check_volume_resolution(value):
+    """``volume_resolution``: None (:func:`auto_volume_resolution`) or an int >= 2."""
+    if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                              or value < 2):
+        raise ValueError(f"volume_resolution: expected None (chosen from the media's size) "
+                         f"or an int >= 2, got {value!r}")
+    return value
 
 
 def slice_offset(grid: FroxelGrid, jitter: float) -> float:

@@ -6,6 +6,8 @@ there is one copy of them.
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from course.raymath import check_inputs
@@ -96,6 +98,15 @@ def check_field(field, name: str, like: torch.Tensor, channels: bool = False,
     return field
 
 
+def check_density_values(density, name: str = "density") -> None:
+    """A density grid must hold extinction coefficients >= 0 (a negative one would make
+    the transmittance exceed 1): ValueError naming it otherwise."""
+    if isinstance(density, torch.Tensor) and bool((density < 0).any()):
+        raise ValueError(f"{name}: expected values >= 0 (an extinction coefficient), got "
+                         f"{int((density < 0).sum())} negative (minimum "
+                         f"{density.min().item():.3g})")
+
+
 def check_integrator(integrator):
     if integrator not in INTEGRATORS:
         raise ValueError(f"integrator: expected one of {', '.join(map(repr, INTEGRATORS))}, "
@@ -119,6 +130,7 @@ def check_march_inputs(origins, directions, box_min, box_max, density, emission,
     origins, directions, box_min, box_max = check_ray_box_inputs(origins, directions,
                                                                  box_min, box_max)
     check_field(density, "density", origins)
+    check_density_values(density)
     if emission is not None:
         check_field(emission, "emission", origins, channels=True)
     check_count(steps, "steps", 0)
@@ -145,6 +157,9 @@ def check_segment_inputs(sigma, length, integrator):
         else:
             raise TypeError(f"{name}: expected a number or a float tensor, "
                             f"got {type(value).__name__}")
+        if bool((value < 0).any()):
+            raise ValueError(f"{name}: expected values >= 0 (a negative {name} would make the "
+                             f"transmittance exceed 1), got minimum {value.min().item():.3g}")
         result.append(value)
     return result
 
@@ -185,6 +200,7 @@ def check_shadow_inputs(points, light_direction, box_min, box_max, density, step
         raise ValueError(f"points: expected shape (N, 3), got {tuple(points.shape)}")
     box_min, box_max = as_box(box_min, box_max, points)
     check_field(density, "density", points)
+    check_density_values(density)
     check_count(steps, "steps", 0)
     return points, unit_light(light_direction, points), box_min, box_max
 
@@ -246,8 +262,10 @@ def check_trace_inputs(origins, directions, sdf, t_max, max_steps, epsilon, rela
     if not callable(sdf):
         raise TypeError(f"sdf: expected a callable of points, got {type(sdf).__name__}")
     check_count(max_steps, "max_steps", 1)
-    if isinstance(t_max, bool) or not isinstance(t_max, (int, float)) or not t_max > 0:
-        raise ValueError(f"t_max: expected a number > 0, got {t_max!r}")
+    if isinstance(t_max, bool) or not isinstance(t_max, (int, float)) or not 0 < t_max < math.inf:
+        raise ValueError(f"t_max: expected a finite number > 0, got {t_max!r} (the hit test "
+                         f"|f| <= epsilon t |d| accepts any distance |f| once t >= |f| / "
+                         f"epsilon: without a bound every ray ends in a hit)")
     check_number(epsilon, "epsilon", 0.0, 1.0, closed_hi=False)
     if epsilon == 0:
         raise ValueError("epsilon: expected a number > 0 (0 is never reached in floating point)")

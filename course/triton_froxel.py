@@ -13,14 +13,19 @@ Kernels of one frame (no host synchronisation between them):
 
 1. ``_shadow_map_kernel``: the sun's shadow map (a ray per texel against the occluder
    boxes), for every sun with ``shadows`` when the scene has occluders;
-2. ``_extinction_kernel``: the extinction volume over ``frustum_bounds(grid)`` (the media
-   at its voxel centres);
+2. ``_extinction_kernel``: the extinction volume over ``volume_bounds(scene, grid)`` (the
+   media's bounds in view, reaching the point and spot lights that light it; the media at
+   its voxel centres), at ``volume_resolution`` or the one chosen from the media's size;
 3. ``_transmittance_kernel``: every sun's and spot light's transmittance volume, a texel
-   per lane marching its ray through the extinction volume;
+   per lane marching its ray through the extinction volume (4 depth samples per texel
+   of resolution, as the lab's ``light_froxels``);
 4. ``_froxel_kernel``: a program per tile column (all its slices in one block of lanes):
    the media at each froxel's sample point (constant fog, height fog, fog volumes with
    their density textures), the light culling of the tile (float64, as the lab's
    ``cull_lights``), the lighting (phase function, shadow map, transmittance volume),
+   with each point light's path to the froxel marched through the extinction volume
+   (``light_steps`` midpoint steps over its part inside the volume's box, as the lab's
+   ``light_transmittance``; lanes beyond the light's range skip it),
    and the front-to-back integration of the column as prefix sums over the block
    (``tl.cumsum``), written as the volume of nodes ``(L, T)`` that the application reads;
 5. ``_apply_kernel``: a lane per pixel, the trilinear lookup at its view depth.
@@ -47,7 +52,11 @@ Speed (``bench/lab5_froxel.py --device cuda --gpu-target``, the talk's 1080p fra
 x 64 froxels, sun with shadow map, 14 point lights, 6 textured fog volumes, height fog):
 0.57 ms per frame on an H100 against 71 ms for the torch pipeline, max difference 8e-6 of
 the largest radiance; the froxel kernel takes 0.41 ms of it, the application and the
-transmittance volume 0.03 ms each (``bench/results/nvidia-h100-80gb-hbm3/lab5/``).
+transmittance volume 0.03 ms each (``bench/results/nvidia-h100-80gb-hbm3/lab5/``). Those
+figures predate the point lights' transmittance (8 steps through the extinction volume
+per froxel and light within range) and the volume chosen from the media's size (64^3
+here, with 256 depth samples for the sun): the frame's budget is 2 ms; the bench's CUDA
+run measures it.
 
 Runs compiled on CUDA, or in Triton's CPU interpreter when ``TRITON_INTERPRET=1`` is set
 before ``triton`` is first imported (small frames only). Importing this module without
@@ -63,6 +72,7 @@ import torch
 
 from course.froxel_support import (
     INTEGRATIONS,
+    LIGHT_STEPS,
     MIN_LIGHT_DISTANCE,
     PHASES,
     SCHLICK_K_MAX,
@@ -72,12 +82,15 @@ from course.froxel_support import (
     HeightFog,
     PointLight,
     SpotLight,
+    auto_volume_resolution,
     check_choice,
     check_scene,
     check_volume,
+    check_volume_resolution,
     frustum_bounds,
     light_frame,
     slice_offset,
+    volume_bounds,
 )
 from course.triton_intersect import _ieee_quiet, _jit, _require_triton, interpreting, tl, triton
 
@@ -85,6 +98,8 @@ __all__ = ["render_froxels_fused"]
 
 BLOCK_PIXELS = 256  # lanes per program of the application
 BLOCK_TEXELS = 128  # lanes per program of the light-space textures and the extinction volume
+# Interpreted, every program costs milliseconds of Python: far fewer, larger blocks.
+BLOCK_TEXELS_INTERPRETED = 8192
 
 # Packed scene tables, one row per medium / light / light-space volume (see _plan):
 # * media, float32 (MED_F): scattering 0-2, extinction 3, emissive 4-6, g weight 7, base 8,
@@ -92,7 +107,8 @@ BLOCK_TEXELS = 128  # lanes per program of the light-space textures and the exti
 #   (0 constant, 1 height, 2 box, 3 ellipsoid), texture offset 1, shape 2-4, has texture 5;
 # * lights, float32 (LIGHT_F): colour 0-2, direction 3-5, position 6-8, range 9, cos(outer)
 #   10, cos(inner) - cos(outer) 11; int32 (LIGHT_I): kind 0 (0 sun, 1 point, 2 spot), shadow
-#   map 1, transmittance volume 2 (volume rows, -1 for none); float64 (LIGHT_D, culling):
+#   map 1, transmittance volume 2 (volume rows, -1 for none), 3: 1 where a point light's
+#   path is marched through the extinction volume; float64 (LIGHT_D, culling):
 #   listed everywhere 0, within the depth range 1, view-space position 2-4, range 5;
 # * light-space volumes, float32 (VOL_F): origin 0-2, axes u 3-5, v 6-8, w 9-11, extent 12,
 #   near 13, far - near 14, step (transmittance volume) or bias (shadow map) 15; int32
@@ -287,6 +303,57 @@ def _transmittance_lookup(volf_ptr, voli_ptr, vdata_ptr, v, px, py, pz, live):
 
 
 @_jit
+def _segment_transmittance(ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, size_z,
+                           px, py, pz, qx, qy, qz, steps, live):
+    """``light_transmittance``: exp(-optical depth) from points p to q through the
+    extinction volume over the box ``lo .. lo + size`` (0 outside), midpoint rule with
+    ``steps`` steps over the part of the segment inside the box (slab test)."""
+    rx = qx - px
+    ry = qy - py
+    rz = qz - pz
+    inf = float("inf")
+    t0 = tl.zeros_like(px)
+    t1 = tl.full(px.shape, 1.0, tl.float32)
+    # Per axis the slab [lo, lo + size]: 1 / 0 gives +-inf, 0 * inf a NaN that says nothing.
+    ix = 1.0 / rx
+    a = (lo_x - px) * ix
+    b = (lo_x + size_x - px) * ix
+    nan = (a != a) | (b != b)  # noqa: PLR0124
+    t0 = tl.maximum(t0, tl.where(nan, -inf, tl.minimum(a, b)))
+    t1 = tl.minimum(t1, tl.where(nan, inf, tl.maximum(a, b)))
+    iy = 1.0 / ry
+    a = (lo_y - py) * iy
+    b = (lo_y + size_y - py) * iy
+    nan = (a != a) | (b != b)  # noqa: PLR0124
+    t0 = tl.maximum(t0, tl.where(nan, -inf, tl.minimum(a, b)))
+    t1 = tl.minimum(t1, tl.where(nan, inf, tl.maximum(a, b)))
+    iz = 1.0 / rz
+    a = (lo_z - pz) * iz
+    b = (lo_z + size_z - pz) * iz
+    nan = (a != a) | (b != b)  # noqa: PLR0124
+    t0 = tl.maximum(t0, tl.where(nan, -inf, tl.minimum(a, b)))
+    t1 = tl.minimum(t1, tl.where(nan, inf, tl.maximum(a, b)))
+    span = t1 - t0
+    span = tl.where(span > 0.0, span, 0.0)  # also NaN -> 0
+    t0 = tl.where(span > 0.0, t0, 0.0)
+    run = live & (span > 0.0)
+    fres = ext_res.to(tl.float32)
+    depth = tl.zeros_like(px)
+    for m in range(steps):
+        t = t0 + (m + 0.5) / steps * span
+        lx = tl.div_rn(px + t * rx - lo_x, size_x)
+        ly = tl.div_rn(py + t * ry - lo_y, size_y)
+        lz = tl.div_rn(pz + t * rz - lo_z, size_z)
+        inside = (lx >= 0.0) & (lx <= 1.0) & (ly >= 0.0) & (ly <= 1.0) & (lz >= 0.0) \
+            & (lz <= 1.0)
+        sigma = _texture(ext_ptr, 0, ext_res, ext_res, ext_res, lx * fres, ly * fres,
+                         lz * fres, run & inside)
+        depth += tl.where(inside, sigma, 0.0)
+    length = tl.sqrt(rx * rx + ry * ry + rz * rz)
+    return tl.exp(-depth * (span * length / steps))
+
+
+@_jit
 def _phi(tau):
     """(1 - e^-x) / x: its Taylor series below x = 0.25 (no 0 / 0, no cancellation in
     thin media; the first dropped term is below 1e-10), the ratio above."""
@@ -423,6 +490,7 @@ def _froxel_kernel(nodes_ptr, lit_ptr, media_ptr, listed_ptr, camf_ptr, camd_ptr
                    medf_ptr, medi_ptr, tex_ptr, n_media,
                    lightf_ptr, lighti_ptr, lightd_ptr, n_lights,
                    volf_ptr, voli_ptr, vdata_ptr,
+                   ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, size_z, light_steps,
                    nx, ny, slices, tile, width, height,
                    near, depth_scale, offset, amb_r, amb_g, amb_b,
                    BLOCK_S: tl.constexpr, SCHLICK: tl.constexpr, NAIVE: tl.constexpr,
@@ -523,6 +591,11 @@ def _froxel_kernel(nodes_ptr, lit_ptr, media_ptr, listed_ptr, camf_ptr, camd_ptr
                 ty = ry / dm
                 tz = rz / dm
                 falloff = tl.where(dist < tl.load(frow + 9), 1.0 / (dm * dm), 0.0)
+                if tl.load(irow + 3) != 0:  # a point light's path through the media
+                    falloff = falloff * _segment_transmittance(
+                        ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, size_z, px, py,
+                        pz, tl.load(frow + 6), tl.load(frow + 7), tl.load(frow + 8),
+                        light_steps, lit & (falloff > 0.0))
                 if kind == 2:
                     cos_axis = -(tx * tl.load(frow + 3) + ty * tl.load(frow + 4)
                                  + tz * tl.load(frow + 5))
@@ -715,14 +788,18 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
                 textures.append(m)
                 tex_offset += medium.density.numel()
 
-    lo, hi = frustum_bounds(grid)
-    center = tuple((a + b) / 2 for a, b in zip(lo, hi))
-    radius = 0.5 * math.dist(lo, hi)
+    view_lo, view_hi = frustum_bounds(grid)
+    center = tuple((a + b) / 2 for a, b in zip(view_lo, view_hi))
+    radius = 0.5 * math.dist(view_lo, view_hi)
     shadow_lights = [n for n, light in enumerate(scene.lights)
                      if isinstance(light, DirectionalLight) and light.shadows
                      and scene.occluders]
-    extinction = volumetric_shadows and any(isinstance(x, (DirectionalLight, SpotLight))
-                                            for x in scene.lights)
+    # The extinction volume over the media in view (volume_bounds), as light_froxels.
+    bounds = volume_bounds(scene, grid) if volumetric_shadows and scene.lights else None
+    extinction = bounds is not None
+    lo, hi = bounds if extinction else (view_lo, view_hi)
+    if extinction and volume_resolution is None:
+        volume_resolution = auto_volume_resolution(scene, lo, hi)
     volume_lights = [n for n, light in enumerate(scene.lights)
                      if extinction and not isinstance(light, PointLight)]
     n_vol = len(shadow_lights) + len(volume_lights)
@@ -758,13 +835,15 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
         lighti[n, 1] = v
         v += 1
     first_volume = v
-    k = 2 * volume_resolution
-    for n in volume_lights:  # transmittance_volume's frames
+    k = 4 * volume_resolution if extinction else 0  # light_froxels' depth samples
+    box_center = tuple((a + b) / 2 for a, b in zip(lo, hi))
+    box_radius = 0.5 * math.dist(lo, hi)
+    for n in volume_lights:  # transmittance_volume's frames, over the extinction's box
         light = scene.lights[n]
         if isinstance(light, DirectionalLight):
-            origin = tuple(c + radius * t for c, t in zip(center, light.direction))
-            volume(v, origin, light_frame(tuple(-x for x in light.direction)), radius, 0.0,
-                   2 * radius, 0, volume_resolution, k, 2 * radius / (k - 1))
+            origin = tuple(c + box_radius * t for c, t in zip(box_center, light.direction))
+            volume(v, origin, light_frame(tuple(-x for x in light.direction)), box_radius,
+                   0.0, 2 * box_radius, 0, volume_resolution, k, 2 * box_radius / (k - 1))
         else:
             volume(v, light.position, light_frame(light.direction),
                    math.tan(math.radians(light.outer_deg)), 0.0, light.range, 1,
@@ -780,6 +859,7 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
             lightd[n, 0] = 1.0
             continue
         lighti[n, 0] = 1 if isinstance(light, PointLight) else 2
+        lighti[n, 3] = int(extinction and isinstance(light, PointLight))
         lightf[n, 0:3] = torch.tensor(light.intensity, dtype=f32)
         lightf[n, 6:9] = torch.tensor(light.position, dtype=f32)
         lightf[n, 9] = light.range
@@ -805,7 +885,8 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
         "boxes": boxes.to(device), "n_boxes": len(scene.occluders),
         "n_maps": len(shadow_lights), "n_volumes": len(volume_lights),
         "first_volume": first_volume, "data_size": max(data_offset, 1),
-        "extinction": bool(volume_lights), "lo": lo32.tolist(), "size": size32.tolist(),
+        "extinction": extinction, "bounds": bounds, "lo": lo32.tolist(),
+        "size": size32.tolist(),
         "shadow_resolution": shadow_resolution, "volume_resolution": volume_resolution,
     }
     per_scene[key] = plan
@@ -814,8 +895,8 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
 
 def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, slices=64,
                          near=0.1, far=100.0, phase="hg", integration="energy",
-                         volumetric_shadows=True, shadow_resolution=128, volume_resolution=32,
-                         counts=True, num_warps=None):
+                         volumetric_shadows=True, shadow_resolution=128, volume_resolution=None,
+                         light_steps=LIGHT_STEPS, counts=True, num_warps=None):
     """Lab 5's ``render_froxels`` (non-temporal) in five Triton launches: ``(image, report)``.
 
     scene: a ``course.froxel_support.Scene``; camera: its ``Camera``; depth_image (H, W)
@@ -825,7 +906,8 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, sl
     ``render_froxels``' (``grid``, ``froxels``, ``froxels_lit``, ``tiles_with_media``,
     ``light_tiles``, ``light_evaluations``, ``jitter`` 0.5, ``history_valid`` 0.0,
     ``history`` None) and ``kernel``, the froxel kernel's compiled handle (``n_regs``,
-    ``n_spills``; absent without media). The counts cost one synchronisation at the end of the frame: with
+    ``n_spills``; absent without media), ``volume_bounds`` and ``volume_resolution`` (as the
+    lab's). The counts cost one synchronisation at the end of the frame: with
     ``counts=False`` they are None, the kernels skip that bookkeeping and nothing waits
     for the GPU (the frame is only queued).
 
@@ -850,10 +932,10 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, sl
     dtype = depth_image.dtype
     check_choice(phase, "phase", PHASES)
     check_choice(integration, "integration", INTEGRATIONS)
-    for name, value, least in (("shadow_resolution", shadow_resolution, 1),
-                               ("volume_resolution", volume_resolution, 2)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < least:
-            raise ValueError(f"{name}: expected an int >= {least}, got {value!r}")
+    for name, value in (("shadow_resolution", shadow_resolution), ("light_steps", light_steps)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"{name}: expected an int >= 1, got {value!r}")
+    check_volume_resolution(volume_resolution)
     # Compiled, Triton rejects a warp count that is not a power of two deep in its compiler
     # (an assertion naming none of these arguments) and cannot launch over 32 warps; the
     # interpreter ignores num_warps, so a bad value would pass every CPU test.
@@ -862,7 +944,8 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, sl
         raise ValueError(f"num_warps: expected None or a power of two <= 32, got {num_warps!r}")
     report = {"grid": grid, "froxels": math.prod(grid.shape), "froxels_lit": 0,
               "tiles_with_media": 0, "light_tiles": [0] * len(scene.lights),
-              "light_evaluations": 0, "jitter": 0.5, "history_valid": 0.0, "history": None}
+              "light_evaluations": 0, "volume_bounds": None, "volume_resolution": 0,
+              "jitter": 0.5, "history_valid": 0.0, "history": None}
     if not scene.media:
         return opaque_image.clone(), report
     device = depth_image.device
@@ -892,27 +975,31 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, sl
     out = torch.empty(opaque.shape, dtype=f32, device=device)
     block_s = max(triton.next_power_of_2(grid.slices), 4)  # >= 4: lanes 0-3 write node 0
     warps = num_warps or max(1, min(8, block_s // 32))
+    block = BLOCK_TEXELS_INTERPRETED if interpreting() else BLOCK_TEXELS
     with _ieee_quiet():
         if plan["n_maps"]:
             res = plan["shadow_resolution"]
-            _shadow_map_kernel[(plan["n_maps"], triton.cdiv(res * res, BLOCK_TEXELS))](
+            _shadow_map_kernel[(plan["n_maps"], triton.cdiv(res * res, block))](
                 plan["volf"], plan["voli"], vdata, plan["boxes"], plan["n_boxes"],
-                BLOCK=BLOCK_TEXELS)
+                BLOCK=block)
+        res = plan["volume_resolution"] if plan["extinction"] else 1
+        ext = torch.empty(res ** 3, dtype=f32, device=device)
         if plan["extinction"]:
-            res = plan["volume_resolution"]
-            ext = torch.empty(res ** 3, dtype=f32, device=device)
-            _extinction_kernel[(triton.cdiv(res ** 3, BLOCK_TEXELS),)](
+            _extinction_kernel[(triton.cdiv(res ** 3, block),)](
                 ext, plan["medf"], plan["medi"], tex, len(scene.media), res, *plan["lo"],
-                *plan["size"], BLOCK=BLOCK_TEXELS)
-            _transmittance_kernel[(plan["n_volumes"], triton.cdiv(res * res, BLOCK_TEXELS))](
-                plan["volf"], plan["voli"], vdata, ext, res, plan["first_volume"],
-                *plan["lo"], *plan["size"], BLOCK=BLOCK_TEXELS)
+                *plan["size"], BLOCK=block)
+            if plan["n_volumes"]:
+                _transmittance_kernel[(plan["n_volumes"],
+                                       triton.cdiv(res * res, block))](
+                    plan["volf"], plan["voli"], vdata, ext, res, plan["first_volume"],
+                    *plan["lo"], *plan["size"], BLOCK=block)
         log_ratio = math.log(grid.far / grid.near)
         report["kernel"] = _froxel_kernel[(n_tiles,)](
             nodes, lit, media, listed, plan["camf"], plan["camd"], plan["dz"],
             plan["medf"], plan["medi"], tex, len(scene.media),
             plan["lightf"], plan["lighti"], plan["lightd"], n_lights,
             plan["volf"], plan["voli"], vdata,
+            ext, res, *plan["lo"], *plan["size"], light_steps,
             grid.nx, grid.ny, grid.slices, grid.tile, camera.width, camera.height,
             grid.near, log_ratio / grid.slices, slice_offset(grid, 0.5), *scene.ambient,
             BLOCK_S=block_s, SCHLICK=phase == "schlick", NAIVE=integration == "naive",
@@ -922,6 +1009,9 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, sl
             out, nodes, depth, opaque, n_pixels, camera.width, grid.tile, grid.nx, grid.ny,
             grid.slices, float(grid.nx), float(grid.ny), float(grid.slices),
             math.log(grid.near), grid.slices / log_ratio, BLOCK=BLOCK_PIXELS)
+    if plan["extinction"]:
+        report["volume_bounds"] = plan["bounds"]
+        report["volume_resolution"] = plan["volume_resolution"]
     if counts:
         _count(report, lit, media, listed, n_lights, n_tiles)
     else:

@@ -137,6 +137,10 @@ def evaluate(field, name: str, points: torch.Tensor, local: torch.Tensor,
         want = "(N,) or (N, C)" if channels else "(N,)"
         raise ValueError(f"{name}: the callable must return a tensor of shape {want} for "
                          f"points of shape {tuple(points.shape)}, got {got}")
+    if name == "density" and bool((values < 0).any()):
+        raise ValueError(f"density: the callable returned {int((values < 0).sum())} negative "
+                         f"values (an extinction coefficient is >= 0; the transmittance would "
+                         f"exceed 1)")
     return values.to(points.dtype)
 
 
@@ -225,7 +229,9 @@ def march_box(origins, directions, box_min, box_max, density, emission=None, ste
 
     Grids are sampled at box coordinates computed as ``((o - box_min) + t d) / size``,
     never from the absolute point, so a box far from the origin keeps its accuracy;
-    callables get world points. Rays that miss (and NaN/inf rays) sample nothing:
+    callables get world points. The density is an extinction coefficient, >= 0: a grid or
+    a callable with negative values raises ValueError naming ``density`` (the provided check
+    and ``evaluate`` do it). Rays that miss (and NaN/inf rays) sample nothing:
     radiance 0, transmittance 1, samples 0. ``steps = 0`` is an empty march.
 
     Hints: ``ray_box_interval`` gives the span. Keep ``rel = o - box_min`` (0 for
@@ -250,7 +256,8 @@ def segment_integral(sigma, length, integrator="exact"):
     """One step of emission–absorption through a medium constant over the step.
 
     sigma: extinction >= 0 (may be +inf); length: the step's world length >= 0 (finite);
-    numbers or float tensors that broadcast. Returns ``(weight, transmittance)`` of the
+    numbers or float tensors that broadcast (a negative value raises ValueError naming it:
+    the transmittance would exceed 1; the provided check does it). Returns ``(weight, transmittance)`` of the
     broadcast shape: a source ``q`` constant over the step adds ``T_before * q * weight``
     to the radiance, and then ``T`` is multiplied by ``transmittance = exp(-sigma length)``.
 
@@ -288,6 +295,8 @@ def henyey_greenstein(cos_theta, g):
 
         p = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos_theta)^(3/2)),   int p dw = 1.
 
+    ``cos_theta`` outside [-1, 1] (unit vectors' dot product a rounding step past +-1) is
+    clamped to [-1, 1], so the value stays finite and positive.
     ``g = 0`` is isotropic, ``1 / (4 pi)``. The denominator is computed as a sum of
     non-negative terms, ``(1 - g)^2 + 2 g (1 - cos)`` for g >= 0 and
     ``(1 + g)^2 - 2 g (1 + cos)`` for g < 0, so it does not cancel at the peak when
@@ -428,8 +437,9 @@ def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1
     """Sphere tracing (Hart 1996) with over-relaxation (Keinert et al. 2014).
 
     origins, directions: (N, 3); sdf: callable ``points (N, 3) -> (N,)``, a signed distance
-    (negative inside; a lower bound of the distance is enough); t_max: number > 0, rays
-    that get beyond it miss; max_steps: int >= 1, sdf evaluations per ray at most;
+    (negative inside; a lower bound of the distance is enough); t_max: finite number > 0,
+    rays that get beyond it miss (inf raises ValueError: the relative hit test accepts any
+    distance ``|f|`` once ``t >= |f| / epsilon``); max_steps: int >= 1, sdf evaluations per ray at most;
     epsilon: number in (0, 1), the hit tolerance *relative to the distance*; relaxation:
     omega in [1, 2).
     Returns a dict: ``t`` (N,) (the hit's ray parameter, inf unless HIT), ``status`` (N,)

@@ -38,10 +38,11 @@ Tasks (points)
 2. ``media_at``, ``voxelize``: the V-buffer (2)
 3. ``henyey_greenstein``, ``schlick_phase``, ``cull_lights``, ``build_shadow_map``,
    ``shadow_lookup``, ``light_froxels``: scattered light per froxel (3.5)
-4. ``extinction_volume``, ``transmittance_volume``, ``sample_light_volume``: volumetric shadows (1.5)
+4. ``extinction_volume``, ``transmittance_volume``, ``sample_light_volume``,
+   ``light_transmittance``: volumetric shadows (2)
 5. ``reproject``, ``temporal_blend``: temporal integration (2)
 6. ``slice_integral``, ``integrate_froxels``: final integration (2.5)
-7. ``apply_froxels``, ``render_froxels``: application to the opaque image, the whole frame (7.5)
+7. ``apply_froxels``, ``render_froxels``: application to the opaque image, the whole frame (8.5)
 
 Accuracy (asserted by the grader, measured by ``bench/lab5_froxel.py``)
 -----------------------------------------------------------------------
@@ -55,6 +56,16 @@ Accuracy (asserted by the grader, measured by ``bench/lab5_froxel.py``)
   slices over 0.1 .. 30 m. Against the brute-force reference the grader allows 4-5% of the
   largest radiance (homogeneous fog, height fog; measured 1-2%), 10% at the silhouette of
   a textured fog volume and 20% at the edges of a sun shadow in fog (a tile of blur).
+* Volumetric shadows cover what the scene requires: the media's bounds within the view
+  (``volume_bounds``) at a resolution chosen from the media's size
+  (``auto_volume_resolution``), and every light's path, point lights' too. Against a
+  float64 quadrature of single scattering in a homogeneous box of fog (sigma_s 0.5,
+  sigma_a 0.1, g 0.5; 64 x 36 pixels, the defaults), mean radiance: a point light inside
+  the fog -0.5% (+125% without its attenuation), the sun through the fog +0.8% (+100%
+  without volumetric shadows). What remains is the froxel grid's: a small fog box seen
+  from outside spans few tiles and slices, and the tile centres that fall inside it set
+  its apparent size (a 2 m box 5 m away at 64 x 64 pixels: +19% without shadows, +27%
+  with them; at 128 x 128, +12%).
 * Measured on the bench's street scene (float32, 2-core CPU, one torch thread): mean error
   0.9% at 8 px x 32 slices, 0.6% at 4 px x 128; without volumetric shadows 8.3%; point
   lights inside the fog put a 1/d^2 peak inside single froxels, so more slices can raise
@@ -72,6 +83,7 @@ import torch
 from course.froxel_support import (  # noqa: F401  (given helpers)
     BLEND,
     INTEGRATIONS,
+    LIGHT_STEPS,
     MIN_LIGHT_DISTANCE,
     PHASES,
     SCHLICK_K_MAX,
@@ -84,6 +96,7 @@ from course.froxel_support import (  # noqa: F401  (given helpers)
     PointLight,
     Scene,
     SpotLight,
+    auto_volume_resolution,
     check_choice,
     check_depths,
     check_dtype,
@@ -94,6 +107,7 @@ from course.froxel_support import (  # noqa: F401  (given helpers)
     check_phase_inputs,
     check_scene,
     check_volume,
+    check_volume_resolution,
     frame_jitter,
     froxel_sample_coords,
     frustum_bounds,
@@ -102,6 +116,7 @@ from course.froxel_support import (  # noqa: F401  (given helpers)
     ray_boxes,
     sample_texture,
     slice_offset,
+    volume_bounds,
 )
 from course.raymath import check_inputs  # noqa: F401  (given: validates (..., 3) inputs)
 
@@ -179,6 +194,8 @@ def henyey_greenstein(cos_theta, g):
 
     cos_theta: any shape, float32/float64; g: a number or a tensor broadcasting with it,
     in (-1, 1). Normalised over the sphere, mean cosine ``g``; ``1 / (4 pi)`` at g = 0.
+    ``cos_theta`` outside [-1, 1] (a dot product of unit vectors a rounding step past
+    +-1) is clamped to [-1, 1]: the value is always finite and positive.
     """
     raise NotImplementedError("not implemented yet: henyey_greenstein (task 3)")
 
@@ -187,7 +204,8 @@ def schlick_phase(cos_theta, g):
     """Schlick's approximation of Henyey–Greenstein, ``(1 - k^2) / (4 pi (1 - k cos)^2)``
     with ``k = 1.55 g - 0.55 g^3`` clamped to ``|k| <= SCHLICK_K_MAX`` (``k`` reaches 1
     at g = 0.9986: without the clamp a forward peak becomes a delta and then negative).
-    Normalised over the sphere for every ``g`` in (-1, 1)."""
+    Normalised over the sphere for every ``g`` in (-1, 1); ``cos_theta`` is clamped to
+    [-1, 1] like :func:`henyey_greenstein`'s."""
     raise NotImplementedError("not implemented yet: schlick_phase (task 3)")
 
 
@@ -224,7 +242,7 @@ def shadow_lookup(shadow_map, points):
 
 
 def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_shadows=True,
-                  shadow_resolution=128, volume_resolution=32):
+                  shadow_resolution=128, volume_resolution=None, light_steps=LIGHT_STEPS):
     """Light scattered toward the camera per unit length at every froxel, plus emission:
     ``(source (S, ny, nx, 3), report)``.
 
@@ -234,15 +252,23 @@ def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_sh
     (d >= MIN_LIGHT_DISTANCE, 0 beyond ``range``) for point lights, times the cone's
     smoothstep for spots; ``vis``: the sun's shadow map (``build_shadow_map`` over the
     bounding sphere of ``frustum_bounds(grid)`` at ``shadow_resolution``) when the light has
-    ``shadows`` and the scene has occluders; ``T``: volumetric shadows (sun and spots:
-    :func:`transmittance_volume` of :func:`extinction_volume` over ``frustum_bounds(grid)``
-    at ``volume_resolution``) when ``volumetric_shadows``; point lights have neither.
+    ``shadows`` and the scene has occluders (point and spot lights cast no opaque shadows);
+    ``T``: volumetric shadows when ``volumetric_shadows``, through the media inside
+    ``volume_bounds(scene, grid)`` (none when it is None): one :func:`extinction_volume`
+    over that box at ``volume_resolution`` (None: ``auto_volume_resolution(scene, lo, hi)``),
+    then for the sun and spots :func:`transmittance_volume` at the same resolution with
+    ``4 resolution`` depth samples (a fog volume's faces cost up to half a step of optical
+    depth each: twice the default's samples halve that) read by :func:`sample_light_volume`,
+    for point lights :func:`light_transmittance` with ``light_steps`` steps from the froxel
+    to the light.
 
     Only what the scene requires: tiles whose froxels hold no medium are not lit; within
     the others only froxels with ``sigma_s > 0`` are, and each light only in the tiles of
-    its list (:func:`cull_lights`). ``report``: ``froxels`` (total), ``froxels_lit``,
-    ``tiles_with_media``, ``light_tiles`` (per light, tiles where it was evaluated) and
-    ``light_evaluations`` (froxel-light pairs evaluated).
+    its list (:func:`cull_lights`); no volume is built without lights or without media in
+    view. ``report``: ``froxels`` (total), ``froxels_lit``, ``tiles_with_media``,
+    ``light_tiles`` (per light, tiles where it was evaluated), ``light_evaluations``
+    (froxel-light pairs evaluated), ``volume_bounds`` (the extinction volume's ``(lo, hi)``,
+    None when none was built) and ``volume_resolution`` (0 when none was built).
     """
     raise NotImplementedError("not implemented yet: light_froxels (task 3)")
 
@@ -256,6 +282,19 @@ def extinction_volume(scene, lo, hi, resolution, dtype=torch.float32, device="cp
     R = ``resolution``, x the first axis: :func:`media_at` sampled on a world-aligned grid
     around the camera, the input of every light's transmittance volume."""
     raise NotImplementedError("not implemented yet: extinction_volume (task 4)")
+
+
+def light_transmittance(extinction, lo, hi, points, position, steps=LIGHT_STEPS):
+    """Transmittance (N,) from world ``points`` (N, 3) to a point light at ``position``
+    (3 numbers) through the extinction volume (X, Y, Z) over ``lo .. hi`` (trilinear, 0
+    outside the box).
+
+    Only the part ``[t0, t1]`` of the segment ``p + t (position - p)``, ``0 <= t <= 1``,
+    inside the box is marched (slab test): ``steps`` equal steps, midpoint rule,
+    ``exp(-sum_m sigma(mid_m) ds)``, exact for a medium constant along it. 1 where the
+    segment misses the box or has zero length (a point on the light); in [0, 1], no NaN.
+    """
+    raise NotImplementedError("not implemented yet: light_transmittance (task 4)")
 
 
 def transmittance_volume(extinction, lo, hi, light, resolution=32, steps=None):
@@ -315,7 +354,10 @@ def slice_integral(source, extinction, length):
     ``phi(x) = (1 - e^(-x)) / x`` (= 1 at 0), the talk's ``(S - S e^(-sigma_t D)) / sigma_t``
     written so it stays exact as ``sigma_t -> 0`` (``S D``, with a finite gradient) and
     for huge ``sigma_t`` (``S / sigma_t``, transmittance 0, no NaN). source (..., C) or
-    (...); extinction, length: broadcasting with it (without C), >= 0.
+    (...); extinction, length: broadcasting with it (without C), >= 0 (``inf`` allowed):
+    a negative one raises ValueError naming it (it would give a transmittance above 1).
+    A slice of zero length, or of no medium, is no optical depth even where the other
+    factor is ``inf``: ``(0, 1)``, as ``sigma_t = inf`` over ``D = 0``.
     Returns tensors of the broadcast shape (integral with C).
     """
     raise NotImplementedError("not implemented yet: slice_integral (task 6)")
@@ -358,8 +400,8 @@ def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out
 
 def render_froxels(scene, camera, depth_image, opaque_image, *, tile=8, slices=64, near=0.1,
                    far=100.0, phase="hg", integration="energy", volumetric_shadows=True,
-                   shadow_resolution=128, volume_resolution=32, temporal=False, frame=0,
-                   history=None):
+                   shadow_resolution=128, volume_resolution=None, light_steps=LIGHT_STEPS,
+                   temporal=False, frame=0, history=None):
     """One frame of the pipeline: ``(image (H, W, 3), report)``.
 
     voxelize -> light_froxels -> (temporal: reproject + temporal_blend of the lit source
@@ -371,7 +413,8 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=8, slices=6
 
     A scene without media returns a copy of ``opaque_image`` and does no V-buffer or
     lighting work. ``report``: ``grid``, ``froxels``, ``froxels_lit``, ``tiles_with_media``,
-    ``light_tiles``, ``light_evaluations`` (as :func:`light_froxels`), ``jitter``,
+    ``light_tiles``, ``light_evaluations``, ``volume_bounds``, ``volume_resolution`` (as
+    :func:`light_froxels`), ``jitter``,
     ``history_valid`` (fraction of froxels that kept history) and ``history`` (a dict
     ``{"grid", "source", "extinction", "frame"}`` for the next frame).
     """

@@ -98,6 +98,11 @@ def bowl_density(p):
     return 0.3 + 3.0 * (p - c).square().sum(-1)
 
 
+def negative_density(p):
+    """Not an extinction coefficient: -1 everywhere (bad input)."""
+    return -torch.ones(p.shape[0], dtype=p.dtype, device=p.device)
+
+
 def wrong_shape_density(p):
     return p
 
@@ -816,6 +821,11 @@ def test_march_box_extremes(impl, device):
                  None, 4, case="a density callable returning (N, 3)")
     expect_error("min_transmittance", impl.march_box, oo, dd, [0.0] * 3, [1.0] * 3, dens, None,
                  4, min_transmittance=1.5, case="min_transmittance=1.5")
+    # A negative extinction would give T > 1: an error naming density, grid or callable.
+    expect_error("density", impl.march_box, oo, dd, [0.0] * 3, [1.0] * 3, -dens, None, 4,
+                 case="a density grid of -1 (transmittance above 1)")
+    expect_error("density", impl.march_box, oo, dd, [0.0] * 3, [1.0] * 3, negative_density,
+                 None, 4, case="a density callable returning -1 (transmittance above 1)")
 
 
 # ---------------------------------------------------------------------------------------
@@ -884,6 +894,11 @@ def test_segment_integral_values_and_limits(impl, device):
                  case="integrator='trapezoid'")
     expect_error("sigma", impl.segment_integral, torch.ones(3, dtype=torch.int64), 1.0,
                  case="int64 sigma")
+    for name, sigma, length in (("sigma", -0.5, 1.0), ("length", 0.5, -1.0)):
+        expect_error(name, impl.segment_integral,
+                     torch.tensor([sigma, 1.0], dtype=F64, device=device),
+                     torch.tensor([length, 1.0], dtype=F64, device=device),
+                     case=f"a negative {name} (transmittance above 1)")
 
 
 def convergence(errors: dict) -> list:
@@ -1033,6 +1048,14 @@ def test_henyey_greenstein(impl, device):
                                                                device=device),
                  kinds=(ValueError,), case="a tensor g holding 1.0")
     expect_error("cos_theta", impl.henyey_greenstein, [0.5, 0.2], 0.3, case="a list as cos_theta")
+    # cos_theta past +-1 (rounding, or a caller's bug) is clamped: finite, the value at +-1.
+    past = torch.tensor([2.0, 1.0 + 1e-6, -1.0 - 1e-6, -3.0], dtype=F64, device=device)
+    for g in (0.5, -0.7, 0.0, 0.99):
+        got = impl.henyey_greenstein(past, g)
+        no_nan(f"henyey_greenstein(cos_theta past +-1, g={g})", p=got)
+        assert_close(got, ref_phase(torch.tensor([1.0, 1.0, -1.0, -1.0], dtype=F64), g),
+                     rtol=1e-9, name=f"henyey_greenstein(cos_theta = 2, 1 + 1e-6, -1 - 1e-6, -3; "
+                     f"g={g}): clamp cos_theta to [-1, 1]", where="cos index")
 
 
 SCATTER_LO, SCATTER_HI = (0.0, 0.0, 0.0), (1.0, 2.0, 1.0)
@@ -1532,6 +1555,10 @@ def test_sphere_trace_matches_analytic(impl, device):
     expect_error("max_steps", impl.sphere_trace, oo, dd, sdf_unit_sphere, max_steps=0,
                  case="max_steps=0")
     expect_error("sdf", impl.sphere_trace, oo, dd, 3.0, case="sdf=3.0", kinds=(TypeError,))
+    # Unbounded, the relative test |f| <= epsilon t |d| accepts any distance far enough out
+    # (an SDF of 1 everywhere would "hit" at t = 1e4): t_max must be finite.
+    expect_error("t_max", impl.sphere_trace, oo, dd, sdf_unit_sphere, t_max=math.inf,
+                 case="t_max=inf")
 
 
 @pytest.mark.task(5)

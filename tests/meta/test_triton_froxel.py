@@ -13,6 +13,10 @@ pipeline (non-temporal) and count for count with its report:
 * ``dense``: extinction 1e4 per metre (transmittance 0 after the first slice: no NaN);
 * ``emissive``: sigma_t = 0 everywhere, emission only (the slice integral's series at 0;
   nothing lit, lights listed but never evaluated);
+* ``lamp in fog`` and ``sun in a fog box``: Lab 5's quadrature scenes (a point light inside a
+  homogeneous box of fog, its light attenuated on the way to each froxel; the sun through
+  a box of fog, the extinction volume over the box at the resolution chosen from its size),
+  with the defaults, also within 1% and 2% of the grader's single-scattering quadrature;
 * a scene without media: a copy of the opaque image;
 * bad arguments (wrong kind, shape, dtype, device or value): an error naming the argument,
   raised before any launch (in process, no interpreter needed).
@@ -124,6 +128,13 @@ def cases() -> dict:
     small = Camera(eye=(0.0, 1.6, 2.0), target=(0.0, 1.7, -20.0), fov_y=55.0, width=24,
                    height=16)
     d_small, o_small = _images(small, g, 0.1, 20.0)
+    lab5 = _lab5_grader()
+    fog = {}
+    for name, box, light, cam in (("lamp in fog", lab5.LAMP_BOX, lab5.LAMP, lab5.LAMP_CAMERA),
+                                  ("sun in a fog box", lab5.SUN_BOX, lab5.FOG_SUN,
+                                   lab5.SUN_CAMERA)):
+        fog[name] = (Scene(media=(lab5.fog_box(*box),), lights=(light,)), cam,
+                     *lab5.sky_images(cam), {})
     return {
         "street": (street, camera, depth, opaque, {**base, "slices": 16}),
         "street, schlick, naive, no volumetric shadows, 12 slices":
@@ -132,7 +143,17 @@ def cases() -> dict:
               "volumetric_shadows": False}),
         "dense": (dense, small, d_small, o_small, {**base, "slices": 16}),
         "emissive": (emissive, small, d_small, o_small, {**base, "slices": 16}),
+        **fog,
     }
+
+
+def _lab5_grader():
+    """Lab 5's grader module (its fog box scenes and quadrature)."""
+    spec = importlib.util.spec_from_file_location("lab5_grader", REPO / "tests" /
+                                                  "test_lab5_froxel.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def run_kernels(data: dict, device: str) -> dict:
@@ -195,6 +216,13 @@ def check(data: dict, out: dict, where: str) -> None:
                 f"{where}, {name}: the dense medium differs"
         if name == "emissive":
             assert counts["froxels_lit"] == 0, f"{where}, {name}: lit froxels without scattering"
+        if name in ("lamp in fog", "sun in a fog box"):
+            lab5 = _lab5_grader()
+            box = lab5.LAMP_BOX if name == "lamp in fog" else lab5.SUN_BOX
+            quad = lab5.fog_box_quadrature(camera, *box, scene.lights[0], 0.1)
+            err, allowed = lab5.mean_error(got, quad), 0.01 if name == "lamp in fog" else 0.02
+            assert abs(err) <= allowed, (f"{where}, {name}: mean radiance {err:+.2%} off the "
+                                         f"quadrature (allowed {allowed:.0%})")
 
 
 @needs_triton
