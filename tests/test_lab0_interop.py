@@ -25,6 +25,7 @@ from course.testing import (
     first_line,
     generator,
     poisoned,
+    replaced,
 )
 
 LAB_MODULE = "lab0_interop"
@@ -589,6 +590,27 @@ def test_run_frame_loop_displays_every_frame_in_order(impl, device, overlap):
 
 
 # ---------------------------------------------------------------- task 4: frame loop
+# render_rotating_triangle packs its pixels with pack_rgba8 (task 1): it runs here with the
+# given packing below in place of the lab's, so task 4 is graded on its own.
+
+
+def given_pack_rgba8(rgba: torch.Tensor) -> torch.Tensor:
+    """In place of the lab's ``pack_rgba8``: the little-endian word of each pixel."""
+    return ref_pack(rgba).to(rgba.device)
+
+
+def probe_render(lab, frame_index, out, **kwargs):
+    """``render_rotating_triangle`` next to the lab, with the given packing; (result, out)."""
+    with replaced(lab, {"pack_rgba8": given_pack_rgba8}):
+        result = lab.render_rotating_triangle(frame_index, out, **kwargs)
+    return result, out
+
+
+def render(impl, frame_index, out, **kwargs):
+    """The lab's render_rotating_triangle (task 1 given); ``out`` gets what it wrote."""
+    result, written = impl.probe(probe_render, frame_index, out, **kwargs)
+    out.copy_(written)
+    return result
 
 
 @pytest.mark.task(4)
@@ -596,7 +618,7 @@ def test_run_frame_loop_displays_every_frame_in_order(impl, device, overlap):
 @pytest.mark.parametrize("frame_index", [0, 7, 38, 101])
 def test_render_rotating_triangle_coverage(impl, device, frame_index):
     out = poisoned((40, 56), torch.int32, device)
-    result = impl.render_rotating_triangle(frame_index, out)
+    result = render(impl, frame_index, out)
     check_tensor(result, "render_rotating_triangle(...)", shape=(40, 56), dtype=torch.int32,
                  device=device)
     assert_equal(result, out, name="the returned framebuffer vs out (it must return out)",
@@ -608,7 +630,7 @@ def test_render_rotating_triangle_coverage(impl, device, frame_index):
 @pytest.mark.points(0.25)
 def test_render_rotating_triangle_period(impl, device):
     def frame(i, **kw):
-        return impl.render_rotating_triangle(i, poisoned((24, 32), torch.int32, device), **kw)
+        return render(impl, i, poisoned((24, 32), torch.int32, device), **kw)
 
     check_triangle_frame(frame(3, period=10), 3, "render_rotating_triangle(3, period=10)",
                          period=10)
@@ -621,7 +643,8 @@ def test_render_rotating_triangle_period(impl, device):
 
 def probe_render_in_place(lab, device):
     fb = torch.full((12, 20), -1, dtype=torch.int32, device=device)
-    result = lab.render_rotating_triangle(2, fb)
+    with replaced(lab, {"pack_rgba8": given_pack_rgba8}):
+        result = lab.render_rotating_triangle(2, fb)
     return {"returns_out": isinstance(result, torch.Tensor) and result.data_ptr() == fb.data_ptr(),
             "all_written": not bool((fb == -1).any())}
 
@@ -635,13 +658,14 @@ def test_render_rotating_triangle_writes_in_place(impl, device):
 
 
 def probe_frame_loop(lab, device, width, height, steps):
-    loop = lab.FrameLoop(width, height, device)
     kept, pointers, frames = [], [], []
-    for _ in range(steps):
-        fb = loop.step()
-        kept.append(fb)  # alive, so a per-frame allocation could not reuse its address
-        pointers.append(fb.data_ptr())
-        frames.append(fb.detach().clone().cpu())
+    with replaced(lab, {"pack_rgba8": given_pack_rgba8}):
+        loop = lab.FrameLoop(width, height, device)
+        for _ in range(steps):
+            fb = loop.step()
+            kept.append(fb)  # alive, so a per-frame allocation could not reuse its address
+            pointers.append(fb.data_ptr())
+            frames.append(fb.detach().clone().cpu())
     return {"pointers": pointers, "frames": frames}
 
 
