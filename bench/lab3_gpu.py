@@ -8,9 +8,14 @@ On a GPU, in one run:
   of <= 4): ``S x S`` primary rays from its framing camera (coherent) and as many diffuse
   bounce rays (cosine-distributed about the normal at the primary hits, origins in pixel
   order: incoherent directions), traced by the CUDA C kernel (course.cuda_tracer, one
-  thread per ray, local-memory stack) and by the Triton kernel (course.triton_tracer, one
-  ray per lane) at several launch shapes, with and without skipping the stages of a step
-  that no lane needs; target: Triton >= 50% of CUDA C (best launch of each);
+  thread per ray, local-memory stack, at several block sizes, with and without its register
+  cap) and by the Triton kernel (course.triton_tracer, one ray per lane) at several launch
+  shapes, with and without skipping the stages of a step that no lane needs; targets:
+  CUDA C >= 4.8 G primary rays/s, Triton >= 80% of CUDA C (best launch of each);
+* **the ray sets** every tracer is timed on, the same for all of them (:func:`ray_sets`):
+  seeded, in pixel order, reproducible from the seed on any machine; their SHA-256 digests
+  and first rays go to ``ray_sets.json`` so another tracer can check it runs on exactly
+  these rays (``--save-rays DIR`` also writes them whole, ~24 MB per set at 1024^2);
 * **ms/frame** of the whole Whitted frame (``F x F`` pixels, shadow rays to every light,
   up to 2 mirror bounces) by the Triton uber kernel on the Cornell mirror scene and the
   bunny on a mirror floor; target: <= 5 ms;
@@ -32,6 +37,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import itertools
+import json
 import math
 import sys
 import time
@@ -57,6 +63,10 @@ from course.whitted_support import (
 TRITON_SHAPES = [(32, 1), (64, 2), (128, 4)]  # (lanes per program, warps)
 UNIFORM = [True, False]  # skip stages no lane needs / run every stage masked
 CUDA_BLOCKS = [64, 128, 256]
+CUDA_CAPPED = [False, True]  # the compiler's registers / at most 40 (MIN_BLOCKS)
+SEED = 0  # of the diffuse directions
+CUDA_TARGET = 4.8  # G primary rays/s
+TRITON_TARGET = 0.8  # of the best CUDA C launch, primary and diffuse
 
 
 def diffuse_rays(bvh, origins, directions, hits, n: int, seed: int = 0):
@@ -75,9 +85,10 @@ def diffuse_rays(bvh, origins, directions, hits, n: int, seed: int = 0):
     normal = torch.where((normal * d).sum(1, keepdim=True) > 0, -normal, normal)
     p = o + t[:, None] * d
     p = p + normal * OFFSET * p.abs().amax(1, keepdim=True).clamp(min=1)
-    g = torch.Generator(device=o.device).manual_seed(seed)
-    r = torch.rand(n, generator=g, device=o.device).sqrt()
-    phi = 2 * math.pi * torch.rand(n, generator=g, device=o.device)
+    # Drawn on the CPU (the same numbers on every machine), then moved.
+    g = torch.Generator().manual_seed(seed)
+    r = torch.rand(n, generator=g).to(o.device).sqrt()
+    phi = 2 * math.pi * torch.rand(n, generator=g).to(o.device)
     # An orthonormal frame about the normal (Duff et al. 2017).
     sign = torch.where(normal[:, 2] >= 0, 1.0, -1.0)
     a = -1 / (sign + normal[:, 2])
@@ -118,6 +129,7 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
     """Time every implementation on one ray set; add a row each."""
     n = len(rays_o)
     fastest = {}
+    reference = None  # the first tracer's hits: every other one is compared with them
     if device.type == "cuda":
         reason = cuda_tracer.unavailable_reason()
         if reason is None:
@@ -126,17 +138,30 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
             except (RuntimeError, OSError, ImportError) as err:  # keep the Triton rows
                 reason = f"the CUDA C build failed: {err!r}"[:2000]
         if reason is None:
-            for block in CUDA_BLOCKS:
+            stack = cuda_tracer.stack_entries(bvh)
+            try:
+                ptxas = cuda_tracer.ptxas_report()
+            except (OSError, RuntimeError, ValueError) as err:
+                print(f"ptxas report unavailable: {err!r}"[:500])
+                ptxas = {}
+            for block, capped in itertools.product(CUDA_BLOCKS, CUDA_CAPPED):
                 fn = cuda_tracer.trace_flat_cuda
-                hits = fn(bvh, rays_o, rays_d, block=block)
-                t = time_fn(fn, bvh, rays_o, rays_d, block=block, repeats=repeats)
-                info = cuda_tracer.cuda_kernel_info(block=block)
-                row = table.add(scene=scene_name, rays=kind, impl="CUDA C", launch=f"{block} thr",
+                kw = {"block": block, "capped": capped}
+                hits = fn(bvh, rays_o, rays_d, **kw)
+                reference = reference or hits
+                t = time_fn(fn, bvh, rays_o, rays_d, repeats=repeats, **kw)
+                info = cuda_tracer.cuda_kernel_info(block=block, stack=stack, capped=capped)
+                report = ptxas.get((False, stack, capped), {})
+                row = table.add(scene=scene_name, rays=kind, impl="CUDA C",
+                                launch=f"{block} thr" + (", <= 40 regs" if capped else ""),
                                 n_rays=n, ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
-                                regs=info.num_regs, spills=None, local_bytes=info.local_bytes,
+                                regs=info.num_regs, spills=report.get("spill_stores"),
+                                spill_loads=report.get("spill_loads"),
+                                local_bytes=info.local_bytes, stack_entries=stack,
                                 threads_per_block=block,
                                 occupancy_model=info.occupancy_model,
                                 occupancy_cuda=info.occupancy_cuda,
+                                same_as_first=agreement(hits, reference),
                                 **hit_errors(scene, rays_o, rays_d, hits, sample))
                 fastest["CUDA C"] = max(fastest.get("CUDA C", 0), row["grays_per_s"])
                 print(_line(row), flush=True)
@@ -148,23 +173,68 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
             fn = triton_tracer.trace_flat_triton
             kw = {"block": block, "num_warps": warps, "uniform_branches": uniform}
             hits, info = fn(bvh, rays_o, rays_d, return_info=True, **kw)
+            reference = reference or hits
             t = time_fn(fn, bvh, rays_o, rays_d, repeats=repeats, warmup=1, **kw)
             row = table.add(scene=scene_name, rays=kind, impl="Triton",
                             launch=_launch(block, warps, uniform), n_rays=n,
                             ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
-                            **triton_row(info), **hit_errors(scene, rays_o, rays_d, hits, sample))
+                            **triton_row(info), same_as_first=agreement(hits, reference),
+                            **hit_errors(scene, rays_o, rays_d, hits, sample))
             fastest["Triton"] = max(fastest.get("Triton", 0), row["grays_per_s"])
             print(_line(row), flush=True)
     if device.type == "cpu":
         t = time_fn(trace_flat_torch, bvh, rays_o, rays_d, repeats=repeats, warmup=1)
         hits = trace_flat_torch(bvh, rays_o, rays_d)
+        reference = reference or hits
         row = table.add(scene=scene_name, rays=kind, impl="torch (CPU fallback)", launch="-",
                         n_rays=n, ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
+                        same_as_first=agreement(hits, reference),
                         **hit_errors(scene, rays_o, rays_d, hits, sample))
         print(_line(row), flush=True)
     return fastest
 
 
+def agreement(hits, reference) -> float:
+    """Fraction of the rays on which ``hits`` reports the same triangle as ``reference``."""
+    return (hits.triangle == reference.triangle).double().mean().item()
+
+
+def ray_sets(bvh, camera, device, seed: int = SEED) -> dict:
+    """The ray sets every tracer is timed on: ``{"primary": (o, d), "diffuse": (o, d)}``,
+    each (S^2, 3) float32 in pixel order (row-major from the top-left pixel).
+
+    primary: ``course.camera.primary_rays(camera)``, one through each pixel centre;
+    diffuse: one cosine-distributed bounce from each primary hit (:func:`diffuse_rays`,
+    random numbers from a CPU generator seeded with ``seed``; hit pixels repeated
+    cyclically to S^2 rays), the hits by the Triton tracer on CUDA (the torch walk on the
+    CPU: a few rays may bounce from another triangle there).
+    """
+    primary = primary_rays(camera, device)
+    o, d = primary.origins.contiguous(), primary.directions.contiguous()
+    hits = trace_flat_torch(bvh, o, d) if device.type == "cpu" else \
+        triton_tracer.trace_flat_triton(bvh, o, d)
+    bo, bd = diffuse_rays(bvh, o, d, hits, len(o), seed=seed)
+    return {"primary": (o, d), "diffuse": (bo, bd)}
+
+
+def describe_rays(sets: dict, camera, seed: int, first: int = 4) -> dict:
+    """What ``ray_sets.json`` holds: how to make the sets again, their SHA-256 digests (of
+    the float32 bytes of origins then directions) and their first rays."""
+    import hashlib
+
+    out = {"how": "bench/lab3_gpu.py ray_sets(bvh, camera, device, seed): primary rays of the "
+                  "bunny's camera at this size, diffuse bounces from their hits",
+           "camera": {"eye": list(camera.eye), "target": list(camera.target),
+                      "fov_y": camera.fov_y, "width": camera.width, "height": camera.height},
+           "seed": seed, "sets": {}}
+    for kind, (o, d) in sets.items():
+        digest = hashlib.sha256()
+        for x in (o, d):
+            digest.update(x.detach().to("cpu", torch.float32).contiguous().numpy().tobytes())
+        out["sets"][kind] = {"n": len(o), "sha256": digest.hexdigest(),
+                             "first_origins": o[:first].tolist(),
+                             "first_directions": d[:first].tolist()}
+    return out
 def bench_frames(table, device, frame, repeats, ref_grid, shapes):
     for name in ("cornell_mirror", "bunny_mirror"):
         scene = whitted_scene(name, device=device)
@@ -214,6 +284,8 @@ def _line(row: dict) -> str:
     if row.get("occupancy_cuda") is not None:
         cells.append(f"occ CUDA {row['occupancy_cuda']:.0%}")
     cells.append(f"mismatch {row['mismatch']:.2%}")
+    if row.get("same_as_first") is not None:
+        cells.append(f"same as first {row['same_as_first']:.4%}")
     return " | ".join(cells)
 
 
@@ -223,6 +295,7 @@ def main(argv=None) -> None:
     parser.add_argument("--size", type=int, help="image side of the ray sets (rays = size^2)")
     parser.add_argument("--frame", type=int, help="image side of the Whitted frames")
     parser.add_argument("--out", type=Path)
+    parser.add_argument("--save-rays", type=Path, help="also write the ray sets whole (.pt)")
     args = parser.parse_args(argv)
     device = torch.device("cuda" if torch.cuda.is_available() and not args.small else "cpu")
     small = args.small or device.type == "cpu"
@@ -249,23 +322,34 @@ def main(argv=None) -> None:
 
     camera = dataclasses.replace(load_scene("bunny", device="cpu").camera, width=size,
                                  height=size)
-    primary = primary_rays(camera, device)
-    o, d = primary.origins.contiguous(), primary.directions.contiguous()
-    hits = trace_flat_torch(bvh, o, d) if device.type == "cpu" else \
-        triton_tracer.trace_flat_triton(bvh, o, d)
-    bo, bd = diffuse_rays(bvh, o, d, hits, size * size)
+    sets = ray_sets(bvh, camera, device)
+    out.mkdir(parents=True, exist_ok=True)
+    described = describe_rays(sets, camera, SEED)
+    (out / "ray_sets.json").write_text(json.dumps(described, indent=1) + "\n")
+    table.metadata["ray_sets"] = {k: v["sha256"] for k, v in described["sets"].items()}
+    if args.save_rays:
+        args.save_rays.mkdir(parents=True, exist_ok=True)
+        for kind, (ro, rd) in sets.items():
+            torch.save({"origins": ro.cpu(), "directions": rd.cpu(), "seed": SEED},
+                       args.save_rays / f"{kind}_rays.pt")
     speeds = {}
-    for kind, (ro, rd) in {"primary": (o, d), "diffuse": (bo, bd)}.items():
+    for kind, (ro, rd) in sets.items():
         speeds[kind] = bench_rays(table, "bunny", bunny, bvh, ro, rd, kind, device, repeats,
                                   sample)
     if device.type == "cuda" or triton_tracer.interpreting():
         bench_frames(table, device, frame, repeats, ref_grid=64 if not small else 4,
                      shapes=TRITON_SHAPES[:2] if device.type == "cuda" else TRITON_SHAPES[:1])
     for kind, best in speeds.items():
+        if "CUDA C" in best:
+            table.metadata[f"cuda_best_grays_{kind}"] = best["CUDA C"]
+            if kind == "primary":
+                print(f"primary: best CUDA C {best['CUDA C']:.3g} G rays/s "
+                      f"(target >= {CUDA_TARGET}: {'met' if best['CUDA C'] >= CUDA_TARGET else 'NOT met'})")
         if "CUDA C" in best and "Triton" in best:
             ratio = best["Triton"] / best["CUDA C"]
             table.metadata[f"triton_over_cuda_{kind}"] = ratio
-            print(f"{kind}: best Triton / best CUDA C = {ratio:.0%} (target >= 50%)")
+            print(f"{kind}: best Triton / best CUDA C = {ratio:.0%} (target >= "
+                  f"{TRITON_TARGET:.0%}: {'met' if ratio >= TRITON_TARGET else 'NOT met'})")
     json_path = table.to_json(out / "lab3_gpu.json")
     (out / "lab3_gpu.md").write_text(
         f"# Lab 3 GPU tracers on {table.metadata['device']}\n\n"

@@ -19,8 +19,23 @@ The flat layouts (what the GPU reads; 32 + 48 bytes per node / triangle):
   count >= 1)``. Node 0 is the root.
 * ``triangles``: (F, 12) float32, three float4 rows per triangle in leaf order: ``v0.xyz``
   with the original triangle index in ``w`` (int32 bits: the lecture's "float4 triangles
-  with the index in w"), ``e1 = v1 - v0`` and ``e2 = v2 - v0`` (w = 0): Möller–Trumbore's
-  precomputed edges, formed in float64 and rounded once.
+  with the index in w"), ``e1 = v1 - v0`` (w = 0) and ``e2 = v2 - v0`` with ``w`` = 1 (int32
+  bits) on the last row of each leaf, else 0: Möller–Trumbore's precomputed edges, formed
+  in float64 and rounded once; the flag ends a leaf that is entered by its first row alone.
+* ``pairs``: (K, 16) float32, one 64-byte row per *interior* node (K = M // 2, numbered in
+  depth-first order, the root's row 0), holding both children's boxes (the packed node of
+  the lecture: a walk reads the two boxes it tests with four float4 loads of one row, and
+  never the children themselves)::
+
+      lo_a.x hi_a.x lo_b.x hi_b.x | lo_a.y hi_a.y lo_b.y hi_b.y |
+      lo_a.z hi_a.z lo_b.z hi_b.z | ref_a  ref_b  count_a count_b    (last four: int32)
+
+  ``a`` is the left child, ``b`` the right one. A child's ``ref`` is its own row of
+  ``pairs`` (>= 0) for an interior child, ``~first`` (< 0, ``first`` its first row of
+  ``triangles``) for a leaf, whose ``count`` is > 0 (0 for interior children). Each axis's
+  four planes share one float4, so a ray picks its near and far plane per axis by the sign
+  of its direction. :attr:`FlatBVH.root_ref` says where a walk starts (after testing the
+  root's box, row 0 of ``nodes``).
 
 Traversal contract (the torch fallback here and both GPU kernels implement the same one):
 
@@ -88,7 +103,8 @@ class FlatBVH:
 
     nodes: (M, 8) float32; triangles: (F, 12) float32 in leaf order; order: (F,) int64, the
     original index of each row of ``triangles``; depth: the number of levels (root = 1);
-    leaf_size: the build's largest leaf; build_seconds: wall time of the build.
+    leaf_size: the build's largest leaf; build_seconds: wall time of the build; pairs:
+    (K, 16) float32, the interior nodes with both children's boxes (module docstring).
     """
 
     nodes: torch.Tensor
@@ -97,6 +113,19 @@ class FlatBVH:
     depth: int
     leaf_size: int
     build_seconds: float = 0.0
+    pairs: torch.Tensor | None = None
+
+    @property
+    def root_ref(self) -> int:
+        """Where a walk of ``pairs`` starts: 0 (the root's row) when the root is interior,
+        ``~0 = -1`` (a leaf at row 0 of ``triangles``) when the tree is a single leaf."""
+        return 0 if self.nodes.shape[0] > 1 else -1
+
+    @property
+    def pair_ints(self) -> torch.Tensor:
+        """(K, 16) int32 view of ``pairs``: columns 12..15 are ``ref_a, ref_b, count_a,
+        count_b``."""
+        return self.pairs.view(torch.int32)
 
     @property
     def num_nodes(self) -> int:
@@ -104,9 +133,9 @@ class FlatBVH:
 
     @property
     def nbytes(self) -> int:
-        """Bytes the kernels read from: nodes and triangles (``order`` stays on the host side
-        of the API, the kernels find the index in ``w``)."""
-        return self.nodes.numel() * 4 + self.triangles.numel() * 4
+        """Bytes the kernels read from: pairs (and the root's row of nodes) and triangles
+        (``order`` stays on the host side of the API, the kernels find the index in ``w``)."""
+        return self.pairs.numel() * 4 + 32 + self.triangles.numel() * 4
 
     @property
     def node_ints(self) -> torch.Tensor:
@@ -120,7 +149,7 @@ class FlatBVH:
 
     def to(self, device) -> FlatBVH:
         return FlatBVH(self.nodes.to(device), self.triangles.to(device), self.order.to(device),
-                       self.depth, self.leaf_size, self.build_seconds)
+                       self.depth, self.leaf_size, self.build_seconds, self.pairs.to(device))
 
 
 # --------------------------------------------------------------------------------------
@@ -283,9 +312,28 @@ def _build(vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int,
     v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
     index = bvh["triangles"].to(torch.int32).view(torch.float32)[:, None]
     zero = torch.zeros_like(index)
-    rows = torch.cat([v0.float(), index, e1.float(), zero, e2.float(), zero], 1).contiguous()
+    last = torch.zeros(n_tri, dtype=torch.int32, device=device)
+    last[(bvh["first"] + bvh["count"] - 1)[leaf]] = 1  # each leaf's last row
+    rows = torch.cat([v0.float(), index, e1.float(), zero, e2.float(),
+                      last.view(torch.float32)[:, None]], 1).contiguous()
     return FlatBVH(nodes=nodes, triangles=rows, order=bvh["triangles"], depth=depth + 1,
-                   leaf_size=leaf_size, build_seconds=time.perf_counter() - start_time)
+                   leaf_size=leaf_size, build_seconds=time.perf_counter() - start_time,
+                   pairs=_pairs(nodes, ints, leaf))
+
+
+def _pairs(nodes: torch.Tensor, ints: torch.Tensor, leaf: torch.Tensor) -> torch.Tensor:
+    """The (K, 16) ``pairs`` layout (module docstring) of the (M, 8) nodes: row r holds the
+    children of the r-th interior node in depth-first order."""
+    inner = (~leaf).nonzero()[:, 0]
+    rank = torch.cumsum((~leaf).long(), 0) - 1
+    first, count = ints[:, 0].long(), ints[:, 1].long()
+    ref = torch.where(leaf, ~first, rank).to(torch.int32)  # each node as a child
+    a, b = inner + 1, first[inner]  # an interior node's word 6 is its right child
+    lo, hi = nodes[:, 0:3], nodes[:, 3:6]
+    planes = torch.stack([lo[a], hi[a], lo[b], hi[b]], 2).reshape(-1, 12)  # axis-major
+    links = torch.stack([ref[a], ref[b], torch.where(leaf[a], count[a], 0).to(torch.int32),
+                         torch.where(leaf[b], count[b], 0).to(torch.int32)], 1)
+    return torch.cat([planes, links.view(torch.float32)], 1).contiguous()
 
 
 # --------------------------------------------------------------------------------------
@@ -329,6 +377,18 @@ def check_rays(origins, directions, t_min, t_max):
     origins, directions: (N, 3) float tensors; t_min, t_max: numbers or (N,) tensors.
     Raises TypeError/ValueError naming the argument.
     """
+    o, d, (lo, lo_value), (hi, hi_value) = check_ray_bounds(origins, directions, t_min, t_max)
+    n, device = o.shape[0], o.device
+    full = {"dtype": torch.float32, "device": device}
+    return (o, d, torch.full((n,), lo_value, **full) if lo is None else lo,
+            torch.full((n,), hi_value, **full) if hi is None else hi)
+
+
+def check_ray_bounds(origins, directions, t_min, t_max):
+    """:func:`check_rays` for kernels that take numbers as numbers: returns ``(o, d,
+    (t_lo, t_lo_value), (t_hi, t_hi_value))`` where a bound given as a number comes back
+    as ``(None, value)`` and one given as a tensor as ``((N,) float32 tensor, 0.0)``.
+    """
     for name, x in (("origins", origins), ("directions", directions)):
         if not isinstance(x, torch.Tensor):
             raise TypeError(f"{name}: expected a (N, 3) float tensor, got {type(x).__name__}")
@@ -353,9 +413,9 @@ def check_rays(origins, directions, t_min, t_max):
                                  f"got {tuple(x.shape)}")
             if not x.is_floating_point():
                 raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
-            bounds.append(x.to(torch.float32).expand(n).contiguous())
+            bounds.append((x.to(torch.float32).expand(n).contiguous(), 0.0))
         elif isinstance(x, (int, float)) and not isinstance(x, bool):
-            bounds.append(torch.full((n,), float(x), dtype=torch.float32, device=device))
+            bounds.append((None, float(x)))
         else:
             raise TypeError(f"{name}: expected a number or a ({n},) tensor, "
                             f"got {type(x).__name__}")

@@ -24,6 +24,10 @@ Single scattering of a directional light fits this form when the light's transmi
 is baked into a grid: ``source = albedo sigma E T_light`` per voxel, and the phase
 function, constant along a ray, multiplies the result (``bench/lab4_march.py`` does this
 for its 1080p target and reports the baked shadow's error against per-sample shadow rays).
+The bake is a kernel too, :func:`bake_light_triton`: one lane per voxel marches toward the
+light (Lab 4's ``shadow_transmittance`` of the voxel centres) and writes the source grid,
+so a whole frame is two launches instead of a bake of a hundred eager torch operations
+(each a pass over the whole grid in DRAM) and one launch.
 
 Runs compiled on CUDA, or in Triton's CPU interpreter when ``TRITON_INTERPRET=1`` is set
 before ``triton`` is first imported (small tests only). Accuracy: float32 throughout;
@@ -38,7 +42,7 @@ import torch
 
 from course.triton_intersect import _ieee_quiet, _is_pow2, _jit, _require_triton, tl, triton
 
-__all__ = ["march_grid_triton"]
+__all__ = ["bake_light_triton", "march_grid_triton"]
 
 DEFAULT_BLOCK_RAYS = 128
 DEFAULT_NUM_WARPS = 4
@@ -153,6 +157,104 @@ def _march_kernel(o_ptr, d_ptr, density_ptr, source_ptr, radiance_ptr, trans_ptr
     tl.store(samples_ptr + ray, samples.to(tl.int64), mask=live)
 
 
+@_jit
+def _bake_kernel(density_ptr, out_ptr, n_cells, nx, ny, nz, size_x, size_y, size_z,
+                 lx, ly, lz, scale, divisions, STEPS: tl.constexpr, SCALED: tl.constexpr,
+                 BLOCK: tl.constexpr):
+    """Transmittance toward a directional light from every voxel centre: one lane per voxel,
+    a midpoint march of STEPS steps to where the light ray leaves the box (Lab 4's
+    ``shadow_transmittance`` of the voxel centres). SCALED: write ``scale * sigma * T``,
+    the single-scattering source, instead of ``T``."""
+    cell = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    live = cell < n_cells
+    i = cell // (ny * nz)
+    j = (cell // nz) % ny
+    k = cell % nz
+    fx, fy, fz = nx.to(tl.float32), ny.to(tl.float32), nz.to(tl.float32)
+    # The centre relative to box_min: voxel (i, j, k) spans [i, i + 1] * size / n.
+    rx = (i.to(tl.float32) + 0.5) * (size_x / fx)
+    ry = (j.to(tl.float32) + 0.5) * (size_y / fy)
+    rz = (k.to(tl.float32) + 0.5) * (size_z / fz)
+    dir_x = tl.zeros_like(rx) + lx
+    dir_y = tl.zeros_like(rx) + ly
+    dir_z = tl.zeros_like(rx) + lz
+    t_near = tl.zeros_like(rx)
+    t_far = tl.full(rx.shape, float("inf"), tl.float32)
+    t_near, t_far = _slab(rx, dir_x, size_x, t_near, t_far)
+    t_near, t_far = _slab(ry, dir_y, size_y, t_near, t_far)
+    t_near, t_far = _slab(rz, dir_z, size_z, t_near, t_far)
+    inside = live & (t_near <= t_far) & (tl.abs(t_far) < float("inf"))
+    t_near = tl.where(inside, t_near, 0.0)
+    dt = tl.where(inside, t_far - t_near, 0.0) / (divisions * 1.0)  # max(steps, 1)
+    depth = tl.zeros_like(rx)
+    for step in range(STEPS):
+        t = t_near + (step + 0.5) * dt
+        u = (rx + t * dir_x) / size_x
+        v = (ry + t * dir_y) / size_y
+        w = (rz + t * dir_z) / size_z
+        depth += _trilinear(density_ptr, u, v, w, nx, ny, nz, fx, fy, fz, 1, 0, inside) * dt
+    lit = tl.exp(-depth)
+    if SCALED:
+        lit = scale * tl.load(density_ptr + cell, mask=live, other=0.0) * lit
+    tl.store(out_ptr + cell, lit, mask=live)
+
+
+def bake_light_triton(density: torch.Tensor, box_min, box_max, light_direction,
+                      steps: int = 16, *, scale: float | None = None,
+                      block: int = 128, num_warps: int = 4) -> torch.Tensor:
+    """The sun's transmittance at every voxel centre of ``density``, as one Triton kernel.
+
+    density: (X, Y, Z) extinction grid spanning the box ``box_min .. box_max`` (3 numbers
+    each); light_direction: 3 numbers, toward the light (normalised here, in float64);
+    steps: int >= 0, midpoint steps of each light ray to the box's exit. Returns (X, Y, Z)
+    float32: ``exp(-sum_k sigma_k dt)`` per voxel, what Lab 4's ``shadow_transmittance``
+    gives at the voxel centres (the volumetric shadow map the frame's source is baked
+    from). With ``scale`` (e.g. ``albedo * irradiance``) it returns ``scale * density * T``
+    instead: the single-scattering source grid that :func:`march_grid_triton` marches, in
+    the same launch.
+    """
+    _require_triton()
+    if not isinstance(density, torch.Tensor):
+        raise TypeError(f"density: expected a float grid tensor, got {type(density).__name__}")
+    dens = _grid(density, "density", density.device, channels=False)
+    lo, hi = _box(box_min, box_max)
+    light = [float(c) for c in light_direction] if not isinstance(light_direction, torch.Tensor) \
+        else [float(c) for c in light_direction.detach().cpu().double().tolist()]
+    norm = math.sqrt(sum(c * c for c in light)) if len(light) == 3 else 0.0
+    if len(light) != 3 or not math.isfinite(norm) or norm == 0:
+        raise ValueError(f"light_direction: expected a finite non-zero 3-vector, got {light}")
+    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
+        raise ValueError(f"steps: expected an int >= 0, got {steps!r}")
+    if scale is not None and (isinstance(scale, bool) or not isinstance(scale, (int, float))):
+        raise TypeError(f"scale: expected a number or None, got {type(scale).__name__}")
+    if not _is_pow2(block) or not _is_pow2(num_warps) or num_warps > 32:
+        raise ValueError(f"block, num_warps: expected powers of two (num_warps <= 32), "
+                         f"got {block!r}, {num_warps!r}")
+    from course.triton_intersect import interpreting
+    if not interpreting() and dens.device.type != "cuda":
+        raise ValueError(f"density: the compiled Triton kernel needs a CUDA tensor, got "
+                         f"{dens.device} (for the CPU, set TRITON_INTERPRET=1 before "
+                         "importing triton)")
+    out = torch.empty_like(dens)
+    cells = dens.numel()
+    with _ieee_quiet():
+        _bake_kernel[(triton.cdiv(cells, block),)](
+            dens, out, cells, *dens.shape, *(b - a for a, b in zip(lo, hi)),
+            *(c / norm for c in light), float(scale or 0.0), max(steps, 1), STEPS=steps,
+            SCALED=scale is not None, BLOCK=block, num_warps=num_warps)
+    return out
+
+
+def _box(box_min, box_max) -> tuple[list[float], list[float]]:
+    lo = [float(c) for c in box_min]
+    hi = [float(c) for c in box_max]
+    if len(lo) != 3 or len(hi) != 3 or not all(math.isfinite(c) for c in lo + hi) \
+            or not all(b > a for a, b in zip(lo, hi)):
+        raise ValueError(f"box_min, box_max: expected finite 3-vectors with box_max > box_min, "
+                         f"got {lo} and {hi}")
+    return lo, hi
+
+
 def _grid(x, name: str, device: torch.device, channels: bool) -> torch.Tensor:
     if not isinstance(x, torch.Tensor) or not x.is_floating_point():
         raise TypeError(f"{name}: expected a float grid tensor, got {type(x).__name__}")
@@ -190,12 +292,7 @@ def march_grid_triton(origins: torch.Tensor, directions: torch.Tensor, box_min, 
                          f"{origins.device} like origins, got {tuple(directions.shape)} on "
                          f"{directions.device}")
     device = origins.device
-    lo = [float(c) for c in box_min]
-    hi = [float(c) for c in box_max]
-    if len(lo) != 3 or len(hi) != 3 or not all(math.isfinite(c) for c in lo + hi) \
-            or not all(b > a for a, b in zip(lo, hi)):
-        raise ValueError(f"box_min, box_max: expected finite 3-vectors with box_max > box_min, "
-                         f"got {lo} and {hi}")
+    lo, hi = _box(box_min, box_max)
     if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
         raise ValueError(f"steps: expected an int >= 0, got {steps!r}")
     if not _is_pow2(block_rays) or not _is_pow2(num_warps) or num_warps > 32:

@@ -56,7 +56,14 @@ from dataclasses import dataclass
 
 import torch
 
-from course.flat_bvh import EXIT_SCALE, STACK_DEPTH, FlatBVH, check_rays, flat_bvh_for, valid_rays
+from course.flat_bvh import (
+    EXIT_SCALE,
+    STACK_DEPTH,
+    FlatBVH,
+    check_ray_bounds,
+    check_rays,
+    flat_bvh_for,
+)
 from course.triton_intersect import _ieee_quiet, _jit, _require_triton, tl, triton
 from course.types import Hits
 
@@ -84,85 +91,107 @@ def _nan_to(x, value):
 
 
 @_jit
-def _slab(ox, oy, oz, ix, iy, iz, lx, ly, lz, hx, hy, hz, t_lo, t_hi, EXIT: tl.constexpr):
-    """Rays against one box each: (entry distance, hit?). NaN from ``0 * inf`` (a ray in a
-    slab plane, parallel to it) means "inside this slab": near -inf, far +inf."""
-    t0 = (lx - ox) * ix
-    t1 = (hx - ox) * ix
-    nx = tl.minimum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
-    fx = tl.maximum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
-    t0 = (ly - oy) * iy
-    t1 = (hy - oy) * iy
-    ny = tl.minimum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
-    fy = tl.maximum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
-    t0 = (lz - oz) * iz
-    t1 = (hz - oz) * iz
-    nz = tl.minimum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
-    fz = tl.maximum(t0, t1, propagate_nan=tl.PropagateNan.ALL)
-    nx = _nan_to(nx, -float("inf"))
-    ny = _nan_to(ny, -float("inf"))
-    nz = _nan_to(nz, -float("inf"))
-    fx = _nan_to(fx, float("inf"))
-    fy = _nan_to(fy, float("inf"))
-    fz = _nan_to(fz, float("inf"))
+def _or(a, b):
+    return a | b
+
+
+@_jit
+def _load4(ptr, offset, mask, VEC: tl.constexpr):
+    """Words ``offset .. offset + 3`` of a 32-bit array per lane (offset a multiple of 4):
+    compiled, one 16-byte load (``ld.global.nc.v4``, masked-off lanes read row 0, which
+    every array has); interpreted, four masked loads. Returns four int32 (bit patterns)."""
+    if VEC:
+        return tl.inline_asm_elementwise(
+            "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4];", "=r,=r,=r,=r,l",
+            [ptr + tl.where(mask, offset, 0)], dtype=(tl.int32, tl.int32, tl.int32, tl.int32),
+            is_pure=True, pack=1)
+    else:
+        return (tl.load(ptr + offset, mask=mask, other=0),
+                tl.load(ptr + offset + 1, mask=mask, other=0),
+                tl.load(ptr + offset + 2, mask=mask, other=0),
+                tl.load(ptr + offset + 3, mask=mask, other=0))
+
+
+@_jit
+def _f(x):
+    return x.to(tl.float32, bitcast=True)
+
+
+@_jit
+def _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz, t_lo, t_hi,
+          EXIT: tl.constexpr, SANITIZE: tl.constexpr):
+    """Rays against one box each: (entry distance, hit?). Each axis's near plane is lo
+    (hi) for a positive (negative) direction, so ``(plane - o) / d`` comes out in order. A
+    NaN from ``0 * inf`` (a ray in a slab plane, parallel to it) means "inside this slab":
+    compiled, ``max.f32``/``min.f32`` return the other operand; interpreted (numpy), the
+    NaN is replaced first (SANITIZE)."""
+    nx = (tl.where(neg_x, hx, lx) - ox) * ix
+    fx = (tl.where(neg_x, lx, hx) - ox) * ix
+    ny = (tl.where(neg_y, hy, ly) - oy) * iy
+    fy = (tl.where(neg_y, ly, hy) - oy) * iy
+    nz = (tl.where(neg_z, hz, lz) - oz) * iz
+    fz = (tl.where(neg_z, lz, hz) - oz) * iz
+    if SANITIZE:
+        nx = _nan_to(nx, -float("inf"))
+        ny = _nan_to(ny, -float("inf"))
+        nz = _nan_to(nz, -float("inf"))
+        fx = _nan_to(fx, float("inf"))
+        fy = _nan_to(fy, float("inf"))
+        fz = _nan_to(fz, float("inf"))
     enter = tl.maximum(tl.maximum(t_lo, nx), tl.maximum(ny, nz))
     leave = tl.minimum(t_hi, tl.minimum(fx, tl.minimum(fy, fz)) * EXIT)
     return enter, enter <= leave
 
 
 @_jit
-def _box(ptr, node, mask):
-    """lo.xyz, hi.xyz of nodes ``node`` (per-lane) from the (M, 8) float node array."""
-    base = ptr + node * 8
-    return (tl.load(base + 0, mask=mask, other=0.0), tl.load(base + 1, mask=mask, other=0.0),
-            tl.load(base + 2, mask=mask, other=0.0), tl.load(base + 3, mask=mask, other=0.0),
-            tl.load(base + 4, mask=mask, other=0.0), tl.load(base + 5, mask=mask, other=0.0))
+def _dispatch(mask, ref, node, cur):
+    """Go to child/stack entry ``ref`` in the lanes of ``mask``: an interior node (ref >= 0)
+    becomes the next ``node``, a leaf (``~first``) pending rows from ``cur = first``."""
+    node = tl.where(mask, tl.where(ref >= 0, ref, -1), node)
+    cur = tl.where(mask & (ref < 0), -1 - ref, cur)
+    return node, cur
 
 
 @_jit
-def _visit(nodes_f, nodes_i, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, t_lo, best_t,
-           visit, node, sp, cur, end, EXIT: tl.constexpr):
-    """TRAVERSE for the lanes in ``visit``: read the node; a leaf becomes pending work
-    ``[cur, end)``; at an interior node go to the nearer hit child and push the farther.
-    Returns the lanes' new ``(node, sp, cur, end)``; node -1: pop next."""
-    word6 = tl.load(nodes_i + node * 8 + 6, mask=visit, other=0)
-    count = tl.load(nodes_i + node * 8 + 7, mask=visit, other=0)
-    leaf = visit & (count > 0)
-    cur = tl.where(leaf, word6, cur)
-    end = tl.where(leaf, word6 + count, end)
-    inner = visit & (count == 0)
-    child_a = node + 1
-    lx, ly, lz, hx, hy, hz = _box(nodes_f, child_a, inner)
-    ta, ha = _slab(ox, oy, oz, ix, iy, iz, lx, ly, lz, hx, hy, hz, t_lo, best_t, EXIT)
-    lx, ly, lz, hx, hy, hz = _box(nodes_f, word6, inner)
-    tb, hb = _slab(ox, oy, oz, ix, iy, iz, lx, ly, lz, hx, hy, hz, t_lo, best_t, EXIT)
-    ha = ha & inner
-    hb = hb & inner
+def _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
+           t_lo, best_t, visit, node, sp, cur, EXIT: tl.constexpr, VEC: tl.constexpr,
+           SANITIZE: tl.constexpr):
+    """TRAVERSE for the lanes in ``visit``: one row of ``pairs`` (both children's boxes and
+    links, four 16-byte loads); go to the nearer hit child, push the farther. Returns the
+    lanes' new ``(node, sp, cur)``; node = cur = -1: pop next."""
+    base = node * 16
+    ax0, ax1, bx0, bx1 = _load4(pairs, base, visit, VEC)
+    ay0, ay1, by0, by1 = _load4(pairs, base + 4, visit, VEC)
+    az0, az1, bz0, bz1 = _load4(pairs, base + 8, visit, VEC)
+    ref_a, ref_b, _ca, _cb = _load4(pairs, base + 12, visit, VEC)
+    ta, ha = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, _f(ax0), _f(ax1), _f(ay0),
+                   _f(ay1), _f(az0), _f(az1), t_lo, best_t, EXIT, SANITIZE)
+    tb, hb = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, _f(bx0), _f(bx1), _f(by0),
+                   _f(by1), _f(bz0), _f(bz1), t_lo, best_t, EXIT, SANITIZE)
+    ha = ha & visit
+    hb = hb & visit
     b_first = hb & (~ha | (tb < ta))
     both = ha & hb
-    tl.store(stack_ptr + sp * stride + slot, tl.where(b_first, child_a, word6), mask=both)
+    tl.store(stack_ptr + sp * stride + slot, tl.where(b_first, ref_a, ref_b), mask=both)
     sp = sp + both.to(tl.int32)
-    near = tl.where(b_first, word6, child_a)
-    node = tl.where(ha | hb, near, tl.where(visit, -1, node))
-    return node, sp, cur, end
+    node = tl.where(visit, -1, node)
+    node, cur = _dispatch(ha | hb, tl.where(b_first, ref_b, ref_a), node, cur)
+    return node, sp, cur
 
 
 @_jit
-def _intersect(tris_f, tris_i, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-               best_t, best_row, best_tri, best_u, best_v):
-    """INTERSECT for the lanes in ``test``: Möller–Trumbore against row ``cur``; keeps the
-    nearest hit (ties: lower original index). Returns the updated best and the hit mask."""
-    base = tris_f + cur * 12
-    v0x = tl.load(base + 0, mask=test, other=0.0)
-    v0y = tl.load(base + 1, mask=test, other=0.0)
-    v0z = tl.load(base + 2, mask=test, other=0.0)
-    tri = tl.load(tris_i + cur * 12 + 3, mask=test, other=0)
-    e1x = tl.load(base + 4, mask=test, other=0.0)
-    e1y = tl.load(base + 5, mask=test, other=0.0)
-    e1z = tl.load(base + 6, mask=test, other=0.0)
-    e2x = tl.load(base + 8, mask=test, other=0.0)
-    e2y = tl.load(base + 9, mask=test, other=0.0)
-    e2z = tl.load(base + 10, mask=test, other=0.0)
+def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
+               best_t, best_row, best_tri, best_u, best_v, VEC: tl.constexpr):
+    """INTERSECT for the lanes in ``test``: Möller–Trumbore against row ``cur`` (three
+    16-byte loads); keeps the nearest hit (ties: lower original index). Returns the updated
+    best, the hit mask and the next row (-1 after the row flagged last in its leaf)."""
+    base = cur * 12
+    v0x, v0y, v0z, tri = _load4(tris, base, test, VEC)
+    e1x, e1y, e1z, _w = _load4(tris, base + 4, test, VEC)
+    e2x, e2y, e2z, last = _load4(tris, base + 8, test, VEC)
+    v0x, v0y, v0z = _f(v0x), _f(v0y), _f(v0z)
+    e1x, e1y, e1z = _f(e1x), _f(e1y), _f(e1z)
+    e2x, e2y, e2z = _f(e2x), _f(e2y), _f(e2z)
     px = dy * e2z - dz * e2y
     py = dz * e2x - dx * e2z
     pz = dx * e2y - dy * e2x
@@ -179,79 +208,108 @@ def _intersect(tris_f, tris_i, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
     t = (e2x * qx + e2y * qy + e2z * qz) * inv
     hit = (test & (det != 0.0) & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t >= t_lo)
            & (t <= best_t) & ((t < best_t) | (tri < best_tri)))
+    nxt = tl.where(test, tl.where(last != 0, -1, cur + 1), cur)
     return (tl.where(hit, t, best_t), tl.where(hit, cur, best_row), tl.where(hit, tri, best_tri),
-            tl.where(hit, u, best_u), tl.where(hit, v, best_v), hit)
+            tl.where(hit, u, best_u), tl.where(hit, v, best_v), hit, nxt)
 
 
 @_jit
-def _trace(nodes_f, nodes_i, tris_f, tris_i, stack_ptr, slot, stride,
+def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
            ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT: tl.constexpr,
-           EXIT: tl.constexpr, UNIFORM: tl.constexpr):
-    """Walk the BVH for every lane with ``alive`` set: the POP/TRAVERSE/INTERSECT loop.
+           EXIT: tl.constexpr, UNIFORM: tl.constexpr, VEC: tl.constexpr,
+           SANITIZE: tl.constexpr):
+    """Walk the BVH for every lane with ``alive`` set: the TRAVERSE/INTERSECT/POP loop.
 
+    pairs, tris: the int32 views of the ``pairs`` and ``triangles`` layouts; root: the
+    float ``nodes`` (only row 0, the root's box, is read); root_ref: where the walk starts.
     UNIFORM: skip a stage in a step where no lane of the program needs it (a branch on a
     vote over the lanes, what a warp does when none of its threads takes a branch), instead
-    of running it with every lane masked off.
+    of running it with every lane masked off. VEC: 16-byte loads (compiled kernels);
+    SANITIZE: replace the slab test's NaN before min/max (the interpreter's keep NaN).
     Returns ``(t, row, u, v)``: row (int32) of the hit in the triangle layout, -1 on a miss.
     """
     one = tl.full(ox.shape, 1.0, tl.float32)
     ix = tl.math.div_rn(one, dx)  # IEEE: 1/+-0 = +-inf, which the slab test expects
     iy = tl.math.div_rn(one, dy)
     iz = tl.math.div_rn(one, dz)
+    neg_x = ix.to(tl.int32, bitcast=True) < 0  # the sign bit: -0 counts as negative
+    neg_y = iy.to(tl.int32, bitcast=True) < 0
+    neg_z = iz.to(tl.int32, bitcast=True) < 0
     zero_i = tl.zeros(ox.shape, tl.int32)
     best_t = t_hi
     best_row = zero_i - 1
     best_tri = zero_i + 2147483647  # original index, for the tie rule
     best_u = tl.zeros(ox.shape, tl.float32)
     best_v = tl.zeros(ox.shape, tl.float32)
-    lx, ly, lz, hx, hy, hz = _box(nodes_f, zero_i, alive)
-    _, root = _slab(ox, oy, oz, ix, iy, iz, lx, ly, lz, hx, hy, hz, t_lo, t_hi, EXIT)
-    alive = alive & root
-    node = zero_i  # the node to visit next; -1: pop one
+    lx = tl.load(root + zero_i + 0)
+    ly = tl.load(root + zero_i + 1)
+    lz = tl.load(root + zero_i + 2)
+    hx = tl.load(root + zero_i + 3)
+    hy = tl.load(root + zero_i + 4)
+    hz = tl.load(root + zero_i + 5)
+    _, in_root = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz,
+                       t_lo, t_hi, EXIT, SANITIZE)
+    alive = alive & in_root
+    node = zero_i - 1  # the pair row to visit next; -1: none
+    cur = zero_i - 1  # the leaf row to test next; -1: none
+    node, cur = _dispatch(alive, zero_i + root_ref, node, cur)
     sp = zero_i
-    cur = zero_i  # pending leaf rows [cur, end)
-    end = zero_i
-    while tl.max(alive.to(tl.int32), axis=0) > 0:
-        # 1. POP
-        idle = alive & (cur >= end) & (node < 0)
-        alive = alive & ~(idle & (sp == 0))
-        pop = idle & (sp > 0)
-        sp = sp - pop.to(tl.int32)
-        node = tl.where(pop, tl.load(stack_ptr + sp * stride + slot, mask=pop, other=0), node)
-        # 2. TRAVERSE
-        visit = alive & (cur >= end) & (node >= 0)
+    # One vote per step for the loop and the TRAVERSE skip: bit 0 some lane alive, bit 1
+    # some lane at an interior node.
+    votes = tl.reduce(alive.to(tl.int32) | ((node >= 0).to(tl.int32) << 1), 0, _or)
+    while (votes & 1) != 0:
+        # 1. TRAVERSE
+        visit = alive & (node >= 0)
         if UNIFORM:
-            if tl.max(visit.to(tl.int32), axis=0) > 0:
-                node, sp, cur, end = _visit(nodes_f, nodes_i, stack_ptr, slot, stride,
-                                            ox, oy, oz, ix, iy, iz, t_lo, best_t,
-                                            visit, node, sp, cur, end, EXIT)
+            if (votes & 2) != 0:
+                node, sp, cur = _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz,
+                                       neg_x, neg_y, neg_z, t_lo, best_t, visit, node, sp,
+                                       cur, EXIT, VEC, SANITIZE)
         else:
-            node, sp, cur, end = _visit(nodes_f, nodes_i, stack_ptr, slot, stride,
-                                        ox, oy, oz, ix, iy, iz, t_lo, best_t,
-                                        visit, node, sp, cur, end, EXIT)
-        # 3. INTERSECT one triangle of the pending leaf
-        test = alive & (cur < end)
+            node, sp, cur = _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz,
+                                   neg_x, neg_y, neg_z, t_lo, best_t, visit, node, sp, cur,
+                                   EXIT, VEC, SANITIZE)
+        # 2. INTERSECT one triangle of the pending leaf
+        test = alive & (cur >= 0)
         hit = test & (zero_i != 0)
         if UNIFORM:
             if tl.max(test.to(tl.int32), axis=0) > 0:
-                best_t, best_row, best_tri, best_u, best_v, hit = _intersect(
-                    tris_f, tris_i, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-                    best_t, best_row, best_tri, best_u, best_v)
+                best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
+                    tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
+                    best_t, best_row, best_tri, best_u, best_v, VEC)
         else:
-            best_t, best_row, best_tri, best_u, best_v, hit = _intersect(
-                tris_f, tris_i, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-                best_t, best_row, best_tri, best_u, best_v)
-        cur = cur + test.to(tl.int32)
+            best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
+                tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
+                best_t, best_row, best_tri, best_u, best_v, VEC)
         if ANY_HIT:
             alive = alive & ~hit
+        # 3. POP: a lane with no node and no leaf work pops its stack (or finishes)
+        idle = alive & (cur < 0) & (node < 0)
+        alive = alive & ~(idle & (sp == 0))
+        pop = idle & (sp > 0)
+        sp = sp - pop.to(tl.int32)
+        ref = tl.load(stack_ptr + sp * stride + slot, mask=pop, other=0)
+        node, cur = _dispatch(pop, ref, node, cur)
+        votes = tl.reduce(alive.to(tl.int32) | ((alive & (node >= 0)).to(tl.int32) << 1), 0,
+                          _or)
     return best_t, best_row, best_u, best_v
 
 
 @_jit
-def _trace_kernel(o_ptr, d_ptr, tlo_ptr, thi_ptr, nodes_f, nodes_i, tris_f, tris_i, stack_ptr,
-                  t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
+def _valid(ox, oy, oz, dx, dy, dz):
+    """Rays that can hit: finite components and a nonzero direction."""
+    inf = float("inf")
+    return ((tl.abs(ox) < inf) & (tl.abs(oy) < inf) & (tl.abs(oz) < inf)
+            & (tl.abs(dx) < inf) & (tl.abs(dy) < inf) & (tl.abs(dz) < inf)
+            & ((dx != 0.0) | (dy != 0.0) | (dz != 0.0)))
+
+
+@_jit
+def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, root, tris,
+                  root_ref, stack_ptr, t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
                   BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr,
-                  UNIFORM: tl.constexpr):
+                  UNIFORM: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
+                  TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
     slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = slot < n_rays
     ox = tl.load(o_ptr + slot * 3 + 0, mask=live, other=0.0)
@@ -260,15 +318,22 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, thi_ptr, nodes_f, nodes_i, tris_f, tris
     dx = tl.load(d_ptr + slot * 3 + 0, mask=live, other=1.0)
     dy = tl.load(d_ptr + slot * 3 + 1, mask=live, other=1.0)
     dz = tl.load(d_ptr + slot * 3 + 2, mask=live, other=1.0)
-    t_lo = tl.load(tlo_ptr + slot, mask=live, other=0.0)
-    t_hi = tl.load(thi_ptr + slot, mask=live, other=0.0)
-    # Invalid rays (NaN/inf, zero direction, t_max < t_min) arrive from the launcher with
-    # the empty interval [inf, -inf].
-    alive = live & (t_lo <= t_hi)
-    t, row, u, v = _trace(nodes_f, nodes_i, tris_f, tris_i, stack_ptr, slot, stride,
-                          ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT, UNIFORM)
+    zero = tl.zeros(ox.shape, tl.float32)
+    if TLO_ARRAY:
+        t_lo = tl.load(tlo_ptr + slot, mask=live, other=0.0)
+    else:
+        t_lo = zero + tlo_value
+    if THI_ARRAY:
+        t_hi = tl.load(thi_ptr + slot, mask=live, other=0.0)
+    else:
+        t_hi = zero + thi_value
+    # Rays that cannot hit (NaN/inf, zero direction, t_max < t_min or NaN) never walk.
+    alive = live & _valid(ox, oy, oz, dx, dy, dz) & (t_lo <= t_hi)
+    t, row, u, v = _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
+                          ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT, UNIFORM,
+                          VEC, SANITIZE)
     hit = row >= 0
-    tri = tl.load(tris_i + row * 12 + 3, mask=hit, other=-1)
+    tri = tl.load(tris + row * 12 + 3, mask=hit, other=-1)
     tl.store(t_ptr + slot, tl.where(hit, t, float("inf")), mask=live)
     tl.store(id_ptr + slot, tri.to(tl.int64), mask=live)
     tl.store(u_ptr + slot, tl.where(hit, u, 0.0), mask=live)
@@ -283,11 +348,12 @@ def _pow(x, s):
 
 
 @_jit
-def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, nodes_f, nodes_i, tris_f, tris_i, stack_ptr,
-                    stride, mat_id_ptr, mat_ptr, light_ptr,
+def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, root_ref,
+                    stack_ptr, stride, mat_id_ptr, mat_ptr, light_ptr,
                     amb_r, amb_g, amb_b, bg_r, bg_g, bg_b, offset,
                     N_LIGHTS: tl.constexpr, MAX_DEPTH: tl.constexpr,
-                    BLOCK: tl.constexpr, EXIT: tl.constexpr, UNIFORM: tl.constexpr):
+                    BLOCK: tl.constexpr, EXIT: tl.constexpr, UNIFORM: tl.constexpr,
+                    VEC: tl.constexpr, SANITIZE: tl.constexpr):
     """The uber kernel: per lane, primary ray -> (closest hit -> shade with shadow rays ->
     mirror bounce) up to ``max_depth`` bounces; the radiance recursion unrolled into a
     loop with a throughput weight (``L += kr * radiance(...)`` becomes ``weight *= kr``).
@@ -318,9 +384,9 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, nodes_f, nodes_i, tris_f, tri
     active = live & finite
     inv_pi = 0.3183098861837907
     for depth in range(MAX_DEPTH + 1):
-        t, row, _u, _v = _trace(nodes_f, nodes_i, tris_f, tris_i, stack_ptr, slot, stride,
+        t, row, _u, _v = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot, stride,
                                 ox, oy, oz, dx, dy, dz, zero, inf, active, False, EXIT,
-                                UNIFORM)
+                                UNIFORM, VEC, SANITIZE)
         hit = active & (row >= 0)
         miss = active & (row < 0)
         c_r += tl.where(miss, w_r * bg_r, 0.0)
@@ -389,9 +455,9 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, nodes_f, nodes_i, tris_f, tri
             s_max = tl.where(is_point, dist - light_reach, inf)
             ndl = nx * lx + ny * ly + nz * lz
             want = hit & (ndl > 0.0)
-            _t, occluder, _u2, _v2 = _trace(nodes_f, nodes_i, tris_f, tris_i, stack_ptr, slot,
+            _t, occluder, _u2, _v2 = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot,
                                             stride, px, py, pz, lx, ly, lz, zero, s_max, want,
-                                            True, EXIT, UNIFORM)
+                                            True, EXIT, UNIFORM, VEC, SANITIZE)
             lit = want & (occluder < 0)
             hx = lx - dx
             hy = ly - dy
@@ -454,10 +520,12 @@ def _device_check(device: torch.device) -> None:
                          "course.flat_bvh.trace_flat_torch)")
 
 
-def _stack(n: int, block: int, device) -> tuple[torch.Tensor, int]:
-    """The per-lane stacks: (STACK_DEPTH, lanes) int32, lanes = n rounded up to blocks."""
+def _stack(n: int, block: int, device, bvh: FlatBVH) -> tuple[torch.Tensor, int]:
+    """The per-lane stacks: (entries, lanes) int32, lanes = n rounded up to blocks;
+    near-child-first traversal pushes at most one entry per interior level (depth - 1)."""
     lanes = max(block, -(-n // block) * block)
-    return torch.empty(STACK_DEPTH, lanes, dtype=torch.int32, device=device), lanes
+    entries = max(1, min(STACK_DEPTH, bvh.depth - 1))
+    return torch.empty(entries, lanes, dtype=torch.int32, device=device), lanes
 
 
 @dataclass(frozen=True)
@@ -503,7 +571,11 @@ def _bvh_args(bvh: FlatBVH, device):
     if bvh.nodes.device != device:
         raise ValueError(f"bvh: expected a BVH on {device} like the rays (bvh.to(device)), "
                          f"got {bvh.nodes.device}")
-    return bvh.nodes, bvh.node_ints, bvh.triangles, bvh.triangle_ints
+    # pairs has a row even for a one-leaf tree: masked-off lanes of the 16-byte loads read
+    # row 0 of every array.
+    pairs = bvh.pair_ints if len(bvh.pairs) else torch.zeros(1, 16, dtype=torch.int32,
+                                                              device=device)
+    return pairs, bvh.nodes, bvh.triangles, bvh.triangle_ints, bvh.root_ref
 
 
 def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf, *,
@@ -519,29 +591,30 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
     """
     _require_triton()
-    o, d, t_lo, t_hi = check_rays(origins, directions, t_min, t_max)
+    o, d, (t_lo, lo_value), (t_hi, hi_value) = check_ray_bounds(origins, directions, t_min,
+                                                                t_max)
     _check_launch(block, num_warps)
     n, device = o.shape[0], o.device
     _device_check(device)
-    nodes_f, nodes_i, tris_f, tris_i = _bvh_args(bvh, device)
-    # Rays that cannot hit (NaN/inf, zero direction, t_max < t_min) get an empty interval,
-    # which the kernel reads as "not alive": they never walk the tree.
-    ok = valid_rays(o, d, t_lo, t_hi)
-    t_lo = torch.where(ok, t_lo, math.inf)
-    t_hi = torch.where(ok, t_hi, -math.inf)
+    pairs, root, _tris_f, tris, root_ref = _bvh_args(bvh, device)
+    # One launch and nothing else: the kernel itself leaves out the rays that cannot hit
+    # (NaN/inf, zero direction, t_max < t_min), and numbers for t_min/t_max stay numbers.
     out_t = torch.empty(n, dtype=torch.float32, device=device)
     out_id = torch.empty(n, dtype=torch.int64, device=device)
     out_u = torch.empty(n, dtype=torch.float32, device=device)
     out_v = torch.empty(n, dtype=torch.float32, device=device)
     handle = None
     if n:
-        stack, lanes = _stack(n, block, device)
+        stack, lanes = _stack(n, block, device, bvh)
+        compiled = not interpreting()
         with _ieee_quiet():
             handle = _trace_kernel[(lanes // block,)](
-                o, d, t_lo, t_hi, nodes_f, nodes_i, tris_f, tris_i, stack,
+                o, d, o if t_lo is None else t_lo, lo_value, o if t_hi is None else t_hi,
+                hi_value, pairs, root, tris, root_ref, stack,
                 out_t, out_id, out_u, out_v, n, lanes,
                 BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE,
-                UNIFORM=bool(uniform_branches), num_warps=num_warps)
+                UNIFORM=bool(uniform_branches), VEC=compiled, SANITIZE=not compiled,
+                TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
     hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
     if return_info:
         name = "any_hit" if any_hit else "closest_hit"
@@ -617,18 +690,19 @@ def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
         from course.whitted_support import OFFSET as offset
     if bvh is None:
         bvh = flat_bvh_for(scene).to(device)
-    nodes_f, nodes_i, tris_f, tris_i = _bvh_args(bvh, device)
+    pairs, root, tris_f, tris_i, root_ref = _bvh_args(bvh, device)
     mat_id, mats, lights, n_lights, colours = _scene_tables(scene, device, float(offset))
     out = torch.empty(n, 3, dtype=torch.float32, device=device)
     handle = None
     if n:
-        stack, lanes = _stack(n, block, device)
+        stack, lanes = _stack(n, block, device, bvh)
+        compiled = not interpreting()
         with _ieee_quiet():
             handle = _whitted_kernel[(lanes // block,)](
-                o, d, out, n, nodes_f, nodes_i, tris_f, tris_i, stack, lanes, mat_id, mats,
-                lights, *colours, float(offset), N_LIGHTS=n_lights, MAX_DEPTH=max_depth,
-                BLOCK=block, EXIT=EXIT_SCALE, UNIFORM=bool(uniform_branches),
-                num_warps=num_warps)
+                o, d, out, n, pairs, root, tris_f, tris_i, root_ref, stack, lanes, mat_id,
+                mats, lights, *colours, float(offset), N_LIGHTS=n_lights, MAX_DEPTH=max_depth,
+                BLOCK=block, EXIT=EXIT_SCALE, UNIFORM=bool(uniform_branches), VEC=compiled,
+                SANITIZE=not compiled, num_warps=num_warps)
     if return_info:
         return out, _info("whitted_uber", handle, num_warps, block)
     return out

@@ -242,7 +242,36 @@ def check_structure(bvh: FlatBVH, vertices: torch.Tensor, faces: torch.Tensor, l
     v0 = bvh.triangles[:, 0:3]
     assert torch.equal(v0, corners[bvh.order][:, 0]), "row v0 must be the triangle's v0"
     assert bvh.depth <= STACK_DEPTH
-    assert bvh.nbytes == m * 32 + f * 48
+    check_pairs(bvh, leaf, inner, a, b)
+    assert bvh.nbytes == len(inner) * 64 + 32 + f * 48
+
+
+def check_pairs(bvh: FlatBVH, leaf, inner, a, b) -> None:
+    """The packed layout: row r of ``pairs`` holds the boxes and links of the children of
+    the r-th interior node; each leaf's last triangle row carries the end flag."""
+    nodes, ints = bvh.nodes, bvh.node_ints
+    pairs, links = bvh.pairs, bvh.pair_ints[:, 12:]
+    assert pairs.shape == (len(inner), 16), f"pairs: expected ({len(inner)}, 16), got " \
+        f"{tuple(pairs.shape)}"
+    assert bvh.root_ref == (0 if len(inner) else -1)
+    rank = torch.full((len(nodes),), -1, dtype=torch.int64)
+    rank[inner] = torch.arange(len(inner))
+    for k, child in enumerate((a, b)):
+        for axis in range(3):
+            assert torch.equal(pairs[:, 4 * axis + 2 * k], nodes[child, axis]), (
+                f"pairs: child {'ab'[k]}'s lower plane on axis {axis} differs from its node")
+            assert torch.equal(pairs[:, 4 * axis + 2 * k + 1], nodes[child, 3 + axis]), (
+                f"pairs: child {'ab'[k]}'s upper plane on axis {axis} differs from its node")
+        is_leaf = leaf[child]
+        want_ref = torch.where(is_leaf, ~ints[child, 6].long(), rank[child])
+        assert torch.equal(links[:, k].long(), want_ref), f"pairs: wrong ref of child {'ab'[k]}"
+        want_count = torch.where(is_leaf, ints[child, 7].long(), 0)
+        assert torch.equal(links[:, 2 + k].long(), want_count), (
+            f"pairs: wrong count of child {'ab'[k]}")
+    flag = bvh.triangle_ints[:, 11]
+    last = torch.zeros_like(flag)
+    last[(ints[leaf, 6] + ints[leaf, 7] - 1).long()] = 1
+    assert torch.equal(flag, last), "e2.w must flag exactly each leaf's last row"
 
 
 def test_bunny_build_is_fast_and_valid():

@@ -98,12 +98,24 @@ def run_kernel(cases: dict, device: str) -> dict:
             out[name, run] = {k: v.cpu() for k, v in result.items()}
             if kernel is not None and device == "cuda":
                 out["regs", name, run] = (kernel.n_regs, kernel.n_spills)
+    from course.triton_march import bake_light_triton
+
+    for name, case in cases.items():
+        for light, steps, scale in BAKES:
+            out["bake", name, light, steps, scale] = bake_light_triton(
+                case["density"].to(device), case["box_min"], case["box_max"], light, steps,
+                scale=scale, block=32, num_warps=1).cpu()
     empty = torch.zeros(0, 3)
     case = cases["rgb"]
     out["empty"] = march_grid_triton(empty.to(device), empty.to(device), case["box_min"],
                                      case["box_max"], case["density"].to(device),
                                      case["source"].to(device))["radiance"].shape
     return out
+
+
+# Light directions (toward the light; one along an axis, with a -0.0: ray-parallel slabs),
+# step counts and scales of the bake.
+BAKES = [((0.5, 0.8, -0.3), 5, None), ((0.0, -0.0, 2.0), 1, None), ((-0.4, 0.2, 0.9), 7, 2.7)]
 
 
 def run_interpreted(tmp_path: Path) -> tuple[dict, dict]:
@@ -159,7 +171,42 @@ def reference(case: dict, steps: int, min_transmittance: float = 0.0) -> dict:
     return {"radiance": radiance, "transmittance": transmittance, "samples": samples}
 
 
+def bake_reference(case: dict, light, steps: int, scale) -> torch.Tensor:
+    """Float64 transmittance to the light from every voxel centre (midpoint rule)."""
+    density = case["density"].to(F64)
+    lo, hi = torch.tensor(case["box_min"], dtype=F64), torch.tensor(case["box_max"], dtype=F64)
+    size = hi - lo
+    n = torch.tensor(density.shape, dtype=F64)
+    idx = torch.stack(torch.meshgrid(*(torch.arange(k, dtype=F64) for k in density.shape),
+                                     indexing="ij"), -1).reshape(-1, 3)
+    rel = (idx + 0.5) / n * size
+    d = torch.tensor(light, dtype=F64)
+    d = d / d.norm()
+    with torch.no_grad():
+        t0, t1 = (0 - rel) / d, (size - rel) / d
+    t_far = torch.maximum(t0, t1).nan_to_num(nan=math.inf).amin(1)
+    dt = t_far / max(steps, 1)
+    depth = torch.zeros(len(rel), dtype=F64)
+    for k in range(steps):
+        depth += sample(density, (rel + ((k + 0.5) * dt)[:, None] * d) / size)[:, 0] * dt
+    lit = torch.exp(-depth).reshape(density.shape)
+    return lit if scale is None else scale * density * lit
+
+
+def check_bakes(cases: dict, out: dict, where: str) -> None:
+    for name, case in cases.items():
+        for light, steps, scale in BAKES:
+            got = out["bake", name, light, steps, scale]
+            want = bake_reference(case, light, steps, scale)
+            assert got.dtype == torch.float32 and got.shape == want.shape, where
+            # float32 sample positions (an FMA apart when compiled) in grids with 0 -> 400
+            # jumps between neighbouring cells: as for the march, ~1e-4 of optical depth.
+            assert_close(got.double(), want, name=f"bake ({where}, {name}, light {light}, "
+                         f"{steps} steps, scale {scale})", atol=2e-5, rtol=1e-3, where="voxel")
+
+
 def check_all(cases: dict, out: dict, where: str) -> None:
+    check_bakes(cases, out, where)
     for name, case in cases.items():
         for run, knobs in RUNS.items():
             want = reference(case, **knobs)
@@ -212,6 +259,12 @@ def test_bad_input_is_named():
     expect_error(["box_min"], tm.march_grid_triton, args[0], args[1], [0, 0, 0], [0, 1, 1],
                  *args[4:])
     expect_error(["origins"], tm.march_grid_triton, case["origins"][:, :2], *args[1:])
+    expect_error(["light_direction"], tm.bake_light_triton, case["density"], case["box_min"],
+                 case["box_max"], (0.0, 0.0, 0.0))
+    expect_error(["steps"], tm.bake_light_triton, case["density"], case["box_min"],
+                 case["box_max"], (0.0, 1.0, 0.0), -2)
+    expect_error(["density"], tm.bake_light_triton, case["source"], case["box_min"],
+                 case["box_max"], (0.0, 1.0, 0.0))
 
 
 @needs_triton
