@@ -10,10 +10,13 @@ for the next one.
 What a grading run may cost is bounded whatever the submission does:
 
 * **time**: a call that ran out of time is not run again in that run (its later calls
-  fail at once with the same message), and the submission's code has a budget per lab
-  (``RTCOURSE_LAB_TIME_BUDGET`` seconds, default 150) after which every call fails at
-  once: a lab whose every function hangs, or sleeps just under the limit, ends in about
-  the budget;
+  fail at once with the same message), and each lab has a budget: what its tests run past
+  their first ``RTCOURSE_SLOW_TEST`` seconds (default 10) adds up to at most
+  ``RTCOURSE_LAB_TIME_BUDGET`` (default 120), and all the submission's code in the lab to
+  at most ``RTCOURSE_LAB_TIME_CAP`` (default 600); after either every call fails at once.
+  Honest tests take seconds, so they never count; a lab whose every function hangs, or
+  sleeps just under the per-test limit, ends after one timeout and a part of another
+  (about 140 s with the default 120 s limit);
 * **memory**: a reply is at most ``RTCOURSE_REPLY_MB`` (default 256) MB, checked before
   it is read, and decodes to no more; a bigger one fails its test. The worker's tree
   (the submission's children included) shares one memory limit;
@@ -53,12 +56,13 @@ import torch
 from course.grading import wire
 from course.grading.worker import Changed, call_checked, check_written, too_large_message
 
-DEFAULT_LAB_TIME_BUDGET = 150.0  # seconds of submitted code per lab
+DEFAULT_LAB_TIME_BUDGET = 120.0  # seconds per lab of what tests run past SLOW_TEST
+DEFAULT_SLOW_TEST = 10.0  # seconds of a test's submitted code that never count
+DEFAULT_LAB_TIME_CAP = 600.0  # seconds of submitted code per lab, all counted
 DEFAULT_REPLY_MB = 256.0
 _MEMORY_POLL = 0.2  # seconds between looks at the worker tree's memory
-BUDGET_MESSAGE = ("the time budget of the lab used up: the submission's code ran for "
-                  "{budget:.0f} s in this lab's tests, so {where} was not run (a hang or a "
-                  "slow loop in an earlier test?)")
+BUDGET_MESSAGE = ("the time budget of the lab used up: {why}, so {where} was not run (a "
+                  "hang or a slow loop in an earlier test?)")
 
 
 class WorkerCrashed(RuntimeError):
@@ -267,6 +271,7 @@ class Worker:
         self.starting = False
         self.redact = Redactor()
         self.last_seconds = 0.0  # how long the last request ran, start-up excluded
+        self.startup_seconds = 0.0  # waited for the worker to start, since the last take
         self.output: list[str] = []  # what the submission printed, since the last take
 
     # -- process management
@@ -332,18 +337,21 @@ class Worker:
             self.output.append(text[:8000])
 
     # -- requests
-    def request(self, message: dict, deadline: float, where: str, probe=False) -> dict:
+    def request(self, message: dict, seconds: float, where: str, probe=False) -> dict:
         """Send a call (to the server) or a probe (to the keeper, which runs it in a fresh
-        process) and wait for the reply until ``deadline``."""
+        process) and wait ``seconds`` for the reply, counted once the worker is ready."""
         if self.proc is None or self.proc.poll() is not None:
             self.stop()
             self.launch()
         if self.starting:
             # Starting Python and torch is the grader's cost, not the test's.
-            self._await_ready(max(deadline, time.monotonic() + self.startup_timeout))
+            began = time.monotonic()
+            self._await_ready(began + self.startup_timeout)
+            self.startup_seconds += time.monotonic() - began
         message["where"] = where
         conn = self.control if probe else self.conn
         started = time.monotonic()
+        deadline = started + seconds
         try:
             conn.send_bytes(wire.dumps(message))
         except OSError:
@@ -446,16 +454,18 @@ class SandboxedLab:
     signatures, its ``tests/hidden/`` the source no output may show).
     """
 
-    def __init__(self, name: str, worker: Worker, time_limit: float, *, root=None,
-                 time_budget: float | None = None):
+    def __init__(self, name: str, worker: Worker, time_limit: float, *, root=None):
         self._name = name
         self._worker = worker
         self._time_limit = time_limit
         self._deadline = None
         self._callable_cache: dict = {}
-        self._budget = time_budget if time_budget is not None else _env_float(
-            "RTCOURSE_LAB_TIME_BUDGET", DEFAULT_LAB_TIME_BUDGET)
-        self._spent = 0.0
+        self._budget = _env_float("RTCOURSE_LAB_TIME_BUDGET", DEFAULT_LAB_TIME_BUDGET)
+        self._slow = _env_float("RTCOURSE_SLOW_TEST", DEFAULT_SLOW_TEST)
+        self._cap = _env_float("RTCOURSE_LAB_TIME_CAP", DEFAULT_LAB_TIME_CAP)
+        self._spent = 0.0       # submitted code's seconds in this lab
+        self._slow_spent = 0.0  # of which past the first SLOW_TEST seconds of their test
+        self._test_spent = 0.0  # in the current test
         self._timed_out: dict[str, str] = {}  # where -> the message it failed with
         self._signatures = reference_signatures(reference_file(root, name))
         if root is not None and not worker.redact.lines:
@@ -464,33 +474,47 @@ class SandboxedLab:
     # The grading plugin resets the clock at the start of every test.
     def _start_clock(self, time_limit=None):
         self._deadline = time.monotonic() + (time_limit or self._time_limit)
+        self._test_spent = 0.0
 
     def _remaining_deadline(self):
         return self._deadline or time.monotonic() + self._time_limit
+
+    def _budget_left(self):
+        """Seconds the next call may run before a budget is used up, and why it would be."""
+        slow_left = self._budget - self._slow_spent + max(0.0, self._slow - self._test_spent)
+        cap_left = self._cap - self._spent
+        if slow_left <= cap_left:
+            return slow_left, (f"the tests of this lab that ran longer than {self._slow:.0f} s "
+                               f"used up the {self._budget:.0f} s allowed past that")
+        return cap_left, f"the submission's code ran for {self._cap:.0f} s in this lab"
 
     def _request(self, message, where, probe=False):
         __tracebackhide__ = True
         if where in self._timed_out:  # it hung once: not again, same message
             raise TimeLimitExceeded(self._timed_out[where])
-        left = self._budget - self._spent
+        left, why = self._budget_left()
         if left <= 0:
-            raise TimeBudgetExceeded(BUDGET_MESSAGE.format(budget=self._budget, where=where))
+            raise TimeBudgetExceeded(BUDGET_MESSAGE.format(why=why, where=where))
         message["lab"] = self._name
-        now = time.monotonic()
-        test_deadline = self._remaining_deadline()
-        by_budget = now + left < test_deadline
+        test_left = self._remaining_deadline() - time.monotonic()
+        by_budget = left < test_left
         try:
-            return self._worker.request(message, min(test_deadline, now + left), where,
+            return self._worker.request(message, max(0.0, min(test_left, left)), where,
                                         probe=probe)
         except TimeLimitExceeded as exc:
             if by_budget:
-                raise TimeBudgetExceeded(BUDGET_MESSAGE.format(
-                    budget=self._budget, where=where)) from None
+                raise TimeBudgetExceeded(BUDGET_MESSAGE.format(why=why, where=where)) from None
             self._timed_out[where] = str(exc)
             raise
         finally:
-            self._spent += self._worker.last_seconds
-            self._worker.last_seconds = 0.0
+            seconds = self._worker.last_seconds
+            before = max(0.0, self._test_spent - self._slow)
+            self._spent += seconds
+            self._test_spent += seconds
+            self._slow_spent += max(0.0, self._test_spent - self._slow) - before
+            if self._deadline is not None:  # the test's clock stops while the worker starts
+                self._deadline += self._worker.startup_seconds
+            self._worker.last_seconds = self._worker.startup_seconds = 0.0
 
     def _fail(self, reply, where):
         __tracebackhide__ = True
