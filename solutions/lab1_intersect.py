@@ -176,6 +176,10 @@ def intersect_simple(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf)
     t_min, t_max = check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max)
     e1, e2 = v1 - v0, v2 - v0
     n = cross(e1, e2)
+    # Per triangle, for step 4: its size and the rounding scale of its areas.
+    size = torch.maximum(e1.abs().amax(-1), e2.abs().amax(-1))
+    noise = 16 * torch.finfo(n.dtype).eps * n.abs().amax(-1)
+    nn = dot(n, n)
     denom = dot(n, directions)
     t = dot(n, v0 - origins) / denom
     p = origins + t[..., None] * directions
@@ -185,9 +189,8 @@ def intersect_simple(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf)
     # Far from the triangle the areas are differences of products of size |v - p|^2 that
     # rounding cannot resolve (all three may round to exactly 0 and pass >= 0): accept only
     # where that rounding error, ~eps |v - p|^2 |n|, stays below the full area n . n.
-    nn = dot(n, n)
-    reach = (v0 - p).abs().amax(-1) + torch.maximum(e1.abs().amax(-1), e2.abs().amax(-1))
-    resolved = 16 * torch.finfo(nn.dtype).eps * reach * reach * n.abs().amax(-1) <= nn
+    reach = (v0 - p).abs().amax(-1) + size
+    resolved = noise * reach * reach <= nn
     inv_area = 1 / nn
     hit = ((denom != 0) & resolved & (a0 >= 0) & (a1 >= 0) & (a2 >= 0) & (t >= t_min)
            & (t <= t_max))
