@@ -49,7 +49,7 @@ sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
 from course import triton_intersect as ti
 from course.bench import ResultTable, device_name, load_lab, pareto_plot, time_fn
-from course.device import default_device
+from course.device import default_device, set_cpu_threads
 from course.occupancy import PRESETS, occupancy
 from course.types import Hits, Mesh, Rays
 
@@ -487,12 +487,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--dtypes", nargs="+", default=list(DTYPES), choices=list(DTYPES))
     parser.add_argument("--no-compile", action="store_true", help="skip torch.compile (CUDA)")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="CPU threads for torch (default: the free cores, "
+                             "course.device.free_cpus)")
     parser.add_argument("--crack-table", action="store_true",
                         help="print only the float32 pass-through table of the lab's docstring")
     parser.add_argument("--out", type=Path, help="output folder "
                         "(default: bench/results/<device_name>/lab1)")
     args = parser.parse_args(argv)
 
+    threads = set_cpu_threads(args.threads)
     device = default_device(args.device)
     cfg = dict(SIZES["cuda" if device.type == "cuda" else "cpu"])
     for key in ("rays", "tris", "triton_rays", "ico_level", "repeats"):
@@ -520,7 +524,8 @@ def main(argv: list[str] | None = None) -> None:
     table.metadata.update(
         command=shlex.join([Path(sys.executable).name, *sys.argv]) if argv is None
         else shlex.join(["python", "bench/lab1_intersect.py", *argv]),
-        triton=_triton_version(), scenes=source, sizes=cfg, crack_rays=len(crack_scene(ico, 0.0, torch.float64)[0]),
+        triton=_triton_version(), scenes=source, sizes=cfg, cpu_threads=threads,
+        load_average=list(os.getloadavg()), crack_rays=len(crack_scene(ico, 0.0, torch.float64)[0]),
         icosphere_faces=ico.num_faces, reference="closest_hit(variant='watertight'), float64")
     print(f"{table.metadata['device']}: {cfg}, scenes from {source}", flush=True)
 

@@ -2,6 +2,11 @@
 
 Precedence: an explicit argument, then the ``RTCOURSE_DEVICE`` environment variable
 (``cpu``, ``cuda`` or ``cuda:N``), then CUDA if available, then the CPU.
+
+CPU threads: ``free_cpus()`` counts the cores this process may use (its affinity mask,
+not the machine's total) less the load already running on them, and ``set_cpu_threads()``
+gives torch that many threads. More threads than free cores makes every parallel torch op
+wait for a descheduled worker: on a loaded machine a traversal step can take 100x longer.
 """
 
 from __future__ import annotations
@@ -11,6 +16,39 @@ import os
 import torch
 
 ENV_VAR = "RTCOURSE_DEVICE"
+
+
+def allowed_cpus() -> int:
+    """The cores this process may run on: its affinity mask where the OS has one (a
+    container or ``taskset`` narrows it), else ``os.cpu_count()``."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
+def free_cpus() -> int:
+    """Cores free for new work: ``allowed_cpus()`` less the 1-minute load average (the
+    runnable processes already there), rounded, at least 1 and at most ``allowed_cpus()``.
+
+    The load average is machine-wide; where the process may use only some of the cores it
+    is scaled to that share."""
+    allowed = allowed_cpus()
+    try:
+        load = os.getloadavg()[0] * allowed / max(1, os.cpu_count() or allowed)
+    except (AttributeError, OSError):  # no load average on this platform
+        load = 0.0
+    return max(1, min(allowed, round(allowed - load)))
+
+
+def set_cpu_threads(threads: int | None = None) -> int:
+    """Give torch ``threads`` intra-op CPU threads (default: ``free_cpus()``); returns the
+    number set. Raises ValueError for a count that is not a positive int."""
+    if threads is None:
+        threads = free_cpus()
+    if not isinstance(threads, int) or isinstance(threads, bool) or threads < 1:
+        raise ValueError(f"threads: expected a positive int, got {threads!r}")
+    torch.set_num_threads(threads)
+    return threads
 
 
 def available_devices() -> list[str]:
