@@ -64,12 +64,14 @@ def select_notebooks(root, names=None) -> list[Path]:
     every = notebooks(root)
     if not names:
         return every
-    by_name = {p.stem: p for p in every} | {p.name: p for p in every}
+    by_name = ({p.stem: p for p in every} | {p.name: p for p in every}
+               | {str(p.resolve()): p for p in every})
     chosen = []
     for name in names:
         path = Path(name)
-        found = by_name.get(str(name)) or (path.resolve() if path.suffix == ".ipynb"
-                                           and path.is_file() else None)
+        found = by_name.get(str(name))
+        if found is None and path.suffix == ".ipynb" and path.is_file():
+            found = by_name.get(str(path.resolve()), path.resolve())
         if found is None:
             known = ", ".join(p.stem for p in every) or "none"
             raise ValueError(f"notebook {name!r}: no such notebook in "
