@@ -48,6 +48,8 @@ Tasks (points)
 3. ``render_uber``: the uber kernel on fixed-size buffers, under ``torch.compile``  (2)
 4. ``render_persistent``: persistent workers fed from a global queue               (2)
 5. ``layout_indexed``, ``layout_float4``, ``layout_woop``, ``intersect_layout``    (2)
+6. End to end: ``render_whitted`` with your own building blocks (the other tasks'
+   renderers are graded with given ones)                                          (1)
 
 What the organisations cost, measured
 -------------------------------------

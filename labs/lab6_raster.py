@@ -57,7 +57,7 @@ Conventions (those of ``course.camera``)
 Tasks (points)
 --------------
 1. ``to_clip_space``, ``clip_triangles``, ``to_screen``: MVP, trivial reject, near-plane
-   clipping, perspective divide and viewport                                        (3)
+   clipping, perspective divide and viewport                                        (4)
 2. ``edge_functions``, ``bounding_boxes``, ``coverage``: edge functions, the top-left fill
    rule, back-face culling                                                           (3)
 3. ``pack_depth_id``, ``triangle_ids``, ``depth_test``, ``rasterize``: 64-bit
@@ -65,7 +65,9 @@ Tasks (points)
 4. ``perspective_correct``, ``resolve_pixels``, ``rasterize_mesh``, ``interpolate``,
    ``shade``: perspective-correct barycentrics, attributes, flat/smooth shading      (3)
 5. ``traced_visibility``, ``world_positions``, ``shadow_epsilon``, ``hybrid_shadows``,
-   ``traced_shadows``: raster vs ray-traced visibility, hybrid shadows               (3)
+   ``traced_shadows``: raster vs ray-traced visibility, hybrid shadows               (2)
+6. End to end: your ``rasterize_mesh`` (tasks 1-4 together) against ray tracing
+   (the other tasks are graded on the reference's results of the tasks before them)  (2)
 
 The ray tracer of task 5 is a callable ``trace(origins, directions, t_min, t_max)`` taking
 ``(N, 3)``, ``(N, 3)``, ``(N,)``, ``(N,)`` tensors and returning an object with ``t (N,)``
