@@ -70,6 +70,7 @@ def cmd_release(args):
 
 
 def cmd_gradescope(args):
+    from course.grading.budget import settings_text
     from course.grading.gradescope import build_autograder
 
     try:
@@ -77,6 +78,7 @@ def cmd_gradescope(args):
     except ValueError as exc:
         raise SystemExit(f"rtcourse gradescope: {exc}") from None
     print(f"wrote the Gradescope autograder ({len(names)} files) to {Path(args.out).resolve()}")
+    print("\n" + settings_text(args.lab))
 
 
 def cmd_slides(args):

@@ -14,6 +14,11 @@ Gradescope), as the unprivileged user ``rtcourse-student`` that setup.sh creates
 cannot read the reference solutions. A lab that was not submitted, or fails to import,
 scores 0; hidden tests reach results.json with their ``visibility``.
 
+``run_autograder`` sizes torch's thread pools to the container's CPU quota (Gradescope
+gives half a CPU by default; torch would start one thread per host core) and sets
+``MALLOC_ARENA_MAX=2``; the memory and CPU each lab needs are in
+:mod:`course.grading.budget`, and ``rtcourse gradescope`` prints them.
+
 Environment overrides (for trying the package locally; Gradescope needs none):
 ``RTCOURSE_SUBMISSION_DIR`` (default /autograder/submission), ``RTCOURSE_RESULTS_DIR``
 (/autograder/results), ``RTCOURSE_PYTHON`` (python3), ``RTCOURSE_WORKER_USER``; for
@@ -77,6 +82,24 @@ LABS=(@LABS@)  # the labs this autograder grades (rtcourse gradescope --lab); em
 
 WORK="$(mktemp -d)"
 trap 'rm -rf "$WORK"' EXIT
+
+# torch's thread pools sized to the CPUs this container may use (its cgroup quota: half a
+# CPU by default), not to the host's cores: more threads only add time and memory here.
+CPUS="$(nproc 2>/dev/null || echo 1)"
+QUOTA=max PERIOD=100000
+if [ -r /sys/fs/cgroup/cpu.max ]; then  # cgroup v2, else v1
+    read -r QUOTA PERIOD < /sys/fs/cgroup/cpu.max
+elif [ -r /sys/fs/cgroup/cpu/cpu.cfs_quota_us ]; then
+    QUOTA="$(cat /sys/fs/cgroup/cpu/cpu.cfs_quota_us)"
+    PERIOD="$(cat /sys/fs/cgroup/cpu/cpu.cfs_period_us)"
+fi
+if [ "$QUOTA" != max ] && [ "$QUOTA" -gt 0 ] 2>/dev/null; then
+    LIMIT=$(( (QUOTA + PERIOD - 1) / PERIOD ))
+    if [ "$LIMIT" -lt "$CPUS" ]; then CPUS=$LIMIT; fi
+fi
+export OMP_NUM_THREADS="${OMP_NUM_THREADS:-$CPUS}" MKL_NUM_THREADS="${MKL_NUM_THREADS:-$CPUS}"
+# glibc gives every thread that allocates its own heap arena; two keep the memory compact.
+export MALLOC_ARENA_MAX="${MALLOC_ARENA_MAX:-2}"
 mkdir -p "$RESULTS"
 rm -f "$RESULTS/results.json"
 cd "$SOURCE"
