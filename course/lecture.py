@@ -33,7 +33,6 @@ INDEX = "index.json"
 _KEPT = ("image/png", "image/svg+xml", "text/html", "text/markdown", "text/latex",
          "text/plain")
 _LAB_FILE = re.compile(r"lab(\d+)_\w+\.py$")
-_NOT_YET = re.compile(r"not implemented yet:\s*([A-Za-z_][\w.]*)(?:[^()]*\(task (\d+)\))?")
 
 
 def cell_key(source: str) -> str:
@@ -114,28 +113,30 @@ def _from_not_implemented(exc: NotImplementedError, root) -> Unwritten | None:
     lab_frames = [f for f in frames if _LAB_FILE.search(f.f_code.co_filename)]
     if not lab_frames:
         return None
+    from course.grading.catalog import parse_not_implemented
+
     frame = lab_frames[-1]
     lab = int(_LAB_FILE.search(frame.f_code.co_filename).group(1))
-    match = _NOT_YET.search(str(exc))
-    function = match.group(1) if match else frame.f_code.co_name
-    task = int(match.group(2)) if match and match.group(2) else None
+    function, task = parse_not_implemented(str(exc))
+    function = function or frame.f_code.co_name
     if task is None and root is not None:
         task = _task_from_graders(Path(root), lab, function.split(".")[0])
     return Unwritten(function, lab, task)
 
 
 def _task_from_graders(root: Path, lab: int, function: str) -> int | None:
-    """The first task whose graded tests exercise ``function`` (read from the graders'
-    markers in ``root/tests``), or None."""
-    from course.grading.catalog import functions_of, lab_catalog
+    """The task that asks for ``function``, read from the graders' markers in
+    ``root/tests`` and the skeleton in ``root/labs`` (None where they do not say)."""
+    from course.grading.catalog import function_tasks, lab_catalog
 
     try:
         info = lab_catalog(sorted((root / "tests").glob(f"test_lab{lab}_*.py"))).get(lab)
+        lab_file = root / "labs" / f"{info.module}.py" if info else None
+        if lab_file is None or not lab_file.is_file():
+            return None
+        return function_tasks(info, lab_file).get(function)
     except (OSError, SyntaxError, ValueError):
         return None
-    tasks = [t.task for t in (info.tests if info else []) if t.task is not None
-             and functions_of(t, [function])]
-    return min(tasks) if tasks else None
 
 
 def names_assigned(code: str) -> set[str]:
@@ -228,13 +229,20 @@ class _Fallback:
         self.handled = True
         if "matplotlib.pyplot" in sys.modules:  # a half-drawn figure of the failed demo
             sys.modules["matplotlib.pyplot"].close("all")
-        print(found.line())
-        self.show_reference()
+        self.show_reference(found.line())
 
-    def show_reference(self):
-        from IPython.display import Image, display, publish_display_data
+    def show_reference(self, line: str):
+        """``line``, then the reference outputs of the running cell. What the cell showed
+        before it stopped (a table or two of the reference's six) is cleared first, so the
+        cell reads as the reference's, not as a mix."""
+        from IPython.display import Image, clear_output, display, publish_display_data
 
         entry = self.index().get(cell_key(self.source))
+        if entry:
+            sys.stdout.flush()
+            clear_output()
+        print(line)
+        sys.stdout.flush()
         for output in (entry or {}).get("outputs", []):
             if "png" in output:
                 path = self.folder / output["png"]

@@ -29,7 +29,6 @@ import html
 import os
 import re
 import shutil
-import sys
 import time
 from pathlib import Path
 
@@ -195,13 +194,13 @@ def render_notebook(path: Path, out: Path, *, execute_first=True, notebook=None)
 
 
 def progress_bar(total: int, desc: str):
-    """A per-notebook progress bar (tqdm) on a terminal; None when output goes elsewhere
-    (a log, a pipe, CI), where the callers print one line per notebook instead."""
-    if not sys.stderr.isatty():
-        return None
-    from tqdm import tqdm
+    """A per-notebook progress bar (``course.progress``: tqdm, on a terminal); None when
+    output goes elsewhere (a log, a pipe, CI), where callers print a line per notebook."""
+    from course.progress import progress, progress_enabled
 
-    return tqdm(total=total, unit="notebook", desc=desc, file=sys.stderr)
+    if not progress_enabled():
+        return None
+    return progress(total=total, desc=desc, unit="notebook", leave=True)
 
 
 def render_slides(root, out, *, execute=True, log=print, names=None) -> list[dict]:

@@ -42,7 +42,10 @@ SETUP = textwrap.dedent("""\
     import lab9_toy as lab""")
 DEMO = textwrap.dedent("""\
     import matplotlib.pyplot as plt
+    from IPython.display import Markdown, display
 
+    print("a wave of 8 samples")
+    display(Markdown("| n | 8 |\\n|---|---|"))   # shown before the demo stops
     fig, ax = plt.subplots(figsize=(2, 1))
     waves = {}
     waves["long"] = lab.wave(8)   # the figure is half drawn when an unwritten wave raises
@@ -139,6 +142,8 @@ def test_unwritten_demo_shows_the_reference_figure_and_one_line(handout):
     assert _text(demo).strip() == LINE, f"expected the one line {LINE!r}, got {_text(demo)!r}"
     images = [o for o in demo.outputs if "image/png" in o.get("data", {})]
     assert len(images) == 1, "the reference figure, and not the half-drawn one, is shown"
+    tables = [o for o in demo.outputs if "text/markdown" in o.get("data", {})]
+    assert len(tables) == 1, "the reference's table once, not the stopped cell's as well"
     assert _text(after_demo).strip() == LINE, \
         "a cell that fails on what the demo left unmade (its dict without the key) too"
     assert "after the demo" in _text(after)

@@ -161,6 +161,7 @@ def test_slides_renders_only_the_notebooks_named(tmp_path, monkeypatch, capsys):
 
     _course(tmp_path)
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("RTCOURSE_PROGRESS", "0")  # the lines a log gets, even on a terminal
     out = tmp_path / "out"
     assert main(["slides", "--no-execute", "--out", "out", "02_other"]) == 0
     assert (out / "02_other.slides.html").is_file() and not (out / "01_maths.html").exists()
@@ -199,13 +200,13 @@ def test_a_browser_without_network_typesets_the_formulas(rendered, page):
             f"{page}: reveal.js did not start offline"
 
 
-def test_a_terminal_gets_a_progress_bar_per_notebook(tmp_path, capsys, monkeypatch):
+def test_a_terminal_gets_a_progress_bar_per_notebook(tmp_path, capfd, monkeypatch):
     from course.slides import render_slides
 
     _course(tmp_path)
-    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    monkeypatch.setenv("RTCOURSE_PROGRESS", "1")  # as on a terminal
     rows = render_slides(tmp_path, tmp_path / "out", execute=False)
-    captured = capsys.readouterr()
+    captured = capfd.readouterr()
     assert len(rows) == 2 and "2/2" in captured.err and "notebook" in captured.err, \
         captured.err[-500:]
     assert "01_maths.ipynb done" in captured.out, "each notebook's line goes above the bar"
