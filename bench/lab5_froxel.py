@@ -13,6 +13,12 @@ reference radiance; ``seconds`` is the median time of one frame (after warm-up).
   no temporal integration).
 * ``shadows``: volumetric shadows on and off at 8 px x 64 slices (the reference keeps them:
   turning them off is a modelling error, measured).
+* ``volumes``: the sun through a homogeneous box of fog (sigma_s 0.5, sigma_a 0.1, g 0.5),
+  seen from inside it and from outside (a 2 m box 5 m away), at the defaults (8 px x 64
+  slices, 0.1 .. 100 m) for extinction/transmittance volume resolutions 16 .. 128 and the
+  automatic one, over the media's bounds (the default) and over the whole frustum's (the
+  old model, made here by adding an empty unbounded fog); ``mean_error`` is the signed
+  error of the mean radiance. Plotted as ``pareto_volumes.png``.
 * ``temporal``: error after 1, 8 and 32 frames of temporal integration with a static camera
   and with a camera sliding sideways (each frame against the reference from its own
   camera); 8 px x 32 slices, where the jitter has the most to add; with all the scene's
@@ -51,6 +57,7 @@ from course.device import default_device
 from course.froxel_reference import reference_render
 from course.froxel_support import (
     Box,
+    ConstantFog,
     DirectionalLight,
     FogVolume,
     HeightFog,
@@ -208,6 +215,64 @@ def bench_resolution(table, cfg, device):
                               max_error=worst)
 
 
+def fog_box_scene(lo, hi, bounds: str) -> Scene:
+    """The sun through a homogeneous box of fog lo .. hi; with ``bounds="frustum"`` an empty
+    unbounded fog makes the volumes cover the whole frustum's bounds."""
+    box = FogVolume(center=tuple((a + b) / 2 for a, b in zip(lo, hi)),
+                    half_size=tuple((b - a) / 2 for a, b in zip(lo, hi)),
+                    scattering=(0.5, 0.5, 0.5), extinction=0.6, g=0.5)
+    empty = (ConstantFog(scattering=(0.0, 0.0, 0.0), extinction=0.0),) if bounds == "frustum" \
+        else ()
+    return Scene(media=(box, *empty), lights=(DirectionalLight(direction=(0.5, 0.7, -0.5),
+                                                               irradiance=(3.0, 3.0, 3.0)),))
+
+
+def bench_volumes(table, cfg, device):
+    """Volume resolution and bounds on a sun-lit fog box, against the reference."""
+    w, h = cfg["image"]
+    views = {"inside a fog box": ((-3.0, 0.0, -10.0), (3.0, 3.0, 2.0),
+                                  Camera(eye=(0.5, 1.5, 0.0), target=(0.5, 1.7, -5.0),
+                                         fov_y=50.0, width=w, height=h)),
+             "a fog box in view": ((-1.0, 0.0, -1.0), (1.0, 2.0, 1.0),
+                                   Camera(eye=(0.5, 1.5, 5.0), target=(0.0, 1.0, 0.0),
+                                          fov_y=50.0, width=w, height=h))}
+    for view, (lo, hi, camera) in views.items():
+        depth = torch.full((h, w), math.inf, dtype=F64)
+        black = torch.zeros(h, w, 3, dtype=F64)
+        pixels = torch.arange(0, w * h, max(1, cfg["stride"] // 8))
+        # No fog beyond 15 m: the reference's march ends there (shadow rays through a
+        # constant medium are exact with few steps).
+        ref = reference_render(fog_box_scene(lo, hi, "media"), camera, depth, black, far=15.0,
+                               samples=4 * cfg["samples"], shadow_steps=4,
+                               pixels=pixels)["image"]
+        depth, black = depth.to(device, torch.float32), black.to(device, torch.float32)
+        for bounds in ("media", "frustum"):
+            scene = fog_box_scene(lo, hi, bounds)
+            for resolution in (16, 32, 64, 128, None):
+                args = {"volume_resolution": resolution}
+                image, report = lab.render_froxels(scene, camera, depth, black, **args)
+                t = time_fn(lab.render_froxels, scene, camera, depth, black,
+                            repeats=cfg["repeats"], warmup=1, device=device, **args)
+                err, worst = errors(image, ref, pixels)
+                got = image.detach().to("cpu", F64).reshape(-1, 3)[pixels]
+                mean = (got.mean() / ref.mean()).item() - 1
+                label = f"{report['volume_resolution']}" + (" (auto)" if resolution is None
+                                                             else "")
+                table.add(series="volumes", setting=f"{view}, {bounds} bounds, R {label}",
+                          view=view, bounds=bounds, volume_resolution=report["volume_resolution"],
+                          auto=resolution is None, seconds=t.median,
+                          ms_per_frame=1e3 * t.median, error=err, max_error=worst,
+                          mean_error=mean, group=f"{view}, {bounds} bounds")
+                print(f"  volumes ({view}, {bounds} bounds) R {label}: {1e3 * t.median:.1f} ms, "
+                      f"mean radiance {mean:+.4f}, error {err:.4f} (max {worst:.3f})",
+                      flush=True)
+        plain, _ = lab.render_froxels(fog_box_scene(lo, hi, "media"), camera, depth, black,
+                                      volumetric_shadows=False)
+        got = plain.detach().to("cpu", F64).reshape(-1, 3)[pixels]
+        print(f"  volumes ({view}) without volumetric shadows: mean radiance "
+              f"{(got.mean() / ref.mean()).item() - 1:+.4f}", flush=True)
+
+
 def bench_temporal(table, cfg, device, lights="all"):
     """Temporal integration on the accuracy scene with all its lights, or the sun only."""
     scene = accuracy_scene()
@@ -326,6 +391,7 @@ def main(argv=None):
         ["bench/lab5_froxel.py", *(sys.argv[1:] if argv is None else argv)])
     print(f"Lab 5 bench on {device} ({'small' if cfg is SIZES['small'] else 'full'})", flush=True)
     bench_resolution(table, cfg, device)
+    bench_volumes(table, cfg, device)
     bench_temporal(table, cfg, device)
     bench_temporal(table, cfg, device, lights="sun")
     if device.type == "cuda" or not args.small:
@@ -348,6 +414,10 @@ def main(argv=None):
     pareto_plot(rows, x="seconds", y="error", label="setting", group="series",
                 path=out / "pareto_resolution.png",
                 title="Froxel resolution: time per frame against error")
+    volumes = [r for r in table.rows if r["series"] == "volumes"]
+    pareto_plot(volumes, x="seconds", y="error", label="setting", group="group",
+                path=out / "pareto_volumes.png",
+                title="Volumetric shadows: volume resolution and bounds, time against error")
     temporal = [r for r in table.rows if r["series"] == "temporal" and r.get("seconds")]
     if temporal:
         pareto_plot(temporal, x="frames", y="error", label="setting", group="lights",

@@ -87,6 +87,26 @@ MUTANTS = [
            tests="apply_froxels",
            why="slice boundaries treated as voxel centres: the lookup reads half a froxel "
                "too near, so fog in front of a wall thins"),
+    Mutant(name="point_lights_unattenuated", module=M, function="light_froxels",
+           find="e = e * light_transmittance(extinction, lo, hi, p, light.position,",
+           replace="e = e * 1 or light_transmittance(extinction, lo, hi, p, light.position,",
+           tests="point_light_in_fog",
+           why="point lights shine through the fog unattenuated (only the sun and spots get "
+               "volumetric shadows): a lamp inside fog is far too bright"),
+    Mutant(name="light_march_unit_steps", module=M, function="light_transmittance",
+           find="return torch.exp(-depth * (span * rel.norm(dim=-1) / steps))",
+           replace="return torch.exp(-depth * span / steps)",
+           tests="light_transmittance or point_light_in_fog",
+           why="optical depth summed over the segment's parameter, not its length: the "
+               "attenuation depends on the distance's units, not the medium"),
+    Mutant(name="volumes_over_the_frustum", module=M, function="light_froxels",
+           find="bounds = volume_bounds(scene, grid) if volumetric_shadows and scene.lights "
+                "else None",
+           replace="bounds = frustum_bounds(grid) if volumetric_shadows and scene.lights "
+                   "else None",
+           tests="sun_in_fog_box_defaults",
+           why="the extinction volume spans the whole frustum: its voxels miss a small fog "
+               "box, which then casts no volumetric shadow on itself"),
     Mutant(name="jitter_not_shared", module=M, function="render_froxels",
            find="source, light_report = light_froxels(scene, grid, vbuffer, jitter,",
            replace="source, light_report = light_froxels(scene, grid, vbuffer, 0.5,",
