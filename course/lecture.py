@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import ast
 import base64
+import functools
 import hashlib
 import json
 import re
@@ -32,7 +33,7 @@ FIGURES = Path("slides") / "figures"  # under the course root
 INDEX = "index.json"
 _KEPT = ("image/png", "image/svg+xml", "text/html", "text/markdown", "text/latex",
          "text/plain")
-_LAB_FILE = re.compile(r"lab(\d+)_\w+\.py$")
+_LAB_FILE = re.compile(r"(?:^|[/\\])lab(\d+)_\w+\.py$")  # a lab's file, not its grader
 
 
 def cell_key(source: str) -> str:
@@ -127,16 +128,21 @@ def _from_not_implemented(exc: NotImplementedError, root) -> Unwritten | None:
 def _task_from_graders(root: Path, lab: int, function: str) -> int | None:
     """The task that asks for ``function``, read from the graders' markers in
     ``root/tests`` and the skeleton in ``root/labs`` (None where they do not say)."""
+    return _lab_function_tasks(root, lab).get(function)
+
+
+@functools.cache
+def _lab_function_tasks(root: Path, lab: int) -> dict[str, int | None]:
     from course.grading.catalog import function_tasks, lab_catalog
 
     try:
         info = lab_catalog(sorted((root / "tests").glob(f"test_lab{lab}_*.py"))).get(lab)
         lab_file = root / "labs" / f"{info.module}.py" if info else None
         if lab_file is None or not lab_file.is_file():
-            return None
-        return function_tasks(info, lab_file).get(function)
+            return {}
+        return function_tasks(info, lab_file)
     except (OSError, SyntaxError, ValueError):
-        return None
+        return {}
 
 
 def names_assigned(code: str) -> set[str]:
