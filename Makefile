@@ -4,13 +4,16 @@
 # and one opens the lecture notebooks:
 #   make lab    create .venv, install, start JupyterLab on slides/ (LAB_ARGS: its options)
 #
-# torch: on a machine without an NVIDIA GPU we ask for the CPU build explicitly, so
-# that pip never fetches a multi-GB CUDA build. Override TORCH_SPEC (and add an index
-# with PIP_EXTRA) where that build lives elsewhere, e.g.
-#   make test PIP_EXTRA="--index-url https://download.pytorch.org/whl/cpu"
+# torch: on a machine without an NVIDIA GPU torch is installed first, on its own, as
+# TORCH_SPEC from TORCH_INDEX (pip's own index when empty). On macOS and Windows that is
+# the CPU build; on Linux PyPI's torch is the CUDA build (gigabytes of CUDA libraries), so
+# a Linux machine without a GPU is best served by PyTorch's CPU index:
+#   make test TORCH_INDEX=https://download.pytorch.org/whl/cpu
+# PIP_EXTRA adds options to every pip command (another index, a proxy).
 PYTHON ?= python3
 VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
+TORCH_INDEX ?=
 PIP_EXTRA ?=
 LAB_ARGS ?=
 PY := $(VENV)/bin/python
@@ -23,7 +26,8 @@ AS_ROOT := $(if $(filter 0,$(shell id -u 2>/dev/null)),--allow-root)
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 ifneq ($(HAS_GPU),1)
-	$(PY) -m pip install --quiet --disable-pip-version-check $(PIP_EXTRA) "$(TORCH_SPEC)"
+	$(PY) -m pip install --quiet --disable-pip-version-check $(PIP_EXTRA) \
+	    $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX)) "$(TORCH_SPEC)"
 endif
 	$(PY) -m pip install --quiet --disable-pip-version-check $(PIP_EXTRA) -e ".[dev]"
 	touch $@
