@@ -1,6 +1,7 @@
 """Hostile submissions against the grader.
 
-Each folder under ``hostile/`` is a submission of the toy lab (``toycourse/``):
+Each folder under ``hostile/`` holding ``lab9_toy.py`` is a submission of the toy lab 9
+(``toycourse/``; lab 8 is the bounds' toy lab, see test_grading_bounds.py):
 task 1 (``double``, 1 point) is honest everywhere; task 2 (``norms``, 2 points)
 attacks the grader. For every attack the grader must finish, write a valid
 results.json, give the attack 0 and the honest task its point (unless the
@@ -23,7 +24,7 @@ import torch
 from course.grading import wire
 
 HERE = Path(__file__).parent
-HOSTILE = sorted(p.name for p in (HERE / "hostile").iterdir() if p.is_dir())
+HOSTILE = sorted(p.name for p in (HERE / "hostile").iterdir() if (p / "lab9_toy.py").is_file())
 AT_IMPORT = {"os_exit_at_import", "sys_exit_at_import", "raise_at_import"}
 
 
@@ -35,7 +36,8 @@ def _grade(name: str, base: Path) -> dict:
                RTCOURSE_TEST_RESULTS=str(out), RTCOURSE_TEST_CWD=str(course))
     proc = subprocess.run(
         [sys.executable, "-m", "course.cli", "grade", "--impl", str(HERE / "hostile" / name),
-         "--json", str(out)], cwd=course, env=env, capture_output=True, text=True, timeout=300, check=False)
+         "--lab", "9", "--json", str(out)], cwd=course, env=env, capture_output=True, text=True,
+        timeout=300, check=False)
     return {"proc": proc, "json": out, "cwd_json": course / "results.json"}
 
 
@@ -108,8 +110,8 @@ def test_student_output_is_captured_not_mixed(tmp_path):
         "def norms(x):\n    print('NORMS-NOISE')\n    return x.sum(-1)\n")
     out = tmp_path / "results.json"
     proc = subprocess.run([sys.executable, "-m", "course.cli", "grade", "--impl", str(sub),
-                           "--json", str(out)], cwd=course, capture_output=True, text=True,
-                          timeout=300)
+                           "--lab", "9", "--json", str(out)], cwd=course, capture_output=True,
+                          text=True, timeout=300, check=False)
     for noise in ("IMPORT-NOISE", "DOUBLE-NOISE"):
         assert noise not in proc.stdout + proc.stderr, "student output leaked into the grader's"
     tests = {t["number"]: t for t in json.loads(out.read_text())["tests"]}
