@@ -91,6 +91,7 @@ class ScoreKeeper:
     problems: dict = field(default_factory=dict)  # submission problems, each said once
     collect_errors: list = field(default_factory=list)  # graders that failed to load
     show_progress: bool = True
+    progress_stream: object = None  # where the bars go (course.progress.terminal_stream)
     _bar: object = None
     _bar_lab: object = None
     _left: dict = field(default_factory=dict)  # lab -> tests still to report
@@ -164,7 +165,8 @@ class ScoreKeeper:
         if self._bar_lab != result.lab:
             self.close_progress()
             self._bar = progress(total=self._left.get(result.lab, 0),
-                                 desc=f"lab {result.lab}", unit="test")
+                                 desc=f"lab {result.lab}", unit="test",
+                                 file=self.progress_stream)
             self._bar_lab = result.lab
         self._bar.update(1)
 

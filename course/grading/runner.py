@@ -92,8 +92,16 @@ def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, t
     for spec in task_specs(labs, tasks):
         args += ["--task", spec]
     args += list(extra_args)
-    keeper = ScoreKeeper(show_progress=quiet)
-    code = pytest.main(args, plugins=[keeper])
+    from course.progress import terminal_stream
+
+    stream = terminal_stream() if quiet else None  # looked up before pytest captures fd 2
+    keeper = ScoreKeeper(show_progress=stream is not None, progress_stream=stream)
+    try:
+        code = pytest.main(args, plugins=[keeper])
+    finally:
+        keeper.close_progress()
+        if stream is not None:
+            stream.close()
     if code == 5:
         raise GradeError(f"rtcourse grade: no graded test matches "
                          f"{_selection(labs, keyword, tasks)}")

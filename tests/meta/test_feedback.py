@@ -64,8 +64,8 @@ def toy(tmp_path_factory):
     return course, subs
 
 
-def _run(args, cwd, timeout=300):
-    env = dict(os.environ, RTCOURSE_TIME_LIMIT="30", RTCOURSE_PROGRESS="0")
+def _run(args, cwd, timeout=300, progress="0"):
+    env = dict(os.environ, RTCOURSE_TIME_LIMIT="30", RTCOURSE_PROGRESS=progress)
     return subprocess.run([sys.executable, *args], cwd=cwd, env=env, capture_output=True,
                           text=True, timeout=timeout, check=False)
 
@@ -167,6 +167,10 @@ def test_grade_task_runs_exactly_that_task(toy, tmp_path):
     data = json.loads(results.read_text())
     assert {t["number"] for t in data["tests"]} == {"9.2"}
     assert data["max_score"] == pytest.approx(2.0) and data["score"] == pytest.approx(2.0)
+    # The progress bar of the lab's tests (forced on: here stderr is a pipe, not a terminal).
+    shown = _run(["-m", "course.cli", "grade", "--impl", "solutions", "--lab", "9", "--task",
+                  "2"], course, progress="1")
+    assert "lab 9:" in shown.stderr and "/1 [" in shown.stderr, shown.stderr
 
 
 PROBE = '''
