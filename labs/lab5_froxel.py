@@ -130,7 +130,8 @@ def slice_depths(near, far, slices, dtype=torch.float32, device="cpu"):
     Exponential slicing ``z_k = near (far / near)^(k / slices)``: each slice is the same
     fraction deeper than the last, so froxels stay roughly cube-shaped in view space and
     resolution goes where perspective puts the pixels. ``z_0 = near`` and
-    ``z_slices = far`` exactly. Computed in float64, rounded once.
+    ``z_slices = far`` exactly. Computed in float64, rounded once. ``0 < near < far <
+    inf`` and ``slices >= 1`` (``check_depths``), else ValueError naming the argument.
     """
     raise NotImplementedError("not implemented yet: slice_depths (task 1)")
 
@@ -306,7 +307,8 @@ def transmittance_volume(extinction, lo, hi, light, resolution=32, steps=None):
     light a perspective frame on its cone (``extent = tan(outer angle)``, depths 0 ..
     range). Each texel marches its ray from the light side in K - 1 equal steps
     (K = ``steps`` or ``2 resolution``), accumulating optical depth with the midpoint rule:
-    ``data[i, j, k] = exp(-sum_{m<k} sigma_t(mid_m) step)``.
+    ``data[i, j, k] = exp(-sum_{m<k} sigma_t(mid_m) step)``. A point light gets no volume
+    (TypeError naming ``light``): :func:`light_transmittance` marches its paths.
     """
     raise NotImplementedError("not implemented yet: transmittance_volume (task 4)")
 
@@ -392,8 +394,9 @@ def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out
     centres. Lookup: trilinear at ``(pixel column + 0.5) / tile, (row + 0.5) / tile`` and
     ``depth_to_slice(depth)`` clamped to ``[0, slices]``: depths beyond ``far`` (and the sky,
     +inf) read the last slice, depths before ``near`` get no fog. depth_image (H, W) view
-    depths >= 0 or +inf; opaque_image (H, W, 3); NaN/inf colours pass through as
-    ``opaque * T + L`` would make them.
+    depths >= 0 or +inf (NaN or negative depths raise ValueError naming it); opaque_image
+    (H, W, 3) of the depths' dtype (else TypeError) and device (``check_images``); NaN/inf
+    colours pass through as ``opaque * T + L`` would make them.
     """
     raise NotImplementedError("not implemented yet: apply_froxels (task 7)")
 
@@ -411,6 +414,9 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=8, slices=6
     lighting alike), and ``history`` (the previous report's ``"history"``, or None) is
     reprojected and blended with weight ``BLEND`` for the new frame.
 
+    The images as :func:`apply_froxels` takes them (checked even without media); bad
+    settings (``tile``, ``slices``, ``near``, ``far``, ``phase``, ``integration``,
+    ``frame``, ``history``) raise errors naming them.
     A scene without media returns a copy of ``opaque_image`` and does no V-buffer or
     lighting work. ``report``: ``grid``, ``froxels``, ``froxels_lit``, ``tiles_with_media``,
     ``light_tiles``, ``light_evaluations``, ``volume_bounds``, ``volume_resolution`` (as

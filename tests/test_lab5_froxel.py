@@ -16,6 +16,9 @@ volumetric shadows       exact optical depth of a constant-extinction box (slab 
 temporal                 a field linear in the previous grid's froxel coordinates
 integration              ``S (1 - e^(-sigma D)) / sigma`` per column; ``q = c sigma`` media
                          must not emit more than ``c (1 - T)`` (energy conservation)
+fog boxes                float64 quadrature of single scattering (composite Gauss-Legendre
+                         along each pixel ray) in a homogeneous box, lit by the sun or a
+                         point light inside it, exact transmittance toward the light
 whole frames             closed form for a homogeneous medium lit by the sun; otherwise
                          ``course.froxel_reference.reference_render`` (brute force, per
                          pixel, exact shadows)
