@@ -62,6 +62,17 @@ from course.whitted_support import (
 
 TRITON_SHAPES = [(32, 1), (64, 2), (128, 4)]  # (lanes per program, warps)
 UNIFORM = [True, False]  # skip stages no lane needs / run every stage masked
+# The Triton walk's launches and knobs (trace_flat_triton's keywords): one warp per program
+# with the stack's top in registers first, then one knob changed at a time.
+TRITON_LAUNCHES = [
+    {"block": 32, "num_warps": 1, "uniform_branches": True, "stack_regs": 4, "tris_per_step": 1},
+    {"block": 32, "num_warps": 1, "uniform_branches": True, "stack_regs": 0, "tris_per_step": 1},
+    {"block": 32, "num_warps": 1, "uniform_branches": True, "stack_regs": 4, "tris_per_step": 2},
+    {"block": 32, "num_warps": 1, "uniform_branches": False, "stack_regs": 4,
+     "tris_per_step": 1},
+    {"block": 64, "num_warps": 1, "uniform_branches": True, "stack_regs": 4, "tris_per_step": 1},
+    {"block": 64, "num_warps": 2, "uniform_branches": True, "stack_regs": 4, "tris_per_step": 1},
+]
 CUDA_BLOCKS = [64, 128, 256]
 CUDA_CAPPED = [False, True]  # the compiler's registers / at most 40 (MIN_BLOCKS)
 SEED = 0  # of the diffuse directions
@@ -168,15 +179,17 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
         else:
             print(f"CUDA C skipped: {reason}")
     if device.type == "cuda" or triton_tracer.interpreting():
-        shapes = TRITON_SHAPES if device.type == "cuda" else TRITON_SHAPES[:1]
-        for (block, warps), uniform in itertools.product(shapes, UNIFORM):
+        launches = TRITON_LAUNCHES if device.type == "cuda" else TRITON_LAUNCHES[:1]
+        for kw in launches:
             fn = triton_tracer.trace_flat_triton
-            kw = {"block": block, "num_warps": warps, "uniform_branches": uniform}
             hits, info = fn(bvh, rays_o, rays_d, return_info=True, **kw)
             reference = reference or hits
             t = time_fn(fn, bvh, rays_o, rays_d, repeats=repeats, warmup=1, **kw)
-            row = table.add(scene=scene_name, rays=kind, impl="Triton",
-                            launch=_launch(block, warps, uniform), n_rays=n,
+            launch = (_launch(kw["block"], kw["num_warps"], kw["uniform_branches"])
+                      + f", stack top {kw['stack_regs']} in registers, "
+                      f"{kw['tris_per_step']} tri/step")
+            row = table.add(scene=scene_name, rays=kind, impl="Triton", launch=launch, n_rays=n,
+                            stack_regs=kw["stack_regs"], tris_per_step=kw["tris_per_step"],
                             ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
                             **triton_row(info), same_as_first=agreement(hits, reference),
                             **hit_errors(scene, rays_o, rays_d, hits, sample))

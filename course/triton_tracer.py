@@ -78,6 +78,8 @@ __all__ = [
 DEFAULT_BLOCK = 32
 DEFAULT_NUM_WARPS = 1
 DEFAULT_UNIFORM = True
+DEFAULT_STACK_REGS = 4
+DEFAULT_TRIS_PER_STEP = 1
 
 
 # --------------------------------------------------------------------------------------
@@ -153,12 +155,44 @@ def _dispatch(mask, ref, node, cur):
 
 
 @_jit
+def _push(stack_ptr, slot, stride, sp, value, mask, s0, s1, s2, s3, REGS: tl.constexpr):
+    """Push ``value`` in the lanes of ``mask``. REGS = 4: the top four entries live in
+    registers (s0 the top); the one they push out goes to the memory stack, whose entries
+    are ``0 .. sp - 5``. REGS = 0: every entry in memory. Returns (sp, s0, s1, s2, s3)."""
+    if REGS == 0:
+        tl.store(stack_ptr + sp * stride + slot, value, mask=mask)
+    else:
+        tl.store(stack_ptr + (sp - 4) * stride + slot, s3, mask=mask & (sp >= 4))
+        s3 = tl.where(mask, s2, s3)
+        s2 = tl.where(mask, s1, s2)
+        s1 = tl.where(mask, s0, s1)
+        s0 = tl.where(mask, value, s0)
+    return sp + mask.to(tl.int32), s0, s1, s2, s3
+
+
+@_jit
+def _pop(stack_ptr, slot, stride, sp, mask, s0, s1, s2, s3, REGS: tl.constexpr):
+    """Pop the top entry in the lanes of ``mask`` (see _push). Returns (value, sp, s0..s3)."""
+    sp = sp - mask.to(tl.int32)
+    if REGS == 0:
+        value = tl.load(stack_ptr + sp * stride + slot, mask=mask, other=0)
+    else:
+        value = s0
+        s0 = tl.where(mask, s1, s0)
+        s1 = tl.where(mask, s2, s1)
+        s2 = tl.where(mask, s3, s2)
+        s3 = tl.where(mask, tl.load(stack_ptr + (sp - 4) * stride + slot,
+                                    mask=mask & (sp >= 4), other=0), s3)
+    return value, sp, s0, s1, s2, s3
+
+
+@_jit
 def _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
-           t_lo, best_t, visit, node, sp, cur, EXIT: tl.constexpr, VEC: tl.constexpr,
-           SANITIZE: tl.constexpr):
+           t_lo, best_t, visit, node, sp, cur, s0, s1, s2, s3, EXIT: tl.constexpr,
+           VEC: tl.constexpr, SANITIZE: tl.constexpr, REGS: tl.constexpr):
     """TRAVERSE for the lanes in ``visit``: one row of ``pairs`` (both children's boxes and
     links, four 16-byte loads); go to the nearer hit child, push the farther. Returns the
-    lanes' new ``(node, sp, cur)``; node = cur = -1: pop next."""
+    lanes' new ``(node, sp, cur, s0, s1, s2, s3)``; node = cur = -1: pop next."""
     base = node * 16
     ax0, ax1, bx0, bx1 = _load4(pairs, base, visit, VEC)
     ay0, ay1, by0, by1 = _load4(pairs, base + 4, visit, VEC)
@@ -172,11 +206,11 @@ def _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y,
     hb = hb & visit
     b_first = hb & (~ha | (tb < ta))
     both = ha & hb
-    tl.store(stack_ptr + sp * stride + slot, tl.where(b_first, ref_a, ref_b), mask=both)
-    sp = sp + both.to(tl.int32)
+    sp, s0, s1, s2, s3 = _push(stack_ptr, slot, stride, sp, tl.where(b_first, ref_a, ref_b),
+                               both, s0, s1, s2, s3, REGS)
     node = tl.where(visit, -1, node)
     node, cur = _dispatch(ha | hb, tl.where(b_first, ref_b, ref_a), node, cur)
-    return node, sp, cur
+    return node, sp, cur, s0, s1, s2, s3
 
 
 @_jit
@@ -217,7 +251,7 @@ def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
 def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
            ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT: tl.constexpr,
            EXIT: tl.constexpr, UNIFORM: tl.constexpr, VEC: tl.constexpr,
-           SANITIZE: tl.constexpr):
+           SANITIZE: tl.constexpr, REGS: tl.constexpr, TRIS: tl.constexpr):
     """Walk the BVH for every lane with ``alive`` set: the TRAVERSE/INTERSECT/POP loop.
 
     pairs, tris: the int32 views of the ``pairs`` and ``triangles`` layouts; root: the
@@ -226,6 +260,8 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
     vote over the lanes, what a warp does when none of its threads takes a branch), instead
     of running it with every lane masked off. VEC: 16-byte loads (compiled kernels);
     SANITIZE: replace the slab test's NaN before min/max (the interpreter's keep NaN).
+    REGS: stack entries kept in registers (0 or 4, see _push); TRIS: triangle tests per
+    step (1 or 2: a lane with leaf work tests up to TRIS rows of its leaf per step).
     Returns ``(t, row, u, v)``: row (int32) of the hit in the triangle layout, -1 on a miss.
     """
     one = tl.full(ox.shape, 1.0, tl.float32)
@@ -254,6 +290,10 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
     cur = zero_i - 1  # the leaf row to test next; -1: none
     node, cur = _dispatch(alive, zero_i + root_ref, node, cur)
     sp = zero_i
+    s0 = zero_i
+    s1 = zero_i
+    s2 = zero_i
+    s3 = zero_i
     # One vote per step for the loop and the TRAVERSE skip: bit 0 some lane alive, bit 1
     # some lane at an interior node.
     votes = tl.reduce(alive.to(tl.int32) | ((node >= 0).to(tl.int32) << 1), 0, _or)
@@ -262,33 +302,34 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
         visit = alive & (node >= 0)
         if UNIFORM:
             if (votes & 2) != 0:
-                node, sp, cur = _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz,
-                                       neg_x, neg_y, neg_z, t_lo, best_t, visit, node, sp,
-                                       cur, EXIT, VEC, SANITIZE)
+                node, sp, cur, s0, s1, s2, s3 = _visit(
+                    pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y,
+                    neg_z, t_lo, best_t, visit, node, sp, cur, s0, s1, s2, s3, EXIT, VEC,
+                    SANITIZE, REGS)
         else:
-            node, sp, cur = _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz,
-                                   neg_x, neg_y, neg_z, t_lo, best_t, visit, node, sp, cur,
-                                   EXIT, VEC, SANITIZE)
-        # 2. INTERSECT one triangle of the pending leaf
-        test = alive & (cur >= 0)
-        hit = test & (zero_i != 0)
-        if UNIFORM:
-            if tl.max(test.to(tl.int32), axis=0) > 0:
+            node, sp, cur, s0, s1, s2, s3 = _visit(
+                pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
+                t_lo, best_t, visit, node, sp, cur, s0, s1, s2, s3, EXIT, VEC, SANITIZE, REGS)
+        # 2. INTERSECT up to TRIS triangles of the pending leaf
+        for _k in tl.static_range(TRIS):
+            test = alive & (cur >= 0)
+            hit = test & (zero_i != 0)
+            if UNIFORM:
+                if tl.max(test.to(tl.int32), axis=0) > 0:
+                    best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
+                        tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
+                        best_t, best_row, best_tri, best_u, best_v, VEC)
+            else:
                 best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
                     tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
                     best_t, best_row, best_tri, best_u, best_v, VEC)
-        else:
-            best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
-                tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-                best_t, best_row, best_tri, best_u, best_v, VEC)
-        if ANY_HIT:
-            alive = alive & ~hit
+            if ANY_HIT:
+                alive = alive & ~hit
         # 3. POP: a lane with no node and no leaf work pops its stack (or finishes)
         idle = alive & (cur < 0) & (node < 0)
         alive = alive & ~(idle & (sp == 0))
         pop = idle & (sp > 0)
-        sp = sp - pop.to(tl.int32)
-        ref = tl.load(stack_ptr + sp * stride + slot, mask=pop, other=0)
+        ref, sp, s0, s1, s2, s3 = _pop(stack_ptr, slot, stride, sp, pop, s0, s1, s2, s3, REGS)
         node, cur = _dispatch(pop, ref, node, cur)
         votes = tl.reduce(alive.to(tl.int32) | ((alive & (node >= 0)).to(tl.int32) << 1), 0,
                           _or)
@@ -309,7 +350,8 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, r
                   root_ref, stack_ptr, t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
                   BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr,
                   UNIFORM: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
-                  TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
+                  REGS: tl.constexpr, TRIS: tl.constexpr, TLO_ARRAY: tl.constexpr,
+                  THI_ARRAY: tl.constexpr):
     slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = slot < n_rays
     ox = tl.load(o_ptr + slot * 3 + 0, mask=live, other=0.0)
@@ -331,7 +373,7 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, r
     alive = live & _valid(ox, oy, oz, dx, dy, dz) & (t_lo <= t_hi)
     t, row, u, v = _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
                           ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT, UNIFORM,
-                          VEC, SANITIZE)
+                          VEC, SANITIZE, REGS, TRIS)
     hit = row >= 0
     tri = tl.load(tris + row * 12 + 3, mask=hit, other=-1)
     tl.store(t_ptr + slot, tl.where(hit, t, float("inf")), mask=live)
@@ -353,7 +395,8 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
                     amb_r, amb_g, amb_b, bg_r, bg_g, bg_b, offset,
                     N_LIGHTS: tl.constexpr, MAX_DEPTH: tl.constexpr,
                     BLOCK: tl.constexpr, EXIT: tl.constexpr, UNIFORM: tl.constexpr,
-                    VEC: tl.constexpr, SANITIZE: tl.constexpr):
+                    VEC: tl.constexpr, SANITIZE: tl.constexpr, REGS: tl.constexpr,
+                    TRIS: tl.constexpr):
     """The uber kernel: per lane, primary ray -> (closest hit -> shade with shadow rays ->
     mirror bounce) up to ``max_depth`` bounces; the radiance recursion unrolled into a
     loop with a throughput weight (``L += kr * radiance(...)`` becomes ``weight *= kr``).
@@ -386,7 +429,7 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
     for depth in range(MAX_DEPTH + 1):
         t, row, _u, _v = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot, stride,
                                 ox, oy, oz, dx, dy, dz, zero, inf, active, False, EXIT,
-                                UNIFORM, VEC, SANITIZE)
+                                UNIFORM, VEC, SANITIZE, REGS, TRIS)
         hit = active & (row >= 0)
         miss = active & (row < 0)
         c_r += tl.where(miss, w_r * bg_r, 0.0)
@@ -457,7 +500,7 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
             want = hit & (ndl > 0.0)
             _t, occluder, _u2, _v2 = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot,
                                             stride, px, py, pz, lx, ly, lz, zero, s_max, want,
-                                            True, EXIT, UNIFORM, VEC, SANITIZE)
+                                            True, EXIT, UNIFORM, VEC, SANITIZE, REGS, TRIS)
             lit = want & (occluder < 0)
             hx = lx - dx
             hy = ly - dy
@@ -502,6 +545,13 @@ def interpreting() -> bool:
     """True when the kernels run in Triton's CPU interpreter (``TRITON_INTERPRET=1``)."""
     _require_triton()
     return type(_trace_kernel).__name__ == "InterpretedFunction"
+
+
+def _check_walk(stack_regs: int, tris_per_step: int) -> None:
+    if stack_regs not in (0, 4) or isinstance(stack_regs, bool):
+        raise ValueError(f"stack_regs: expected 0 or 4, got {stack_regs!r}")
+    if tris_per_step not in (1, 2) or isinstance(tris_per_step, bool):
+        raise ValueError(f"tris_per_step: expected 1 or 2, got {tris_per_step!r}")
 
 
 def _check_launch(block: int, num_warps: int) -> None:
@@ -581,19 +631,24 @@ def _bvh_args(bvh: FlatBVH, device):
 def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf, *,
                       any_hit: bool = False, block: int = DEFAULT_BLOCK,
                       num_warps: int = DEFAULT_NUM_WARPS,
-                      uniform_branches: bool = DEFAULT_UNIFORM, return_info: bool = False):
+                      uniform_branches: bool = DEFAULT_UNIFORM,
+                      stack_regs: int = DEFAULT_STACK_REGS,
+                      tris_per_step: int = DEFAULT_TRIS_PER_STEP, return_info: bool = False):
     """Closest (or any) hit of each ray by the Triton BVH walk (one ray per lane).
 
     bvh: ``build_flat_bvh(...)`` on the rays' device; origins, directions: (N, 3) float
     (traced in float32); t_min, t_max: numbers or (N,) tensors; any_hit: stop at the first
     hit; block: lanes per program (a power of two, >= 32 num_warps); uniform_branches:
-    skip a stage of a step that no lane of the program needs (see ``_trace``).
+    skip a stage of a step that no lane of the program needs (see ``_trace``);
+    stack_regs: the stack's top entries kept in registers (0 or 4); tris_per_step:
+    triangle tests per step (1 or 2).
     Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
     """
     _require_triton()
     o, d, (t_lo, lo_value), (t_hi, hi_value) = check_ray_bounds(origins, directions, t_min,
                                                                 t_max)
     _check_launch(block, num_warps)
+    _check_walk(stack_regs, tris_per_step)
     n, device = o.shape[0], o.device
     _device_check(device)
     pairs, root, _tris_f, tris, root_ref = _bvh_args(bvh, device)
@@ -614,7 +669,7 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                 out_t, out_id, out_u, out_v, n, lanes,
                 BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE,
                 UNIFORM=bool(uniform_branches), VEC=compiled, SANITIZE=not compiled,
-                TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
+                REGS=stack_regs, TRIS=tris_per_step, TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
     hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
     if return_info:
         name = "any_hit" if any_hit else "closest_hit"
@@ -702,7 +757,8 @@ def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
                 o, d, out, n, pairs, root, tris_f, tris_i, root_ref, stack, lanes, mat_id,
                 mats, lights, *colours, float(offset), N_LIGHTS=n_lights, MAX_DEPTH=max_depth,
                 BLOCK=block, EXIT=EXIT_SCALE, UNIFORM=bool(uniform_branches), VEC=compiled,
-                SANITIZE=not compiled, num_warps=num_warps)
+                SANITIZE=not compiled, REGS=DEFAULT_STACK_REGS, TRIS=DEFAULT_TRIS_PER_STEP,
+                num_warps=num_warps)
     if return_info:
         return out, _info("whitted_uber", handle, num_warps, block)
     return out

@@ -64,6 +64,14 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
         out["info"][info.name] = info
     # Skipping stages no lane needs must not change a single result.
     out["masked_only"] = tt.trace_flat_triton(bvh, *args, uniform_branches=False).to("cpu")
+    # Nor may the stack's place or the triangle tests per step (a deep tree of single
+    # triangles: stacks deeper than the four register entries).
+    deep = build_flat_bvh(case["vertices"].to(device), case["faces"].to(device), leaf_size=1)
+    out["deep"] = tt.trace_flat_triton(deep, *args).to("cpu")
+    out["depth"] = deep.depth
+    out["variants"] = {(regs, tris): tt.trace_flat_triton(deep, *args, stack_regs=regs,
+                                                          tris_per_step=tris).to("cpu")
+                       for regs, tris in ((0, 1), (4, 2), (0, 2))}
     v, f, o, d = axis_parallel_case()
     out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
                                        o.to(device), d.to(device)).to("cpu")
@@ -93,6 +101,12 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
             f"{label}: uniform_branches=False changed {field}: the stages must be skipped "
             f"only where no lane needs them")
     assert out["empty"] == 0
+    check_hits(case, out["deep"], f"{label} closest hit, leaves of 1", ref=ref)
+    assert out["depth"] > 6, "the deep tree must need more than the four register entries"
+    for (regs, tris), hits in out["variants"].items():
+        for field in ("t", "triangle", "u", "v"):
+            assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
+                f"{label}: stack_regs={regs}, tris_per_step={tris} changed {field}")
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device="cpu")
         want = render_reference(scene, o, d)
@@ -168,6 +182,7 @@ def test_bad_arguments_raise_clear_errors():
     for kwargs, word in [({"origins": o[:, :2]}, "origins"), ({"directions": d[:2]}, "directions"),
                          ({"block": 48}, "block"), ({"num_warps": 3}, "num_warps"),
                          ({"block": 32, "num_warps": 2}, "block"), ({"bvh": "x"}, "bvh"),
+                         ({"stack_regs": 2}, "stack_regs"), ({"tris_per_step": 3}, "tris_per"),
                          ({"t_min": torch.zeros(7)}, "t_min")]:
         args = {"bvh": bvh, "origins": o, "directions": d, **kwargs}
         with pytest.raises((ValueError, TypeError), match=word):
