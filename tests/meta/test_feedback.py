@@ -55,6 +55,7 @@ def toy(tmp_path_factory):
     for name, files in {"wrong": {"lab9_toy.py": WRONG},
                         "syntax": {"lab9_toy.py": "import torch\n\ndef double(x)\n    return x\n"},
                         "misnamed": {"lab9_toy (1).py": WRONG},
+                        "import": {"lab9_toy.py": "import torch\nimport not_a_module_xyz\n"},
                         "empty": {}}.items():
         folder = base / name
         folder.mkdir()
@@ -142,7 +143,9 @@ def test_submission_problems_are_said_once(toy, tmp_path):
     for name, needle in (("empty", "no lab9_toy.py in"),
                          ("misnamed", "found 'lab9_toy (1).py': rename it to lab9_toy.py"),
                          ("syntax", ("lab9_toy.py failed to import: SyntaxError: expected "
-                                     "':' (lab9_toy.py, line 3)"))):
+                                     "':' (lab9_toy.py, line 3)")),
+                         ("import", ("lab9_toy.py failed to import: ModuleNotFoundError: No "
+                                     "module named 'not_a_module_xyz' (at import/lab9_toy.py:2"))):
         results = tmp_path / f"{name}.json"
         proc = _run(["-m", "course.cli", "grade", "--impl", str(subs[name]), "--lab", "9",
                      "--json", str(results)], course)
