@@ -65,13 +65,12 @@ UNIFORM = [True, False]  # skip stages no lane needs / run every stage masked
 # The Triton walk's launches and knobs (trace_flat_triton's keywords): one warp per program
 # with the stack's top in registers first, then one knob changed at a time.
 TRITON_LAUNCHES = [
-    {"block": 32, "num_warps": 1, "uniform_branches": True, "stack_regs": 4, "tris_per_step": 1},
-    {"block": 32, "num_warps": 1, "uniform_branches": True, "stack_regs": 0, "tris_per_step": 1},
-    {"block": 32, "num_warps": 1, "uniform_branches": True, "stack_regs": 4, "tris_per_step": 2},
-    {"block": 32, "num_warps": 1, "uniform_branches": False, "stack_regs": 4,
-     "tris_per_step": 1},
-    {"block": 64, "num_warps": 1, "uniform_branches": True, "stack_regs": 4, "tris_per_step": 1},
-    {"block": 64, "num_warps": 2, "uniform_branches": True, "stack_regs": 4, "tris_per_step": 1},
+    {"block": b, "num_warps": w, "uniform_branches": u, "stack_regs": r, "tris_per_step": k,
+     "speculate": sp}
+    for b, w, u, r, k, sp in [
+        (32, 1, True, 4, 1, False), (32, 1, True, 0, 1, False), (32, 1, True, 4, 2, False),
+        (32, 1, True, 4, 1, True), (32, 1, True, 4, 2, True), (32, 1, False, 4, 1, False),
+        (64, 1, True, 4, 1, False), (64, 1, True, 4, 1, True), (64, 2, True, 4, 1, False)]
 ]
 CUDA_BLOCKS = [64, 128, 256]
 CUDA_CAPPED = [False, True]  # the compiler's registers / at most 40 (MIN_BLOCKS)
@@ -187,9 +186,11 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
             t = time_fn(fn, bvh, rays_o, rays_d, repeats=repeats, warmup=1, **kw)
             launch = (_launch(kw["block"], kw["num_warps"], kw["uniform_branches"])
                       + f", stack top {kw['stack_regs']} in registers, "
-                      f"{kw['tris_per_step']} tri/step")
+                      f"{kw['tris_per_step']} tri/step"
+                      + (", speculative" if kw["speculate"] else ""))
             row = table.add(scene=scene_name, rays=kind, impl="Triton", launch=launch, n_rays=n,
                             stack_regs=kw["stack_regs"], tris_per_step=kw["tris_per_step"],
+                            speculate=kw["speculate"],
                             ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
                             **triton_row(info), same_as_first=agreement(hits, reference),
                             **hit_errors(scene, rays_o, rays_d, hits, sample))

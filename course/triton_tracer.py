@@ -80,6 +80,9 @@ DEFAULT_NUM_WARPS = 1
 DEFAULT_UNIFORM = True
 DEFAULT_STACK_REGS = 4
 DEFAULT_TRIS_PER_STEP = 1
+DEFAULT_SPECULATE = False
+NONE = tl.constexpr(-2147483648) if tl is not None else -2147483648
+"""The walk's "no node" (int32 min: every other negative value is a leaf's ``~first``)."""
 
 
 # --------------------------------------------------------------------------------------
@@ -148,9 +151,12 @@ def _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz, t
 @_jit
 def _dispatch(mask, ref, node, cur):
     """Go to child/stack entry ``ref`` in the lanes of ``mask``: an interior node (ref >= 0)
-    becomes the next ``node``, a leaf (``~first``) pending rows from ``cur = first``."""
-    node = tl.where(mask, tl.where(ref >= 0, ref, -1), node)
-    cur = tl.where(mask & (ref < 0), -1 - ref, cur)
+    becomes the next ``node``; a leaf (``~first``) becomes pending rows from ``cur = first``,
+    or, in a lane still busy with another leaf (speculative traversal), waits in ``node``
+    (a negative ref other than NONE) until that one is done."""
+    take = mask & (ref < 0) & (cur < 0)
+    node = tl.where(mask, tl.where(take, NONE, ref), node)
+    cur = tl.where(take, -1 - ref, cur)
     return node, cur
 
 
@@ -208,7 +214,7 @@ def _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y,
     both = ha & hb
     sp, s0, s1, s2, s3 = _push(stack_ptr, slot, stride, sp, tl.where(b_first, ref_a, ref_b),
                                both, s0, s1, s2, s3, REGS)
-    node = tl.where(visit, -1, node)
+    node = tl.where(visit, NONE, node)
     node, cur = _dispatch(ha | hb, tl.where(b_first, ref_b, ref_a), node, cur)
     return node, sp, cur, s0, s1, s2, s3
 
@@ -251,7 +257,8 @@ def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
 def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
            ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT: tl.constexpr,
            EXIT: tl.constexpr, UNIFORM: tl.constexpr, VEC: tl.constexpr,
-           SANITIZE: tl.constexpr, REGS: tl.constexpr, TRIS: tl.constexpr):
+           SANITIZE: tl.constexpr, REGS: tl.constexpr, TRIS: tl.constexpr,
+           SPECULATE: tl.constexpr):
     """Walk the BVH for every lane with ``alive`` set: the TRAVERSE/INTERSECT/POP loop.
 
     pairs, tris: the int32 views of the ``pairs`` and ``triangles`` layouts; root: the
@@ -261,7 +268,10 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
     of running it with every lane masked off. VEC: 16-byte loads (compiled kernels);
     SANITIZE: replace the slab test's NaN before min/max (the interpreter's keep NaN).
     REGS: stack entries kept in registers (0 or 4, see _push); TRIS: triangle tests per
-    step (1 or 2: a lane with leaf work tests up to TRIS rows of its leaf per step).
+    step (1 or 2: a lane with leaf work tests up to TRIS rows of its leaf per step);
+    SPECULATE: a lane with leaf work keeps traversing (pops and visits nodes) meanwhile,
+    parking at most one more leaf (Aila & Laine's speculative traversal), so it takes part
+    in both stages of a step instead of idling through one.
     Returns ``(t, row, u, v)``: row (int32) of the hit in the triangle layout, -1 on a miss.
     """
     one = tl.full(ox.shape, 1.0, tl.float32)
@@ -286,7 +296,7 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
     _, in_root = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz,
                        t_lo, t_hi, EXIT, SANITIZE)
     alive = alive & in_root
-    node = zero_i - 1  # the pair row to visit next; -1: none
+    node = zero_i + NONE  # the pair row to visit next (or a leaf waiting); NONE: none
     cur = zero_i - 1  # the leaf row to test next; -1: none
     node, cur = _dispatch(alive, zero_i + root_ref, node, cur)
     sp = zero_i
@@ -326,9 +336,17 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
             if ANY_HIT:
                 alive = alive & ~hit
         # 3. POP: a lane with no node and no leaf work pops its stack (or finishes)
-        idle = alive & (cur < 0) & (node < 0)
-        alive = alive & ~(idle & (sp == 0))
-        pop = idle & (sp > 0)
+        if SPECULATE:
+            # A leaf waiting in node starts once the current one is done.
+            waiting = alive & (cur < 0) & (node < 0) & (node != NONE)
+            cur = tl.where(waiting, -1 - node, cur)
+            node = tl.where(waiting, NONE, node)
+        no_node = alive & (node == NONE)
+        alive = alive & ~(no_node & (cur < 0) & (sp == 0))
+        if SPECULATE:  # traverse on while the leaf's triangles are tested
+            pop = no_node & (sp > 0)
+        else:
+            pop = no_node & (cur < 0) & (sp > 0)
         ref, sp, s0, s1, s2, s3 = _pop(stack_ptr, slot, stride, sp, pop, s0, s1, s2, s3, REGS)
         node, cur = _dispatch(pop, ref, node, cur)
         votes = tl.reduce(alive.to(tl.int32) | ((alive & (node >= 0)).to(tl.int32) << 1), 0,
@@ -350,8 +368,8 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, r
                   root_ref, stack_ptr, t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
                   BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr,
                   UNIFORM: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
-                  REGS: tl.constexpr, TRIS: tl.constexpr, TLO_ARRAY: tl.constexpr,
-                  THI_ARRAY: tl.constexpr):
+                  REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr,
+                  TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
     slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = slot < n_rays
     ox = tl.load(o_ptr + slot * 3 + 0, mask=live, other=0.0)
@@ -373,7 +391,7 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, r
     alive = live & _valid(ox, oy, oz, dx, dy, dz) & (t_lo <= t_hi)
     t, row, u, v = _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
                           ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT, UNIFORM,
-                          VEC, SANITIZE, REGS, TRIS)
+                          VEC, SANITIZE, REGS, TRIS, SPECULATE)
     hit = row >= 0
     tri = tl.load(tris + row * 12 + 3, mask=hit, other=-1)
     tl.store(t_ptr + slot, tl.where(hit, t, float("inf")), mask=live)
@@ -396,7 +414,7 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
                     N_LIGHTS: tl.constexpr, MAX_DEPTH: tl.constexpr,
                     BLOCK: tl.constexpr, EXIT: tl.constexpr, UNIFORM: tl.constexpr,
                     VEC: tl.constexpr, SANITIZE: tl.constexpr, REGS: tl.constexpr,
-                    TRIS: tl.constexpr):
+                    TRIS: tl.constexpr, SPECULATE: tl.constexpr):
     """The uber kernel: per lane, primary ray -> (closest hit -> shade with shadow rays ->
     mirror bounce) up to ``max_depth`` bounces; the radiance recursion unrolled into a
     loop with a throughput weight (``L += kr * radiance(...)`` becomes ``weight *= kr``).
@@ -429,7 +447,7 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
     for depth in range(MAX_DEPTH + 1):
         t, row, _u, _v = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot, stride,
                                 ox, oy, oz, dx, dy, dz, zero, inf, active, False, EXIT,
-                                UNIFORM, VEC, SANITIZE, REGS, TRIS)
+                                UNIFORM, VEC, SANITIZE, REGS, TRIS, SPECULATE)
         hit = active & (row >= 0)
         miss = active & (row < 0)
         c_r += tl.where(miss, w_r * bg_r, 0.0)
@@ -500,7 +518,8 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
             want = hit & (ndl > 0.0)
             _t, occluder, _u2, _v2 = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot,
                                             stride, px, py, pz, lx, ly, lz, zero, s_max, want,
-                                            True, EXIT, UNIFORM, VEC, SANITIZE, REGS, TRIS)
+                                            True, EXIT, UNIFORM, VEC, SANITIZE, REGS, TRIS,
+                                            SPECULATE)
             lit = want & (occluder < 0)
             hx = lx - dx
             hy = ly - dy
@@ -633,7 +652,8 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                       num_warps: int = DEFAULT_NUM_WARPS,
                       uniform_branches: bool = DEFAULT_UNIFORM,
                       stack_regs: int = DEFAULT_STACK_REGS,
-                      tris_per_step: int = DEFAULT_TRIS_PER_STEP, return_info: bool = False):
+                      tris_per_step: int = DEFAULT_TRIS_PER_STEP,
+                      speculate: bool = DEFAULT_SPECULATE, return_info: bool = False):
     """Closest (or any) hit of each ray by the Triton BVH walk (one ray per lane).
 
     bvh: ``build_flat_bvh(...)`` on the rays' device; origins, directions: (N, 3) float
@@ -641,7 +661,8 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     hit; block: lanes per program (a power of two, >= 32 num_warps); uniform_branches:
     skip a stage of a step that no lane of the program needs (see ``_trace``);
     stack_regs: the stack's top entries kept in registers (0 or 4); tris_per_step:
-    triangle tests per step (1 or 2).
+    triangle tests per step (1 or 2); speculate: keep traversing while a leaf is tested
+    (see ``_trace``).
     Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
     """
     _require_triton()
@@ -669,7 +690,8 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                 out_t, out_id, out_u, out_v, n, lanes,
                 BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE,
                 UNIFORM=bool(uniform_branches), VEC=compiled, SANITIZE=not compiled,
-                REGS=stack_regs, TRIS=tris_per_step, TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
+                REGS=stack_regs, TRIS=tris_per_step, SPECULATE=bool(speculate),
+                TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
     hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
     if return_info:
         name = "any_hit" if any_hit else "closest_hit"
@@ -758,7 +780,7 @@ def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
                 mats, lights, *colours, float(offset), N_LIGHTS=n_lights, MAX_DEPTH=max_depth,
                 BLOCK=block, EXIT=EXIT_SCALE, UNIFORM=bool(uniform_branches), VEC=compiled,
                 SANITIZE=not compiled, REGS=DEFAULT_STACK_REGS, TRIS=DEFAULT_TRIS_PER_STEP,
-                num_warps=num_warps)
+                SPECULATE=DEFAULT_SPECULATE, num_warps=num_warps)
     if return_info:
         return out, _info("whitted_uber", handle, num_warps, block)
     return out

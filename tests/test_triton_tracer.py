@@ -72,6 +72,11 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
     out["variants"] = {(regs, tris): tt.trace_flat_triton(deep, *args, stack_regs=regs,
                                                           tris_per_step=tris).to("cpu")
                        for regs, tris in ((0, 1), (4, 2), (0, 2))}
+    for tris in (1, 2):
+        out["variants"]["speculate", tris] = tt.trace_flat_triton(
+            deep, *args, speculate=True, tris_per_step=tris).to("cpu")
+    out["any_speculate"] = tt.trace_flat_triton(deep, *args, any_hit=True,
+                                                speculate=True).to("cpu")
     v, f, o, d = axis_parallel_case()
     out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
                                        o.to(device), d.to(device)).to("cpu")
@@ -107,6 +112,9 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
                 f"{label}: stack_regs={regs}, tris_per_step={tris} changed {field}")
+    check_hits(case, out["any_speculate"], f"{label} any hit, speculative", any_hit=True,
+               ref=ref)
+    assert torch.equal(out["any_speculate"].hit, out["deep"].hit)
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device="cpu")
         want = render_reference(scene, o, d)
