@@ -303,8 +303,11 @@ def pytest_runtest_makereport(item, call):
 
 
 def long_feedback(config) -> bool:
+    """pytest's own report: with ``--feedback full``, ``-v`` or an explicit ``--tb`` style."""
     choice = config.getoption("--feedback", None)
-    return choice == "full" or (choice is None and config.getoption("verbose", 0) > 0)
+    if choice is not None:
+        return choice == "full"
+    return config.getoption("verbose", 0) > 0 or config.getoption("tbstyle", "auto") != "auto"
 
 
 @cache
