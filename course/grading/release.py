@@ -212,6 +212,7 @@ def labs_readme(root, hidden_root=None) -> str:
     fn = functions[0] if functions else "pack_rgba8"
     test_cmds = _commented([
         (f"python -m pytest {first}", f"all tests of lab {number}"),
+        (f"python -m pytest {first} --task 1", "exactly the tests of task 1's points"),
         (f"python -m pytest {first} -k {fn}", "only the tests of one function"),
         (f"python -m pytest {first} -x -k {fn}", "stop at the first failure"),
     ])
