@@ -5,6 +5,7 @@ costs and buys, against brute force (and, on the CPU, trimesh) in the same run.
     python bench/lab2_accel.py --device cuda            # GPU, a few minutes on an H100
     python bench/lab2_accel.py --device cpu --threads 2 --scenes bunny --fast-size 256
     python bench/lab2_accel.py --device cuda --headline  # LBVH build + traversal rows, ~2 min
+    python bench/lab2_accel.py --device cpu --parts embree  # Embree against the walks, CPU
 
 Three parts, each a table of the same ResultTable (column ``part``):
 
@@ -23,6 +24,17 @@ Three parts, each a table of the same ResultTable (column ``part``):
   (k, steps between host syncs), ``compile`` (off, ``torch.compile``, CUDA graphs), leaf
   size; primary rays at ``--fast-size`` squared.
 * ``lbvh``: the LBVH build of bunny_x16 (1.1M triangles), median of several builds.
+* ``embree`` (CPU): Embree (``embreex``, optional: ``pip install embreex``; the part is
+  skipped with the reason when it is missing) and the lab's walks on the same bunny primary
+  rays (``--fast-size`` squared), warm (each traced once first), at one thread and at all
+  cores this process may use (and at the free ones, ``course.device.free_cpus``, where
+  that differs): the stack and stackless BVH traversals, the
+  sync-free walk eager and compiled, and ``course.flat_bvh``'s tracer. Each thread count
+  runs in its own process pinned to that many cores (Embree's thread pool sizes itself
+  from the affinity at its first use); the timings of one count are interleaved round by
+  round, so a load that comes and goes slows every row alike, and each row records its
+  ratio to Embree at the same thread count. ``--parts embree`` alone writes its
+  ``lab2_accel.json`` / ``.md`` into ``bench/results/<device>/lab2_embree/`` by default.
 
 The triangle kernel of the structures is Lab 1's Möller–Trumbore (float32) from the
 solutions; the sync-free traversal inlines the same test. Writes ``lab2_accel.json``,
@@ -35,6 +47,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -48,7 +61,7 @@ sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
 from course.accel_support import pack_bvh
 from course.bench import ResultTable, device_name, pareto_plot, time_fn
 from course.camera import primary_rays
-from course.device import default_device
+from course.device import allowed_cpus, default_device, free_cpus, set_cpu_threads
 from course.scenes import load_scene
 from course.types import Rays
 from solutions import lab2_accel as lab
@@ -329,6 +342,121 @@ def run_lbvh_build(mode, device, table, log):
               triangles=mesh.num_faces, build_s=timing.median)
 
 
+EMBREE_WALKS = ("Embree", "sync-free walk, compiled", "sync-free walk, eager",
+                "SAH stack traversal", "SAH stackless traversal", "flat_bvh.trace_bvh")
+
+
+def embree_tracer(mesh):
+    """A warm-able Embree query on ``mesh``: ``trace(origins, directions) -> triangle ids``
+    (numpy float32 in, int32 out, -1 for a miss), or ``(None, reason)`` without embreex."""
+    try:
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+    except ImportError as error:
+        return None, f"embreex is not installed ({error}); pip install embreex"
+    import numpy as np
+
+    scene = rtcore_scene.EmbreeScene()
+    TriangleMesh(scene=scene, vertices=mesh.vertices.cpu().float().numpy(),
+                 indices=mesh.faces.cpu().numpy().astype(np.int32))
+
+    def trace(origins, directions):
+        return scene.run(origins, directions)
+
+    return trace, ""
+
+
+def run_embree_one(mode, table, log, threads: int, rounds: int, budget: float):
+    """One thread count of the ``embree`` part (this process is pinned to ``threads``
+    cores): every walk warm, then ``rounds`` rounds timing each walk once in turn (a walk
+    whose timed calls add up to more than ``budget`` seconds sits out the later rounds)."""
+    from course import flat_bvh
+
+    device = torch.device("cpu")
+    scene = load("bunny", mode, device)
+    mesh = scene.mesh
+    rays = camera_rays(scene, mode["fast_size"], device)
+    embree, reason = embree_tracer(mesh)
+    if embree is None:
+        log(f"embree part skipped: {reason}")
+        table.metadata["embree_skipped"] = reason
+        return
+    o32 = rays.origins.float().numpy().copy()
+    d32 = rays.directions.float().numpy().copy()
+    bvh = lab.build_sah_bvh(mesh)
+    walk = pack_bvh(bvh, mesh)
+    calls = {
+        "Embree": lambda: torch.from_numpy(embree(o32, d32).astype("int64")),
+        "sync-free walk, compiled": lambda: lab.bvh_closest_hit_fast(
+            rays, mesh, bvh, check_every=8, compile=True, walk=walk)[0].triangle,
+        "sync-free walk, eager": lambda: lab.bvh_closest_hit_fast(
+            rays, mesh, bvh, check_every=8, walk=walk)[0].triangle,
+        "SAH stack traversal": lambda: lab.bvh_closest_hit(rays, mesh, bvh, intersect)[0].triangle,
+        "SAH stackless traversal": lambda: lab.bvh_closest_hit_stackless(
+            rays, mesh, bvh, intersect)[0].triangle,
+        "flat_bvh.trace_bvh": lambda: flat_bvh.trace_bvh(
+            mesh, rays.origins, rays.directions, rays.t_min, rays.t_max).triangle,
+    }
+    first, warm = {}, {}
+    for name, call in calls.items():  # warm: Embree's build, torch.compile, the flat BVH
+        started = time.perf_counter()
+        first[name] = call()
+        warm[name] = time.perf_counter() - started
+        log(f"  {threads} thread(s): {name} warm-up call {warm[name]:.2f} s")
+    times = {name: [] for name in calls}
+    for _ in range(rounds):
+        for name, call in calls.items():
+            if times[name] and sum(times[name]) > budget:  # enough of a slow walk
+                continue
+            started = time.perf_counter()
+            call()
+            times[name].append(time.perf_counter() - started)
+    embree_s = sorted(times["Embree"])[len(times["Embree"]) // 2]
+    for name in calls:
+        median = sorted(times[name])[len(times[name]) // 2]
+        agree = (first[name] == first["Embree"]).double().mean().item()
+        row = table.add(part="embree", scene="bunny", setting=name, threads=threads,
+                        triangles=mesh.num_faces, rays=len(rays), rays_per_s=len(rays) / median,
+                        seconds_median=median, seconds_min=min(times[name]),
+                        seconds_max=max(times[name]), rounds=len(times[name]),
+                        first_call_s=warm[name],
+                        ratio_to_embree=embree_s / median, same_triangle_as_embree=agree)
+        log(f"  {threads} thread(s): {name:<26} {row['rays_per_s']:>13,.0f} rays/s  "
+            f"x{row['ratio_to_embree']:.3f} Embree  (min {len(rays) / max(times[name]):,.0f}, "
+            f"max {len(rays) / min(times[name]):,.0f}; same triangle as Embree "
+            f"{agree:.2%})")
+
+
+def run_embree(args, mode, table, log):
+    """The ``embree`` part: one process per thread count (1, the free cores, all), each
+    pinned to that many of this process's cores; their rows join ``table``."""
+    import json
+    import subprocess
+    import tempfile
+
+    counts = sorted({1, free_cpus(), allowed_cpus()})
+    table.metadata.update(embree_threads=counts, allowed_cpus=allowed_cpus(),
+                          free_cpus=free_cpus(), load_average=list(os.getloadavg()))
+    for threads in counts:
+        with tempfile.TemporaryDirectory() as folder:
+            command = [sys.executable, str(Path(__file__).resolve()), "--device", "cpu",
+                       "--parts", "embree-one", "--threads", str(threads), "--out", folder,
+                       "--fast-size", str(mode["fast_size"]), "--rounds", str(args.rounds),
+                       "--walk-budget", str(args.walk_budget)]
+            log(f"embree part, {threads} thread(s): {' '.join(command[1:])}")
+            done = subprocess.run(command, check=False, capture_output=True, text=True)
+            for line in done.stdout.splitlines():
+                log(f"  | {line}")
+            if done.returncode:
+                log(f"  failed (exit {done.returncode}): {done.stderr.strip()[-2000:]}")
+                continue
+            part = json.loads((Path(folder) / "lab2_accel.json").read_text())
+            if part["metadata"].get("embree_skipped"):
+                table.metadata["embree_skipped"] = part["metadata"]["embree_skipped"]
+            for row in part["rows"]:
+                table.add(**row)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
@@ -338,14 +466,24 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=None)
     parser.add_argument("--fast-size", type=int, default=None)
     parser.add_argument("--out", default=None, help="output folder")
-    parser.add_argument("--threads", type=int, default=None, help="CPU threads for torch")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="CPU threads for torch (default: the free cores, "
+                             "course.device.free_cpus); with --parts embree-one the process "
+                             "is also pinned to that many cores")
+    parser.add_argument("--rounds", type=int, default=7,
+                        help="embree part: timed rounds of every walk (median reported)")
+    parser.add_argument("--walk-budget", type=float, default=20.0,
+                        help="embree part: seconds of timed calls after which a walk sits "
+                             "out the remaining rounds")
     parser.add_argument("--no-compile", action="store_true", help="skip torch.compile rows")
     parser.add_argument("--headline", action="store_true",
                         help="only the LBVH build and the headline traversal rows (bunny, "
                              "eager / compiled / CUDA graphs): ~2 minutes on a GPU")
     args = parser.parse_args(argv)
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    if args.parts == "embree-one" and hasattr(os, "sched_setaffinity"):
+        cores = sorted(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, cores[:args.threads or 1])  # before Embree sizes its pool
+    threads = set_cpu_threads(args.threads)
     device = default_device(args.device)
     mode = dict(MODES["small" if args.small else device.type if device.type == "cuda"
                       else "cpu"])
@@ -354,9 +492,10 @@ def main(argv=None):
     for key in ("scenes", "size", "fast_size"):
         if getattr(args, key) is not None:
             mode[key] = getattr(args, key)
-    out = Path(args.out) if args.out else REPO / "bench" / "results" / device_name(device) / "lab2"
+    folder = "lab2_embree" if args.parts == "embree" else "lab2"
+    out = Path(args.out) if args.out else REPO / "bench" / "results" / device_name(device) / folder
     table = ResultTable("lab2 acceleration structures", device=device)
-    table.metadata.update(mode={k: v for k, v in mode.items()}, cpu_threads=torch.get_num_threads(),
+    table.metadata.update(mode={k: v for k, v in mode.items()}, cpu_threads=threads,
                           kernel="lab1 moller_trumbore float32; sync-free path: inline, float32")
     start = time.perf_counter()
 
@@ -366,6 +505,16 @@ def main(argv=None):
     # The headline figures first, and the files rewritten after every part: a run stopped
     # at its time limit keeps what it measured.
     parts = ["lbvh", "fast"] if args.headline else args.parts.split(",")
+    if "embree-one" in parts:  # one thread count of the embree part (run by run_embree)
+        run_embree_one(mode, table, log, threads, args.rounds, args.walk_budget)
+        write(table, out, mode)
+        return table
+    if "embree" in parts:
+        if device.type != "cpu":
+            log("embree part: CPU only, skipped")
+        else:
+            run_embree(args, mode, table, log)
+            write(table, out, mode)
     if "lbvh" in parts:
         run_lbvh_build(mode, device, table, log)
     if "fast" in parts:
@@ -387,7 +536,8 @@ def write(table, out: Path, mode: dict):
     parts = []
     for part, title in (("structures", "Structures: build, primary and shadow rays, work"),
                         ("fast", "The sync-free BVH traversal: one knob at a time (bunny)"),
-                        ("lbvh", "LBVH build of bunny_x16")):
+                        ("lbvh", "LBVH build of bunny_x16"),
+                        ("embree", "Embree and the lab's walks, same rays, warm (bunny)")):
         rows = [r for r in table.rows if r.get("part") == part]
         if rows:
             sub = ResultTable(part)

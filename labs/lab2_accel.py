@@ -97,12 +97,17 @@ The two-level grid and the sync-free traversal (``bench/lab2_accel.py --small --
   runs at x0.7 brute force; the two-level grid tests 9 (8 cells per ray) and runs 10x the
   uniform grid (x7 brute force), close to the SAH BVH's stack traversal.
 * bunny, primary rays: the stack traversal 7.6K rays/s (65K rays, 2 threads); trimesh's
-  numpy query 100 rays/s. The sync-free walk (``bench/results/cpu-2cores/lab2_fused/``,
-  262K rays, 2 threads, one run): 0.54 M rays/s eager, **2.4 M rays/s** under
-  ``torch.compile``, next to Embree through trimesh at 2.9 M rays/s. On an H200 with 1M
-  rays (``bench/results/nvidia-h200/lab2_fused/``): 2.9 M eager, 21 M compiled,
-  **105-137 M rays/s** compiled and replayed from CUDA graphs (k = 16-32); the stack
-  traversal 0.25 M. The LBVH of bunny_x16 (1.1M triangles) builds in 10 ms there.
+  numpy query 100 rays/s. Against Embree on the same 65K rays, every walk warm
+  (``bench/lab2_accel.py --device cpu --parts embree``, ``bench/results/cpu-2cores/
+  lab2_embree/``, on a loaded shared machine): on one thread the sync-free walk under
+  ``torch.compile`` runs at **0.11x Embree** (0.43 M against 3.9 M rays/s), eager at
+  0.020x, the stack traversal at 0.017x; with two torch threads on the loaded two cores
+  the torch walks fall 50-100x (the benches take ``course.device.free_cpus()`` threads).
+  On an H200 with 1M rays (``bench/results/nvidia-h200/lab2_fused/``): 2.9 M eager, 21 M
+  compiled, **105-137 M rays/s** compiled and replayed from CUDA graphs (k = 16-32); with
+  the graphs of each size kept across calls 143 M (k = 16,
+  ``bench/results/nvidia-h200/lab2_walk/``); the stack traversal 0.25 M. The LBVH of
+  bunny_x16 (1.1M triangles) builds in 10 ms there.
 * ``choose_structure`` (given) reads triangle count, crowding and size spread and picks:
   a grid for small even scenes, the two-level grid for crowded scenes with few rays, the
   SAH BVH for many rays, the LBVH when the build dominates; never the kd-tree (slowest
@@ -775,8 +780,9 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
     steps run between two looks at the rays (one host sync each); compile: False, True or
     a ``torch.compile`` mode for the steps; ``"reduce-overhead"`` compiles them as
-    ``"default"`` and, on a GPU, replays the ``k`` steps from a CUDA graph per number of
-    rays (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (an
+    ``"default"`` and, on a GPU, replays the ``k`` steps of a look from one CUDA graph,
+    captured once per (padded) number of rays and kept for later calls with the same
+    ``walk`` (packed here: a graph of one step, replayed ``k`` times, not kept); compact: at a look, drop finished rays if at most half (an
     eighth with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
     once and trace it many times (default: packed here, for the octants of these rays);
     fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
@@ -808,8 +814,11 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
       rays are left;
     * a step is gathers from read-only tables and elementwise ops, nothing else, so
       ``torch.compile`` turns it into **one kernel** (one thread per ray, the state in
-      registers): the lecture's kernel, written in torch; on a GPU a CUDA graph replays
-      it ``k`` times between two looks.
+      registers): the lecture's kernel, written in torch; on a GPU one CUDA graph holds
+      the ``k`` steps between two looks. With a ``walk`` packed once, the rays are padded
+      (with finished ones) to a few sizes, so the graphs of a size are captured once and
+      replayed by every later traversal of that size: a warm traversal pays no capture and
+      no compiled call.
 
     The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
     in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel

@@ -90,12 +90,17 @@ The two-level grid and the sync-free traversal (``bench/lab2_accel.py --small --
   runs at x0.7 brute force; the two-level grid tests 9 (8 cells per ray) and runs 10x the
   uniform grid (x7 brute force), close to the SAH BVH's stack traversal.
 * bunny, primary rays: the stack traversal 7.6K rays/s (65K rays, 2 threads); trimesh's
-  numpy query 100 rays/s. The sync-free walk (``bench/results/cpu-2cores/lab2_fused/``,
-  262K rays, 2 threads, one run): 0.54 M rays/s eager, **2.4 M rays/s** under
-  ``torch.compile``, next to Embree through trimesh at 2.9 M rays/s. On an H200 with 1M
-  rays (``bench/results/nvidia-h200/lab2_fused/``): 2.9 M eager, 21 M compiled,
-  **105-137 M rays/s** compiled and replayed from CUDA graphs (k = 16-32); the stack
-  traversal 0.25 M. The LBVH of bunny_x16 (1.1M triangles) builds in 10 ms there.
+  numpy query 100 rays/s. Against Embree on the same 65K rays, every walk warm
+  (``bench/lab2_accel.py --device cpu --parts embree``, ``bench/results/cpu-2cores/
+  lab2_embree/``, on a loaded shared machine): on one thread the sync-free walk under
+  ``torch.compile`` runs at **0.11x Embree** (0.43 M against 3.9 M rays/s), eager at
+  0.020x, the stack traversal at 0.017x; with two torch threads on the loaded two cores
+  the torch walks fall 50-100x (the benches take ``course.device.free_cpus()`` threads).
+  On an H200 with 1M rays (``bench/results/nvidia-h200/lab2_fused/``): 2.9 M eager, 21 M
+  compiled, **105-137 M rays/s** compiled and replayed from CUDA graphs (k = 16-32); with
+  the graphs of each size kept across calls 143 M (k = 16,
+  ``bench/results/nvidia-h200/lab2_walk/``); the stack traversal 0.25 M. The LBVH of
+  bunny_x16 (1.1M triangles) builds in 10 ms there.
 * ``choose_structure`` (given) reads triangle count, crowding and size spread and picks:
   a grid for small even scenes, the two-level grid for crowded scenes with few rays, the
   SAH BVH for many rays, the LBVH when the build dominates; never the kd-tree (slowest
@@ -104,6 +109,7 @@ The two-level grid and the sync-free traversal (``bench/lab2_accel.py --small --
 
 from __future__ import annotations
 
+import collections
 import math
 
 import torch
@@ -1493,8 +1499,9 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
     steps run between two looks at the rays (one host sync each); compile: False, True or
     a ``torch.compile`` mode for the steps; ``"reduce-overhead"`` compiles them as
-    ``"default"`` and, on a GPU, replays the ``k`` steps from a CUDA graph per number of
-    rays (:class:`_StepGraph`); compact: at a look, drop finished rays if at most half (an
+    ``"default"`` and, on a GPU, replays the ``k`` steps of a look from one CUDA graph,
+    captured once per (padded) number of rays and kept for later calls with the same
+    ``walk`` (packed here: a graph of one step, replayed ``k`` times, not kept); compact: at a look, drop finished rays if at most half (an
     eighth with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
     once and trace it many times (default: packed here, for the octants of these rays);
     fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
@@ -1526,8 +1533,11 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
       rays are left;
     * a step is gathers from read-only tables and elementwise ops, nothing else, so
       ``torch.compile`` turns it into **one kernel** (one thread per ray, the state in
-      registers): the lecture's kernel, written in torch; on a GPU a CUDA graph replays
-      it ``k`` times between two looks.
+      registers): the lecture's kernel, written in torch; on a GPU one CUDA graph holds
+      the ``k`` steps between two looks. With a ``walk`` packed once, the rays are padded
+      (with finished ones) to a few sizes, so the graphs of a size are captured once and
+      replayed by every later traversal of that size: a warm traversal pays no capture and
+      no compiled call.
 
     The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
     in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
@@ -1542,7 +1552,8 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
         raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
     o, d, inv = rays.origins, rays.directions, 1 / rays.directions
     octant = ray_octants(d)  # the array whose order is near-first for the ray
-    if walk is None:  # only the octants these rays go in
+    packed_here = walk is None  # fresh tables: no later call can reuse graphs that read them
+    if packed_here:  # only the octants these rays go in
         walk = pack_bvh(bvh, mesh, torch.unique(octant).tolist())
     else:
         check_walk(walk, mesh, rays)
@@ -1573,14 +1584,19 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     # rays change nothing, so the counters never depend on the knobs.
     fuse = check_every if compile is False else min(fuse_steps, check_every)
     calls = -(-check_every // fuse)
+    cache = graphs and not packed_here
+    if cache:  # pad to a graph size: the graphs of a size are captured once and kept
+        fixed, state = _padded(fixed, state, m)
     graph = None
     for _ in range(0, m + mesh.num_faces + 1, calls * fuse):  # a step per node or slot
         if not len(ray):
             break
         if graphs:
-            if graph is None:  # a graph per number of rays: captured after each compaction
-                graph = _StepGraph(steps, fixed, state, (tables, m, fuse, bool(any_hit)))
-            state = graph.run(calls)
+            if graph is None and cache:  # the graph of a look at this size, kept across calls
+                graph = _step_graph(steps, fixed, state, tables, m, fuse, bool(any_hit), calls)
+            elif graph is None:  # tables of this call only: a graph of one call, replayed
+                graph = _StepGraph(steps, fixed, state, (tables, m, fuse, bool(any_hit)), 1)
+            state = graph.run(fixed, state, 1 if cache else calls)
         else:
             for _ in range(calls):
                 state = list(steps(fixed, state, tables, m, fuse, bool(any_hit)))
@@ -1588,18 +1604,20 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
         active = int(running.sum())  # the one host sync per k steps
         if active == 0:
             break
-        # A compaction is ~20 small ops of host time, and with graphs a capture: compact
-        # only when it saves the device far more (the rays still running fall fast).
+        # A compaction is ~20 small ops of host time (with graphs, copies into the buffers of
+        # another cached graph): compact only when it saves the device far more.
         if compact and active <= len(ray) // (8 if graphs else 2):
             for i, name in enumerate(names):
-                out[name][ray] = state[3 + i]
-            keep = running.nonzero()[:, 0]
+                out[name][ray] = state[3 + i][:len(ray)]
+            keep = running.nonzero()[:, 0]  # padding rows never run: keep < len(ray)
             ray = ray[keep]
             fixed = (fixed[0][:, keep], fixed[1][keep])
             state = [x[keep] for x in state]
+            if cache:
+                fixed, state = _padded(fixed, state, m)
             graph = None
     for i, name in enumerate(names):
-        out[name][ray] = state[3 + i]
+        out[name][ray] = state[3 + i][:len(ray)]
     return (Hits(t=out["t"], triangle=out["tri"].long(), u=out["u"], v=out["v"]),
             {"steps": out["steps"].long(), "tests": out["tests"].long()})
 
@@ -1614,20 +1632,48 @@ def _fast_steps(fixed, state, tables, m: int, k: int, any_hit: bool):
     return state
 
 
+def _graph_size(n: int) -> int:
+    """The number of rays a graph is captured for: ``n`` rounded up to a multiple of a
+    sixteenth of its power of two (at most ~12% padding), so that the sizes a compaction
+    produces repeat from call to call and their graphs are reused."""
+    quantum = max(128, 1 << max(0, n.bit_length() - 4))
+    return -(-n // quantum) * quantum
+
+
+def _padded(fixed, state, m: int):
+    """``fixed`` and ``state`` padded with finished rays (node ``m``, no hit) up to
+    ``_graph_size``; the real rays stay first."""
+    n = len(fixed[1])
+    pad = _graph_size(n) - n
+    if pad == 0:
+        return fixed, state
+    columns = torch.nn.functional.pad(fixed[0], (0, pad))
+    fill = (m, 0, 0, math.inf, -1, 0, 0, 0, 0)  # node, slot, end, t, tri, u, v, steps, tests
+    state = [torch.cat((x, torch.full((pad,), f, dtype=x.dtype, device=x.device)))
+             for x, f in zip(state, fill)]
+    return (columns, torch.nn.functional.pad(fixed[1], (0, pad))), state
+
+
 class _StepGraph:
-    """One compiled call of :func:`bvh_closest_hit_fast`'s steps, updating the state in
-    place (:func:`_fast_steps_in_place`), captured in a CUDA graph and replayed: a graph
-    launch instead of a compiled call (whose Python wrapper costs more host time than its
-    kernel's device time), and no copies: the kernel writes the state where it read it.
+    """The ``calls`` compiled calls of one look of :func:`bvh_closest_hit_fast`, updating
+    the state in place (:func:`_fast_steps_in_place`), captured once in a CUDA graph for a
+    number of rays and replayed at every look of every later traversal of that size: one
+    graph launch per look instead of ``calls`` compiled calls (whose Python wrappers cost
+    more host time than their kernels' device time), and no capture after a compaction
+    once the sizes have been seen.
 
-    The state tensors (fresh after each compaction) are the graph's buffers. A capture
-    costs about one compiled call, so a compaction (a new number of rays) stays cheap."""
+    The graph reads and writes its own buffers (``fixed`` and ``state`` of the capture);
+    :meth:`run` copies other tensors of the same size into them first. A walk packed inside
+    the call (``walk=None``) has tables no later call reads: its graphs hold one call,
+    replayed ``calls`` times, and are not kept (a capture then costs one compiled call)."""
 
-    def __init__(self, steps, fixed, state, args):
-        self.state = state
-        # One real call first, outside the capture: whatever the compiler still has to
-        # (re)compile for these shapes happens there (its steps are steps of the walk).
-        steps(fixed, state, *args)
+    def __init__(self, steps, fixed, state, args, calls: int):
+        self.fixed, self.state, self.args = fixed, state, args
+        # One call first, outside the capture, on a copy of the state: whatever the compiler
+        # still has to (re)compile for these shapes happens there, and the walk itself
+        # advances only by the graph's steps, so every traversal of these rays sees the
+        # same sizes at its compactions and a warm one captures nothing.
+        steps(fixed, [x.clone() for x in state], *args)
         # capture_begin/end on a side stream, not the torch.cuda.graph context: that one
         # runs gc.collect() and empties the cache at every capture (tens of ms each).
         self.graph = torch.cuda.CUDAGraph()
@@ -1635,14 +1681,41 @@ class _StepGraph:
         side.wait_stream(torch.cuda.current_stream())
         with torch.cuda.stream(side):
             self.graph.capture_begin()
-            steps(fixed, state, *args)
+            for _ in range(calls):
+                steps(fixed, state, *args)
             self.graph.capture_end()
         torch.cuda.current_stream().wait_stream(side)
 
-    def run(self, calls: int):
-        for _ in range(calls):
+    def run(self, fixed, state, replays: int = 1):
+        """Replay ``replays`` times on ``fixed`` and ``state`` (copied into the graph's
+        buffers unless they are them); returns the buffers holding the new state."""
+        for mine, theirs in zip((*self.fixed, *self.state), (*fixed, *state)):
+            if mine is not theirs:
+                mine.copy_(theirs)
+        for _ in range(replays):
             self.graph.replay()
         return self.state
+
+
+_GRAPHS: collections.OrderedDict = collections.OrderedDict()
+_MAX_GRAPHS = 32
+
+
+def _step_graph(steps, fixed, state, tables, m: int, fuse: int, any_hit: bool, calls: int):
+    """The cached :class:`_StepGraph` for these tables and this size (least recently used
+    ones dropped beyond ``_MAX_GRAPHS``). The key holds the tables' addresses and the entry
+    the tables themselves, so a cached graph never reads freed memory."""
+    key = (len(fixed[1]), fixed[0].dtype, fixed[0].device, m, fuse, any_hit, calls,
+           tuple(t.data_ptr() for t in tables))
+    entry = _GRAPHS.get(key)
+    if entry is not None and all(a is b for a, b in zip(entry[0], tables)):
+        _GRAPHS.move_to_end(key)
+        return entry[1]
+    graph = _StepGraph(steps, fixed, state, (tables, m, fuse, any_hit), calls)
+    _GRAPHS[key] = (tables, graph)
+    while len(_GRAPHS) > _MAX_GRAPHS:
+        _GRAPHS.popitem(last=False)
+    return graph
 
 
 def _fast_step(ox, oy, oz, dx, dy, dz, ix, iy, iz, t_min, t_max, base,
