@@ -452,6 +452,9 @@ def ray_sphere(origins, directions, center, radius, t_min=0.0, t_max=math.inf):
       perpendicular to the ray) does not;
     * ``q = -(b + sign(b) sqrt(disc))``, roots ``c / q`` and ``q / a``: no subtraction of
       nearly equal numbers for the smaller root.
+    The nearer root in ``[t_min, t_max]`` wins, else the farther (a ray starting inside the
+    sphere, or spawned on it with ``t_min > 0``, finds the far side). NaN/inf origins or
+    directions, a zero direction and a negative radius give ``inf``, never NaN.
     """
     _, s = check_inputs(
         {"origins": (origins, (3,)), "directions": (directions, (3,)), "center": (center, (3,))},
