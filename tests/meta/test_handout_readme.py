@@ -1,5 +1,6 @@
 """The handout's ``labs/README.md`` and a student's first step with it: write one function
-pair from its docstring, and the score goes up by exactly the points of its tests."""
+pair from its docstring, and the README's command for its task scores exactly the points
+of its tests."""
 
 from __future__ import annotations
 
@@ -63,16 +64,22 @@ def test_one_task_raises_the_score_by_its_points(handout, tmp_path):
         text = text.replace(skeleton[name], solution)
     lab_file.write_text(text)
 
+    # The README's command for the task: exactly task 1's tests run.
+    command = "rtcourse grade --lab 0 --task 1"
+    assert f"`{command}`" in (handout / LABS_README).read_text()
     results = tmp_path / "results.json"
-    proc = subprocess.run([sys.executable, "-m", "course.cli", "grade", "--lab", "0",
+    proc = subprocess.run([sys.executable, "-m", "course.cli", *command.split()[1:],
                            "--json", str(results)], cwd=handout, capture_output=True,
                           text=True, timeout=600, check=False)
     assert results.exists(), proc.stdout[-3000:] + proc.stderr[-3000:]
     data = json.loads(results.read_text())
     lab = lab_catalog([handout / "tests" / "test_lab0_interop.py"])[0]
     # Tests that call only these functions (the bad-input test also needs linear_to_srgb8).
-    earned = sum(t.points for t in lab.graded() if t.calls and t.calls <= set(names))
+    earned = sum(t.points for t in lab.graded(1) if t.calls and t.calls <= set(names))
     assert earned > 0
     assert data["score"] == pytest.approx(earned), proc.stdout[-3000:]
-    assert data["max_score"] == pytest.approx(lab.points())
-    assert f"lab 0: {earned:.2f} / {lab.points():.2f}" in proc.stdout
+    assert data["max_score"] == pytest.approx(lab.points(1))
+    assert f"lab 0: {earned:.2f} / {lab.points(1):.2f}" in proc.stdout
+    # The task that lost points shows its first failure under its row, not a log.
+    assert "task 1: write `linear_to_srgb8` (not implemented yet)" in proc.stdout, proc.stdout
+    assert len(proc.stdout.strip().splitlines()) <= 12, proc.stdout
