@@ -1,4 +1,4 @@
-"""Lab 0 showcase: one frame of the rotating triangle, through the whole interop pipeline.
+"""Lab 0 showcase: frames of the rotating triangle, through the whole interop pipeline.
 
 FrameLoop renders into its one packed framebuffer on the device, a FrameDownloader brings
 it to (pinned, on CUDA) host memory, unpack_rgba8 turns the words back into sRGB bytes
@@ -24,10 +24,22 @@ def render(lab, device, size: int = 256):
         return downloader.receive()
 
     timing = time_fn(frame, repeats=10, warmup=2, device=device)
-    # The picture: frame 20, drawn into the loop's own framebuffer and downloaded.
-    downloader.submit(lab.render_rotating_triangle(20, loop.framebuffer))
-    host = downloader.receive()
-    image = from_srgb8(lab.unpack_rgba8(host)[..., :3])
+    # The picture: four frames of the loop (0, 10, 20, 30 of its 120-frame turn), each
+    # drawn into one quarter-size framebuffer and downloaded through the double-buffered
+    # staging, as a 2 x 2 film strip.
+    half = size // 2
+    strip = lab.FrameLoop(half, half, device)
+    small = lab.FrameDownloader((half, half), device, num_buffers=2)
+    tiles = []
+    for n in (0, 10, 20, 30):
+        small.submit(lab.render_rotating_triangle(n, strip.framebuffer))
+        tiles.append(from_srgb8(lab.unpack_rgba8(small.receive())[..., :3]))
+    image = torch.ones(size, size, 3) * 0.6  # the strip's frame lines
+    gap = 1
+    for k, tile in enumerate(tiles):
+        r, c = divmod(k, 2)
+        image[r * half + gap:(r + 1) * half - gap, c * half + gap:(c + 1) * half - gap] = \
+            tile.cpu()[gap:half - gap, gap:half - gap]
 
     nbytes = size * size * 4
     info = {"frame_ms": timing.median * 1e3, "frames_per_second": 1 / timing.median,

@@ -1,5 +1,8 @@
 """Lab 6 showcase: Suzanne rasterized, smooth-shaded, with ray-traced shadows on a floor.
 
+The inset shows the rasterizer's visibility buffer: the id of the triangle that won each
+pixel's depth test, one colour per triangle.
+
 Primary visibility comes from the lab's compute rasterizer (``rasterize_mesh``), shading
 from its ``shade`` (interpolated vertex normals, one directional sun), and shadows from its
 ``hybrid_shadows``: one shadow ray per visible pixel that faces the sun, traced by the small
@@ -149,6 +152,18 @@ def render(lab, device, size: int = 256):
              + torch.tensor(SUN_RGB, device=device) * (lambert * ~shadowed)[..., None])
     image = torch.where((face >= 0)[..., None], albedo * light,
                         torch.tensor(BACKGROUND, device=device))
+    # Inset: the visibility buffer itself, one colour per triangle id (the id half of the
+    # packed depth|id word each pixel's atomic minimum kept): the rasterizer's output.
+    k = max(size // 3, 1)
+    rows = torch.arange(k, device=device) * face.shape[0] // k
+    cols = torch.arange(k, device=device) * face.shape[1] // k
+    ids = face[rows[:, None], cols[None, :]]
+    hashed = (ids[..., None] * torch.tensor([2654435761, 40503, 97], device=device)) % 251
+    inset = torch.where((ids >= 0)[..., None], 0.1 + 0.9 * (hashed.float() / 250) ** 2,
+                        torch.tensor(BACKGROUND, device=device))
+    image = image.clone()
+    image[:k + 2, :k + 2] = 0.8  # a light frame around the inset
+    image[1:k + 1, 1:k + 1] = inset
     covered = face >= 0
     info = {"triangles": mesh.num_faces, "raster_ms": raster_s * 1e3, "shade_ms": shade_s * 1e3,
             "shadow_rays": int((lit >= 0).sum()), "shadow_ms": shadow_s * 1e3,
