@@ -370,6 +370,7 @@ def assert_image_close(actual, expected, *, name: str, atol: float = 0.0, rtol: 
     """
     if kind not in ("color", "depth", "id"):
         raise ValueError(f"kind: expected 'color', 'depth' or 'id', got {kind!r}")
+    actual, expected = _as_tensor(actual, name), _as_tensor(expected, f"expected {name}")
     try:
         if exact:
             assert_equal(actual, expected, name=name, where=where)
