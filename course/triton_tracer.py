@@ -18,25 +18,38 @@ different warps never wait for each other.
 
 Each step of the walk does, per lane (see course.flat_bvh for the layouts and the contract):
 
-1. POP: a lane with no node and no leaf work pops its stack (or finishes when it is empty);
-2. TRAVERSE: a lane at a node reads it; at an interior node it tests both children's boxes,
-   goes to the nearer hit child and pushes the farther; at a leaf it takes its triangle
-   range as pending work;
-3. INTERSECT: a lane with pending leaf work tests one triangle (Möller–Trumbore).
+1. TRAVERSE: a lane at an interior node reads its row of ``pairs`` (both children's boxes
+   and links: four 16-byte loads, the layout the CUDA C kernel reads), tests both boxes,
+   goes to the nearer hit child and pushes the farther; a leaf child becomes pending work;
+2. INTERSECT: a lane with pending leaf work tests one triangle (Möller–Trumbore, three
+   16-byte loads), or two with ``tris_per_step=2``;
+3. POP: a lane with no node pops its stack (or finishes when it is empty and its leaf is
+   done). With ``speculate`` (the default) it does so even while its leaf is being tested,
+   parking at most one more leaf: it then takes part in both stages of a step instead of
+   idling through one (Aila & Laine's speculative traversal).
 
 Stages no lane needs are skipped (``uniform_branches``, on by default): before TRAVERSE and
-INTERSECT the program votes over its lanes and branches around the stage when none needs
-it, as a warp does when none of its threads takes a branch. With one-warp programs this
-took the H200's rays/s from 2.85 to 3.12 G (primary) and 1.13 to 1.32 G (diffuse), and
-the uber kernel's frames from 0.49 to 0.35 ms (Cornell); see
-bench/results/nvidia-h200/lab3_gpu/.
+INTERSECT the program votes over its lanes (``redux.sync``) and branches around the stage
+when none needs it, as a warp does when none of its threads takes a branch. The kernel
+itself leaves out rays that cannot hit and takes numbers for ``t_min``/``t_max`` as
+numbers, so a call is one launch.
+
+What the knobs measured on an H200 (bench/results/nvidia-h200/lab3_packed/: 1M rays on the
+bunny, one warp per program): skipping stages 5.7 -> 4.9 G primary rays/s without it;
+speculation +20% primary (5.7 -> 6.9 G), +8% diffuse (1.95 -> 2.10 G); the stack's top four
+entries in registers (``stack_regs=4``) cost 12% (6.5 -> 5.7 G) against the stack in
+memory; two triangle tests per step +10% primary and -4% diffuse; 64 lanes per warp (two
+rays per thread) or two warps per program were slower. The CUDA C kernel on the same rays:
+11.8 G primary, 3.2 G diffuse.
 
 The stack. Triton has no per-lane arrays with dynamic indices in registers, so each lane's
 stack is a column of a scratch buffer in global memory, ``stack[level, lane]``: entries of
 one level of neighbouring lanes are neighbours, so pushes and pops of a warp at similar
 depths touch few cache lines (the interleaving CUDA gives local memory). It is what the
 CUDA kernel's local-memory stack is, too: both live in L1/L2-cached device memory. A lane
-owns its column for the program's lifetime, so nothing needs synchronising.
+owns its column for the program's lifetime, so nothing needs synchronising. With
+``stack_regs=4`` the top four entries stay in registers (shifted on every push and pop)
+and only deeper ones go to the buffer.
 
 Accuracy contract: that of course.flat_bvh (float32 slab test with NaN-safe zero
 directions and Ize's widened exit, float32 Möller–Trumbore with IEEE division, closed
@@ -80,7 +93,9 @@ DEFAULT_NUM_WARPS = 1
 DEFAULT_UNIFORM = True
 DEFAULT_STACK_REGS = 4
 DEFAULT_TRIS_PER_STEP = 1
-DEFAULT_SPECULATE = False
+DEFAULT_SPECULATE = True
+# The uber kernel's walk, as measured for its frames (bench/results/nvidia-h200/lab3_packed/).
+UBER_STACK_REGS, UBER_TRIS_PER_STEP, UBER_SPECULATE = 4, 1, False
 NONE = tl.constexpr(-2147483648) if tl is not None else -2147483648
 """The walk's "no node" (int32 min: every other negative value is a leaf's ``~first``)."""
 
@@ -779,8 +794,8 @@ def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
                 o, d, out, n, pairs, root, tris_f, tris_i, root_ref, stack, lanes, mat_id,
                 mats, lights, *colours, float(offset), N_LIGHTS=n_lights, MAX_DEPTH=max_depth,
                 BLOCK=block, EXIT=EXIT_SCALE, UNIFORM=bool(uniform_branches), VEC=compiled,
-                SANITIZE=not compiled, REGS=DEFAULT_STACK_REGS, TRIS=DEFAULT_TRIS_PER_STEP,
-                SPECULATE=DEFAULT_SPECULATE, num_warps=num_warps)
+                SANITIZE=not compiled, REGS=UBER_STACK_REGS, TRIS=UBER_TRIS_PER_STEP,
+                SPECULATE=UBER_SPECULATE, num_warps=num_warps)
     if return_info:
         return out, _info("whitted_uber", handle, num_warps, block)
     return out

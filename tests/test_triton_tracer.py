@@ -69,14 +69,14 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
     deep = build_flat_bvh(case["vertices"].to(device), case["faces"].to(device), leaf_size=1)
     out["deep"] = tt.trace_flat_triton(deep, *args).to("cpu")
     out["depth"] = deep.depth
-    out["variants"] = {(regs, tris): tt.trace_flat_triton(deep, *args, stack_regs=regs,
-                                                          tris_per_step=tris).to("cpu")
-                       for regs, tris in ((0, 1), (4, 2), (0, 2))}
-    for tris in (1, 2):
-        out["variants"]["speculate", tris] = tt.trace_flat_triton(
-            deep, *args, speculate=True, tris_per_step=tris).to("cpu")
-    out["any_speculate"] = tt.trace_flat_triton(deep, *args, any_hit=True,
-                                                speculate=True).to("cpu")
+    out["variants"] = {
+        (regs, tris, spec): tt.trace_flat_triton(deep, *args, stack_regs=regs,
+                                                 tris_per_step=tris, speculate=spec).to("cpu")
+        for regs, tris, spec in ((0, 1, False), (4, 1, False), (4, 2, False), (0, 2, True),
+                                 (4, 2, True))}
+    for spec in (False, True):
+        out["any", spec] = tt.trace_flat_triton(deep, *args, any_hit=True,
+                                                speculate=spec).to("cpu")
     v, f, o, d = axis_parallel_case()
     out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
                                        o.to(device), d.to(device)).to("cpu")
@@ -108,13 +108,15 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
     assert out["empty"] == 0
     check_hits(case, out["deep"], f"{label} closest hit, leaves of 1", ref=ref)
     assert out["depth"] > 6, "the deep tree must need more than the four register entries"
-    for (regs, tris), hits in out["variants"].items():
+    for (regs, tris, spec), hits in out["variants"].items():
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
-                f"{label}: stack_regs={regs}, tris_per_step={tris} changed {field}")
-    check_hits(case, out["any_speculate"], f"{label} any hit, speculative", any_hit=True,
-               ref=ref)
-    assert torch.equal(out["any_speculate"].hit, out["deep"].hit)
+                f"{label}: stack_regs={regs}, tris_per_step={tris}, speculate={spec} "
+                f"changed {field}")
+    for spec in (False, True):
+        check_hits(case, out["any", spec], f"{label} any hit, speculate={spec}", any_hit=True,
+                   ref=ref)
+        assert torch.equal(out["any", spec].hit, out["deep"].hit)
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device="cpu")
         want = render_reference(scene, o, d)
