@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import os
 import re
+import traceback
 from functools import cache
 from pathlib import Path
 
@@ -211,9 +212,7 @@ class _Labs:
                 try:
                     module = import_file(path, f"trusted_{name}")
                 except Exception as exc:  # noqa: BLE001 (a lab file may raise anything)
-                    import traceback
-
-                    self.problems[name] = _import_problem_text(name, exc, traceback, path)
+                    self.problems[name] = _import_problem_text(name, exc, path)
                     pytest.fail(self.problems[name], pytrace=False)
                 self.loaded[name] = LocalLab(name, module)
             else:
@@ -255,7 +254,8 @@ def pytest_collection_finish(session):
             continue
 
 
-def _import_problem_text(name, exc, traceback, path) -> str:
+def _import_problem_text(name: str, exc: BaseException, path: Path) -> str:
+    """One line for a trusted lab file that raised while importing: the error and its line."""
     frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename == str(path)]
     where = f" ({name}.py, line {frames[-1].lineno})" if frames else ""
     return f"{name}.py failed to import: {type(exc).__name__}: {exc}{where}"
