@@ -352,7 +352,7 @@ def trace_flat_cuda(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf
     t, tri, u, v = module.trace(bvh.pairs, bvh.nodes, bvh.triangles, bvh.root_ref, o, d,
                                 none if lo is None else lo, lo_value,
                                 none if hi is None else hi, hi_value, bool(any_hit), block,
-                                stack_entries(bvh))
+                                stack_entries(bvh), MIN_BLOCKS if capped else 0)
     return Hits(t=t, triangle=tri, u=u, v=v)
 
 
