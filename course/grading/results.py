@@ -77,9 +77,9 @@ def _thumbnail_html(path: str) -> str:
         return ""
     data = base64.b64encode(buffer.getvalue()).decode("ascii")
     title = html.escape(Path(path).stem)
-    return (f'<figure style="display:inline-block;margin:4px"><img alt="{title}" '
-            f'src="data:image/png;base64,{data}" style="image-rendering:pixelated;'
-            f'width:{_THUMBNAIL}px"><figcaption>{title}</figcaption></figure>')
+    # Plain tags only: Gradescope sanitises HTML output and may drop styling.
+    return (f'<span>{title}: <img alt="{title}" width="{_THUMBNAIL}" '
+            f'src="data:image/png;base64,{data}"></span> ')
 
 
 @dataclass(eq=False)  # hashable: pluggy keeps plugins in sets
