@@ -1302,17 +1302,68 @@ def test_traced_visibility_primary_hits(impl, device):
 # Task 6: end to end, the lab's whole pipeline
 
 
+STAGES = ("to_clip_space", "clip_triangles", "to_screen", "rasterize", "resolve_pixels")
+
+
+def reference_stages(reference, mesh: Mesh, camera: Camera) -> dict:
+    """What each stage of ``rasterize_mesh`` returns, by the reference."""
+    mvp = camera.view_projection(F64).to(mesh.device)
+    clip = reference.to_clip_space(mesh.vertices, mvp)
+    clipped, source, weights = reference.clip_triangles(clip[mesh.faces])
+    screen = reference.to_screen(clipped, camera.width, camera.height)
+    keys = reference.rasterize(screen, camera.width, camera.height)
+    return {"to_clip_space": clip, "clip_triangles": (clipped, source, weights),
+            "to_screen": screen, "rasterize": keys,
+            "resolve_pixels": reference.resolve_pixels(keys, screen, source, weights,
+                                                       camera.width, camera.height)}
+
+
+def rasterize_mesh_with_stage(lab, stage: str, value, mesh: Mesh, camera: Camera):
+    """``lab.rasterize_mesh`` next to the lab, its ``stage`` returning ``value`` (the
+    reference's result of that stage) whatever it is given."""
+    with replaced(lab, {stage: lambda *args, **kwargs: value}):
+        return lab.rasterize_mesh(mesh, camera)
+
+
+def wrong_stage(impl, reference, mesh: Mesh, camera: Camera, check) -> str:
+    """Which stage of the lab's ``rasterize_mesh`` is wrong: swapping a stage for the
+    reference's result repairs the image when the mistake is in that stage or before it,
+    so the first stage whose swap makes ``check(face, bary)`` pass is the wrong one."""
+    stages = reference_stages(reference, mesh, camera)
+    for stage in STAGES:
+        face, bary = impl.probe(rasterize_mesh_with_stage, stage, stages[stage], mesh, camera)
+        try:
+            check(face.cpu(), bary.cpu())
+        except AssertionError:
+            continue
+        return (f"the step that is wrong: {stage} (with the reference's result of {stage} in "
+                f"place of yours the image is right; with that of any step before it, not)")
+    return ("no single step repairs the image when its result is the reference's: see the "
+            "failing tests of each step's task")
+
+
+def diagnosed(impl, reference, mesh: Mesh, camera: Camera, what: str, check):
+    """``check`` the lab's ``rasterize_mesh``; a failure names the step that is wrong."""
+    face, bary = pipeline(impl, mesh, camera)
+    try:
+        return check(face, bary)
+    except AssertionError as error:
+        hint = wrong_stage(impl, reference, mesh, camera, check)
+        raise AssertionError(f"{what}: {hint}.\n{error}") from None
+
+
 @pytest.mark.task(END_TO_END)
 @pytest.mark.points(1)
-def test_rasterize_mesh_matches_ray_tracing(impl, device):
+def test_rasterize_mesh_matches_ray_tracing(impl, reference, device):
     # Your rasterize_mesh: to_clip_space, clip_triangles, to_screen, rasterize (coverage,
     # pack_depth_id, depth_test) and resolve_pixels together; every other task's tests give
-    # a task the reference's results of the tasks before it.
+    # a task the reference's results of the tasks before it. A failure names the step.
     mesh, camera = scene("suzanne")
     mesh = mesh.to(device)
-    face, _ = pipeline(impl, mesh, camera)
-    rate = check_visibility(face, mesh.to("cpu"), camera, "rasterize_mesh of Suzanne (96x64)",
-                            agree=0.995)
+    rate = diagnosed(impl, reference, mesh, camera, "rasterize_mesh of Suzanne (96x64)",
+                     lambda face, _: check_visibility(face, mesh.to("cpu"), camera,
+                                                      "rasterize_mesh of Suzanne (96x64)",
+                                                      agree=0.995))
     face24, _ = pipeline(impl, mesh, camera, depth_bits=24)
     check_visibility(face24, mesh.to("cpu"), camera, "rasterize_mesh(depth_bits=24) of Suzanne",
                      agree=0.99)
@@ -1321,22 +1372,33 @@ def test_rasterize_mesh_matches_ray_tracing(impl, device):
                      "rasterize_mesh(cull_backfaces=True) of Suzanne", agree=0.99)
     print(f"raster vs float64 ray tracing: {rate:.3%} of pixels differ")
     if device != "cpu":
+        face, _ = pipeline(impl, mesh, camera)
         cpu_face, _ = pipeline(impl, mesh.to("cpu"), camera)
         assert_equal(face, cpu_face, name="rasterize_mesh: CUDA vs CPU id buffers (bit-identical)",
                      where="pixel")
     # Perspective-correct barycentrics through the whole pipeline, the near plane crossed.
     for dtype, tol in ((torch.float32, 2e-4), (torch.float64, 1e-9)):
         slanted, _, slanted_camera = slanted_scene(device, dtype)
-        face, bary = pipeline(impl, slanted, slanted_camera)
+        what = f"rasterize_mesh ({dtype}) of a floor crossing the near plane"
+        diagnosed(impl, reference, slanted, slanted_camera, what,
+                  exact_barycentrics(slanted, slanted_camera, tol, what))
+
+
+def exact_barycentrics(mesh: Mesh, camera: Camera, tol: float, what: str):
+    """A check of ``(face, bary)``: the barycentrics of the exact point where each pixel's
+    ray meets the face shown there, within ``tol``."""
+    rays = primary_rays(camera, device="cpu", dtype=F64)
+    tris = mesh.triangles().cpu().to(F64)
+
+    def check(face, bary):
         covered = face >= 0
-        rays = primary_rays(slanted_camera, device="cpu", dtype=F64)
+        assert int(covered.sum()) > 600, f"{what}: the slanted planes fill the view"
         f = face.reshape(-1)[covered.reshape(-1)]
-        exact, _ = ray_plane_barycentrics(slanted.triangles().cpu().to(F64)[f],
-                                          rays.origins[covered.reshape(-1)],
+        exact, _ = ray_plane_barycentrics(tris[f], rays.origins[covered.reshape(-1)],
                                           rays.directions[covered.reshape(-1)])
         assert_close(bary[covered].double(), exact, atol=tol, name=(
-            f"rasterize_mesh ({dtype}) of a floor crossing the near plane: barycentrics vs the "
-            f"exact ray/plane point"), where="covered pixel")
+            f"{what}: barycentrics vs the exact ray/plane point"), where="covered pixel")
+    return check
 
 
 @pytest.mark.task(END_TO_END)

@@ -6,8 +6,8 @@ the grader, given building blocks, the reference's visibility buffer) and grade 
 whole chain in one small end-to-end task (``END_TO_END`` in the grader), which a mistake
 anywhere may also cost. Here a shipped mutant of an early task is graded on the tests of
 every task that used to carry such a mistake further, and may lose points only in its own
-task and the end-to-end one; where the end-to-end test names the step that is wrong, the
-name must be the mutated one.
+task and the end-to-end one; where the end-to-end test names the step that is wrong (Labs 3
+and 6), the name must be the mutated one.
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ SLOW_CASES = [
          "render_persistent or whole_tracer", names="offset_origins"),
     # Lab 6: no near-plane clipping (task 1) under rasterize_mesh, shading and shadows.
     Case("no_near_plane_clipping", 1, "clip_triangles or perspective_correct_exact or "
-         "shade_flat or hybrid or rasterize_mesh"),
+         "shade_flat or hybrid or rasterize_mesh", names="clip_triangles"),
 ]
 
 
@@ -98,7 +98,7 @@ def check_isolated(case: Case, data: dict) -> None:
         outputs = [t["output"] for t in data["tests"]
                    if t["number"] == f"{lab}.{e2e}" and t["score"] < t["max_score"]]
         assert outputs, f"mutant {case.mutant}: the end-to-end task passed"
-        assert all(f"the step that is wrong: {case.names}" in o for o in outputs), (
+        assert any(f"the step that is wrong: {case.names}" in o for o in outputs), (
             f"mutant {case.mutant}: the end-to-end failure must name {case.names} as the "
             f"wrong step: {outputs[0][:600]}")
 
