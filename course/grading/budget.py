@@ -84,8 +84,8 @@ def settings_text(labs=None) -> str:
         return text + (" (default)" if value <= default else "")
 
     measured = f" ({MEASURED_WITH})" if MEASURED_WITH else ""
-    lines = [("Gradescope settings (the assignment's Autograder Settings), from the "
-              f"references graded at one core{measured}:"),
+    lines = [("Gradescope settings for the assignment's Autograder Settings, from the "
+              f"references\ngraded at one core{measured}:"),
              (f"{'lab':>5}  {'peak memory':>11}  {'CPU time':>8}   {'memory':<16} "
               f"{'CPUs':<15} timeout")]
     combined = autograder_setting(labs) if len(rows) > 1 else None
@@ -98,9 +98,9 @@ def settings_text(labs=None) -> str:
                             f"{row.timeout_minutes} min"))
     over = [r for r in rows if not r.is_default]
     if combined:
-        lines.append("  (all: one autograder grading these labs together)")
+        lines.append("  (all: one autograder grading these labs one after another, estimated\n"
+                     "  from their rows; one autograder per lab is what was measured)")
     if over:
-        lines.append("Set these where they differ from the defaults: above the default "
-                     f"{DEFAULT_MEMORY_MB} MB the container is killed and the student gets "
-                     "'Killed' and 0.")
+        lines.append("Set these where they differ from the defaults: over its memory the "
+                     "container is\nkilled, and the student sees 'Killed' and 0 points.")
     return "\n".join(lines)
