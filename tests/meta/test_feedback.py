@@ -7,6 +7,7 @@ task-selection check collects every lab's graders once without running them.
 
 from __future__ import annotations
 
+import html
 import json
 import os
 import re
@@ -45,12 +46,32 @@ def norms(x):
 """
 
 
+# A grader of the toy lab that compares an image: its failure must come with pictures.
+IMAGE_GRADER = """\
+import pytest
+import torch
+
+from course.testing import assert_image_close
+
+LAB_MODULE = "lab9_toy"
+TASKS = {3: "an image"}
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(1)
+def test_double_image(impl):
+    image = torch.linspace(0, 0.4, 48).reshape(4, 4, 3)
+    assert_image_close(impl.double(image), 2 * image, rtol=1e-6, name="double(image)")
+"""
+
+
 @pytest.fixture(scope="module")
 def toy(tmp_path_factory):
     """The toy course and submissions: wrong, syntax error, misnamed, empty."""
     base = tmp_path_factory.mktemp("feedback")
     course = base / "course"
     shutil.copytree(HERE / "toycourse", course)
+    (course / "tests" / "test_lab9_image.py").write_text(IMAGE_GRADER)
     subs = {}
     for name, files in {"wrong": {"lab9_toy.py": WRONG},
                         "syntax": {"lab9_toy.py": "import torch\n\ndef double(x)\n    return x\n"},
@@ -65,8 +86,8 @@ def toy(tmp_path_factory):
     return course, subs
 
 
-def _run(args, cwd, timeout=300, progress="0"):
-    env = dict(os.environ, RTCOURSE_TIME_LIMIT="30", RTCOURSE_PROGRESS=progress)
+def _run(args, cwd, timeout=300, progress="0", **env):
+    env = dict(os.environ, RTCOURSE_TIME_LIMIT="30", RTCOURSE_PROGRESS=progress, **env)
     return subprocess.run([sys.executable, *args], cwd=cwd, env=env, capture_output=True,
                           text=True, timeout=timeout, check=False)
 
@@ -109,23 +130,35 @@ def test_pytest_failure_is_short_and_message_first(toy):
 def test_grade_prints_first_failure_per_task_and_caps_results_json(toy, tmp_path):
     course, subs = toy
     results = tmp_path / "results.json"
+    pictures = tmp_path / "pictures"
     proc = _run(["-m", "course.cli", "grade", "--impl", str(subs["wrong"]), "--lab", "9",
-                 "--json", str(results)], course)
+                 "--json", str(results)], course, RTCOURSE_FAILURE_DIR=str(pictures))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = proc.stdout.strip().splitlines()
-    assert len(lines) <= 20, proc.stdout  # a table, not a log
+    assert len(lines) <= 24, proc.stdout  # a table, not a log
     row = next(i for i, ln in enumerate(lines) if re.match(r"\s+9\s+1\s+double", ln))
     assert "not close" in "\n".join(lines[row + 1:row + 4])
     assert any("task 2: write `norms` (not implemented yet)" in ln for ln in lines)
     data = json.loads(results.read_text())
     for test in data["tests"]:
-        assert len(test["output"]) <= OUTPUT_LIMIT, test["output"]
+        text = test["output"]
+        if test.get("output_format") == "html":  # the text, then the pictures
+            text = html.unescape(text.split("<pre>", 1)[1].split("</pre>", 1)[0])
+        assert len(text) <= OUTPUT_LIMIT, test["output"]
     outputs = {t["name"].split(": ", 1)[1]: t["output"] for t in data["tests"]}
     assert outputs["test_norms[cpu]"] == \
         "task 2: write `norms` (not implemented yet)"
     double = outputs["test_double[cpu]"]
     assert double.startswith("test_double[cpu]: lab 9 task 1") and "not close" in double
     assert "what your code printed" in double  # after the message, cut short
+    # The image test: three pictures on disk, named in the message, inline in results.json.
+    image = next(t for t in data["tests"] if "test_double_image" in t["name"])
+    assert image["output_format"] == "html" and image["output"].startswith("<pre>")
+    assert image["output"].count("data:image/png;base64,") == 3
+    written = sorted(p.name for p in pictures.rglob("*.png"))
+    assert written == ["difference.png", "expected.png", "got.png"], written
+    folder = next(pictures.rglob("got.png")).parent
+    assert str(folder) in image["output"] and str(folder) in proc.stdout
 
 
 def test_submission_problems_are_said_once(toy, tmp_path):
