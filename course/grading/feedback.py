@@ -30,7 +30,6 @@ IMPORT_FAILED = "the lab module failed to import: "
 @dataclass
 class Feedback:
     text: str  # the short text, message first
-    unwritten: str | None = None  # the function named by a NotImplementedError
     problem: str | None = None  # a submission problem shared by every test of a lab
 
 
@@ -115,9 +114,9 @@ def short_feedback(*, exc: BaseException, frames, test_file, folder, task, task_
             owner = stated if stated is not None else task_of(fn.split(".")[0])
             if owner is not None and task is not None and owner != task:
                 return Feedback(f"needs `{fn}` (task {owner}) first: this test of task {task} "
-                                f"calls it, and it is not implemented yet", unwritten=fn)
+                                f"calls it, and it is not implemented yet")
             return Feedback(f"task {owner if owner is not None else task}: write `{fn}` "
-                            f"(not implemented yet)", unwritten=fn)
+                            f"(not implemented yet)")
     if IMPORT_FAILED in text:
         problem = import_problem(lab_module or "the lab", text, folder)
         return Feedback(problem, problem=problem)
