@@ -2,6 +2,7 @@
 
     python bench/lab5_froxel.py --device cpu|cuda [--small] [--out DIR]
     python bench/lab5_froxel.py --device cuda --gpu-target     # the talk's 1080p frame only
+    python bench/lab5_froxel.py --device cpu --only volumes    # one series (its own files)
 
 Every row renders one frame of a fog scene with ``render_froxels`` and compares it with
 ``course.froxel_reference.reference_render`` (brute-force single scattering, float64, exact
@@ -378,6 +379,8 @@ def main(argv=None):
     parser.add_argument("--gpu-target", action="store_true",
                         help="time only the talk's 1080p frame and print ms/frame")
     parser.add_argument("--out", default=None)
+    parser.add_argument("--only", choices=("resolution", "volumes", "temporal", "frame"),
+                        default=None, help="run one series, into lab5_froxel_<series>.*")
     args = parser.parse_args(argv)
     device = default_device(args.device)
     if args.gpu_target:
@@ -390,34 +393,44 @@ def main(argv=None):
     table.metadata["command"] = "python " + shlex.join(
         ["bench/lab5_froxel.py", *(sys.argv[1:] if argv is None else argv)])
     print(f"Lab 5 bench on {device} ({'small' if cfg is SIZES['small'] else 'full'})", flush=True)
-    bench_resolution(table, cfg, device)
-    bench_volumes(table, cfg, device)
-    bench_temporal(table, cfg, device)
-    bench_temporal(table, cfg, device, lights="sun")
-    if device.type == "cuda" or not args.small:
+    run = {args.only} if args.only else {"resolution", "volumes", "temporal", "frame"}
+    if "resolution" in run:
+        bench_resolution(table, cfg, device)
+    if "volumes" in run:
+        bench_volumes(table, cfg, device)
+    if "temporal" in run:
+        bench_temporal(table, cfg, device)
+        bench_temporal(table, cfg, device, lights="sun")
+    if "frame" in run and (device.type == "cuda" or not args.small):
         bench_frame(table, device, repeats=cfg["repeats"])
-    else:  # the 1080p frame on 2 CPU cores takes seconds: time a quarter-size frame
+    elif "frame" in run:  # the 1080p frame on 2 CPU cores takes seconds: a quarter-size one
         bench_frame(table, device, repeats=1, size=(480, 270))
     out.mkdir(parents=True, exist_ok=True)
-    table.to_json(out / "lab5_froxel.json")
+    stem = f"lab5_froxel_{args.only}" if args.only else "lab5_froxel"
+    table.to_json(out / f"{stem}.json")
     notes = ("error: mean |pipeline - reference| / mean reference radiance over every "
              f"{cfg['stride']}th pixel; max_error: largest pixel error / largest reference "
              "radiance; seconds: median per frame; froxels_lit and light_evaluations from the "
-             "pipeline's report (only froxels with medium are lit, culled lights not counted).")
-    (out / "lab5_froxel.md").write_text(
+             "pipeline's report (only froxels with medium are lit, culled lights not counted). "
+             f"volumes: every {max(1, cfg['stride'] // 8)}th pixel, mean_error the signed error "
+             "of the mean radiance.")
+    (out / f"{stem}.md").write_text(
         "# Lab 5: the froxel pipeline, speed against accuracy\n\n"
         f"Device: {table.metadata['device']} ({torch.get_num_threads()} torch threads); "
         f"torch {table.metadata['torch']}; "
         f"{table.metadata['date']}.\n\nCommand: `{table.metadata['command']}`\n\n{notes}\n\n"
         + table.to_markdown() + "\n")
     rows = [r for r in table.rows if r["series"] in ("resolution", "shadows")]
-    pareto_plot(rows, x="seconds", y="error", label="setting", group="series",
-                path=out / "pareto_resolution.png",
-                title="Froxel resolution: time per frame against error")
+    if rows:
+        pareto_plot(rows, x="seconds", y="error", label="setting", group="series",
+                    path=out / "pareto_resolution.png",
+                    title="Froxel resolution: time per frame against error")
     volumes = [r for r in table.rows if r["series"] == "volumes"]
-    pareto_plot(volumes, x="seconds", y="error", label="setting", group="group",
-                path=out / "pareto_volumes.png",
-                title="Volumetric shadows: volume resolution and bounds, time against error")
+    if volumes:
+        pareto_plot(volumes, x="seconds", y="error", label="setting", group="group",
+                    path=out / "pareto_volumes.png",
+                    title="Volumetric shadows: volume resolution and bounds, time against "
+                          "error")
     temporal = [r for r in table.rows if r["series"] == "temporal" and r.get("seconds")]
     if temporal:
         pareto_plot(temporal, x="frames", y="error", label="setting", group="lights",

@@ -591,11 +591,14 @@ def _froxel_kernel(nodes_ptr, lit_ptr, media_ptr, listed_ptr, camf_ptr, camd_ptr
                 ty = ry / dm
                 tz = rz / dm
                 falloff = tl.where(dist < tl.load(frow + 9), 1.0 / (dm * dm), 0.0)
-                if tl.load(irow + 3) != 0:  # a point light's path through the media
+                # A point light's path through the media, marched only where some lane of
+                # the column is within its range (a listed tile's froxels mostly are not).
+                reach = lit & (falloff > 0.0)
+                if (tl.load(irow + 3) != 0) & (tl.max(reach.to(tl.int32), axis=0) > 0):
                     falloff = falloff * _segment_transmittance(
                         ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, size_z, px, py,
                         pz, tl.load(frow + 6), tl.load(frow + 7), tl.load(frow + 8),
-                        light_steps, lit & (falloff > 0.0))
+                        light_steps, reach)
                 if kind == 2:
                     cos_axis = -(tx * tl.load(frow + 3) + ty * tl.load(frow + 4)
                                  + tz * tl.load(frow + 5))
