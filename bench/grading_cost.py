@@ -15,7 +15,10 @@ Gradescope's default container has 768 MB and half a CPU (a 10-minute timeout): 
 over 768 MB or 5 CPU-minutes needs other settings, which ``rtcourse gradescope`` prints
 from :mod:`course.grading.budget` (copy a new run's numbers there).
 
-    taskset -c 0 python bench/grading_cost.py [--lab N ...] [--out PATH]
+    python bench/grading_cost.py [--lab N ...] [--cpus 0] [--out PATH]
+
+The autograder is pinned to ``--cpus`` (core 0); this script's memory sampler is not, so
+that it never takes the autograder's core.
 
 Linux only (``/proc``, ``taskset``). ``--isolation [--repeats 2]`` measures instead what
 the sandbox costs: the whole suite against the references, in-process (trusted) and
@@ -28,6 +31,7 @@ import argparse
 import json
 import os
 import resource
+import shlex
 import shutil
 import subprocess
 import sys
@@ -209,8 +213,7 @@ def main():
                   f"score {row['score']:g}/{row['max_score']:g}", flush=True)
     table.metadata.update(
         cpus=args.cpus, torch=torch.__version__, interval_s=args.interval,
-        command="taskset -c 0 python bench/grading_cost.py" if not args.lab else
-        "taskset -c 0 python bench/grading_cost.py " + " ".join(f"--lab {n}" for n in args.lab),
+        command=shlex.join([Path(sys.executable).name, *sys.argv]),
         note="run_autograder of `rtcourse gradescope --lab N` with the reference as the "
              "submission, CUDA hidden, pinned to one core; PSS of the whole process tree, "
              "sampled. Wall time is on a shared machine: cpu_seconds is the steadier number.")
