@@ -19,7 +19,7 @@ reference radiance; ``seconds`` is the median time of one frame (after warm-up).
   slices, 0.1 .. 100 m) for extinction/transmittance volume resolutions 16 .. 128 and the
   automatic one, over the media's bounds (the default) and over the whole frustum's (the
   old model, made here by adding an empty unbounded fog); ``mean_error`` is the signed
-  error of the mean radiance. Plotted as ``pareto_volumes.png``.
+  error of the mean radiance. Plotted as ``pareto_volumes_<view>.png``.
 * ``temporal``: error after 1, 8 and 32 frames of temporal integration with a static camera
   and with a camera sliding sideways (each frame against the reference from its own
   camera); 8 px x 32 slices, where the jitter has the most to add; with all the scene's
@@ -274,6 +274,17 @@ def bench_volumes(table, cfg, device):
               f"{(got.mean() / ref.mean()).item() - 1:+.4f}", flush=True)
 
 
+def plot_volumes(rows, out: Path):
+    """One Pareto plot per view of the ``volumes`` series (``pareto_volumes_<view>.png``):
+    time against error, a colour per bounds, each point labelled with its resolution."""
+    for view in dict.fromkeys(r["view"] for r in rows):
+        points = [{**r, "label": f"R {r['volume_resolution']}" + (" auto" if r["auto"] else "")}
+                  for r in rows if r["view"] == view]
+        name = view.replace(" ", "_")
+        pareto_plot(points, x="seconds", y="error", label="label", group="bounds",
+                    path=out / f"pareto_volumes_{name}.png", title=f"Volumes, {view}")
+
+
 def bench_temporal(table, cfg, device, lights="all"):
     """Temporal integration on the accuracy scene with all its lights, or the sun only."""
     scene = accuracy_scene()
@@ -425,12 +436,7 @@ def main(argv=None):
         pareto_plot(rows, x="seconds", y="error", label="setting", group="series",
                     path=out / "pareto_resolution.png",
                     title="Froxel resolution: time per frame against error")
-    volumes = [r for r in table.rows if r["series"] == "volumes"]
-    if volumes:
-        pareto_plot(volumes, x="seconds", y="error", label="setting", group="group",
-                    path=out / "pareto_volumes.png",
-                    title="Volumetric shadows: volume resolution and bounds, time against "
-                          "error")
+    plot_volumes([r for r in table.rows if r["series"] == "volumes"], out)
     temporal = [r for r in table.rows if r["series"] == "temporal" and r.get("seconds")]
     if temporal:
         pareto_plot(temporal, x="frames", y="error", label="setting", group="lights",
