@@ -375,7 +375,9 @@ def integrate_froxels(source, extinction, grid, method="energy"):
     ``T *= e^(-sigma_t D)`` (after: the slice's own medium absorbs only via the integral).
     "naive": ``L += T * S D`` (the talk's leak: no absorption within a slice, so a dense
     slice emits more light than it can). A loop over slices or prefix sums (``cumsum``
-    of the optical depths) are both fine; the result is the same to rounding.
+    of the optical depths) are both fine; the result is the same to rounding. A negative
+    extinction raises ValueError naming ``extinction`` with either method (it would give a
+    transmittance above 1).
     """
     raise NotImplementedError("not implemented yet: integrate_froxels (task 6)")
 

@@ -761,13 +761,18 @@ def integrate_froxels(source, extinction, grid, method="energy"):
     ``T *= e^(-sigma_t D)`` (after: the slice's own medium absorbs only via the integral).
     "naive": ``L += T * S D`` (the talk's leak: no absorption within a slice, so a dense
     slice emits more light than it can). A loop over slices or prefix sums (``cumsum``
-    of the optical depths) are both fine; the result is the same to rounding.
+    of the optical depths) are both fine; the result is the same to rounding. A negative
+    extinction raises ValueError naming ``extinction`` with either method (it would give a
+    transmittance above 1).
     """
     check_grid(grid)
     check_choice(method, "method", INTEGRATIONS)
     check_volume(source, "source", (*grid.shape, 3))
     dtype, device = source.dtype, source.device
     check_volume(extinction, "extinction", grid.shape, dtype, device)
+    if bool((extinction < 0).any()):
+        raise ValueError(f"extinction: expected values >= 0, got minimum "
+                         f"{extinction.min().item():.3g}")
     z = slice_depths(grid.near, grid.far, grid.slices, torch.float64, device)
     j = torch.arange(grid.ny, dtype=torch.float64, device=device) + 0.5
     i = torch.arange(grid.nx, dtype=torch.float64, device=device) + 0.5

@@ -996,6 +996,10 @@ def test_integrate_froxels_homogeneous_and_energy(impl, device):
                  small_grid(slices=32), method="trapezoid", case="an unknown method")
     expect_error("source", impl.integrate_froxels, src[..., :2].contiguous().to(device),
                  ext.to(device), small_grid(slices=32), case="2 colour channels")
+    for method in ("energy", "naive"):
+        expect_error("extinction", impl.integrate_froxels, src.to(device), -ext.to(device),
+                     small_grid(slices=32), method=method,
+                     case=f"a negative extinction ({method}: transmittance above 1)")
 
 
 @pytest.mark.task(6)
