@@ -146,8 +146,10 @@ def _raise_student_error(err: dict, where: str, redact=None):
     if not isinstance(err, dict) or not all(isinstance(err.get(k), str) for k in
                                             ("type", "message", "traceback")):
         raise WorkerCrashed(f"the worker sent a malformed error during {where}")
-    message, trace = redact(err["message"]), redact(err["traceback"])
-    text = f"{err['type']}: {message}" if err["type"] != "NotImplementedError" else message
+    # Cut first: a hostile worker's megabytes of text must not cost the grader time.
+    message, trace = redact(err["message"][:4000]), redact(err["traceback"][:4000])
+    kind = err["type"][:100]
+    text = f"{kind}: {message}" if kind != "NotImplementedError" else message
     kinds = err.get("kinds") if isinstance(err.get("kinds"), list) else []
     for name in kinds:
         cls = getattr(builtins, name, None) if isinstance(name, str) else None
@@ -340,7 +342,7 @@ class Worker:
     def request(self, message: dict, seconds: float, where: str, probe=False) -> dict:
         """Send a call (to the server) or a probe (to the keeper, which runs it in a fresh
         process) and wait ``seconds`` for the reply, counted once the worker is ready."""
-        if self.proc is None or self.proc.poll() is not None:
+        if self.proc is None or self.proc.poll() is not None or self._stale():
             self.stop()
             self.launch()
         if self.starting:
@@ -366,6 +368,16 @@ class Worker:
                 f"sys.exit/os._exit or a crash in native code ends the grading of that call")
         self._keep_output(reply)
         return reply
+
+    def _stale(self) -> bool:
+        """Between requests the server has nothing to say: if its socket reads (it ended
+        after its last reply, or sent more than one), it starts afresh."""
+        if self.starting:
+            return False
+        try:
+            return self.conn.poll(0)
+        except (EOFError, OSError):
+            return True
 
     def _tree_bytes(self) -> int:
         """Memory of every process below the keeper: the server, a probe, and whatever
