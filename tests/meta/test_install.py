@@ -10,9 +10,11 @@ on, so a Linux-only dependency would be asked of macOS too. The resolver therefo
 a small launcher that hands pip's marker evaluation the target's environment.
 
 An index that serves no separate wheel metadata (PEP 658) makes a dry run download every
-wheel it considers: gigabytes for torch's CUDA libraries on Linux. pip's ``fast-deps``
-reads just the metadata of each wheel with HTTP range requests instead (where a pip no
-longer knows that option, the test runs without it).
+wheel it considers: a few hundred MB on macOS and Windows, but gigabytes for torch's
+CUDA libraries on Linux. There torch and what it needs are resolved on their own with
+pip's ``fast-deps``, which reads just each wheel's metadata with HTTP range requests
+(where a pip no longer knows that option, without it), and the rest of the dependencies
+in a run of their own. All runs go at once: they mostly wait for the index.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ TIMEOUT = 300  # seconds for the three resolutions together (about 30 s with a n
 class Target:
     platforms: tuple[str, ...]  # pip --platform tags (each also accepts older ones on macOS)
     markers: dict  # the PEP 508 marker environment of that machine
+    torch_apart: bool = False  # resolve torch in a run of its own, reading only metadata
 
     def environment(self) -> dict:
         full = f"{PYTHON}.0"
@@ -54,7 +57,7 @@ _MANYLINUX = tuple(f"manylinux_2_{minor}_x86_64" for minor in range(17, 36)) + (
 TARGETS = {
     "Linux x86_64 (and WSL)": Target(_MANYLINUX, {
         "sys_platform": "linux", "platform_system": "Linux", "os_name": "posix",
-        "platform_machine": "x86_64"}),
+        "platform_machine": "x86_64"}, torch_apart=True),
     "macOS arm64": Target(("macosx_14_0_arm64",), {
         "sys_platform": "darwin", "platform_system": "Darwin", "os_name": "posix",
         "platform_machine": "arm64"}),
@@ -88,15 +91,28 @@ def project_requirements() -> list[str]:
     return list(project["dependencies"]) + list(project["optional-dependencies"]["dev"])
 
 
-def _resolve_command(target: Target, report: Path, scratch: Path, fast=True) -> list[str]:
-    cmd = [sys.executable, "-c", LAUNCHER, json.dumps(target.environment()),
-           "install", *(["--use-feature=fast-deps"] if fast else []), "--dry-run", "--ignore-installed", "--only-binary=:all:",
+def _resolve_command(target: Target, requirements: list[str], report: Path, scratch: Path,
+                     fast: bool) -> list[str]:
+    cmd = [sys.executable, "-c", LAUNCHER, json.dumps(target.environment()), "install",
+           *(["--use-feature=fast-deps"] if fast else []),
+           "--dry-run", "--ignore-installed", "--only-binary=:all:",
            "--python-version", PYTHON, "--implementation", "cp",
-           "--target", str(scratch), "--report", str(report),
-           "--quiet", "--progress-bar", "off", "--disable-pip-version-check", "--timeout", "20", "--retries", "2"]
+           "--target", str(scratch), "--report", str(report), "--quiet",
+           "--progress-bar", "off", "--disable-pip-version-check",
+           "--timeout", "20", "--retries", "2"]
     for platform in target.platforms:
         cmd += ["--platform", platform]
-    return cmd + project_requirements()
+    return cmd + requirements
+
+
+def _jobs(target: Target) -> list[tuple[list[str], bool]]:
+    """(requirements, fast-deps) of each resolver run for ``target``."""
+    reqs = project_requirements()
+    if not target.torch_apart:
+        return [(reqs, False)]
+    is_torch = [canonicalize_name(Requirement(r).name) == "torch" for r in reqs]
+    return [([r for r, t in zip(reqs, is_torch) if not t], False),
+            ([r for r, t in zip(reqs, is_torch) if t], True)]
 
 
 def _failure(name: str, output: str) -> str:
@@ -108,38 +124,49 @@ def _failure(name: str, output: str) -> str:
     return f"{name}: pip could not resolve the dependencies\n" + output[-3000:]
 
 
-def _installed(report: Path) -> dict[str, tuple[Version, str]]:
-    data = json.loads(report.read_text())
-    return {canonicalize_name(item["metadata"]["name"]):
-            (Version(item["metadata"]["version"]), item["download_info"]["url"])
-            for item in data["install"]}
+def _installed(reports: list[Path]) -> dict[str, tuple[Version, str]]:
+    found = {}
+    for report in reports:
+        for item in json.loads(report.read_text())["install"]:
+            found[canonicalize_name(item["metadata"]["name"])] = (
+                Version(item["metadata"]["version"]), item["download_info"]["url"])
+    return found
 
 
-def _resolve_all(tmp_path, fast=True) -> dict:
-    """Run the resolver for every target at once (the work is mostly waiting for the
-    index); return name -> (target, report path, exit code, output)."""
-    procs = {}
-    for i, (name, target) in enumerate(TARGETS.items()):
-        report = tmp_path / f"report-{i}.json"
-        cmd = _resolve_command(target, report, tmp_path / f"target-{i}", fast)
-        procs[name] = (target, report, subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            stdin=subprocess.DEVNULL))
+def _start(cmd) -> subprocess.Popen:
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            stdin=subprocess.DEVNULL)
+
+
+def _resolve_all(tmp_path) -> dict:
+    """Run every target's resolver runs at once; return name -> (target, report paths,
+    exit code, output) with the codes and outputs of a target's runs combined."""
+    procs = []
+    for name, target in TARGETS.items():
+        for reqs, fast in _jobs(target):
+            i = len(procs)
+            report, scratch = tmp_path / f"report-{i}.json", tmp_path / f"target-{i}"
+            procs.append([name, target, reqs, fast, report, scratch,
+                          _start(_resolve_command(target, reqs, report, scratch, fast))])
     runs = {}
     try:
-        for name, (target, report, proc) in procs.items():
+        for job in procs:
+            name, target, reqs, fast, report, scratch, proc = job
             try:
                 output = proc.communicate(timeout=TIMEOUT)[0]
+                if proc.returncode and fast and "fast-deps" in output:  # a pip without it
+                    job[-1] = proc = _start(_resolve_command(target, reqs, report, scratch,
+                                                             False))
+                    output = proc.communicate(timeout=TIMEOUT)[0]
             except subprocess.TimeoutExpired:
                 pytest.fail(f"{name}: pip did not resolve the dependencies in {TIMEOUT} s")
-            runs[name] = (target, report, proc.returncode, output)
+            _, reports, code, text = runs.get(name, (target, [], 0, ""))
+            runs[name] = (target, [*reports, report], code or proc.returncode, text + output)
     finally:
-        for _, _, proc in procs.values():
+        for *_, proc in procs:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
-    if fast and any(code and "fast-deps" in out for _, _, code, out in runs.values()):
-        return _resolve_all(tmp_path, fast=False)  # a pip without that feature
     return runs
 
 
@@ -155,11 +182,11 @@ def test_project_dependencies_resolve_to_wheels_everywhere(tmp_path):
         if code and offline:
             pytest.skip(f"no package index is reachable from here ({name}: {offline.group(0)})")
     problems = []
-    for name, (target, report, code, output) in runs.items():
+    for name, (target, reports, code, output) in runs.items():
         if code:
             problems.append(_failure(name, output))
             continue
-        installed = _installed(report)
+        installed = _installed(reports)
         environment = target.environment()
         for line in project_requirements():
             req = Requirement(line)

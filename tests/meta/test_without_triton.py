@@ -15,8 +15,9 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-TRITON_TESTS = sorted(str(p.relative_to(ROOT)) for p in
-                      [*ROOT.glob("tests/test_triton_*.py"), *ROOT.glob("tests/meta/test_triton_*.py")])
+TRITON_TESTS = sorted(str(p.relative_to(ROOT)) for pattern in
+                      ("tests/test_triton_*.py", "tests/meta/test_triton_*.py")
+                      for p in ROOT.glob(pattern))
 
 HIDE_TRITON = """\
 import sys
