@@ -139,7 +139,7 @@ def test_two_level_closest_hit_hidden_scenes(impl, device):
 
 @pytest.mark.task(7)
 @pytest.mark.points(0.5)
-def test_fast_bvh_closest_hit_hidden_scenes(impl, device):
+def test_fast_bvh_hidden_scenes(impl, device):
     for name, leaf_size, k in (("slivers", 2, 5), ("soup64", 4, 3), ("moved64", 3, 11)):
         mesh = on(hidden_scene(name), device)
         rays = hidden_rays(mesh, 505).to(device)
