@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import os
 import resource
 import signal
@@ -127,6 +128,20 @@ class Changed:
     value: object         # the array after the call
 
 
+@contextlib.contextmanager
+def _unobserved():
+    """The check's own copies and comparisons, hidden from the torch modes a probe may
+    have entered (an op counter or a live-value tracker must see the kernel only)."""
+    import torch
+
+    try:
+        from torch.utils._python_dispatch import _disable_current_modes
+    except ImportError:  # an older torch: no modes to hide from
+        _disable_current_modes = contextlib.nullcontext
+    with _disable_current_modes(), torch._C.DisableTorchFunction():
+        yield
+
+
 def call_checked(fn, args, kwargs):
     """Call ``fn``; return ``(result, changed, exception)``.
 
@@ -136,17 +151,19 @@ def call_checked(fn, args, kwargs):
     is the caller's decision, made from the reference's signature.
     """
     before = []
-    for i, arg in enumerate(args):
-        before += [(i, None, p, a, _copy(a)) for p, a in _walk(arg)]
-    for key, arg in kwargs.items():
-        before += [(None, key, p, a, _copy(a)) for p, a in _walk(arg)]
+    with _unobserved():
+        for i, arg in enumerate(args):
+            before += [(i, None, p, a, _copy(a)) for p, a in _walk(arg)]
+        for key, arg in kwargs.items():
+            before += [(None, key, p, a, _copy(a)) for p, a in _walk(arg)]
     result, error = None, None
     try:
         result = fn(*args, **kwargs)
     except BaseException as exc:  # a submission may raise anything, SystemExit too
         error = exc
-    changed = [Changed(pos, key, path, a) for pos, key, path, a, old in before
-               if not _same_bits(a, old)]
+    with _unobserved():
+        changed = [Changed(pos, key, path, a) for pos, key, path, a, old in before
+                   if not _same_bits(a, old)]
     return result, changed, error
 
 
@@ -331,6 +348,7 @@ def _wrap(value, key, signatures, where):
         return value
     positional = signatures.get(key) if signatures is not None else None
 
+    @functools.wraps(value)  # the probe may read its signature (course.accounting does)
     def call(*args, **kwargs):
         result, changed, error = call_checked(value, args, kwargs)
         check_written(changed, where, positional)
@@ -340,7 +358,6 @@ def _wrap(value, key, signatures, where):
             return _CheckedObject(result, key, signatures)
         return result
 
-    call.__name__ = getattr(value, "__name__", "call")
     return call
 
 
