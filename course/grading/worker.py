@@ -14,7 +14,8 @@ the pristine one. It forks
 
 The keeper is a child subreaper: whatever the submission starts, even a grandchild that
 left its session, is reparented to it and killed when the server ends or the grader
-stops the worker. Children drop to ``UID``/``GID`` when given (the grader runs as root),
+stops the worker (or dies: the keeper's parent-death signal); then it removes its
+working folder, the grader's temporary one. Children drop to ``UID``/``GID`` when given (the grader runs as root),
 cap their address space, and die with the keeper.
 
 Requests arrive as pickles from the trusted grader; replies go back as plain data (see
@@ -32,6 +33,7 @@ import dataclasses
 import functools
 import os
 import resource
+import shutil
 import signal
 import sys
 import tempfile
@@ -587,8 +589,16 @@ def main(argv):
     os.dup2(devnull, 0)
     os.close(devnull)
 
-    def stop(*_):  # the grader stops the worker, or died: the whole tree goes
+    workdir = os.getcwd()
+
+    def clean():
+        """Everything below the keeper, then its folder (the grader's temporary one)."""
         _kill_descendants()
+        if os.path.basename(workdir).startswith("rtcourse-worker-"):
+            shutil.rmtree(workdir, ignore_errors=True)
+
+    def stop(*_):  # the grader stops the worker, or died: the whole tree goes
+        clean()
         os._exit(0)
 
     signal.signal(signal.SIGTERM, stop)
@@ -626,7 +636,7 @@ def main(argv):
             break
         ctl.send_bytes(_run_probe(request, ctl_fd, folder, memory_bytes, reply_bytes, uid,
                                   gid, wire))
-    _kill_descendants()
+    clean()
     _exit_like(status)
 
 

@@ -358,3 +358,29 @@ def test_hanging_lab_grades_within_three_minutes_at_the_default_limits(tmp_path)
     assert data["score"] == 0 and data["tests"], proc.stdout[-2000:]
     assert all(t["output"].strip() for t in data["tests"])
     assert seconds < 180, f"a hanging Lab 0 took {seconds:.0f} s to grade"
+
+
+def test_a_killed_grader_leaves_nothing(tmp_path):
+    """The grader itself killed mid-run (SIGKILL: no clean-up of its own): the worker
+    notices, ends everything the submission started and removes its folder."""
+    course, sub = tmp_path / "course", tmp_path / "sub"
+    shutil.copytree(HERE / "toycourse", course)
+    shutil.copytree(HERE / "hostile" / "child_spawner", sub)
+    (tmp_path / "tmp").mkdir()
+    env = dict(os.environ, TMPDIR=str(tmp_path / "tmp"), RTCOURSE_TIME_LIMIT="60")
+    proc = subprocess.Popen([sys.executable, "-m", "course.cli", "grade", "--impl", str(sub),
+                             "--lab", "8"], cwd=course, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 240
+        while not _processes_with(MARK) and time.monotonic() < deadline:
+            time.sleep(0.2)  # until the submission's first children run
+        assert _processes_with(MARK), "the submission never started its children"
+    finally:
+        proc.kill()
+        proc.wait()
+    deadline = time.monotonic() + 30
+    while (_processes_with(str(sub)) or _processes_with(MARK)) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _processes_with(str(sub)) and not _processes_with(MARK)
+    assert not list((tmp_path / "tmp").glob("rtcourse-worker-*"))
