@@ -350,7 +350,7 @@ def _wrap(value, key, signatures, where):
         return value
     positional = signatures.get(key) if signatures is not None else None
 
-    @functools.wraps(value)  # the probe may read its signature (course.accounting does)
+    @functools.wraps(value, updated=())  # a probe may read its signature (accounting does)
     def call(*args, **kwargs):
         result, changed, error = call_checked(value, args, kwargs)
         check_written(changed, where, positional)
