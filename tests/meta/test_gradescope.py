@@ -133,12 +133,29 @@ def test_submitted_lab_full_marks_others_zero(graded):
 
 
 def test_hidden_tests_graded_with_their_visibility(graded):
-    hidden = [t for t in graded["data"]["tests"] if "odd_and_large_sizes" in t["name"]
-              or "strided_views" in t["name"]]
-    assert hidden, "the hidden Lab 0 tests did not run in the autograder"
-    assert all(t["visibility"] == "after_due_date" and t["status"] == "passed" for t in hidden)
-    visible = [t for t in graded["data"]["tests"] if t not in hidden]
-    assert all(t["visibility"] == "visible" for t in visible)
+    hidden_files = sorted((ROOT / "tests" / "hidden").glob("test_lab*_*.py"))
+    catalog = lab_catalog(hidden_files)
+    names = {(lab, t.name) for lab, info in catalog.items() for t in info.tests}
+    assert {lab for lab, _ in names} >= {0}, "no hidden graders found"
+    visible_catalog = lab_catalog(sorted((ROOT / "tests").glob("test_lab*_*.py")))
+    clash = {(lab, t.name) for lab, info in visible_catalog.items() for t in info.tests} & names
+    assert not clash, f"hidden tests named like visible ones: {sorted(clash)}"
+
+    def hidden_name(result):
+        lab = int(result["number"].split(".")[0])
+        return any(lab == n_lab and f": {name}[" in result["name"] + "["
+                   for n_lab, name in names)
+
+    tests = graded["data"]["tests"]
+    hidden = [t for t in tests if hidden_name(t)]
+    assert {int(t["number"].split(".")[0]) for t in hidden} == {lab for lab, _ in names}, \
+        "every lab's hidden graders run in the autograder"
+    assert all(t["visibility"] == "after_due_date" for t in hidden)
+    lab0 = [t for t in hidden if t["number"].startswith("0.")]
+    assert lab0 and all(t["status"] == "passed" for t in lab0), \
+        "the submitted Lab 0 passes its hidden tests"
+    visible = [t for t in tests if t not in hidden]
+    assert visible and all(t["visibility"] == "visible" for t in visible)
 
 
 def test_release_leaves_hidden_tests_out(tmp_path):
