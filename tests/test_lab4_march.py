@@ -595,6 +595,53 @@ def march(impl, *args, what="march_box", n=None, dtype=None, device=None, channe
     return result_dict(result, what, MARCH_KEYS, n, dtype, device, channels)
 
 
+def given_field(field, points, local):
+    """A medium's values at N points (a callable at world points, a grid trilinearly at box
+    coordinates, as ``sample_grid``): (N,) or (N, C)."""
+    if not isinstance(field, torch.Tensor):
+        return field(points).to(points.dtype)
+    g5 = field.permute(2, 1, 0, *range(3, field.ndim))  # (Z, Y, X[, C])
+    g5 = g5[None, None] if field.ndim == 3 else g5.permute(3, 0, 1, 2)[None]
+    out = torch.nn.functional.grid_sample(g5.to(points.dtype), (2 * local - 1)[None, None, None],
+                                          align_corners=False, padding_mode="border")
+    return out[0, :, 0, 0].T if field.ndim == 4 else out[0, 0, 0, 0]
+
+
+def march_given_box(lab, origins, directions, box_min, box_max, density, emission, steps,
+                    integrator="exact"):
+    """The midpoint march of task 1, given (the grader's own interval, sampling and
+    front-to-back loop), calling the lab's ``segment_integral`` (task 2) for each step: task
+    2 is graded on its own, whatever the lab's ``march_box``. Returns ``march_box``'s dict."""
+    like = {"dtype": origins.dtype, "device": origins.device}
+    lo, hi = (torch.as_tensor(b).to(**like) for b in (box_min, box_max))
+    near, far, hit = (x.to(origins.device) for x in ref_interval(origins, directions, lo, hi))
+    near, far = (torch.where(hit, x, 0).to(origins.dtype) for x in (near, far))
+    dt = (far - near) / max(steps, 1)
+    ds = dt * directions.norm(dim=-1)
+    radiance, transmittance = 0, torch.ones(len(origins), **like)
+    for i in range(steps):
+        offset = (origins - lo) + (near + (i + 0.5) * dt)[:, None] * directions
+        points, local = lo + offset, offset / (hi - lo)
+        sigma = torch.where(hit, given_field(density, points, local), 0)
+        weight, t_seg = lab.segment_integral(sigma, torch.where(hit, ds, 0), integrator)
+        if emission is not None:
+            q = torch.where(hit, given_field(emission, points, local), 0)
+            radiance = radiance + transmittance * weight * q
+        transmittance = transmittance * t_seg
+    if not isinstance(radiance, torch.Tensor):
+        radiance = torch.zeros(len(origins), **like)
+    samples = torch.where(hit, steps, 0)
+    return {"radiance": radiance, "transmittance": transmittance, "samples": samples}
+
+
+def march_given(impl, *args, what="march_box", n=None, dtype=None, device=None, **kwargs):
+    """``march_box``'s results from the given march (task 1) with the lab's
+    ``segment_integral``: how task 2 reaches ``segment_integral`` through whole marches."""
+    result = impl.probe(march_given_box, *args, **kwargs)
+    return result_dict(result, f"{what} (the given march, your segment_integral)", MARCH_KEYS,
+                       n, dtype, device)
+
+
 @pytest.mark.task(1)
 @pytest.mark.points(1)
 def test_march_box_homogeneous_and_layered(impl, device):
@@ -922,16 +969,17 @@ def test_segment_integral_convergence_order(impl, device):
     for integrator, order in (("riemann", 1.0), ("exact", 2.0)):
         errors = {"homogeneous": {}, "ramp": {}}
         for steps in (8, 16, 32, 64):
-            got = march(impl, o.to(device), d.to(device), lo, hi, dens, emis, steps,
-                        integrator=integrator, what=f"march_box(integrator={integrator!r})",
-                        n=24, dtype=F64, device=device)
+            got = march_given(impl, o.to(device), d.to(device), lo, hi, dens, emis, steps,
+                              integrator=integrator, what=f"march(integrator={integrator!r})",
+                              n=24, dtype=F64, device=device)
             errors["homogeneous"][steps] = (got["radiance"].cpu() - homogeneous).abs().max().item()
-            got = march(impl, o.to(device), d.to(device), lo, hi, ramp_density, emis, steps,
-                        integrator=integrator, what=f"march_box(integrator={integrator!r})",
-                        n=24, dtype=F64, device=device)
+            got = march_given(impl, o.to(device), d.to(device), lo, hi, ramp_density, emis,
+                              steps, integrator=integrator,
+                              what=f"march(integrator={integrator!r})", n=24, dtype=F64,
+                              device=device)
             errors["ramp"][steps] = (got["radiance"].cpu() - ramp).abs().max().item()
             assert_close(got["transmittance"], ramp_t, rtol=1e-12,
-                         name=f"march_box({integrator!r}, steps={steps}): transmittance of the "
+                         name=f"march({integrator!r}, steps={steps}): transmittance of the "
                               f"linear ramp (the midpoint rule is exact for a linear density)",
                          where="ray")
         report.append(f"{integrator}: " + ", ".join(
@@ -940,7 +988,7 @@ def test_segment_integral_convergence_order(impl, device):
         if integrator == "exact":
             worst = max(errors["homogeneous"].values())
             assert worst < 1e-12, (
-                f"segment_integral('exact') in march_box: a homogeneous box must come out "
+                f"segment_integral('exact') in the given march: a homogeneous box must come out "
                 f"exact at every step count (error {worst:.2e}). The weight of a step is "
                 f"(1 - e^(-sigma ds)) / sigma, not ds.\n" + "\n".join(report))
         else:
@@ -969,22 +1017,22 @@ def test_segment_integral_conserves_energy(impl, device):
     _, _, hit = ref_interval(o, d, lo, hi)
     for dtype, tol in ((F64, 1e-12), (torch.float32, 2e-6)):
         for steps in (1, 4, 32):
-            what = f"march_box(integrator='exact', steps={steps}, {dtype}) with q = 0.8 sigma"
-            got = march(impl, o.to(device, dtype), d.to(device, dtype), lo, hi,
-                        blackbody_density, blackbody_emission, steps, what=what, n=120,
-                        dtype=dtype, device=device)
+            what = f"march(integrator='exact', steps={steps}, {dtype}) with q = 0.8 sigma"
+            got = march_given(impl, o.to(device, dtype), d.to(device, dtype), lo, hi,
+                              blackbody_density, blackbody_emission, steps, what=what, n=120,
+                              dtype=dtype, device=device)
             no_nan(what, radiance=got["radiance"], transmittance=got["transmittance"])
             assert_close(got["radiance"], 0.8 * (1 - got["transmittance"].cpu().double()),
                          rtol=tol, atol=tol,
                          name=f"{what}: radiance must equal 0.8 (1 - T): each step adds "
                               f"T q (1 - e^(-sigma ds)) / sigma = 0.8 (T_before - T_after)",
                          where="ray")
-    got = march(impl, o.to(device), d.to(device), lo, hi, blackbody_density, blackbody_emission,
-                4, integrator="riemann", what="march_box(integrator='riemann')", n=120,
-                dtype=F64, device=device)
+    got = march_given(impl, o.to(device), d.to(device), lo, hi, blackbody_density,
+                      blackbody_emission, 4, integrator="riemann",
+                      what="march(integrator='riemann')", n=120, dtype=F64, device=device)
     brightest = got["radiance"].cpu()[hit].max().item()
     assert brightest > 0.8 * 1.5, (
-        f"march_box(integrator='riemann', steps=4) on a medium with q = 0.8 sigma (sigma up to "
+        f"march(integrator='riemann', steps=4) on a medium with q = 0.8 sigma (sigma up to "
         f"300): the Riemann sum T q ds should overshoot the physical bound 0.8 by far "
         f"(it ignores absorption within a step), got at most {brightest:.3g}. Is 'riemann' "
         f"really weight = ds?")
