@@ -49,6 +49,7 @@ from course.testing import (
     check_tensor,
     expect_error,
     generator,
+    replaced,
 )
 from course.types import Hits, Mesh, Rays
 
@@ -1211,14 +1212,46 @@ def ref_closest(o, d, tris, t_min, t_max, eps):
     return best, index, u.gather(1, safe)[:, 0], v.gather(1, safe)[:, 0], clear
 
 
+def given_moller_trumbore(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
+    """Möller–Trumbore with the relative parallel test (task 2), given: in place of the lab's
+    own while closest_hit (task 6) is graded, so a mistake in task 2 costs task 2 only.
+    Broadcast shapes as the lab's kernels; returns (t, u, v), (inf, 0, 0) for a miss."""
+    e1, e2 = v1 - v0, v2 - v0
+    p = torch.linalg.cross(directions.expand(torch.broadcast_shapes(directions.shape,
+                                                                    e2.shape)), e2)
+    det = (e1 * p).sum(-1)
+    scale = directions.abs().amax(-1) * e1.abs().amax(-1) * e2.abs().amax(-1)
+    s = origins - v0
+    q = torch.linalg.cross(s.expand(torch.broadcast_shapes(s.shape, e1.shape)), e1)
+    u, v, t = (s * p).sum(-1) / det, (directions * q).sum(-1) / det, (e2 * q).sum(-1) / det
+    hit = ((det.abs() > torch.finfo(det.dtype).eps * scale) & (u >= 0) & (v >= 0)
+           & (u + v <= 1) & (t >= t_min) & (t <= t_max))
+    inf, zero = t.new_tensor(INF), t.new_tensor(0.0)
+    return torch.where(hit, t, inf), torch.where(hit, u, zero), torch.where(hit, v, zero)
+
+
+def closest_hit_given_kernel(lab, rays, mesh, *args, **kwargs):
+    """``lab.closest_hit`` next to the lab with the given Möller–Trumbore in place of the
+    lab's (its default variant, task 2): task 6 is graded on its own."""
+    with replaced(lab, {"moller_trumbore": given_moller_trumbore}):
+        return lab.closest_hit(rays, mesh, *args, **kwargs)
+
+
+def closest(impl, rays, mesh, *args, **kwargs):
+    """The lab's closest_hit on the given Möller–Trumbore (``closest_hit_given_kernel``)."""
+    return impl.probe(closest_hit_given_kernel, rays, mesh, *args, **kwargs)
+
+
 def implemented_variants(impl) -> list[str]:
-    """The triangle kernels the submission has done: closest_hit's tests use Möller–Trumbore
-    (task 2) by default and try the other variants only where they exist, so task 6 is
-    graded on its own."""
+    """The other triangle kernels the submission has done: closest_hit's tests run the
+    default variant on a given Möller–Trumbore (task 2) and try the lab's other variants only
+    where they exist, so task 6 is graded on its own."""
     one = torch.tensor([[0.25, 0.25, -1.0]]), torch.tensor([[0.0, 0.0, 1.0]])
     tri = torch.eye(3)[:, None, :]
     done = []
     for variant in TRIANGLE_KERNELS:
+        if variant == "moller_trumbore":
+            continue  # the given one, through the default variant
         try:
             intersect(impl, variant, *one, tri[0], tri[1], tri[2])
         except NotImplementedError:
@@ -1281,7 +1314,7 @@ def soup_scene(n_tris, n_rays, seed, device):
 @pytest.mark.points(1)
 def test_closest_hit_matches_reference(impl, device):
     rays, mesh, ref = soup_scene(120, 200, seed=111, device=device)
-    hits = impl.closest_hit(rays, mesh)
+    hits = closest(impl, rays, mesh)
     check_hits(hits, len(rays), torch.float32, device, "default variant")
     compare_closest(hits, ref, "120 random triangles + 2 duplicates, 200 rays")
     assert ref[4].float().mean() > 0.85, "test set-up: too few clear-cut rays"
@@ -1296,7 +1329,7 @@ def test_closest_hit_matches_reference(impl, device):
 
 
 def probe_largest_tensor(lab, rays, mesh, variant, budget):
-    """Run closest_hit and report the largest tensor (bytes) any op created, and the hits."""
+    """Run closest_hit (on the given Möller–Trumbore) and report the largest tensor (bytes) any op created, and the hits."""
     from torch.utils._python_dispatch import TorchDispatchMode
 
     class Largest(TorchDispatchMode):
@@ -1309,7 +1342,7 @@ def probe_largest_tensor(lab, rays, mesh, variant, budget):
                     Largest.largest = max(Largest.largest, x.numel() * x.element_size())
             return out
 
-    with Largest():
+    with replaced(lab, {"moller_trumbore": given_moller_trumbore}), Largest():
         hits = lab.closest_hit(rays, mesh, variant, budget)
     return Largest.largest, hits
 
@@ -1318,7 +1351,7 @@ def probe_largest_tensor(lab, rays, mesh, variant, budget):
 @pytest.mark.points(1)
 def test_closest_hit_respects_memory_budget(impl, device):
     rays, mesh, ref = soup_scene(60, 48, seed=121, device=device)
-    full = impl.closest_hit(rays, mesh, "moller_trumbore")
+    full = closest(impl, rays, mesh, "moller_trumbore")
     # 2 KiB: a few triangles at a time for one ray; 128 KiB: all triangles, a few rays.
     for budget in (2**11, 2**17):
         largest, hits = impl.probe(probe_largest_tensor, rays, mesh, "moller_trumbore", budget)
@@ -1348,13 +1381,14 @@ def test_closest_hit_closed_mesh_and_errors(impl, device):
     rays = Rays.create(torch.zeros(3, device=device), d.to(device))
     ref = ref_closest(rays.origins.cpu(), rays.directions.cpu(), mesh.triangles().cpu(),
                       rays.t_min.cpu(), rays.t_max.cpu(), torch.finfo(torch.float32).eps)
-    for variant in implemented_variants(impl):
-        hits = impl.closest_hit(rays, mesh, variant)
+    for variant in ["moller_trumbore", *implemented_variants(impl)]:
+        hits = (closest(impl, rays, mesh) if variant == "moller_trumbore"
+                else impl.closest_hit(rays, mesh, variant))
         check_hits(hits, 150, torch.float32, device, variant)
         compare_closest(hits, ref, f"rays from the centre of a closed icosphere, {variant}")
     # t_max shorter than the radius: all miss.
     short = Rays.create(torch.zeros(3, device=device), d.to(device), t_max=0.5)
-    hits = impl.closest_hit(short, mesh)
+    hits = closest(impl, short, mesh)
     assert_equal(hits.triangle, torch.full((150,), -1), name="closest_hit: rays with t_max = 0.5 "
                  "inside a unit sphere must miss (triangle -1)", where="ray")
     assert_equal(hits.t, torch.full((150,), INF), name="closest_hit: t of misses", where="ray")
