@@ -7,7 +7,9 @@ whole chain in one small end-to-end task (``END_TO_END`` in the grader), which a
 anywhere may also cost. Here a shipped mutant of an early task is graded on the tests of
 every task that used to carry such a mistake further, and may lose points only in its own
 task and the end-to-end one; where the end-to-end test names the step that is wrong (Labs 3
-and 6), the name must be the mutated one.
+and 6), the name must be the mutated one. Labs 1 and 4 have no end-to-end task: their later
+tasks run on given kernels (Lab 1's closest_hit on a given Möller–Trumbore, Lab 4's step
+integral in a given march).
 """
 
 from __future__ import annotations
@@ -37,6 +39,10 @@ class Case:
 CASES = [
     # Lab 0: the packing (task 1) fed the rotating triangle and the frame loop (task 4).
     Case("pack_bgra_order", 1, "pack_rgba8 or render_rotating or FrameLoop"),
+    # Lab 1: Möller–Trumbore (task 2), closest_hit's default variant (task 6).
+    Case("mt_no_u_plus_v", 2, "moller_trumbore_matches or closest_hit"),
+    # Lab 4: march_box (task 1), which task 2's whole marches used to run.
+    Case("march_transmittance_first", 1, "march_box or segment_integral"),
     # Lab 2: the grid builder (task 1) fed the grid walk, closest_hit (task 5) and the
     # two-level grid's top level (task 6).
     Case("grid_cells_one_short", 1, "grid_resolution_and_build or grid_dda or "
@@ -51,6 +57,10 @@ CASES = [
 ]
 
 SLOW_CASES = [
+    # Lab 1: an absolute determinant test in Möller–Trumbore (task 2) under closest_hit.
+    Case("mt_absolute_epsilon", 2, "moller_trumbore or closest_hit"),
+    # Lab 4: the back-to-front update in march_box (task 1) under task 2's marches.
+    Case("march_back_to_front", 1, "march_box or segment_integral"),
     # Lab 2: the DDA (task 1) under closest_hit, 'auto' and the two-level walk.
     Case("dda_lower_face_when_stepping_up", 1, "grid_dda or closest_hit_entry or auto_builds "
          "or two_level_matches or two_level_mailboxing or counters_show"),
