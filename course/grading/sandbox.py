@@ -63,6 +63,8 @@ DEFAULT_REPLY_MB = 256.0
 _MEMORY_POLL = 0.2  # seconds between looks at the worker tree's memory
 BUDGET_MESSAGE = ("the time budget of the lab used up: {why}, so {where} was not run (a "
                   "hang or a slow loop in an earlier test?)")
+BUDGET_STOP_MESSAGE = ("the time budget of the lab used up while {where} ran, and it was "
+                       "stopped: {why} (a hang or a slow loop?)")
 
 
 class WorkerCrashed(RuntimeError):
@@ -493,7 +495,9 @@ class SandboxedLab:
 
     def _budget_left(self):
         """Seconds the next call may run before a budget is used up, and why it would be."""
-        slow_left = self._budget - self._slow_spent + max(0.0, self._slow - self._test_spent)
+        slow_left = self._budget - self._slow_spent
+        if slow_left > 0:  # used up, it stays used up: no test's first seconds are free then
+            slow_left += max(0.0, self._slow - self._test_spent)
         cap_left = self._cap - self._spent
         if slow_left <= cap_left:
             return slow_left, (f"the tests of this lab that ran longer than {self._slow:.0f} s "
@@ -515,7 +519,8 @@ class SandboxedLab:
                                         probe=probe)
         except TimeLimitExceeded as exc:
             if by_budget:
-                raise TimeBudgetExceeded(BUDGET_MESSAGE.format(why=why, where=where)) from None
+                raise TimeBudgetExceeded(BUDGET_STOP_MESSAGE.format(why=why, where=where)) \
+                    from None
             self._timed_out[where] = str(exc)
             raise
         finally:
