@@ -12,11 +12,11 @@ What a grading run may cost is bounded whatever the submission does:
 * **time**: a call that ran out of time is not run again in that run (its later calls
   fail at once with the same message), and each lab has a budget: what its tests run past
   their first ``RTCOURSE_SLOW_TEST`` seconds (default 10) adds up to at most
-  ``RTCOURSE_LAB_TIME_BUDGET`` (default 120), and all the submission's code in the lab to
+  ``RTCOURSE_LAB_TIME_BUDGET`` (default 100), and all the submission's code in the lab to
   at most ``RTCOURSE_LAB_TIME_CAP`` (default 600); after either every call fails at once.
   Honest tests take seconds, so they never count; a lab whose every function hangs, or
-  sleeps just under the per-test limit, ends after one timeout and a part of another
-  (about 140 s with the default 120 s limit);
+  sleeps just under the per-test limit, ends after its first timeout (120 s at the
+  default limit: 110 s past the first 10 use the budget up);
 * **memory**: a reply is at most ``RTCOURSE_REPLY_MB`` (default 256) MB, checked before
   it is read, and decodes to no more; a bigger one fails its test. The worker's tree
   (the submission's children included) shares one memory limit;
@@ -56,7 +56,7 @@ import torch
 from course.grading import wire
 from course.grading.worker import Changed, call_checked, check_written, too_large_message
 
-DEFAULT_LAB_TIME_BUDGET = 120.0  # seconds per lab of what tests run past SLOW_TEST
+DEFAULT_LAB_TIME_BUDGET = 100.0  # seconds per lab of what tests run past SLOW_TEST
 DEFAULT_SLOW_TEST = 10.0  # seconds of a test's submitted code that never count
 DEFAULT_LAB_TIME_CAP = 600.0  # seconds of submitted code per lab, all counted
 DEFAULT_REPLY_MB = 256.0
