@@ -34,7 +34,7 @@ log="$OUT/gpu_${PART:-all}.log"
         --junitxml "$OUT/run/pytest_cuda.xml" 2>&1 | tail -25
     echo "== 2. sandboxed grading on cuda"
     rm -rf /tmp/sub && mkdir -p /tmp/sub && cp solutions/lab*_*.py /tmp/sub/
-    timeout 200 python3 -m course.cli grade --impl /tmp/sub --json "$OUT/run/sandboxed_cuda.json" \
+    timeout 200 python3 -m course.tools.cli grade --impl /tmp/sub --json "$OUT/run/sandboxed_cuda.json" \
         2>&1 | tail -25
     fi
     if [ "${PART:-all}" != tests ]; then
@@ -44,7 +44,7 @@ log="$OUT/gpu_${PART:-all}.log"
         echo "-- $driver"
         timeout "${DRIVER_TIMEOUT:-150}" python3 "$driver" --device cuda --out "$OUT/run/$name" 2>&1 | tail -8
     done
-    [ "${GALLERY:-1}" = 1 ] && echo "== 4. gallery" && timeout 120 python3 -m course.cli demo --device cuda --out "$OUT/run/gallery" 2>&1 | tail -12
+    [ "${GALLERY:-1}" = 1 ] && echo "== 4. gallery" && timeout 120 python3 -m course.tools.cli demo --device cuda --out "$OUT/run/gallery" 2>&1 | tail -12
     fi
 } 2>&1 | tee "$log"
 tar czf "$OUT/gpu_${PART:-all}.tar.gz" -C "$OUT" run "$(basename "$log")"

@@ -20,7 +20,7 @@ fi
 if [ -n "${OUT:-}" ]; then
     out="$OUT/lab1"
 else
-    out="bench/results/$("$PY" -c "from course.bench import device_name; print(device_name('cuda'))")/lab1"
+    out="bench/results/$("$PY" -c "from course.measure.bench import device_name; print(device_name('cuda'))")/lab1"
 fi
 mkdir -p "$out"
 

@@ -44,10 +44,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from course.bench import ResultTable
 from course.grading.catalog import lab_catalog
-from course.grading.gradescope import build_autograder
 from course.grading.runner import lab_test_files
+from course.measure.bench import ResultTable
+from course.tools.gradescope import build_autograder
 
 
 def _children() -> dict[int, list[int]]:
@@ -150,7 +150,7 @@ def measure_lab(lab: int, module: str, work: Path, interval: float, cpus: str) -
 
 def _grade_seconds(impl: str, trusted: bool) -> tuple[float, float]:
     """(wall seconds, CPU seconds of the grader and all its processes) of one grading."""
-    cmd = [sys.executable, "-m", "course.cli", "grade", "--impl", impl]
+    cmd = [sys.executable, "-m", "course.tools.cli", "grade", "--impl", impl]
     if trusted:
         cmd.append("--trusted")
     before = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -21,8 +21,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from course.bench import ResultTable, device_name, load_lab
-from course.device import default_device
+from course.core.device import default_device
+from course.measure.bench import ResultTable, device_name, load_lab
 
 KIB, MIB = 1 << 10, 1 << 20
 COPY_SIZES = [64 * KIB, 256 * KIB, MIB, 4 * MIB, 16 * MIB, 64 * MIB, 128 * MIB]

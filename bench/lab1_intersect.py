@@ -18,8 +18,8 @@ precision (fp16, bf16, fp32, fp64) it measures
   through to a triangle behind).
 
 On CUDA it adds ``torch.compile`` of Möller–Trumbore (fp32) and the Triton kernels of
-``course.triton_intersect``: registers and spills of each compiled configuration, the
-occupancy they allow (``course.occupancy``) and the throughput, over num_warps x rays per
+``course.kernels.triton_intersect``: registers and spills of each compiled configuration, the
+occupancy they allow (``course.measure.occupancy``) and the throughput, over num_warps x rays per
 thread (block sizes): occupancy against speed.
 
 ``--crack-table`` prints only the float32 pass-through table, the one quoted in the lab's
@@ -47,11 +47,11 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
-from course import triton_intersect as ti
-from course.bench import ResultTable, device_name, load_lab, pareto_plot, time_fn
-from course.device import default_device, set_cpu_threads
-from course.occupancy import PRESETS, occupancy
-from course.types import Hits, Mesh, Rays
+from course.core.device import default_device, set_cpu_threads
+from course.core.types import Hits, Mesh, Rays
+from course.kernels import triton_intersect as ti
+from course.measure.bench import ResultTable, device_name, load_lab, pareto_plot, time_fn
+from course.measure.occupancy import PRESETS, occupancy
 
 # The kernels measured: the references by default, a student's with RTCOURSE_IMPL=labs.
 LAB = load_lab("lab1_intersect", os.environ.get("RTCOURSE_IMPL"))
@@ -87,20 +87,20 @@ TRITON_KERNELS = {  # row name: (function, layout builder, extra keywords)
 def load_meshes(tris: int, ico_level: int) -> tuple[Mesh, Mesh, str]:
     """(random soup, icosphere, where they came from), float64 on the CPU.
 
-    course.scenes builds both but needs trimesh; where trimesh is missing (a bare GPU
+    course.core.scenes builds both but needs trimesh; where trimesh is missing (a bare GPU
     machine) the fallbacks below build the same geometry with torch alone.
     """
     try:
-        from course.scenes import load_scene
+        from course.core.scenes import load_scene
     except ImportError:
         return _soup_fallback(tris, 0), _icosphere_fallback(ico_level), "bench fallback"
     soup = load_scene("random_soup", n=tris, seed=0, device="cpu", dtype=torch.float64).mesh
     ico = load_scene("icosphere", level=ico_level, device="cpu", dtype=torch.float64).mesh
-    return soup, ico, "course.scenes"
+    return soup, ico, "course.core.scenes"
 
 
 def _soup_fallback(n: int, seed: int) -> Mesh:
-    """course.scenes' random_soup, step for step (same triangles for a seed)."""
+    """course.core.scenes' random_soup, step for step (same triangles for a seed)."""
     g = torch.Generator().manual_seed(seed)
     size = torch.exp(torch.empty(n, dtype=torch.float64).uniform_(math.log(1e-3), math.log(0.25),
                                                                  generator=g))
@@ -349,7 +349,7 @@ def bench_compile(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hi
 # --------------------------------------------------------------------------------------
 
 def arch_preset(device):
-    """The course.occupancy preset of the device's generation (the newest not newer)."""
+    """The course.measure.occupancy preset of the device's generation (the newest not newer)."""
     major, minor = torch.cuda.get_device_capability(device)
     older = [a for a in PRESETS.values()
              if tuple(map(int, a.compute_capability.split("."))) <= (major, minor)]
@@ -489,7 +489,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--no-compile", action="store_true", help="skip torch.compile (CUDA)")
     parser.add_argument("--threads", type=int, default=None,
                         help="CPU threads for torch (default: the free cores, "
-                             "course.device.free_cpus)")
+                             "course.core.device.free_cpus)")
     parser.add_argument("--crack-table", action="store_true",
                         help="print only the float32 pass-through table of the lab's docstring")
     parser.add_argument("--out", type=Path, help="output folder "

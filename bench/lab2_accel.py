@@ -27,9 +27,9 @@ Three parts, each a table of the same ResultTable (column ``part``):
 * ``embree`` (CPU): Embree (``embreex``, optional: ``pip install embreex``; the part is
   skipped with the reason when it is missing) and the lab's walks on the same bunny primary
   rays (``--fast-size`` squared), warm (each traced once first), at one thread and at all
-  cores this process may use (and at the free ones, ``course.device.free_cpus``, where
+  cores this process may use (and at the free ones, ``course.core.device.free_cpus``, where
   that differs): the stack and stackless BVH traversals, the
-  sync-free walk eager and compiled, and ``course.flat_bvh``'s tracer. Each thread count
+  sync-free walk eager and compiled, and ``course.kernels.flat_bvh``'s tracer. Each thread count
   runs in its own process pinned to that many cores (Embree's thread pool sizes itself
   from the affinity at its first use); the timings of one count are interleaved round by
   round, so a load that comes and goes slows every row alike, and each row records its
@@ -58,12 +58,12 @@ from torch._inductor import metrics as inductor_metrics
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
 
-from course.accel_support import pack_bvh
-from course.bench import ResultTable, device_name, pareto_plot, time_fn
-from course.camera import primary_rays
-from course.device import allowed_cpus, default_device, free_cpus, set_cpu_threads
-from course.scenes import load_scene
-from course.types import Rays
+from course.core.camera import primary_rays
+from course.core.device import allowed_cpus, default_device, free_cpus, set_cpu_threads
+from course.core.scenes import load_scene
+from course.core.types import Rays
+from course.given.lab2 import pack_bvh
+from course.measure.bench import ResultTable, device_name, pareto_plot, time_fn
 from solutions import lab2_accel as lab
 from solutions.lab1_intersect import moller_trumbore
 
@@ -370,7 +370,7 @@ def run_embree_one(mode, table, log, threads: int, rounds: int, budget: float):
     """One thread count of the ``embree`` part (this process is pinned to ``threads``
     cores): every walk warm, then ``rounds`` rounds timing each walk once in turn (a walk
     whose timed calls add up to more than ``budget`` seconds sits out the later rounds)."""
-    from course import flat_bvh
+    from course.kernels import trace
 
     device = torch.device("cpu")
     scene = load("bunny", mode, device)
@@ -394,7 +394,7 @@ def run_embree_one(mode, table, log, threads: int, rounds: int, budget: float):
         "SAH stack traversal": lambda: lab.bvh_closest_hit(rays, mesh, bvh, intersect)[0].triangle,
         "SAH stackless traversal": lambda: lab.bvh_closest_hit_stackless(
             rays, mesh, bvh, intersect)[0].triangle,
-        "flat_bvh.trace_bvh": lambda: flat_bvh.trace_bvh(
+        "flat_bvh.trace_bvh": lambda: trace.trace_bvh(
             mesh, rays.origins, rays.directions, rays.t_min, rays.t_max).triangle,
     }
     first, warm = {}, {}
@@ -468,7 +468,7 @@ def main(argv=None):
     parser.add_argument("--out", default=None, help="output folder")
     parser.add_argument("--threads", type=int, default=None,
                         help="CPU threads for torch (default: the free cores, "
-                             "course.device.free_cpus); with --parts embree-one the process "
+                             "course.core.device.free_cpus); with --parts embree-one the process "
                              "is also pinned to that many cores")
     parser.add_argument("--rounds", type=int, default=7,
                         help="embree part: timed rounds of every walk (median reported)")

@@ -19,9 +19,9 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
 
-from course.accel_support import pack_bvh
-from course.camera import primary_rays
-from course.scenes import load_scene
+from course.core.camera import primary_rays
+from course.core.scenes import load_scene
+from course.given.lab2 import pack_bvh
 from solutions import lab2_accel as lab
 
 

@@ -7,9 +7,9 @@ On a GPU, in one run:
 * **rays/s** of the BVH walk on the Stanford bunny (69K triangles, binned-SAH BVH, leaves
   of <= 4): ``S x S`` primary rays from its framing camera (coherent) and as many diffuse
   bounce rays (cosine-distributed about the normal at the primary hits, origins in pixel
-  order: incoherent directions), traced by the CUDA C kernel (course.cuda_tracer, one
+  order: incoherent directions), traced by the CUDA C kernel (course.kernels.cuda_tracer, one
   thread per ray, local-memory stack, at several block sizes, with and without its register
-  cap) and by the Triton kernel (course.triton_tracer, one ray per lane) at several launch
+  cap) and by the Triton kernel (course.kernels.triton_tracer, one ray per lane) at several launch
   shapes, with and without skipping the stages of a step that no lane needs; targets:
   CUDA C >= 4.8 G primary rays/s, Triton >= 80% of CUDA C (best launch of each);
 * **the ray sets** every tracer is timed on, the same for all of them (:func:`ray_sets`):
@@ -21,9 +21,9 @@ On a GPU, in one run:
   bunny on a mirror floor; target: <= 5 ms;
 * each kernel's registers, spills, local memory and occupancy (the Triton kernels' from
   the compiled binary, the CUDA kernel's from cudaFuncGetAttributes and
-  cudaOccupancyMaxActiveBlocksPerMultiprocessor, both next to course.occupancy's model);
+  cudaOccupancyMaxActiveBlocksPerMultiprocessor, both next to course.measure.occupancy's model);
 * **errors**: hits on a sample of rays against the float64 brute force of
-  course.whitted_support (fraction of rays with another triangle, worst relative error of
+  course.given.lab3 (fraction of rays with another triangle, worst relative error of
   t), and the uber kernel's image on a pixel grid against render_reference.
 
 On the CPU (``--small``, or no GPU) the same rows run at a tiny size with the torch
@@ -48,17 +48,17 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from course import cuda_tracer, triton_tracer
-from course.bench import ResultTable, device_name, time_fn
-from course.camera import primary_rays
-from course.flat_bvh import build_flat_bvh, flat_bvh_for, trace_flat_torch
-from course.whitted_support import (
+from course.core.camera import primary_rays
+from course.given.lab3 import (
     OFFSET,
     render_reference,
     trace_brute_force,
     whitted_camera,
     whitted_scene,
 )
+from course.kernels import cuda_tracer, triton_tracer
+from course.kernels.flat_bvh import build_flat_bvh, flat_bvh_for, trace_flat_torch
+from course.measure.bench import ResultTable, device_name, time_fn
 
 TRITON_SHAPES = [(32, 1), (64, 2), (128, 4)]  # (lanes per program, warps)
 UNIFORM = [True, False]  # skip stages no lane needs / run every stage masked
@@ -217,7 +217,7 @@ def ray_sets(bvh, camera, device, seed: int = SEED) -> dict:
     """The ray sets every tracer is timed on: ``{"primary": (o, d), "diffuse": (o, d)}``,
     each (S^2, 3) float32 in pixel order (row-major from the top-left pixel).
 
-    primary: ``course.camera.primary_rays(camera)``, one through each pixel centre;
+    primary: ``course.core.camera.primary_rays(camera)``, one through each pixel centre;
     diffuse: one cosine-distributed bounce from each primary hit (:func:`diffuse_rays`,
     random numbers from a CPU generator seeded with ``seed``; hit pixels repeated
     cyclically to S^2 rays), the hits by the Triton tracer on CUDA (the torch walk on the
@@ -332,7 +332,7 @@ def main(argv=None) -> None:
                           bvh_depth=bvh.depth, bvh_bytes=bvh.nbytes, bvh_build_s=build_s)
     print(f"bunny: {len(bunny_faces)} triangles, BVH {bvh.num_nodes} nodes, depth {bvh.depth}, "
           f"{bvh.nbytes / 1e6:.1f} MB, built in {build_s:.2f} s on {device}", flush=True)
-    from course.scenes import load_scene
+    from course.core.scenes import load_scene
 
     camera = dataclasses.replace(load_scene("bunny", device="cpu").camera, width=size,
                                  height=size)

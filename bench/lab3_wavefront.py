@@ -14,7 +14,7 @@ reference solution:
 * ``uber`` (eager, and under ``torch.compile`` unless ``--no-compile``): fixed-size lanes,
   every shadow lane traced;
 * ``persistent``: a pool of ray slots fed from one queue (pools of N/4 and N slots);
-* on CUDA, the Triton uber kernel ``course.triton_tracer.render_whitted_triton`` (traversal
+* on CUDA, the Triton uber kernel ``course.kernels.triton_tracer.render_whitted_triton`` (traversal
   and shading in one launch), where it exists;
 
 and records images/s, rays/s, the **lanes traced** (closest-hit and shadow lanes, live or
@@ -23,7 +23,7 @@ fraction, and the error of the image against ``render_reference`` (float64) on `
 sampled pixels: ``max_rel_error`` (the largest relative error where the shading decisions
 agree) and ``flipped`` (the fraction of pixels whose shadow/edge decision differs).
 
-The tracer is ``course.flat_bvh.trace_bvh`` (a flattened binned-SAH BVH) where it exists,
+The tracer is ``course.kernels.trace.trace_bvh`` (a flattened binned-SAH BVH) where it exists,
 else brute force. Also measured: the three geometry layouts of task 5 (bytes per triangle,
 the time of a brute-force pass over each, agreement with the reference tracer).
 
@@ -46,19 +46,19 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
 
-from course.bench import ResultTable, device_name, pareto_plot, time_fn
-from course.camera import primary_rays
-from course.device import default_device
-from course.whitted_support import (
+from course.core.camera import primary_rays
+from course.core.device import default_device
+from course.given.lab3 import (
     render_reference,
     trace_brute_force,
     whitted_camera,
     whitted_scene,
 )
+from course.measure.bench import ResultTable, device_name, pareto_plot, time_fn
 from solutions import lab3_wavefront as lab
 
 try:  # the fast tracer of the GPU track (a flattened BVH), where it exists
-    from course.flat_bvh import trace_bvh
+    from course.kernels.trace import trace_bvh
 except ImportError:  # pragma: no cover - older checkouts
     trace_bvh = None
 
@@ -95,7 +95,7 @@ def triton_renderer(device):
     if device.type != "cuda":
         return None
     try:
-        from course.triton_tracer import render_whitted_triton, triton_available
+        from course.kernels.triton_tracer import render_whitted_triton, triton_available
     except ImportError:
         return None
     return render_whitted_triton if triton_available() else None

@@ -26,10 +26,10 @@ analytic or exact reference computed in float64 on the same rays:
   steps, sun light, a 128^3 density grid (64^3 on the CPU): the lab's
   ``march_single_scatter`` (a shadow march per sample), the same light baked once into a
   transmittance grid then ``march_box`` over the baked source, and the fused
-  ``course.triton_march`` kernel over the baked source (CUDA only), each against a
+  ``course.kernels.triton_march`` kernel over the baked source (CUDA only), each against a
   high-step reference on every 61st pixel. The bake's own time is a separate row, eager
   (the lab's ``shadow_transmittance`` at the voxel centres) and fused
-  (``course.triton_march.bake_light_triton``, one launch that also writes the source); the
+  (``course.kernels.triton_march.bake_light_triton``, one launch that also writes the source); the
   whole-frame row (fused bake, fused march, phase: target <= 5 ms) carries its error
   against the 4x-steps float64 reference, and ``bake_vs_eager`` the fused bake's largest
   difference from the eager one, relative to the source's maximum.
@@ -54,8 +54,8 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
 
-from course.bench import ResultTable, device_name, pareto_plot, time_fn
-from course.device import default_device
+from course.core.device import default_device
+from course.measure.bench import ResultTable, device_name, pareto_plot, time_fn
 
 try:
     from solutions import lab4_march as lab
@@ -394,7 +394,7 @@ def frame_scene(res: int, device):
 
 def bench_frame(table, device, cfg):
     """The 1080p single-scattering target: per-sample shadow marches against a baked light."""
-    from course.camera import Camera, primary_rays
+    from course.core.camera import Camera, primary_rays
 
     width, height = cfg["frame"]
     steps, shadow_steps = 128, 32
@@ -441,7 +441,7 @@ def bench_frame(table, device, cfg):
                             ["radiance"] * phase)
     row("baked light, march_box (eager torch)", seconds, result, grid=cfg["frame_grid"])
     if device.type == "cuda":
-        from course.triton_march import march_grid_triton
+        from course.kernels.triton_march import march_grid_triton
 
         def fused():
             return march_grid_triton(o, d, lo, hi, density, source, steps)
@@ -455,7 +455,7 @@ def bench_frame(table, device, cfg):
                                                           steps)["radiance"] * phase)
         row("eager bake + fused march (whole frame)", seconds, out["radiance"] * phase,
             grid=cfg["frame_grid"])
-        from course.triton_march import bake_light_triton
+        from course.kernels.triton_march import bake_light_triton
 
         sun = light.tolist()  # numbers: no device-to-host copy per frame
 

@@ -5,7 +5,7 @@
     python bench/lab5_froxel.py --device cpu --only volumes    # one series (its own files)
 
 Every row renders one frame of a fog scene with ``render_froxels`` and compares it with
-``course.froxel_reference.reference_render`` (brute-force single scattering, float64, exact
+``course.given.lab5_reference.reference_render`` (brute-force single scattering, float64, exact
 shadow rays) on a fixed subset of pixels; ``error`` is the mean absolute error divided by
 the mean reference radiance, ``max_error`` the largest pixel error divided by the largest
 reference radiance; ``seconds`` is the median time of one frame (after warm-up).
@@ -29,7 +29,7 @@ reference radiance; ``seconds`` is the median time of one frame (after warm-up).
 * ``frame``: the talk's test scene at 1080p (240 x 135 x 64 froxels, sun + 14 point lights,
   6 local fog volumes with 16^3 density textures, height fog), time per frame; the target
   on an H100/H200 is 2 ms. ``--gpu-target`` times only this and prints ms/frame. On CUDA
-  the same frame is also timed with ``course.triton_froxel.render_froxels_fused`` (the
+  the same frame is also timed with ``course.kernels.triton_froxel.render_froxels_fused`` (the
   pipeline fused into five Triton kernels), without and with its counts, and its error
   against the torch pipeline's image is recorded (``error_vs_torch``, ``max_error_vs_torch``).
 
@@ -52,11 +52,9 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
 
-from course.bench import ResultTable, device_name, pareto_plot, time_fn
-from course.camera import Camera
-from course.device import default_device
-from course.froxel_reference import reference_render
-from course.froxel_support import (
+from course.core.camera import Camera
+from course.core.device import default_device
+from course.given.lab5 import (
     Box,
     ConstantFog,
     DirectionalLight,
@@ -65,6 +63,8 @@ from course.froxel_support import (
     PointLight,
     Scene,
 )
+from course.given.lab5_reference import reference_render
+from course.measure.bench import ResultTable, device_name, pareto_plot, time_fn
 
 try:
     from solutions import lab5_froxel as lab
@@ -143,7 +143,7 @@ def camera_at(width: int, height: int, shift: float = 0.0) -> Camera:
 def scene_images(camera: Camera, device, dtype=torch.float32):
     """Depth (H, W) and opaque (H, W, 3) images: a ground plane y = 0 and a wall at z = -36
     (sky above it), the wall's colour shaded by distance."""
-    from course.camera import primary_rays
+    from course.core.camera import primary_rays
 
     rays = primary_rays(camera, device="cpu", dtype=F64)
     d = rays.directions
@@ -354,11 +354,11 @@ def bench_frame(table, device, repeats: int, size=(1920, 1080)):
 
 
 def bench_frame_fused(table, scene, camera, depth, opaque, args, report, repeats, size):
-    """The same frame with ``course.triton_froxel.render_froxels_fused`` (five Triton
+    """The same frame with ``course.kernels.triton_froxel.render_froxels_fused`` (five Triton
     launches, no host synchronisation unless the counts are asked for), its error against
     the torch pipeline's image: ``max_error`` the largest difference / the largest
     radiance, ``error`` the mean difference / the mean radiance."""
-    from course.triton_froxel import render_froxels_fused
+    from course.kernels.triton_froxel import render_froxels_fused
 
     want, _ = lab.render_froxels(scene, camera, depth, opaque, **args)
     got, counts = render_froxels_fused(scene, camera, depth, opaque, **args)
@@ -377,7 +377,7 @@ def bench_frame_fused(table, scene, camera, depth, opaque, args, report, repeats
                   light_evaluations=counts["light_evaluations"], seconds=t.median,
                   ms_per_frame=1e3 * t.median, error_vs_torch=err, max_error_vs_torch=worst,
                   counts_match=same)
-        print(f"  frame {size[0]}x{size[1]}, {label} (course.triton_froxel): "
+        print(f"  frame {size[0]}x{size[1]}, {label} (course.kernels.triton_froxel): "
               f"{1e3 * t.median:.3f} ms/frame (median of {repeats}, min {1e3 * t.min:.3f}); "
               f"against the torch pipeline: mean error {err:.2e}, max error {worst:.2e} of the "
               f"largest radiance; counts {'match' if same else 'differ'}", flush=True)

@@ -29,14 +29,14 @@ frame of ``--frames`` (512x512, 1920x1080, 3840x2160 on a GPU), the ``frame`` se
 
 * ``raster``: ``rasterize_mesh`` (visibility + perspective-correct barycentrics), and the
   visibility buffer alone (triangle ids) from the lab's ``rasterize`` and, on CUDA, from
-  the fused kernels of ``course.triton_raster``: after the lab's torch setup stages
+  the fused kernels of ``course.kernels.triton_raster``: after the lab's torch setup stages
   (``fused Triton``), and end to end with the fused vertex kernel (``fused, vertex
   kernel``: camera matrix to ids in four kernels, no host synchronisation; ``CUDA graph``:
   the same four replayed as one graph, ``FusedVisibility``; ``kernels' GPU time``: the
   profiler's time of each kernel, the host's launch time left out), whose
   ``raster_speedup`` is the BVH-traced time over its own (same keys). The camera matrix
   is computed once per camera (``camera_matrix``), as the BVH is built once per mesh;
-* ``raytrace``: ``traced_visibility`` through ``course.flat_bvh.trace_bvh`` (a binned-SAH
+* ``raytrace``: ``traced_visibility`` through ``course.kernels.trace.trace_bvh`` (a binned-SAH
   BVH, Triton traversal on CUDA; its build time is reported apart, ``build_s``), the
   fair competitor at scale where brute force is hopeless;
 * ``hybrid``: raster visibility + Lambert shading + ``hybrid_shadows`` (one BVH shadow ray
@@ -68,11 +68,11 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
-from course.bench import ResultTable, device_name, load_lab, time_fn
-from course.camera import Camera, primary_rays
-from course.device import default_device
-from course.scenes import load_scene
-from course.types import Mesh, Rays
+from course.core.camera import Camera, primary_rays
+from course.core.device import default_device
+from course.core.scenes import load_scene
+from course.core.types import Mesh, Rays
+from course.measure.bench import ResultTable, device_name, load_lab, time_fn
 
 # The references by default, a student's labs with RTCOURSE_IMPL=labs.
 lab = load_lab("lab6_raster", os.environ.get("RTCOURSE_IMPL"))
@@ -113,7 +113,7 @@ def raster_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32,
 def fused_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.Tensor:
     """``raster_ids`` with ``rasterize`` replaced by the fused Triton kernels (CUDA), and
     the near-plane clipper applied only to the triangles that cross the near plane."""
-    from course.triton_raster import rasterize_triton, screen_triangles_fast
+    from course.kernels.triton_raster import rasterize_triton, screen_triangles_fast
 
     mvp = camera.view_projection(torch.float64).to(mesh.device)
     clip = lab.to_clip_space(mesh.vertices, mvp)
@@ -138,12 +138,12 @@ def camera_matrix(camera: Camera) -> torch.Tensor:
 
 
 def fused_vertex_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.Tensor:
-    """``raster_ids`` as one fused pipeline, ``course.triton_raster.visibility_fused``: the
+    """``raster_ids`` as one fused pipeline, ``course.kernels.triton_raster.visibility_fused``: the
     MVP, near-plane clipping and viewport in one Triton kernel (no host synchronisation),
     then the raster kernels and the id map. The same pieces and keys as the lab's; only an
     exact depth tie between the second piece of a clipped face and another face can go
     the other way (slot order)."""
-    from course.triton_raster import visibility_fused
+    from course.kernels.triton_raster import visibility_fused
 
     return visibility_fused(mesh.vertices, mesh.faces, camera_matrix(camera),
                             camera.width, camera.height, depth_bits=depth_bits)
@@ -151,7 +151,7 @@ def fused_vertex_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.
 
 @functools.lru_cache(maxsize=8)
 def _recorded(mesh: Mesh, width: int, height: int):
-    from course.triton_raster import FusedVisibility
+    from course.kernels.triton_raster import FusedVisibility
 
     return FusedVisibility(mesh.vertices, mesh.faces, width, height)
 
@@ -283,7 +283,8 @@ def bench_zfighting(table: ResultTable, device) -> None:
 def bench_frames(table: ResultTable, device, cfg: dict) -> None:
     """Raster vs BVH-traced visibility and the hybrid frame, per scene and frame size."""
 
-    from course.flat_bvh import flat_bvh_for, trace_bvh
+    from course.kernels.flat_bvh import flat_bvh_for
+    from course.kernels.trace import trace_bvh
 
     sun = torch.tensor(SUN, device=device)
     for name in cfg["scenes"]:
@@ -362,7 +363,7 @@ def bench_frames(table: ResultTable, device, cfg: dict) -> None:
                      raster_speedup=t_rt.median / t_f.median, **common)
                 # Where the time goes: the torch setup (MVP, near-plane clipping, viewport)
                 # against the fused kernels alone on its output.
-                from course.triton_raster import rasterize_triton
+                from course.kernels.triton_raster import rasterize_triton
 
                 mvp = cam.view_projection(torch.float64).to(device)
                 clipped, _, _ = lab.clip_triangles(lab.to_clip_space(mesh.vertices, mvp)

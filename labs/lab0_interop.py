@@ -44,8 +44,8 @@ import time  # noqa: F401  (for run_frame_loop)
 import numpy as np
 import torch
 
-from course.bench import time_fn  # noqa: F401  (for measure_copy_bandwidth)
-from course.image import srgb_encode  # noqa: F401  (for linear_to_srgb8)
+from course.core.image import srgb_encode  # noqa: F401  (for linear_to_srgb8)
+from course.measure.bench import time_fn  # noqa: F401  (for measure_copy_bandwidth)
 
 BACKGROUND_RGBA = (16, 16, 24, 255)  # the frame loop's clear colour, 8-bit sRGB
 
@@ -125,7 +125,7 @@ def linear_to_srgb8(img: torch.Tensor) -> torch.Tensor:
 
     code = floor(255 * srgb(clamp(x, 0, 1)) + 0.5) (round half up), where srgb is the sRGB
     OETF: ``12.92 x`` for x <= 0.0031308, else ``1.055 x^(1/2.4) - 0.055``
-    (``course.image.srgb_encode``). NaN -> 0, -inf -> 0, +inf -> 255. Same device.
+    (``course.core.image.srgb_encode``). NaN -> 0, -inf -> 0, +inf -> 255. Same device.
 
     Accuracy contract: every input gets the code the float64 formula gives, except inputs
     whose 255 * srgb + 0.5 lies within about 1e-4 of an integer (a decision boundary).
@@ -287,7 +287,7 @@ def measure_copy_bandwidth(nbytes: int, pinned: bool, device, repeats: int = 5) 
 
     Hints:
     - Allocate both buffers once, outside the timed function.
-    - ``course.bench.time_fn(fn, *args, repeats=..., warmup=1, device=device)`` returns a
+    - ``course.measure.bench.time_fn(fn, *args, repeats=..., warmup=1, device=device)`` returns a
       Timing in seconds per call (CUDA events on the GPU); use its ``median``.
     - ``dst.copy_(src, non_blocking=True)`` is asynchronous only into pinned memory.
     """

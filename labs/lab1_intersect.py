@@ -128,7 +128,7 @@ import math
 
 import torch
 
-from course.raymath import (  # noqa: F401  (given helpers, re-exported for the tasks)
+from course.core.raymath import (  # noqa: F401  (given helpers, re-exported for the tasks)
     check_inputs,
     check_triangle_inputs,
     cross,
@@ -136,14 +136,14 @@ from course.raymath import (  # noqa: F401  (given helpers, re-exported for the 
     gamma,
     masked_result,
 )
-from course.types import Hits, Mesh, Rays
+from course.core.types import Hits, Mesh, Rays
 
 VARIANTS = ("intersect_simple", "moller_trumbore", "woop_unit", "watertight")
 """The triangle kernels of this lab, by name (``closest_hit(..., variant=...)``)."""
 
 
 # Provided helpers (not tasks): cross, dot, gamma, check_inputs, check_triangle_inputs and
-# masked_result come from course.raymath.
+# masked_result come from course.core.raymath.
 
 
 # ---------------------------------------------------------------------------------------
@@ -399,9 +399,9 @@ def check_closest_hit_inputs(rays, mesh, variant, memory_budget_bytes):
     """Provided: validate :func:`closest_hit`'s arguments (ValueError/TypeError naming the
     argument). Objects that crossed a process boundary are re-validated too."""
     if not isinstance(rays, Rays):
-        raise TypeError(f"rays: expected course.types.Rays, got {type(rays).__name__}")
+        raise TypeError(f"rays: expected course.core.types.Rays, got {type(rays).__name__}")
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     rays.validate()
     mesh.validate()
     if mesh.dtype != rays.dtype:
@@ -469,14 +469,14 @@ def accounting_inputs(variant: str) -> tuple:
 def op_counts(variant: str) -> dict:
     """Floating-point operations of one test of ``variant`` (a name in ``VARIANTS``).
 
-    Runs ``course.accounting.count_ops`` on this module's kernel with
+    Runs ``course.measure.accounting.count_ops`` on this module's kernel with
     ``accounting_inputs(variant)`` and one lane. Returns the counts as a dict with the
     keys ``mul, add, div, sqrt, fma, compare, abs, select, other`` and ``cycles_bound``,
     the lecture's lower bound ``4 * (N_mul + |N_add - N_mul|)`` with ``N_mul`` read as the
     number of mul/add pairs a mad can fuse, ``min(mul, add)``. A name not in ``VARIANTS``
     raises ValueError naming ``variant`` (``accounting_inputs`` does: call it first).
 
-    Hints: ``from course.accounting import count_ops``;
+    Hints: ``from course.measure.accounting import count_ops``;
     ``count_ops(fn, *args, lanes=1)`` returns an ``OpCounts`` with the fields named above.
     """
     raise NotImplementedError("not implemented yet: op_counts (task 7)")
@@ -485,21 +485,21 @@ def op_counts(variant: str) -> dict:
 def register_estimate(variant: str) -> int:
     """Registers one thread of ``variant`` needs, estimated from the values alive at once.
 
-    ``course.accounting.live_values`` on ``accounting_inputs(variant)`` (one lane); its
+    ``course.measure.accounting.live_values`` on ``accounting_inputs(variant)`` (one lane); its
     ``peak_last_use`` (every value dies at its last use, as a register allocator frees it),
     rounded up. A name not in ``VARIANTS`` raises ValueError naming ``variant``.
 
-    Hints: ``from course.accounting import live_values``; ``math.ceil``.
+    Hints: ``from course.measure.accounting import live_values``; ``math.ceil``.
     """
     raise NotImplementedError("not implemented yet: register_estimate (task 7)")
 
 
 def occupancy_for(variant: str, arch: str = "g80", block_size: int = 64):
     """Occupancy of a kernel running ``variant`` with ``register_estimate(variant)``
-    registers per thread on ``arch`` (a name in ``course.occupancy.PRESETS``) with
-    ``block_size`` threads per block: a ``course.occupancy.Occupancy``.
+    registers per thread on ``arch`` (a name in ``course.measure.occupancy.PRESETS``) with
+    ``block_size`` threads per block: a ``course.measure.occupancy.Occupancy``.
 
-    Hints: ``from course.occupancy import PRESETS, occupancy``; unknown arch
+    Hints: ``from course.measure.occupancy import PRESETS, occupancy``; unknown arch
     names raise ValueError naming ``arch``.
     """
     raise NotImplementedError("not implemented yet: occupancy_for (task 7)")

@@ -1,7 +1,7 @@
 """Lab 3: organising the tracer.
 
 Fill in every function that raises ``NotImplementedError`` (the tasks below); the helpers
-imported from ``course.whitted_support`` are given. Run the grader for this lab with
+imported from ``course.given.lab3`` are given. Run the grader for this lab with
 ``pytest tests/test_lab3_wavefront.py`` (add ``-k render_whitted`` for one function). The
 tests call your code on the CPU and, where present, on CUDA: write device- and
 dtype-agnostic tensor code, with no Python loop over rays or pixels (a loop over bounces or
@@ -10,7 +10,7 @@ steps is fine).
 A Whitted ray tracer follows light backwards: from the eye through each pixel (primary
 rays), from each hit toward each light (shadow rays: is anything in between?), and off
 mirrors (reflected rays, up to a depth limit). *What* it computes is fixed by the shading
-contract in ``course.whitted_support`` (read its docstring first); this lab is about *how*
+contract in ``course.given.lab3`` (read its docstring first); this lab is about *how*
 the work is organised on a machine that runs thousands of rays at once:
 
 * **one loop over full-size buffers** (task 1): simple, every lane traced every bounce;
@@ -26,7 +26,7 @@ the work is organised on a machine that runs thousands of rays at once:
 
 Conventions
 -----------
-* A scene is a ``course.whitted_support.WhittedScene`` (float32 or float64; half precision
+* A scene is a ``course.given.lab3.WhittedScene`` (float32 or float64; half precision
   is rejected: it cannot hold the secondary-ray offset). Rays are ``origins (N, 3)`` and
   unit ``directions (N, 3)`` of the scene's dtype and device; an image is ``(N, 3)``
   linear radiance, pixel ``i`` for ray ``i``.
@@ -54,7 +54,7 @@ Tasks (points)
 What the organisations cost, measured
 -------------------------------------
 ``bench/lab3_wavefront.py --device cpu --threads 1`` on a shared 2-core CPU, 32 x 32
-pixels, shadows and two bounces, the BVH tracer ``course.flat_bvh.trace_bvh``; every
+pixels, shadows and two bounces, the BVH tracer ``course.kernels.trace.trace_bvh``; every
 organisation returns the reference image (relative error <= 1e-6 where the shading
 decisions agree; 0.4% of the Cornell box's pixels flip a shadow decision at an exact corner).
 
@@ -77,8 +77,8 @@ from __future__ import annotations
 
 import torch
 
-from course.types import Hits, Mesh
-from course.whitted_support import (  # noqa: F401  (given helpers)
+from course.core.types import Hits, Mesh
+from course.given.lab3 import (  # noqa: F401  (given helpers)
     LAYOUTS,
     MAX_DEPTH,
     OFFSET,
@@ -176,7 +176,7 @@ def shade_direct(scene: WhittedScene, points: torch.Tensor, normals: torch.Tenso
     trace: the tracer. Returns ``(radiance (N, 3), shadow_rays)``: ``shadow_rays`` (int) is
     the number of shadow rays traced.
 
-    Per the contract (``course.whitted_support``), with ``p_off = offset_origins(p, n)``,
+    Per the contract (``course.given.lab3``), with ``p_off = offset_origins(p, n)``,
     ``v = -d``, ``s = shininess[m]``::
 
         L = ambient * kd[m]
@@ -305,7 +305,7 @@ def render_uber(scene: WhittedScene, origins: torch.Tensor, directions: torch.Te
     ``nonzero``, ``.item()``, ``if`` on tensor values), so ``torch.compile(step,
     backend=..., fullgraph=True)`` captures each as one graph of fixed-size tensors and
     fuses it (the grader inspects the captured graphs); the tracer stays outside (on a GPU
-    the Triton uber kernel fuses the traversal too: ``course.triton_tracer``). TypeError
+    the Triton uber kernel fuses the traversal too: ``course.kernels.triton_tracer``). TypeError
     for a ``compile`` of another type.
 
     Hints: pass the scene's tensors to the step functions one by one (not the dataclass);

@@ -89,7 +89,8 @@ import math  # noqa: F401  (math.pi, math.inf: you will need them)
 
 import torch
 
-from course.march_support import (  # noqa: F401  (given helpers)
+from course.core.raymath import check_inputs, dot  # noqa: F401  (dot: given, for the tasks)
+from course.given.lab4 import (  # noqa: F401  (given helpers)
     HIT,
     INTEGRATORS,
     MISS,
@@ -116,7 +117,6 @@ from course.march_support import (  # noqa: F401  (given helpers)
     sdf_union,
     unit_light,
 )
-from course.raymath import check_inputs, dot  # noqa: F401  (dot: given, for the tasks)
 
 # ---------------------------------------------------------------------------------------
 # Provided helpers (not tasks): input checks, field evaluation, SDF primitives. Each task
@@ -354,7 +354,7 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
     ``steps * (shadow_steps + 2)`` density evaluations.
 
     Hints: the phase is one value per ray, from ``dot(unit d, light)`` (``dot`` is
-    imported from ``course.raymath``; ``torch.nan_to_num`` it for degenerate rays). Write
+    imported from ``course.core.raymath``; ``torch.nan_to_num`` it for degenerate rays). Write
     ``source(points)`` inside this function (a closure over the phase, the light, ...) and
     pass it to ``march_box`` as the emission; multiply by ``factor`` last ((C,) for colour).
     """

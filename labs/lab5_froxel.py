@@ -1,7 +1,7 @@
 """Lab 5: the Frostbite froxel pipeline.
 
 Fill in every function that raises ``NotImplementedError`` (the tasks below); the helpers
-imported from ``course.froxel_support`` are given. Run the grader for this lab with
+imported from ``course.given.lab5`` are given. Run the grader for this lab with
 ``pytest tests/test_lab5_froxel.py`` (add ``-k slice_depths`` for one function). The tests call
 your kernels on the CPU and, where present, on CUDA: write device- and dtype-agnostic
 tensor code (loops over slices, lights or frames are fine; no loops over froxels or pixels).
@@ -9,13 +9,13 @@ tensor code (loops over slices, lights or frames are fine; no loops over froxels
 Hillaire, "Physically Based and Unified Volumetric Rendering in Frostbite" (SIGGRAPH 2015),
 stage by stage: a clip-space volume of froxels (frustum voxels) aligned with screen tiles,
 filled with participating media (the V-buffer), lit once per froxel, accumulated over
-frames, integrated front to back and applied to the opaque image. ``course.froxel_reference``
+frames, integrated front to back and applied to the opaque image. ``course.given.lab5_reference``
 renders the same scenes by brute force (per pixel, many samples, exact shadows); the grader
 compares the two.
 
 Conventions shared by all kernels
 ---------------------------------
-* A scene (:class:`course.froxel_support.Scene`): media (constant fog, height fog, local fog
+* A scene (:class:`course.given.lab5.Scene`): media (constant fog, height fog, local fog
   volumes with optional density textures), lights (sun with shadow map, point, spot), an
   ambient radiance and opaque boxes that shadow the sun. Physical units throughout.
 * A :class:`FroxelGrid` (camera, tile, slices, near, far): volumes have shape
@@ -80,7 +80,8 @@ import math  # noqa: F401  (math.log, math.pi: you will need them)
 
 import torch
 
-from course.froxel_support import (  # noqa: F401  (given helpers)
+from course.core.raymath import check_inputs  # noqa: F401  (given: validates (..., 3) inputs)
+from course.given.lab5 import (  # noqa: F401  (given helpers)
     BLEND,
     INTEGRATIONS,
     LIGHT_STEPS,
@@ -118,7 +119,6 @@ from course.froxel_support import (  # noqa: F401  (given helpers)
     slice_offset,
     volume_bounds,
 )
-from course.raymath import check_inputs  # noqa: F401  (given: validates (..., 3) inputs)
 
 # ---------------------------------------------------------------------------------------
 # Task 1: the froxel grid

@@ -35,15 +35,15 @@ What the grader asserts (and the reference measures)
   ``bench/lab6_raster.py``): with 24-bit window depth it shows through on 1% of the pixels
   at 30 units and 99.6% at 100; with 32-bit float view depth on none up to 300.
 
-Conventions (those of ``course.camera``)
+Conventions (those of ``course.core.camera``)
 ----------------------------------------
 * Clip space is OpenGL's: a point is visible when ``-w <= x, y, z <= w``; the near plane is
-  ``z = -w``, which for ``course.camera.perspective`` is the plane ``w = near`` (eye-space
+  ``z = -w``, which for ``course.core.camera.perspective`` is the plane ``w = near`` (eye-space
   ``z = -near``); ``w`` is the distance in front of the eye along the view axis.
 * Screen space: pixel ``(row, col)`` has its centre at ``(x, y) = (col + 0.5, row + 0.5)``;
   row 0 is the top, so ``x = (x_ndc + 1) / 2 * width`` and ``y = (1 - y_ndc) / 2 * height``.
   Pixels are numbered row-major, ``pixel = row * width + col``, like ``primary_rays``.
-* Winding: a triangle counter-clockwise seen from the front (``course.types.Mesh``) has a
+* Winding: a triangle counter-clockwise seen from the front (``course.core.types.Mesh``) has a
   *positive* signed area ``E_12(v0)`` in screen space (the y flip turns the mathematical sign
   around; see ``edge_functions``).
 * Degenerate input is a case, not an error: NaN/inf vertices, zero-area triangles and
@@ -71,7 +71,7 @@ Tasks (points)
 
 The ray tracer of task 5 is a callable ``trace(origins, directions, t_min, t_max)`` taking
 ``(N, 3)``, ``(N, 3)``, ``(N,)``, ``(N,)`` tensors and returning an object with ``t (N,)``
-(inf where missed) and ``triangle (N,)`` int64 (-1 where missed), e.g. ``course.types.Hits``:
+(inf where missed) and ``triangle (N,)`` int64 (-1 where missed), e.g. ``course.core.types.Hits``:
 any closest-hit tracer (Lab 1's ``closest_hit``, a BVH of Lab 2) fits.
 """
 
@@ -81,8 +81,9 @@ import math  # noqa: F401  (math.inf, math.isfinite, ...)
 
 import torch
 
-from course.camera import Camera, primary_rays  # noqa: F401  (task 5)
-from course.raster_support import (  # noqa: F401  (given code, for the tasks to use)
+from course.core.camera import Camera, primary_rays  # noqa: F401  (task 5)
+from course.core.types import Mesh
+from course.given.lab6 import (  # noqa: F401  (given code, for the tasks to use)
     BYTES_PER_FRAGMENT,
     EMPTY,
     ID_BITS,
@@ -98,7 +99,6 @@ from course.raster_support import (  # noqa: F401  (given code, for the tasks to
     sun_direction,
     traced_hits,
 )
-from course.types import Mesh
 
 # ---------------------------------------------------------------------------------------
 # Task 1: MVP transform, clipping, viewport
@@ -448,9 +448,9 @@ def rasterize_mesh(mesh: Mesh, camera: Camera, *, depth_bits: int = 32,
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     if not isinstance(camera, Camera):
-        raise TypeError(f"camera: expected course.camera.Camera, got {type(camera).__name__}")
+        raise TypeError(f"camera: expected course.core.camera.Camera, got {type(camera).__name__}")
     mesh.validate()
     raise NotImplementedError("not implemented yet: rasterize_mesh (task 4)")
 
@@ -490,7 +490,7 @@ def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     check_tensor(face, "face", (None, None), kind="int64", like=mesh.vertices)
     check_tensor(bary, "bary", (*face.shape, 3), like=mesh.vertices)
     check_tensor(light_direction, "light_direction", (3,), like=mesh.vertices)
@@ -506,16 +506,16 @@ def traced_visibility(trace, camera: Camera, device=None, dtype=torch.float32):
     hits first (-1 where it misses), for the same pixel centres as the rasterizer.
 
     trace: ``trace(origins, directions, t_min, t_max) -> hits`` (see the module docstring);
-    camera: the view; device, dtype: of the rays (``course.camera.primary_rays``).
+    camera: the view; device, dtype: of the rays (``course.core.camera.primary_rays``).
 
-    Hints: ``course.camera.primary_rays(camera, device, dtype)``; the provided ``traced_hits``
+    Hints: ``course.core.camera.primary_rays(camera, device, dtype)``; the provided ``traced_hits``
     calls the tracer and checks its answer.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not callable(trace):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
     if not isinstance(camera, Camera):
-        raise TypeError(f"camera: expected course.camera.Camera, got {type(camera).__name__}")
+        raise TypeError(f"camera: expected course.core.camera.Camera, got {type(camera).__name__}")
     raise NotImplementedError("not implemented yet: traced_visibility (task 5)")
 
 
@@ -527,7 +527,7 @@ def world_positions(mesh: Mesh, face, bary):
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     raise NotImplementedError("not implemented yet: world_positions (task 5)")
 
 
@@ -545,7 +545,7 @@ def shadow_epsilon(mesh: Mesh) -> float:
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     raise NotImplementedError("not implemented yet: shadow_epsilon (task 5)")
 
 
@@ -589,6 +589,6 @@ def traced_shadows(trace, mesh: Mesh, camera: Camera, light_direction):
     if not callable(trace):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     light = sun_direction(light_direction, mesh.vertices)  # noqa: F841  (unit, toward the light)
     raise NotImplementedError("not implemented yet: traced_shadows (task 5)")

@@ -33,8 +33,8 @@ import time
 import numpy as np
 import torch
 
-from course.bench import time_fn
-from course.image import srgb_encode
+from course.core.image import srgb_encode
+from course.measure.bench import time_fn
 
 BACKGROUND_RGBA = (16, 16, 24, 255)  # the frame loop's clear colour, 8-bit sRGB
 

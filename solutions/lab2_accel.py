@@ -16,7 +16,7 @@ The loop runs as many iterations as the longest ray needs, never one per ray or 
 
 Conventions
 -----------
-* Rays and meshes are ``course.types.Rays`` / ``Mesh`` of one float dtype and device;
+* Rays and meshes are ``course.core.types.Rays`` / ``Mesh`` of one float dtype and device;
   every structure is a ``dict`` of tensors on that device (plus ``"kind"``), so it can be
   inspected, saved and sent anywhere.
 * ``intersect(origins, directions, v0, v1, v2, t_min, t_max) -> (t, u, v)`` is the
@@ -95,7 +95,7 @@ The two-level grid and the sync-free traversal (``bench/lab2_accel.py --small --
   lab2_embree/``, on a loaded shared machine): on one thread the sync-free walk under
   ``torch.compile`` runs at **0.11x Embree** (0.43 M against 3.9 M rays/s), eager at
   0.020x, the stack traversal at 0.017x; with two torch threads on the loaded two cores
-  the torch walks fall 50-100x (the benches take ``course.device.free_cpus()`` threads).
+  the torch walks fall 50-100x (the benches take ``course.core.device.free_cpus()`` threads).
   On an H200 with 1M rays (``bench/results/nvidia-h200/lab2_fused/``): 2.9 M eager, 21 M
   compiled, **105-137 M rays/s** compiled and replayed from CUDA graphs (k = 16-32); with
   the graphs of each size kept across calls 143 M (k = 16,
@@ -114,7 +114,9 @@ import math
 
 import torch
 
-from course.accel_support import (  # noqa: F401  (given helpers)
+from course.core.raymath import gamma
+from course.core.types import Hits, Mesh, Rays
+from course.given.lab2 import (  # noqa: F401  (given helpers)
     COUNTERS,
     MAX_PAIRS,
     OFFSET_BITS,
@@ -155,8 +157,6 @@ from course.accel_support import (  # noqa: F401  (given helpers)
     test_ranges,
     triangle_bounds,
 )
-from course.raymath import gamma
-from course.types import Hits, Mesh, Rays
 
 # =======================================================================================
 # Provided helpers (not tasks): input checks, bounds, the slab test, pairs, closest hits

@@ -2,7 +2,7 @@
 
 Whitted-style backward ray tracing, organised four ways, and three layouts of the triangles
 in memory. See ``labs/lab3_wavefront.py`` for the tasks; the shading contract, the scene
-type, the brute-force tracer and the input checks are given in ``course.whitted_support``.
+type, the brute-force tracer and the input checks are given in ``course.given.lab3``.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import math
 
 import torch
 
-from course.types import Hits, Mesh
-from course.whitted_support import (  # noqa: F401  (given helpers)
+from course.core.types import Hits, Mesh
+from course.given.lab3 import (  # noqa: F401  (given helpers)
     LAYOUTS,
     MAX_DEPTH,
     OFFSET,
@@ -59,7 +59,7 @@ def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Ten
     check_scene(scene)
     n = check_vectors(scene.vertices, origins=origins, directions=directions)
     if not isinstance(hits, Hits) or len(hits) != n:
-        raise TypeError(f"hits: expected course.types.Hits for {n} rays, got "
+        raise TypeError(f"hits: expected course.core.types.Hits for {n} rays, got "
                         f"{type(hits).__name__}")
     hit = hits.hit
     tri = hits.triangle.clamp(min=0)

@@ -83,7 +83,8 @@ import math
 
 import torch
 
-from course.march_support import (  # noqa: F401  (given helpers)
+from course.core.raymath import dot
+from course.given.lab4 import (  # noqa: F401  (given helpers)
     HIT,
     INTEGRATORS,
     MISS,
@@ -110,7 +111,6 @@ from course.march_support import (  # noqa: F401  (given helpers)
     sdf_union,
     unit_light,
 )
-from course.raymath import dot
 
 # ---------------------------------------------------------------------------------------
 # Provided helpers (not tasks): input checks, field evaluation, SDF primitives. Each task

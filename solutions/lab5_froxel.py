@@ -3,13 +3,13 @@
 Hillaire, "Physically Based and Unified Volumetric Rendering in Frostbite" (SIGGRAPH 2015),
 stage by stage: a clip-space volume of froxels (frustum voxels) aligned with screen tiles,
 filled with participating media (the V-buffer), lit once per froxel, accumulated over
-frames, integrated front to back and applied to the opaque image. ``course.froxel_reference``
+frames, integrated front to back and applied to the opaque image. ``course.given.lab5_reference``
 renders the same scenes by brute force (per pixel, many samples, exact shadows); the grader
 compares the two.
 
 Conventions shared by all kernels
 ---------------------------------
-* A scene (:class:`course.froxel_support.Scene`): media (constant fog, height fog, local fog
+* A scene (:class:`course.given.lab5.Scene`): media (constant fog, height fog, local fog
   volumes with optional density textures), lights (sun with shadow map, point, spot), an
   ambient radiance and opaque boxes that shadow the sun. Physical units throughout.
 * A :class:`FroxelGrid` (camera, tile, slices, near, far): volumes have shape
@@ -74,7 +74,8 @@ import math
 
 import torch
 
-from course.froxel_support import (  # noqa: F401  (given helpers)
+from course.core.raymath import check_inputs
+from course.given.lab5 import (  # noqa: F401  (given helpers)
     BLEND,
     INTEGRATIONS,
     LIGHT_STEPS,
@@ -112,7 +113,6 @@ from course.froxel_support import (  # noqa: F401  (given helpers)
     slice_offset,
     volume_bounds,
 )
-from course.raymath import check_inputs
 
 # ---------------------------------------------------------------------------------------
 # Task 1: the froxel grid

@@ -35,15 +35,15 @@ What the grader asserts (and the reference measures)
   ``bench/lab6_raster.py``): with 24-bit window depth it shows through on 1% of the pixels
   at 30 units and 99.6% at 100; with 32-bit float view depth on none up to 300.
 
-Conventions (those of ``course.camera``)
+Conventions (those of ``course.core.camera``)
 ----------------------------------------
 * Clip space is OpenGL's: a point is visible when ``-w <= x, y, z <= w``; the near plane is
-  ``z = -w``, which for ``course.camera.perspective`` is the plane ``w = near`` (eye-space
+  ``z = -w``, which for ``course.core.camera.perspective`` is the plane ``w = near`` (eye-space
   ``z = -near``); ``w`` is the distance in front of the eye along the view axis.
 * Screen space: pixel ``(row, col)`` has its centre at ``(x, y) = (col + 0.5, row + 0.5)``;
   row 0 is the top, so ``x = (x_ndc + 1) / 2 * width`` and ``y = (1 - y_ndc) / 2 * height``.
   Pixels are numbered row-major, ``pixel = row * width + col``, like ``primary_rays``.
-* Winding: a triangle counter-clockwise seen from the front (``course.types.Mesh``) has a
+* Winding: a triangle counter-clockwise seen from the front (``course.core.types.Mesh``) has a
   *positive* signed area ``E_12(v0)`` in screen space (the y flip turns the mathematical sign
   around; see ``edge_functions``).
 * Degenerate input is a case, not an error: NaN/inf vertices, zero-area triangles and
@@ -71,7 +71,7 @@ Tasks (points)
 
 The ray tracer of task 5 is a callable ``trace(origins, directions, t_min, t_max)`` taking
 ``(N, 3)``, ``(N, 3)``, ``(N,)``, ``(N,)`` tensors and returning an object with ``t (N,)``
-(inf where missed) and ``triangle (N,)`` int64 (-1 where missed), e.g. ``course.types.Hits``:
+(inf where missed) and ``triangle (N,)`` int64 (-1 where missed), e.g. ``course.core.types.Hits``:
 any closest-hit tracer (Lab 1's ``closest_hit``, a BVH of Lab 2) fits.
 """
 
@@ -81,8 +81,9 @@ import math
 
 import torch
 
-from course.camera import Camera, primary_rays
-from course.raster_support import (  # given code, shared by skeleton and reference
+from course.core.camera import Camera, primary_rays
+from course.core.types import Mesh
+from course.given.lab6 import (  # given code, shared by skeleton and reference
     BYTES_PER_FRAGMENT,
     EMPTY,
     ID_BITS,
@@ -98,7 +99,6 @@ from course.raster_support import (  # given code, shared by skeleton and refere
     sun_direction,
     traced_hits,
 )
-from course.types import Mesh
 
 # ---------------------------------------------------------------------------------------
 # Task 1: MVP transform, clipping, viewport
@@ -528,9 +528,9 @@ def rasterize_mesh(mesh: Mesh, camera: Camera, *, depth_bits: int = 32,
     perspective-correct barycentrics of the pixel centre in that face.
     """
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     if not isinstance(camera, Camera):
-        raise TypeError(f"camera: expected course.camera.Camera, got {type(camera).__name__}")
+        raise TypeError(f"camera: expected course.core.camera.Camera, got {type(camera).__name__}")
     mesh.validate()
     mvp = camera.view_projection(torch.float64).to(mesh.device)
     clip = to_clip_space(mesh.vertices, mvp)
@@ -574,7 +574,7 @@ def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
     than 1 (by up to a few percent on a coarse mesh), which darkens the middle of each face.
     """
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     check_tensor(face, "face", (None, None), kind="int64", like=mesh.vertices)
     check_tensor(bary, "bary", (*face.shape, 3), like=mesh.vertices)
     check_tensor(light_direction, "light_direction", (3,), like=mesh.vertices)
@@ -599,12 +599,12 @@ def traced_visibility(trace, camera: Camera, device=None, dtype=torch.float32):
     hits first (-1 where it misses), for the same pixel centres as the rasterizer.
 
     trace: ``trace(origins, directions, t_min, t_max) -> hits`` (see the module docstring);
-    camera: the view; device, dtype: of the rays (``course.camera.primary_rays``).
+    camera: the view; device, dtype: of the rays (``course.core.camera.primary_rays``).
     """
     if not callable(trace):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
     if not isinstance(camera, Camera):
-        raise TypeError(f"camera: expected course.camera.Camera, got {type(camera).__name__}")
+        raise TypeError(f"camera: expected course.core.camera.Camera, got {type(camera).__name__}")
     rays = primary_rays(camera, device=device, dtype=dtype)
     _, triangle = traced_hits(trace, rays.origins, rays.directions, rays.t_min, rays.t_max)
     return triangle.reshape(camera.height, camera.width)
@@ -614,7 +614,7 @@ def world_positions(mesh: Mesh, face, bary):
     """(H, W, 3) world-space points ``sum_i bary_i * v_i`` of the visible faces (0 where
     ``face == -1``): the G-buffer's positions, reconstructed from the visibility buffer."""
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     return interpolate(mesh.vertices, mesh.faces, face, bary)
 
 
@@ -629,7 +629,7 @@ def shadow_epsilon(mesh: Mesh) -> float:
     light leak through thin occluders in contact: scale, not a constant.
     """
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     v = mesh.vertices.to(torch.float64)
     v = v[torch.isfinite(v).all(-1)]
     if v.numel() == 0:
@@ -677,7 +677,7 @@ def traced_shadows(trace, mesh: Mesh, camera: Camera, light_direction):
     if not callable(trace):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     light = sun_direction(light_direction, mesh.vertices)
     rays = primary_rays(camera, device=mesh.device, dtype=mesh.dtype)
     t, triangle = traced_hits(trace, rays.origins, rays.directions, rays.t_min, rays.t_max)

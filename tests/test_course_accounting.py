@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from course.accounting import LECTURE_COUNTS, OpCounts, count_ops, live_values
+from course.measure.accounting import LECTURE_COUNTS, OpCounts, count_ops, live_values
 
 # Sizes that differ from each other and from 3, so lane dims are unambiguous.
 N, M = 7, 5

@@ -13,13 +13,14 @@ import pytest
 import torch
 import trimesh
 
-from course import bench, scenes
-from course.bench import ResultTable, device_name, pareto_front, pareto_plot, time_fn
-from course.camera import Camera, look_at, perspective, primary_rays
-from course.device import available_devices, default_device
-from course.image import from_srgb8, save_png, show, srgb_decode, srgb_encode, to_srgb8
-from course.scenes import QuadLight, list_scenes, load_mesh, load_scene
-from course.types import Hits, Mesh, Rays, closest
+from course.core import scenes
+from course.core.camera import Camera, look_at, perspective, primary_rays
+from course.core.device import available_devices, default_device
+from course.core.image import from_srgb8, save_png, show, srgb_decode, srgb_encode, to_srgb8
+from course.core.scenes import QuadLight, list_scenes, load_mesh, load_scene
+from course.core.types import Hits, Mesh, Rays, closest
+from course.measure import bench
+from course.measure.bench import ResultTable, device_name, pareto_front, pareto_plot, time_fn
 
 
 @pytest.fixture(autouse=True)

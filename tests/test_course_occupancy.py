@@ -2,7 +2,7 @@
 
 import pytest
 
-from course.occupancy import (
+from course.measure.occupancy import (
     G80,
     HOPPER_H100,
     PRESETS,

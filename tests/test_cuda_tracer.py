@@ -1,7 +1,7 @@
-"""course.cuda_tracer: the CUDA C BVH tracer, compiled at run time with nvcc.
+"""course.kernels.cuda_tracer: the CUDA C BVH tracer, compiled at run time with nvcc.
 
 Without a CUDA device and toolkit only the "clear reason" behaviour is tested; on a GPU the
-kernels are held to course.flat_bvh's contract by the float64 rules of tests/test_flat_bvh.py
+kernels are held to course.kernels.flat_bvh's contract by the float64 rules of tests/test_flat_bvh.py
 and their attributes are read back.
 """
 
@@ -27,8 +27,8 @@ from test_flat_bvh import (
     make_case,
 )
 
-from course import cuda_tracer as ct
-from course.flat_bvh import build_flat_bvh
+from course.kernels import cuda_tracer as ct
+from course.kernels.flat_bvh import build_flat_bvh
 
 REASON = ct.unavailable_reason()
 needs_nvcc = pytest.mark.skipif(REASON is not None, reason=REASON or "")
@@ -114,7 +114,7 @@ def cpu_build(tmp_path):
 
 
 def trace_cpu(walk, bvh, case, any_hit=False):
-    from course.types import Hits
+    from course.core.types import Hits
 
     n = case["origins"].shape[0]
     out = Hits(t=torch.full((n,), -1.0), triangle=torch.full((n,), -7, dtype=torch.int64),
@@ -170,10 +170,10 @@ def test_cuda_matches_float64_brute_force(shift):
 
 @needs_nvcc
 def test_cuda_agrees_with_triton_on_the_bunny():
-    from course.camera import primary_rays
-    from course.flat_bvh import flat_bvh_for
-    from course.triton_tracer import trace_flat_triton
-    from course.whitted_support import whitted_camera, whitted_scene
+    from course.core.camera import primary_rays
+    from course.given.lab3 import whitted_camera, whitted_scene
+    from course.kernels.flat_bvh import flat_bvh_for
+    from course.kernels.triton_tracer import trace_flat_triton
 
     scene = whitted_scene("bunny_mirror", device="cuda")
     bvh = flat_bvh_for(scene)

@@ -1,4 +1,4 @@
-"""course.flat_bvh: the GPU kernels' BVH (build invariants) and its torch traversal, checked
+"""course.kernels.flat_bvh: the GPU kernels' BVH (build invariants) and its torch traversal, checked
 against a float64 brute force on awkward rays and geometry.
 
 ``make_case`` and ``check_hits`` are also used by tests/test_triton_tracer.py and
@@ -20,15 +20,15 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as a script (the interpreter subprocess of the Triton test)
     sys.path.insert(0, str(REPO))
 
-from course.accel_support import expand_ranges
-from course.flat_bvh import (
+from course.given.lab2 import expand_ranges
+from course.kernels.flat_bvh import (
     STACK_DEPTH,
     FlatBVH,
     build_flat_bvh,
     flat_bvh_for,
-    trace_bvh,
     trace_flat_torch,
 )
+from course.kernels.trace import trace_bvh
 
 EPS32 = 2.0**-24
 C_FP32 = 32.0  # rounding budget of a float32 Möller–Trumbore pair, in units of the bound
@@ -275,7 +275,7 @@ def check_pairs(bvh: FlatBVH, leaf, inner, a, b) -> None:
 
 
 def test_bunny_build_is_fast_and_valid():
-    from course.scenes import load_scene
+    from course.core.scenes import load_scene
 
     mesh = load_scene("bunny", device="cpu").mesh
     start = time.perf_counter()
@@ -360,7 +360,7 @@ def check_axis_parallel(hits, label: str) -> None:
 
 
 def test_trace_bvh_caches_per_scene_and_checks_inputs():
-    from course.whitted_support import whitted_scene
+    from course.given.lab3 import whitted_scene
 
     scene = whitted_scene("cornell_mirror", device="cpu")
     o = torch.tensor([[0.0, 1.0, 2.9]])
@@ -391,8 +391,8 @@ def test_trace_bvh_caches_per_scene_and_checks_inputs():
 
 
 def test_trace_bvh_on_the_bunny_matches_brute_force():
-    from course.camera import primary_rays
-    from course.whitted_support import trace_brute_force, whitted_camera, whitted_scene
+    from course.core.camera import primary_rays
+    from course.given.lab3 import trace_brute_force, whitted_camera, whitted_scene
 
     scene = whitted_scene("bunny_mirror", device="cpu")
     rays = primary_rays(whitted_camera("bunny_mirror", 12, 12), "cpu")

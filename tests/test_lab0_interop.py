@@ -1,7 +1,7 @@
 """Grader for Lab 0: interop (packed framebuffers, zero-copy sharing, staging, frame loop).
 
 References are computed here, never stored: byte reinterpretation for packing, float64
-``course.image.srgb_encode`` for the 8-bit encoding and an analytic point-in-triangle test
+``course.core.image.srgb_encode`` for the 8-bit encoding and an analytic point-in-triangle test
 for the rasterised frames. Every device is checked against the same CPU reference, so a
 passing run also means CPU and CUDA agree. Zero-copy properties can only be observed next
 to the code under test, so those tests run a ``probe_*`` function there and check what it
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 import torch
 
-from course.image import srgb_decode, srgb_encode
-from course.testing import (
+from course.core.image import srgb_decode, srgb_encode
+from course.grading.testing import (
     assert_close,
     assert_equal,
     check_tensor,

@@ -39,10 +39,9 @@ import math
 import pytest
 import torch
 
-from course.accounting import count_ops, live_values
-from course.occupancy import PRESETS, occupancy
-from course.scenes import load_scene
-from course.testing import (
+from course.core.scenes import load_scene
+from course.core.types import Hits, Mesh, Rays
+from course.grading.testing import (
     assert_close,
     assert_equal,
     assert_fraction,
@@ -51,7 +50,8 @@ from course.testing import (
     generator,
     replaced,
 )
-from course.types import Hits, Mesh, Rays
+from course.measure.accounting import count_ops, live_values
+from course.measure.occupancy import PRESETS, occupancy
 
 LAB_MODULE = "lab1_intersect"
 TASKS = {1: "Plane + area test", 2: "Möller–Trumbore", 3: "Woop's unit-triangle test",
@@ -1262,7 +1262,7 @@ def implemented_variants(impl) -> list[str]:
 
 def check_hits(hits, n, dtype, device, case):
     assert isinstance(hits, Hits), (
-        f"closest_hit ({case}): expected a course.types.Hits, got {type(hits).__name__}")
+        f"closest_hit ({case}): expected a course.core.types.Hits, got {type(hits).__name__}")
     check_tensor(hits.t, "Hits.t", shape=(n,), dtype=dtype, device=device)
     check_tensor(hits.triangle, "Hits.triangle", shape=(n,), dtype=torch.int64, device=device)
     check_tensor(hits.u, "Hits.u", shape=(n,), dtype=dtype, device=device)
@@ -1420,7 +1420,7 @@ def accounting_args(lab, variant):
 
 
 def probe_accounting(lab, variant):
-    """course.accounting run on the lab's own kernel, next to it."""
+    """course.measure.accounting run on the lab's own kernel, next to it."""
     args = accounting_args(lab, variant)
     counts = count_ops(getattr(lab, variant), *args, lanes=1)
     live = live_values(getattr(lab, variant), *args, lanes=1)
@@ -1443,7 +1443,7 @@ def test_op_counts(impl):
         for key in ("mul", "add", "div", "sqrt", "fma", "compare", "cycles_bound"):
             assert key in got, f"op_counts({variant!r}): missing key {key!r} (got {sorted(got)})"
             assert abs(got[key] - want[key]) < 1e-9, (
-                f"op_counts({variant!r})[{key!r}] = {got[key]}, but course.accounting.count_ops "
+                f"op_counts({variant!r})[{key!r}] = {got[key]}, but course.measure.accounting.count_ops "
                 f"on your {variant} for the documented ray and triangle gives {want[key]}")
         counts[variant] = got
     expect_error("variant", impl.op_counts, "nope", case="an unknown variant name")
@@ -1467,7 +1467,7 @@ def test_register_estimate_and_occupancy(impl):
         got = impl.register_estimate(variant)
         want = math.ceil(impl.probe(probe_accounting, variant)["peak_last_use"])
         assert got == want, (
-            f"register_estimate({variant!r}) = {got!r}, but course.accounting.live_values on "
+            f"register_estimate({variant!r}) = {got!r}, but course.measure.accounting.live_values on "
             f"your {variant} gives peak_last_use rounded up = {want}")
         assert 8 <= got <= 128, f"register_estimate({variant!r}) = {got}: implausible"
         for arch, block in (("g80", 64), ("hopper_h100", 256)):

@@ -37,15 +37,16 @@ import math
 import pytest
 import torch
 
-from course.accel_support import (
+from course.core.scenes import load_scene
+from course.core.types import Hits, Mesh, Rays
+from course.given.lab2 import (
     STRUCTURES,
     choose_structure,
     grid_resolutions,
     pack_bvh,
     ray_octants,
 )
-from course.scenes import load_scene
-from course.testing import (
+from course.grading.testing import (
     assert_close,
     assert_equal,
     check_tensor,
@@ -53,7 +54,6 @@ from course.testing import (
     generator,
     replaced,
 )
-from course.types import Hits, Mesh, Rays
 
 LAB_MODULE = "lab2_accel"
 TASKS = {1: "Uniform grid: build, 3D DDA, mailboxing", 2: "BVH builds: LBVH and binned SAH",
@@ -266,7 +266,7 @@ def check_result(result, n: int, dtype, device, what: str, counters=("steps", "t
                              f"{type(result).__name__}")
     hits, count = result
     assert isinstance(hits, Hits), \
-        f"{what}: expected course.types.Hits first, got {type(hits).__name__}"
+        f"{what}: expected course.core.types.Hits first, got {type(hits).__name__}"
     for name in ("t", "u", "v"):
         check_tensor(getattr(hits, name), f"{what}: Hits.{name}", shape=(n,), dtype=dtype,
                      device=device)

@@ -1,7 +1,7 @@
 """Grader for Lab 3: organising the tracer.
 
 Every organisation of the Whitted tracer is compared with ``render_reference`` (given in
-``course.whitted_support``): the shading contract written out plainly and evaluated in
+``course.given.lab3``): the shading contract written out plainly and evaluated in
 float64 with the secondary-ray offset of the scene's dtype, so what may differ is rounding.
 In float64 the images must agree to 1e-9; in float32 to 1e-4 (relative), except for a
 small fraction of pixels where a shadow or edge decision flips (a ray that meets a corner
@@ -31,17 +31,9 @@ import math
 import pytest
 import torch
 
-from course.camera import primary_rays
-from course.testing import (
-    assert_close,
-    assert_equal,
-    check_tensor,
-    expect_error,
-    generator,
-    replaced,
-)
-from course.types import Hits, Mesh
-from course.whitted_support import (
+from course.core.camera import primary_rays
+from course.core.types import Hits, Mesh
+from course.given.lab3 import (
     WhittedScene,
     face_normals,
     float_as_index,
@@ -52,6 +44,14 @@ from course.whitted_support import (
     translated,
     whitted_camera,
     whitted_scene,
+)
+from course.grading.testing import (
+    assert_close,
+    assert_equal,
+    check_tensor,
+    expect_error,
+    generator,
+    replaced,
 )
 
 LAB_MODULE = "lab3_wavefront"
@@ -236,7 +236,7 @@ def compare_images(got, expected: torch.Tensor, what: str, dtype, device,
     rtol, atol = tol or TOL[dtype]
     off = ~((got - expected).abs() <= atol + rtol * expected.abs()).all(1)
     if off.double().mean() > flips:
-        from course.testing import assert_image_close  # writes expected/got/difference PNGs
+        from course.grading.testing import assert_image_close  # writes expected/got/difference PNGs
 
         assert_image_close(got, expected, rtol=rtol, atol=atol, where="(pixel, channel)",
                            name=f"{what}: radiance against the float64 reference renderer "
@@ -980,7 +980,7 @@ def test_render_persistent_stats(impl, device):
 @functools.cache
 def _soup(dtype) -> Mesh:
     """120 random triangles in the unit cube, a degenerate one, and two sharing an edge."""
-    from course.scenes import load_scene
+    from course.core.scenes import load_scene
 
     soup = load_scene("random_soup", device="cpu", dtype=F64, n=120, seed=9).mesh
     corners = soup.vertices[soup.faces]
@@ -1006,7 +1006,7 @@ def soup_rays(dtype, device, n: int = 300, seed: int = 4):
 
 def check_layout_hits(hits, expected: Hits, what: str, dtype) -> None:
     n = len(expected)
-    assert isinstance(hits, Hits), f"{what}: expected course.types.Hits, got {type(hits).__name__}"
+    assert isinstance(hits, Hits), f"{what}: expected course.core.types.Hits, got {type(hits).__name__}"
     check_tensor(hits.t, f"{what}: t", shape=(n,), dtype=dtype)
     tri, ref = hits.triangle.cpu(), expected.triangle.cpu()
     # Another algorithm may decide a ray through an edge or a tie differently: a few rays.

@@ -33,7 +33,7 @@ import math
 import pytest
 import torch
 
-from course.testing import (
+from course.grading.testing import (
     assert_close,
     assert_equal,
     check_tensor,

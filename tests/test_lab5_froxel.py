@@ -7,7 +7,7 @@ the way the lab does:
 stage                    reference
 =======================  ================================================================
 grid                     ``near (far / near)^(k / S)``; pixel rays from the camera's axes
-V-buffer                 ``course.froxel_reference.media`` at the froxel sample points
+V-buffer                 ``course.given.lab5_reference.media`` at the froxel sample points
 phase functions          closed forms; normalisation and mean cosine by quadrature over
                          cos theta (200001 points, enough for the g = 0.99 peak)
 light lists              thousands of points sampled inside each tile's frustum
@@ -20,7 +20,7 @@ fog boxes                float64 quadrature of single scattering (composite Gaus
                          along each pixel ray) in a homogeneous box, lit by the sun or a
                          point light inside it, exact transmittance toward the light
 whole frames             closed form for a homogeneous medium lit by the sun; otherwise
-                         ``course.froxel_reference.reference_render`` (brute force, per
+                         ``course.given.lab5_reference.reference_render`` (brute force, per
                          pixel, exact shadows)
 =======================  ================================================================
 
@@ -41,10 +41,8 @@ import math
 import pytest
 import torch
 
-from course.camera import Camera
-from course.froxel_reference import media as ref_media
-from course.froxel_reference import phase_value, reference_render
-from course.froxel_support import (
+from course.core.camera import Camera
+from course.given.lab5 import (
     Box,
     ConstantFog,
     DirectionalLight,
@@ -59,7 +57,9 @@ from course.froxel_support import (
     frustum_bounds,
     ray_boxes,
 )
-from course.testing import (
+from course.given.lab5_reference import media as ref_media
+from course.given.lab5_reference import phase_value, reference_render
+from course.grading.testing import (
     assert_close,
     assert_equal,
     assert_fraction,

@@ -46,10 +46,11 @@ from pathlib import Path
 import pytest
 import torch
 
-from course.camera import Camera, primary_rays
-from course.grading.wire import import_file
-from course.scenes import load_scene
-from course.testing import (
+from course.core.camera import Camera, primary_rays
+from course.core.files import import_file
+from course.core.scenes import load_scene
+from course.core.types import Hits, Mesh
+from course.grading.testing import (
     assert_close,
     assert_equal,
     assert_fraction,
@@ -61,7 +62,6 @@ from course.testing import (
     poisoned,
     replaced,
 )
-from course.types import Hits, Mesh
 
 LAB_MODULE = "lab6_raster"
 TASKS = {1: "MVP transform and near-plane clipping", 2: "Edge functions and the fill rule",
@@ -1293,7 +1293,7 @@ def test_traced_visibility_primary_hits(impl, device):
     assert_image_close(traced.reshape(-1), want, exact=True, kind="id",
                        image_shape=(camera.height, camera.width), name=(
         "traced_visibility: the triangle the tracer returns for each pixel's primary ray "
-        "(course.camera.primary_rays, row-major)"), where="pixel")
+        "(course.core.camera.primary_rays, row-major)"), where="pixel")
     expect_error("trace", impl.traced_visibility, "not a tracer", camera, device,
                  case="a string as the tracer")
 

@@ -1,4 +1,4 @@
-"""Tests of the given Triton kernels (course/triton_intersect.py): course code, not graded.
+"""Tests of the given Triton kernels (course/kernels/triton_intersect.py): course code, not graded.
 
 The kernels are checked against a float64 brute force written here, on a random soup and
 on a closed mesh, plus the edge cases of the lab's contract (closed ``[t_min, t_max]``,
@@ -29,7 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as a script: make `import course` work from a checkout
     sys.path.insert(0, str(REPO))
 
-from course.testing import run_in_triton_interpreter
+from course.grading.testing import run_in_triton_interpreter
 
 HAVE_TRITON = importlib.util.find_spec("triton") is not None
 needs_triton = pytest.mark.skipif(not HAVE_TRITON, reason="triton is not installed "
@@ -80,10 +80,10 @@ def soup_case(n_rays: int = 70, n_tris: int = 50, seed: int = 0) -> dict:
 
 
 def closed_mesh() -> tuple[torch.Tensor, torch.Tensor, str]:
-    """(vertices, faces, name): the course's icosphere when course.scenes can be imported
+    """(vertices, faces, name): the course's icosphere when course.core.scenes can be imported
     (it needs trimesh), else an octahedron, the smallest closed mesh with shared edges."""
     try:
-        from course.scenes import load_scene
+        from course.core.scenes import load_scene
     except ImportError:
         vertices = torch.tensor([[1.0, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1],
                                  [0, 0, -1]])
@@ -152,7 +152,7 @@ def all_cases() -> dict:
 def run_kernels(cases: dict, device: str) -> dict:
     """Every configuration on every case: ``{case: {config: (t, triangle, u, v)}}`` on the
     CPU, plus ``"info"``: compiled_kernel_info of each config and ``"interpreting"``."""
-    from course import triton_intersect as ti
+    from course.kernels import triton_intersect as ti
 
     out: dict = {"interpreting": ti.interpreting(), "info": {}}
     for case_name, case in cases.items():
@@ -322,7 +322,7 @@ def test_interpreter_matches_float64_reference(tmp_path):
 @needs_triton
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_compiled_matches_float64_reference():
-    from course import triton_intersect as ti
+    from course.kernels import triton_intersect as ti
 
     if ti.interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
@@ -340,7 +340,7 @@ def test_compiled_matches_float64_reference():
 
 @needs_triton
 def test_bad_arguments_raise_clear_errors():
-    from course import triton_intersect as ti
+    from course.kernels import triton_intersect as ti
 
     case = soup_case(n_rays=4, n_tris=3)
     o, d, tri = case["origins"], case["directions"], case["triangles"]
@@ -367,7 +367,7 @@ def test_bad_arguments_raise_clear_errors():
 def test_import_without_triton_fails_only_on_call():
     code = ("import sys; sys.modules['triton'] = None\n"
             "import torch\n"
-            "from course import triton_intersect as ti\n"
+            "from course.kernels import triton_intersect as ti\n"
             "layout = ti.mt_layout(torch.rand(2, 3, 3))\n"
             "try:\n"
             "    ti.mt_closest_hit_triton(torch.zeros(1, 3), torch.ones(1, 3), layout)\n"
@@ -383,7 +383,7 @@ def test_import_without_triton_fails_only_on_call():
 
 
 def test_unit_layout_maps_the_triangle_to_the_unit_triangle():
-    from course.triton_intersect import unit_layout
+    from course.kernels.triton_intersect import unit_layout
 
     tri = torch.tensor([[[1.0, 2.0, 3.0], [4.0, 2.5, 3.0], [1.5, 5.0, 4.0]],
                         [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [2.0, 2.0, 2.0]]])  # 2nd: degenerate

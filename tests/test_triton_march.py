@@ -1,4 +1,4 @@
-"""Tests of the given fused marcher (course/triton_march.py): course code, not graded.
+"""Tests of the given fused marcher (course/kernels/triton_march.py): course code, not graded.
 
 The kernel is checked against a float64 marcher written here with ``grid_sample`` as its
 trilinear lookup (an independent implementation of the same cell-centred, border-clamped
@@ -28,7 +28,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as a script: make `import course` work from a checkout
     sys.path.insert(0, str(REPO))
 
-from course.testing import (
+from course.grading.testing import (
     OLD_INTERPRETER_REASON,
     assert_close,
     assert_equal,
@@ -85,7 +85,7 @@ RUNS = {"steps1": {"steps": 1}, "steps6": {"steps": 6}, "steps0": {"steps": 0},
 
 
 def run_kernel(cases: dict, device: str) -> dict:
-    from course.triton_march import march_grid_triton
+    from course.kernels.triton_march import march_grid_triton
 
     out = {}
     for name, case in cases.items():
@@ -98,7 +98,7 @@ def run_kernel(cases: dict, device: str) -> dict:
             out[name, run] = {k: v.cpu() for k, v in result.items()}
             if kernel is not None and device == "cuda":
                 out["regs", name, run] = (kernel.n_regs, kernel.n_spills)
-    from course.triton_march import bake_light_triton
+    from course.kernels.triton_march import bake_light_triton
 
     for name, case in cases.items():
         for light, steps, scale in BAKES:
@@ -248,8 +248,8 @@ def test_interpreted_matches_float64_reference(tmp_path):
 
 @needs_triton
 def test_bad_input_is_named():
-    from course import triton_march as tm
-    from course.testing import expect_error
+    from course.grading.testing import expect_error
+    from course.kernels import triton_march as tm
 
     case = make_case(0, n=20)
     args = [case["origins"], case["directions"], case["box_min"], case["box_max"],
@@ -270,7 +270,7 @@ def test_bad_input_is_named():
 @needs_triton
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_compiled_matches_float64_reference():
-    from course import triton_intersect as ti
+    from course.kernels import triton_intersect as ti
 
     if ti.interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")

@@ -1,10 +1,10 @@
-"""course.triton_tracer: the Triton BVH walk and the Whitted uber kernel.
+"""course.kernels.triton_tracer: the Triton BVH walk and the Whitted uber kernel.
 
 On the CPU the kernels run in Triton's interpreter (TRITON_INTERPRET=1, which must be set
 before triton is imported, hence a subprocess) at tiny sizes; on CUDA the compiled kernels
 run at moderate sizes and report their registers and spills. Both are held to
-course.flat_bvh's contract by the float64 rules of tests/test_flat_bvh.py, and the uber
-kernel to course.whitted_support.render_reference.
+course.kernels.flat_bvh's contract by the float64 rules of tests/test_flat_bvh.py, and the uber
+kernel to course.given.lab3.render_reference.
 """
 
 from __future__ import annotations
@@ -30,15 +30,15 @@ from test_flat_bvh import (
     make_case,
 )
 
-from course.testing import run_in_triton_interpreter
+from course.grading.testing import run_in_triton_interpreter
 
 HAVE_TRITON = importlib.util.find_spec("triton") is not None
 needs_triton = pytest.mark.skipif(not HAVE_TRITON, reason="triton is not installed")
 
 
 def render_cases(size: int) -> dict:
-    from course.camera import primary_rays
-    from course.whitted_support import whitted_camera
+    from course.core.camera import primary_rays
+    from course.given.lab3 import whitted_camera
 
     out = {}
     for name in ("cornell_mirror", "mirror_corridor"):
@@ -51,9 +51,9 @@ def render_cases(size: int) -> dict:
 
 def run_kernels(case: dict, renders: dict, device: str) -> dict:
     """Every kernel on the cases, results on the CPU, plus kernel infos."""
-    from course import triton_tracer as tt
-    from course.flat_bvh import build_flat_bvh
-    from course.whitted_support import whitted_scene
+    from course.given.lab3 import whitted_scene
+    from course.kernels import triton_tracer as tt
+    from course.kernels.flat_bvh import build_flat_bvh
 
     out: dict = {"interpreting": tt.interpreting(), "info": {}}
     bvh = build_flat_bvh(case["vertices"].to(device), case["faces"].to(device))
@@ -92,7 +92,7 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
 
 
 def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
-    from course.whitted_support import render_reference, whitted_scene
+    from course.given.lab3 import render_reference, whitted_scene
 
     ref = brute_force64(case)
     check_hits(case, out["closest"], f"{label} closest hit", ref=ref)
@@ -147,7 +147,7 @@ def test_interpreted_kernels_follow_the_contract(tmp_path):
 @needs_triton
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_compiled_kernels_follow_the_contract():
-    from course import triton_tracer as tt
+    from course.kernels import triton_tracer as tt
 
     if tt.interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
@@ -165,10 +165,10 @@ def test_compiled_kernels_follow_the_contract():
 @needs_triton
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_compiled_bunny_matches_torch_traversal():
-    from course import triton_tracer as tt
-    from course.camera import primary_rays
-    from course.flat_bvh import flat_bvh_for, trace_flat_torch
-    from course.whitted_support import whitted_camera, whitted_scene
+    from course.core.camera import primary_rays
+    from course.given.lab3 import whitted_camera, whitted_scene
+    from course.kernels import triton_tracer as tt
+    from course.kernels.flat_bvh import flat_bvh_for, trace_flat_torch
 
     if tt.interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
@@ -183,8 +183,8 @@ def test_compiled_bunny_matches_torch_traversal():
 
 @needs_triton
 def test_bad_arguments_raise_clear_errors():
-    from course import triton_tracer as tt
-    from course.flat_bvh import build_flat_bvh
+    from course.kernels import triton_tracer as tt
+    from course.kernels.flat_bvh import build_flat_bvh
 
     case = make_case(n_tris=20, n_rays=64, seed=1)
     bvh = build_flat_bvh(case["vertices"], case["faces"])

@@ -2,15 +2,15 @@
 
 FrameLoop renders into its one packed framebuffer on the device, a FrameDownloader brings
 it to (pinned, on CUDA) host memory, unpack_rgba8 turns the words back into sRGB bytes
-and course.image.from_srgb8 into the linear image the gallery expects.
+and course.core.image.from_srgb8 into the linear image the gallery expects.
 """
 
 from __future__ import annotations
 
 import torch
 
-from course.bench import time_fn
-from course.image import from_srgb8
+from course.core.image import from_srgb8
+from course.measure.bench import time_fn
 
 
 def render(lab, device, size: int = 256):

@@ -19,11 +19,11 @@ import math
 
 import torch
 
-from course.bench import time_fn
-from course.camera import Camera, primary_rays
-from course.raymath import cross, dot
-from course.scenes import load_scene
-from course.types import Hits, Mesh, Rays
+from course.core.camera import Camera, primary_rays
+from course.core.raymath import cross, dot
+from course.core.scenes import load_scene
+from course.core.types import Hits, Mesh, Rays
+from course.measure.bench import time_fn
 
 VARIANT = "moller_trumbore"
 LIGHT = (-0.6, 0.65, 0.3)  # towards the light

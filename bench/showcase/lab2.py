@@ -21,9 +21,9 @@ import time
 
 import torch
 
-from course.camera import primary_rays
-from course.image import srgb_decode
-from course.scenes import load_scene
+from course.core.camera import primary_rays
+from course.core.image import srgb_decode
+from course.core.scenes import load_scene
 
 TOP = {"steps": 64, "tests": 256}  # the top of each row's colour scale
 

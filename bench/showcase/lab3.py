@@ -4,7 +4,7 @@ Left, the Cornell box whose tall box is a mirror, lit by one point light below t
 (its reflection shows the red wall and the short glossy box); right, the Stanford bunny
 (69K triangles) on a mirror floor under a sun and a point light. Rendered by the lab
 module passed in (its ``render_wavefront``: separate kernels with compaction, sorted by
-material), so a student's labs/ renders too. The tracer is ``course.flat_bvh.trace_bvh``
+material), so a student's labs/ renders too. The tracer is ``course.kernels.trace.trace_bvh``
 (a BVH) where it exists; without it only the Cornell box is drawn (brute force over 69K
 triangles per ray is too slow for a gallery).
 """
@@ -15,11 +15,11 @@ import time
 
 import torch
 
-from course.camera import primary_rays
-from course.whitted_support import trace_brute_force, whitted_camera, whitted_scene
+from course.core.camera import primary_rays
+from course.given.lab3 import trace_brute_force, whitted_camera, whitted_scene
 
 try:
-    from course.flat_bvh import trace_bvh
+    from course.kernels.trace import trace_bvh
 except ImportError:  # pragma: no cover - a checkout without the GPU track's BVH
     trace_bvh = None
 

@@ -17,7 +17,7 @@ import time
 
 import torch
 
-from course.camera import Camera, primary_rays
+from course.core.camera import Camera, primary_rays
 
 BOX_MIN, BOX_MAX = (-1.3, 0.25, -1.1), (1.3, 1.45, 1.1)
 SUN = (0.75, 0.45, -0.55)           # toward the sun: behind the cloud, to the right

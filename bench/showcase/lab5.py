@@ -16,8 +16,8 @@ import time
 
 import torch
 
-from course.camera import Camera, primary_rays
-from course.froxel_support import (
+from course.core.camera import Camera, primary_rays
+from course.given.lab5 import (
     Box,
     DirectionalLight,
     HeightFog,

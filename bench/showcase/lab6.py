@@ -18,9 +18,9 @@ import time
 
 import torch
 
-from course.camera import Camera
-from course.scenes import load_mesh
-from course.types import Hits, Mesh
+from course.core.camera import Camera
+from course.core.scenes import load_mesh
+from course.core.types import Hits, Mesh
 
 SUN = (0.55, -0.35, 1.0)         # toward the sun (Suzanne's file is z-up)
 SUN_RGB = (1.0, 0.93, 0.8)

@@ -1,0 +1,1 @@
+"""The autograder: pytest plugin, sandboxed worker, runner, catalog, feedback, mutants."""

@@ -35,7 +35,7 @@ class Mutant:
 
 def load_mutants(root) -> list[Mutant]:
     """All mutants shipped under ``root/solutions/mutants``."""
-    from course.grading.wire import import_file
+    from course.core.files import import_file
 
     mutants = []
     for path in sorted(Path(root, "solutions", "mutants").glob("lab*.py")):
@@ -79,7 +79,7 @@ def grade_mutant(mutant: Mutant, root, workdir, timeout: float = 600) -> dict:
     (workdir / f"{mutant.module}.py").write_text(apply_mutant(mutant, source))
     out = workdir / "results.json"
     # The mutant is our own code: grade it in-process in the child for speed.
-    cmd = [sys.executable, "-m", "course.cli", "grade", "--impl", str(workdir), "--trusted",
+    cmd = [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(workdir), "--trusted",
            "--lab", str(mutant.lab), "-k", mutant.tests, "--json", str(out)]
     proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=timeout,
                           check=False)

@@ -296,7 +296,7 @@ def load_reviewed(root) -> dict[str, str]:
     path = Path(root, "solutions", "mutants", "generated_reviewed.py")
     if not path.is_file():
         return {}
-    from course.grading.wire import import_file
+    from course.core.files import import_file
 
     return dict(import_file(path, "rtcourse_generated_reviewed").EQUIVALENT)
 

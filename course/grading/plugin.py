@@ -31,10 +31,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from course.core.files import import_file
 from course.grading.catalog import function_tasks, near_misses, read_grader
 from course.grading.feedback import IMPORT_FAILED, Feedback, short_feedback
 from course.grading.sandbox import LocalLab, SandboxedLab, Worker
-from course.grading.wire import import_file
 
 MARKERS = (
     "points(n): the test is graded and worth n points",

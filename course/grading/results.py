@@ -91,7 +91,7 @@ class ScoreKeeper:
     problems: dict = field(default_factory=dict)  # submission problems, each said once
     collect_errors: list = field(default_factory=list)  # graders that failed to load
     show_progress: bool = True
-    progress_stream: object = None  # where the bars go (course.progress.terminal_stream)
+    progress_stream: object = None  # where the bars go (course.core.progress.terminal_stream)
     _bar: object = None
     _bar_lab: object = None
     _left: dict = field(default_factory=dict)  # lab -> tests still to report
@@ -160,7 +160,7 @@ class ScoreKeeper:
         """One more test of ``result``'s lab reported: the lab's progress bar moves on."""
         if not self.show_progress:
             return
-        from course.progress import progress
+        from course.core.progress import progress
 
         if self._bar_lab != result.lab:
             self.close_progress()

@@ -10,20 +10,11 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from course.core.files import repo_root
+
 
 class GradeError(SystemExit):
     """A grading run that cannot start or selects nothing: one line, a non-zero exit."""
-
-
-def repo_root(command: str = "rtcourse") -> Path:
-    """The course checkout (or handout) this command runs in: the folder holding tests/.
-    ``command`` names the command in the error ("rtcourse release")."""
-    here = Path.cwd().resolve()
-    for folder in (here, *here.parents):
-        if (folder / "tests").is_dir() and (folder / "pyproject.toml").is_file():
-            return folder
-    raise SystemExit(f"{command}: run this inside the course folder (no tests/ and "
-                     f"pyproject.toml in {here} or above it)")
 
 
 def lab_test_files(root: Path, labs=None) -> list[Path]:
@@ -92,7 +83,7 @@ def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, t
     for spec in task_specs(labs, tasks):
         args += ["--task", spec]
     args += list(extra_args)
-    from course.progress import terminal_stream
+    from course.core.progress import terminal_stream
 
     stream = terminal_stream() if quiet else None  # looked up before pytest captures fd 2
     keeper = ScoreKeeper(show_progress=stream is not None, progress_stream=stream)

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-import importlib.util
 import inspect
 import io
 import pickle
@@ -33,6 +32,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
+from course.core.files import import_file
 
 TAG = "__rtcourse__"
 _PLAIN = (str, bytes, int, float, bool, type(None))
@@ -196,24 +197,6 @@ def load_function(d):
     for part in d["qualname"].split("."):
         obj = getattr(obj, part)
     return obj
-
-
-def import_file(path, name=None):
-    """Import a Python file as a module (cached by path)."""
-    path = str(Path(path).resolve())
-    name = name or "rtcourse_file_" + Path(path).stem
-    module = sys.modules.get(name)
-    if module is not None and getattr(module, "__file__", None) == path:
-        return module
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    try:
-        spec.loader.exec_module(module)
-    except BaseException:
-        sys.modules.pop(name, None)
-        raise
-    return module
 
 
 def decode(obj, *, make_ref=None, allow_functions=False, limit=None):

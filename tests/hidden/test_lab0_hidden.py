@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from course.testing import assert_equal, check_tensor, generator
+from course.grading.testing import assert_equal, check_tensor, generator
 
 LAB_MODULE = "lab0_interop"
 TASKS = {1: "Packed framebuffers"}

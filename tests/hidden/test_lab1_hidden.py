@@ -27,7 +27,7 @@ from test_lab1_intersect import (
     soup_scene,
 )
 
-from course.testing import assert_close, check_tensor, generator
+from course.grading.testing import assert_close, check_tensor, generator
 
 LAB_MODULE = "lab1_intersect"
 TASKS = visible.TASKS

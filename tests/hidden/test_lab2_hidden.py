@@ -33,9 +33,9 @@ from test_lab2_accel import (
     uniform_grid,
 )
 
-from course.scenes import load_scene
-from course.testing import generator
-from course.types import Mesh
+from course.core.scenes import load_scene
+from course.core.types import Mesh
+from course.grading.testing import generator
 
 LAB_MODULE = "lab2_accel"
 TASKS = visible.TASKS

@@ -28,10 +28,9 @@ from test_lab3_wavefront import (
     with_blocks,
 )
 
-from course.camera import primary_rays
-from course.testing import assert_close, check_tensor, generator
-from course.types import Mesh
-from course.whitted_support import (
+from course.core.camera import primary_rays
+from course.core.types import Mesh
+from course.given.lab3 import (
     face_normals,
     make_scene,
     offset_scale,
@@ -40,6 +39,7 @@ from course.whitted_support import (
     translated,
     whitted_camera,
 )
+from course.grading.testing import assert_close, check_tensor, generator
 
 LAB_MODULE = "lab3_wavefront"
 TASKS = visible.TASKS

@@ -36,7 +36,7 @@ from test_lab4_march import (
     walk,
 )
 
-from course.testing import assert_close, check_tensor
+from course.grading.testing import assert_close, check_tensor
 
 LAB_MODULE = "lab4_march"
 TASKS = visible.TASKS

@@ -11,7 +11,7 @@ import test_lab5_froxel as visible
 import torch
 from test_lab5_froxel import F32, F64, hg, phi64, quadrature, ref_depths
 
-from course.testing import assert_close, check_tensor, generator
+from course.grading.testing import assert_close, check_tensor, generator
 
 LAB_MODULE = "lab5_froxel"
 TASKS = visible.TASKS

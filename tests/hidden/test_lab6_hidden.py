@@ -33,8 +33,14 @@ from test_lab6_raster import (
     trace_shadow_scene,
 )
 
-from course.camera import primary_rays
-from course.testing import assert_close, assert_equal, assert_fraction, check_tensor, generator
+from course.core.camera import primary_rays
+from course.grading.testing import (
+    assert_close,
+    assert_equal,
+    assert_fraction,
+    check_tensor,
+    generator,
+)
 
 LAB_MODULE = "lab6_raster"
 TASKS = visible.TASKS

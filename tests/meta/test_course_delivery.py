@@ -13,14 +13,14 @@ from pathlib import Path
 import pytest
 
 from course.grading.mutants import grade_mutant, load_mutants
-from course.grading.release import release
+from course.tools.release import release
 
 ROOT = Path(__file__).resolve().parents[2]
 MUTANTS = load_mutants(ROOT)
 
 
 def _rtcourse(*args, cwd, timeout=900):
-    return subprocess.run([sys.executable, "-m", "course.cli", *args], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "course.tools.cli", *args], cwd=cwd,
                           capture_output=True, text=True, timeout=timeout)
 
 

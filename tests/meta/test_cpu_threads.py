@@ -1,4 +1,4 @@
-"""course.device's CPU thread count: the free cores of this process, never the machine's."""
+"""course.core.device's CPU thread count: the free cores of this process, never the machine's."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import os
 import pytest
 import torch
 
-from course import device
+from course.core import device
 
 
 def test_free_cpus_follows_affinity_and_load(monkeypatch):

@@ -22,11 +22,11 @@ import torch
 
 from course.grading.catalog import function_tasks, lab_catalog, lab_file_rank, skeleton_stubs
 from course.grading.feedback import MAX_LINES, short_feedback
-from course.grading.release import labs_readme
 from course.grading.results import OUTPUT_LIMIT, ScoreKeeper
 from course.grading.results import TestResult as Result
 from course.grading.runner import lab_test_files
-from course.testing import ImageMismatch, assert_image_close
+from course.grading.testing import ImageMismatch, assert_image_close
+from course.tools.release import labs_readme
 
 HERE = Path(__file__).parent
 ROOT = HERE.parents[1]
@@ -51,7 +51,7 @@ IMAGE_GRADER = """\
 import pytest
 import torch
 
-from course.testing import assert_image_close
+from course.grading.testing import assert_image_close
 
 LAB_MODULE = "lab9_toy"
 TASKS = {3: "an image"}
@@ -131,7 +131,7 @@ def test_grade_prints_first_failure_per_task_and_caps_results_json(toy, tmp_path
     course, subs = toy
     results = tmp_path / "results.json"
     pictures = tmp_path / "pictures"
-    proc = _run(["-m", "course.cli", "grade", "--impl", str(subs["wrong"]), "--lab", "9",
+    proc = _run(["-m", "course.tools.cli", "grade", "--impl", str(subs["wrong"]), "--lab", "9",
                  "--json", str(results)], course, RTCOURSE_FAILURE_DIR=str(pictures))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = proc.stdout.strip().splitlines()
@@ -164,7 +164,7 @@ def test_grade_prints_first_failure_per_task_and_caps_results_json(toy, tmp_path
 def test_submission_problems_are_said_once(toy, tmp_path):
     course, subs = toy
     start = time.monotonic()
-    missing = _run(["-m", "course.cli", "grade", "--impl", str(tmp_path / "nowhere")], course)
+    missing = _run(["-m", "course.tools.cli", "grade", "--impl", str(tmp_path / "nowhere")], course)
     assert missing.returncode != 0 and time.monotonic() - start < 10
     assert missing.stderr.strip().splitlines() == [
         (f"rtcourse grade: --impl {tmp_path / 'nowhere'}: no such folder (give the folder "
@@ -180,17 +180,17 @@ def test_submission_problems_are_said_once(toy, tmp_path):
                          ("import", ("lab9_toy.py failed to import: ModuleNotFoundError: No "
                                      "module named 'not_a_module_xyz' (at import/lab9_toy.py:2"))):
         results = tmp_path / f"{name}.json"
-        proc = _run(["-m", "course.cli", "grade", "--impl", str(subs[name]), "--lab", "9",
+        proc = _run(["-m", "course.tools.cli", "grade", "--impl", str(subs[name]), "--lab", "9",
                      "--json", str(results)], course)
         assert proc.stdout.count(needle) == 1, proc.stdout
         data = json.loads(results.read_text())
         assert data["score"] == 0 and all(needle in t["output"] for t in data["tests"])
         assert len({t["output"] for t in data["tests"]}) == 1  # one reason for every test
 
-    typo = _run(["-m", "course.cli", "grade", "--impl", str(subs["wrong"]), "--lab", "9", "-k",
+    typo = _run(["-m", "course.tools.cli", "grade", "--impl", str(subs["wrong"]), "--lab", "9", "-k",
                  "dubble"], course)
     assert typo.returncode != 0 and "no graded test matches" in typo.stderr
-    no_task = _run(["-m", "course.cli", "grade", "--impl", str(subs["wrong"]), "--lab", "9",
+    no_task = _run(["-m", "course.tools.cli", "grade", "--impl", str(subs["wrong"]), "--lab", "9",
                     "--task", "7"], course)
     assert no_task.returncode != 0 and "no graded test of task 7 of lab 9" in no_task.stderr
 
@@ -198,13 +198,13 @@ def test_submission_problems_are_said_once(toy, tmp_path):
 def test_grade_task_runs_exactly_that_task(toy, tmp_path):
     course, _ = toy
     results = tmp_path / "results.json"
-    _run(["-m", "course.cli", "grade", "--impl", "solutions", "--lab", "9", "--task", "2",
+    _run(["-m", "course.tools.cli", "grade", "--impl", "solutions", "--lab", "9", "--task", "2",
           "--json", str(results)], course)
     data = json.loads(results.read_text())
     assert {t["number"] for t in data["tests"]} == {"9.2"}
     assert data["max_score"] == pytest.approx(2.0) and data["score"] == pytest.approx(2.0)
     # The progress bar of the lab's tests (forced on: here stderr is a pipe, not a terminal).
-    shown = _run(["-m", "course.cli", "grade", "--impl", "solutions", "--lab", "9", "--task",
+    shown = _run(["-m", "course.tools.cli", "grade", "--impl", "solutions", "--lab", "9", "--task",
                   "2"], course, progress="1")
     assert "lab 9:" in shown.stderr and "/1 [" in shown.stderr, shown.stderr
 
@@ -329,7 +329,7 @@ def test_image_mismatch_writes_three_pictures_and_html(tmp_path, monkeypatch):
 
 
 def test_progress_only_on_a_terminal(monkeypatch):
-    from course.progress import progress, progress_enabled
+    from course.core.progress import progress, progress_enabled
 
     monkeypatch.delenv("RTCOURSE_PROGRESS", raising=False)
 
@@ -343,7 +343,7 @@ def test_progress_only_on_a_terminal(monkeypatch):
     monkeypatch.setenv("RTCOURSE_PROGRESS", "0")
     assert list(progress(range(3), desc="x")) == [0, 1, 2]
 
-    from course.bench import ResultTable
+    from course.measure.bench import ResultTable
 
     monkeypatch.setenv("RTCOURSE_PROGRESS", "1")
     table = ResultTable("sweep", device="cpu", total=2)
@@ -354,7 +354,7 @@ def test_progress_only_on_a_terminal(monkeypatch):
 
 
 def test_bad_mesh_file_is_named(tmp_path):
-    from course.scenes import load_mesh
+    from course.core.scenes import load_mesh
 
     for suffix, data in ((".obj", b"v 0 0 0\nf 1 2 3 4 5\nv nonsense\x00\xff"),
                          (".glb", b"glTF\x02\x00\x00\x00garbage"),
@@ -369,7 +369,7 @@ def test_bad_mesh_file_is_named(tmp_path):
 
 
 def test_camera_rejects_degenerate_up():
-    from course.camera import Camera
+    from course.core.camera import Camera
 
     with pytest.raises(ValueError, match="up.*zero"):
         Camera(eye=(0, 0, 3), target=(0, 0, 0), up=(0, 0, 0))
@@ -378,7 +378,7 @@ def test_camera_rejects_degenerate_up():
 
 
 def test_commands_name_themselves_outside_the_course(tmp_path):
-    proc = _run(["-m", "course.cli", "release", str(tmp_path / "out")], tmp_path, timeout=60)
+    proc = _run(["-m", "course.tools.cli", "release", str(tmp_path / "out")], tmp_path, timeout=60)
     assert proc.returncode != 0
     assert proc.stderr.strip().startswith("rtcourse release: run this inside the course"), \
         proc.stderr
@@ -409,7 +409,7 @@ def test_student_line_from_the_worker_traceback(tmp_path):
 
 
 def test_gradescope_accepts_a_renamed_upload(tmp_path):
-    from course.grading.gradescope import collect_submission
+    from course.tools.gradescope import collect_submission
 
     sub = tmp_path / "submission"
     (sub / "labs").mkdir(parents=True)

@@ -21,9 +21,9 @@ from pathlib import Path
 import pytest
 
 from course.grading.catalog import lab_catalog
-from course.grading.gradescope import STUDENT_USER, build_autograder, collect_submission
-from course.grading.release import release
 from course.grading.runner import lab_test_files
+from course.tools.gradescope import STUDENT_USER, build_autograder, collect_submission
+from course.tools.release import release
 
 ROOT = Path(__file__).resolve().parents[2]
 HIDDEN = "tests/hidden/test_lab0_hidden.py"
@@ -84,7 +84,7 @@ def test_package_layout(package):
         assert script in names and modes[script] & stat.S_IXUSR, f"{script}: not executable"
     assert f"rtcourse/{HIDDEN}" in names, "the hidden graders ship in the autograder"
     assert "rtcourse/solutions/lab0_interop.py" in names, "the references ship for instructors"
-    assert "rtcourse/pyproject.toml" in names and "rtcourse/course/cli.py" in names
+    assert "rtcourse/pyproject.toml" in names and "rtcourse/course/tools/cli.py" in names
     assert not any(n.startswith(("rtcourse/tests/meta/", "rtcourse/.git/")) for n in names)
 
 
@@ -99,7 +99,7 @@ def test_scripts_parse_and_setup_installs_cpu_torch(package):
     assert "useradd" in setup and STUDENT_USER in setup
     run = (package["dir"] / "run_autograder").read_text()
     assert "/autograder/submission" in run and "/autograder/results" in run
-    assert 'course.cli grade --impl "$WORK"' in run and '--json "$RESULTS/results.json"' in run
+    assert 'course.tools.cli grade --impl "$WORK"' in run and '--json "$RESULTS/results.json"' in run
 
 
 def test_results_json_is_gradescope_format(graded):
@@ -197,7 +197,7 @@ CHEAT = '''
 from pathlib import Path
 
 import course
-from course.grading.wire import import_file
+from course.core.files import import_file
 
 _ref = import_file(Path(course.__file__).resolve().parents[1] / "solutions" / "lab0_interop.py",
                    "stolen")

@@ -20,8 +20,8 @@ from course.grading.budget import (
     settings_text,
 )
 from course.grading.catalog import lab_catalog
-from course.grading.gradescope import RUN_AUTOGRADER, _script
 from course.grading.runner import lab_test_files
+from course.tools.gradescope import RUN_AUTOGRADER, _script
 
 ROOT = Path(__file__).resolve().parents[2]
 RECORD = ROOT / "bench" / "results" / "cpu-2cores" / "grading_cost.json"

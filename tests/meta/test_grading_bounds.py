@@ -62,7 +62,7 @@ if _unprivileged_user():  # the forger also as the unprivileged worker user
 
 # Runs the grader and records its own peak memory (not its workers').
 _WRAPPER = """import resource, sys
-from course.cli import main
+from course.tools.cli import main
 try:
     code = main(sys.argv[2:])
 finally:
@@ -354,7 +354,7 @@ def test_hanging_lab_grades_within_three_minutes_at_the_default_limits(tmp_path)
     env["TMPDIR"] = str(tmp_path)
     start = time.monotonic()
     proc = subprocess.run(
-        [sys.executable, "-m", "course.cli", "grade", "--impl", str(tmp_path / "sub"),
+        [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(tmp_path / "sub"),
          "--lab", "0", "--json", str(tmp_path / "results.json")], cwd=ROOT, env=env,
         capture_output=True, text=True, timeout=600, check=False)
     seconds = time.monotonic() - start
@@ -372,7 +372,7 @@ def test_a_killed_grader_leaves_nothing(tmp_path):
     shutil.copytree(HERE / "hostile" / "child_spawner", sub)
     (tmp_path / "tmp").mkdir()
     env = dict(os.environ, TMPDIR=str(tmp_path / "tmp"), RTCOURSE_TIME_LIMIT="60")
-    proc = subprocess.Popen([sys.executable, "-m", "course.cli", "grade", "--impl", str(sub),
+    proc = subprocess.Popen([sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(sub),
                              "--lab", "8"], cwd=course, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     try:

@@ -35,7 +35,7 @@ def _grade(name: str, base: Path) -> dict:
     env = dict(os.environ, RTCOURSE_TIME_LIMIT="8", RTCOURSE_MEMORY_GB="1",
                RTCOURSE_TEST_RESULTS=str(out), RTCOURSE_TEST_CWD=str(course))
     proc = subprocess.run(
-        [sys.executable, "-m", "course.cli", "grade", "--impl", str(HERE / "hostile" / name),
+        [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(HERE / "hostile" / name),
          "--lab", "9", "--json", str(out)], cwd=course, env=env, capture_output=True, text=True,
         timeout=300, check=False)
     return {"proc": proc, "json": out, "cwd_json": course / "results.json"}
@@ -109,7 +109,7 @@ def test_student_output_is_captured_not_mixed(tmp_path):
         "def double(x):\n    print('DOUBLE-NOISE')\n    return 2 * x\n"
         "def norms(x):\n    print('NORMS-NOISE')\n    return x.sum(-1)\n")
     out = tmp_path / "results.json"
-    proc = subprocess.run([sys.executable, "-m", "course.cli", "grade", "--impl", str(sub),
+    proc = subprocess.run([sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(sub),
                            "--lab", "9", "--json", str(out)], cwd=course, capture_output=True,
                           text=True, timeout=300, check=False)
     for noise in ("IMPORT-NOISE", "DOUBLE-NOISE"):

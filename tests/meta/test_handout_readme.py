@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from course.grading.catalog import lab_catalog
-from course.grading.release import LABS_README, release
 from course.grading.runner import lab_test_files
+from course.tools.release import LABS_README, release
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -68,7 +68,7 @@ def test_one_task_raises_the_score_by_its_points(handout, tmp_path):
     command = "rtcourse grade --lab 0 --task 1"
     assert f"`{command}`" in (handout / LABS_README).read_text()
     results = tmp_path / "results.json"
-    proc = subprocess.run([sys.executable, "-m", "course.cli", *command.split()[1:],
+    proc = subprocess.run([sys.executable, "-m", "course.tools.cli", *command.split()[1:],
                            "--json", str(results)], cwd=handout, capture_output=True,
                           text=True, timeout=600, check=False)
     assert results.exists(), proc.stdout[-3000:] + proc.stderr[-3000:]

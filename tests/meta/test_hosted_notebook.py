@@ -22,7 +22,7 @@ import torch
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
-from course.grading.release import course_files
+from course.tools.release import course_files
 
 ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- hosted-setup-cell"

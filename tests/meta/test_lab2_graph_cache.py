@@ -19,10 +19,10 @@ REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from course.accel_support import pack_bvh
-from course.camera import primary_rays
-from course.scenes import load_scene
-from course.testing import assert_equal
+from course.core.camera import primary_rays
+from course.core.scenes import load_scene
+from course.given.lab2 import pack_bvh
+from course.grading.testing import assert_equal
 from solutions import lab2_accel as lab
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need CUDA")

@@ -14,8 +14,7 @@ import pytest
 from nbclient import NotebookClient
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
 
-from course.grading.release import release
-from course.lecture import (
+from course.tools.lecture import (
     FIGURES,
     INDEX,
     Unwritten,
@@ -23,6 +22,7 @@ from course.lecture import (
     names_read,
     unwritten_function,
 )
+from course.tools.release import release
 
 ROOT = Path(__file__).resolve().parents[2]
 LINE = "write `wave` (Lab 9, task 2) to see your own"
@@ -35,7 +35,7 @@ SETUP = textwrap.dedent("""\
     IMPL = ROOT / ("solutions" if (ROOT / "solutions").is_dir() else "labs")
     sys.path[:0] = [str(IMPL), str(ROOT)]
 
-    from course.lecture import show_reference_when_unwritten
+    from course.tools.lecture import show_reference_when_unwritten
 
     show_reference_when_unwritten(ROOT)
 

@@ -40,7 +40,7 @@ def test_every_notebook_that_imports_a_lab_falls_back_to_reference_figures():
         installed = [i for i, source in enumerate(code)
                      if "show_reference_when_unwritten(ROOT)" in source]
         assert installed and installed[0] <= imports[0], \
-            f"{path.name}: call course.lecture.show_reference_when_unwritten(ROOT) in the " \
+            f"{path.name}: call course.tools.lecture.show_reference_when_unwritten(ROOT) in the " \
             f"cell that imports the lab (before its first demo)"
         checked += 1
     assert checked >= 7, f"only {checked} notebooks import a lab"

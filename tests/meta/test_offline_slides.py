@@ -56,7 +56,7 @@ def _slides(root: Path, *args):
     (root / "no_network").mkdir(exist_ok=True)
     (root / "no_network" / "sitecustomize.py").write_text(NO_NETWORK)
     env = dict(os.environ, PYTHONPATH=str(root / "no_network"))
-    return subprocess.run([sys.executable, "-m", "course.cli", "slides", "--out", "out", *args],
+    return subprocess.run([sys.executable, "-m", "course.tools.cli", "slides", "--out", "out", *args],
                           cwd=root, capture_output=True, text=True, timeout=300, check=False,
                           env=env)
 
@@ -157,7 +157,7 @@ def test_pages_load_nothing_from_the_network(rendered):
 
 
 def test_slides_renders_only_the_notebooks_named(tmp_path, monkeypatch, capsys):
-    from course.cli import main
+    from course.tools.cli import main
 
     _course(tmp_path)
     monkeypatch.chdir(tmp_path)
@@ -201,7 +201,7 @@ def test_a_browser_without_network_typesets_the_formulas(rendered, page):
 
 
 def test_a_terminal_gets_a_progress_bar_per_notebook(tmp_path, capfd, monkeypatch):
-    from course.slides import render_slides
+    from course.tools.slides import render_slides
 
     _course(tmp_path)
     monkeypatch.setenv("RTCOURSE_PROGRESS", "1")  # as on a terminal

@@ -11,7 +11,7 @@ from pathlib import Path
 import nbformat
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
 
-from course.slides import error_cells, execute, with_slide_types
+from course.tools.slides import error_cells, execute, with_slide_types
 
 ROOT = Path(__file__).resolve().parents[2]
 OVERVIEW = ROOT / "slides" / "00_overview.ipynb"
@@ -45,7 +45,7 @@ def _toy_course(root: Path):
 
 
 def _slides(root: Path, *args):
-    return subprocess.run([sys.executable, "-m", "course.cli", "slides", "--out", "out", *args],
+    return subprocess.run([sys.executable, "-m", "course.tools.cli", "slides", "--out", "out", *args],
                           cwd=root, capture_output=True, text=True, timeout=300, check=False)
 
 

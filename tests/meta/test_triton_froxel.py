@@ -1,4 +1,4 @@
-"""The fused froxel pipeline (course/triton_froxel.py) against Lab 5's ``render_froxels``.
+"""The fused froxel pipeline (course/kernels/triton_froxel.py) against Lab 5's ``render_froxels``.
 
 Not shipped to students (it compares with ``solutions/``). Small seeded scenes that
 exercise every branch of the kernels, each compared image for image with the lab's torch
@@ -41,7 +41,7 @@ REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from course.testing import OLD_INTERPRETER_REASON, triton_interpreter_too_old
+from course.grading.testing import OLD_INTERPRETER_REASON, triton_interpreter_too_old
 
 needs_triton = pytest.mark.skipif(importlib.util.find_spec("triton") is None,
                                   reason="triton is not installed")
@@ -74,8 +74,8 @@ def _images(camera, g: torch.Generator, near: float, far: float):
 
 def cases() -> dict:
     """name -> (scene, camera, depth, opaque, keyword arguments)."""
-    from course.camera import Camera
-    from course.froxel_support import (
+    from course.core.camera import Camera
+    from course.given.lab5 import (
         Box,
         ConstantFog,
         DirectionalLight,
@@ -157,7 +157,7 @@ def _lab5_grader():
 
 
 def run_kernels(data: dict, device: str) -> dict:
-    from course.triton_froxel import render_froxels_fused
+    from course.kernels.triton_froxel import render_froxels_fused
 
     out = {}
     for name, (scene, camera, depth, opaque, kwargs) in data.items():
@@ -197,7 +197,7 @@ def compare_images(got, want, where: str, outliers: float = 0.0, worst: float = 
 
 
 def check(data: dict, out: dict, where: str) -> None:
-    from course.bench import load_lab
+    from course.measure.bench import load_lab
 
     lab = load_lab("lab5_froxel", "solutions")
     for name, (scene, camera, depth, opaque, kwargs) in data.items():
@@ -228,7 +228,7 @@ def check(data: dict, out: dict, where: str) -> None:
 @needs_triton
 @old_interpreter
 def test_interpreted_matches_the_lab(tmp_path):
-    from course.testing import run_in_triton_interpreter
+    from course.grading.testing import run_in_triton_interpreter
 
     data = cases()
     check(data, run_in_triton_interpreter(__file__, data, tmp_path, timeout=600),
@@ -237,8 +237,8 @@ def test_interpreted_matches_the_lab(tmp_path):
 
 @needs_triton
 def test_scene_without_media_returns_a_copy():
-    from course.froxel_support import PointLight, Scene
-    from course.triton_froxel import render_froxels_fused
+    from course.given.lab5 import PointLight, Scene
+    from course.kernels.triton_froxel import render_froxels_fused
 
     _, camera, depth, opaque, kwargs = cases()["emissive"]
     image, report = render_froxels_fused(Scene(lights=(PointLight(),)), camera, depth, opaque,
@@ -251,7 +251,7 @@ def test_scene_without_media_returns_a_copy():
 @needs_triton
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_compiled_matches_the_lab():
-    from course.triton_intersect import interpreting
+    from course.kernels.triton_intersect import interpreting
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
@@ -267,9 +267,9 @@ def test_compiled_1080p_frame_matches_the_lab():
     may land on the other side (fast exp/division) and move a tile's pixels by up to that
     froxel's light: at most 0.1% of the pixels may differ by more than the tight
     tolerance, none by more than 10% of the largest radiance."""
-    from course.bench import load_lab
-    from course.triton_froxel import render_froxels_fused
-    from course.triton_intersect import interpreting
+    from course.kernels.triton_froxel import render_froxels_fused
+    from course.kernels.triton_intersect import interpreting
+    from course.measure.bench import load_lab
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
@@ -293,8 +293,8 @@ def test_compiled_1080p_frame_matches_the_lab():
 def _tiny_frame():
     """A valid call's arguments: a 12 x 8 frame of a scene with media (without media the
     call returns before the device check), float32 CPU images."""
-    from course.camera import Camera
-    from course.froxel_support import ConstantFog, PointLight, Scene
+    from course.core.camera import Camera
+    from course.given.lab5 import ConstantFog, PointLight, Scene
 
     camera = Camera(eye=(0.0, 1.0, 2.0), target=(0.0, 1.0, -5.0), width=12, height=8)
     scene = Scene(media=(ConstantFog(),), lights=(PointLight(),))
@@ -306,9 +306,9 @@ def test_bad_arguments_are_named():
     """render_froxels_fused checks every argument before its first launch (no interpreter
     needed): each bad one raises a TypeError (wrong kind) or ValueError (wrong shape,
     device or value) naming it, with or without media in the scene."""
-    from course.froxel_support import ConstantFog, Scene
-    from course.testing import expect_error
-    from course.triton_froxel import render_froxels_fused
+    from course.given.lab5 import ConstantFog, Scene
+    from course.grading.testing import expect_error
+    from course.kernels.triton_froxel import render_froxels_fused
 
     scene, camera, depth, opaque = _tiny_frame()
     positional = [  # (name, kind, case, scene, camera, depth_image, opaque_image)
@@ -367,9 +367,9 @@ def test_bad_arguments_are_named():
 def test_cpu_images_need_the_interpreter():
     """Compiled, the kernels need CUDA tensors: CPU images are refused, naming depth_image,
     before anything is packed or launched."""
-    from course.testing import expect_error
-    from course.triton_froxel import render_froxels_fused
-    from course.triton_intersect import interpreting
+    from course.grading.testing import expect_error
+    from course.kernels.triton_froxel import render_froxels_fused
+    from course.kernels.triton_intersect import interpreting
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: CPU tensors are accepted")

@@ -1,4 +1,4 @@
-"""The fused rasterizer (course/triton_raster.py) against Lab 6's reference ``rasterize``.
+"""The fused rasterizer (course/kernels/triton_raster.py) against Lab 6's reference ``rasterize``.
 
 Not shipped to students (it compares with ``solutions/``). The same keys are asked for on
 scenes that exercise both kernels: Suzanne (small triangles), a jittered mesh covering the
@@ -37,7 +37,7 @@ REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from course.testing import OLD_INTERPRETER_REASON, triton_interpreter_too_old
+from course.grading.testing import OLD_INTERPRETER_REASON, triton_interpreter_too_old
 
 needs_triton = pytest.mark.skipif(importlib.util.find_spec("triton") is None,
                                   reason="triton is not installed")
@@ -54,8 +54,8 @@ old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(),
 
 
 def cases() -> dict:
-    from course.bench import load_lab
-    from course.scenes import load_scene
+    from course.core.scenes import load_scene
+    from course.measure.bench import load_lab
 
     lab = load_lab("lab6_raster", "solutions")
     scene = load_scene("suzanne", device="cpu")
@@ -87,7 +87,7 @@ def cases() -> dict:
 
 
 def run_kernels(data: dict, device: str) -> dict:
-    from course.triton_raster import rasterize_triton
+    from course.kernels.triton_raster import rasterize_triton
 
     # Suzanne with the default knobs only: the interpreter runs every lane in Python.
     return {(name, run): rasterize_triton(screen.to(device), w, h, **KNOBS[run], **knobs).cpu()
@@ -96,7 +96,7 @@ def run_kernels(data: dict, device: str) -> dict:
 
 
 def check(data: dict, out: dict, where: str) -> None:
-    from course.bench import load_lab
+    from course.measure.bench import load_lab
 
     lab = load_lab("lab6_raster", "solutions")
     for (name, run), keys in out.items():
@@ -120,7 +120,7 @@ def check(data: dict, out: dict, where: str) -> None:
 @pytest.fixture(scope="module")
 def interpreted(tmp_path_factory):
     """Every kernel of this file run once in Triton's interpreter (one subprocess)."""
-    from course.testing import run_in_triton_interpreter
+    from course.grading.testing import run_in_triton_interpreter
 
     data = {"raster": cases(), "mesh": mesh_cases()}
     return data, run_in_triton_interpreter(__file__, data, tmp_path_factory.mktemp("interp"),
@@ -137,7 +137,7 @@ def test_interpreted_matches_reference(interpreted):
 @needs_triton
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_compiled_matches_reference():
-    from course.triton_intersect import interpreting
+    from course.kernels.triton_intersect import interpreting
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
@@ -150,10 +150,10 @@ def test_fast_setup_matches_the_lab_pipeline():
     camera stands inside the mesh and many triangles cross the near plane."""
     import dataclasses
 
-    from course.bench import load_lab
-    from course.camera import Camera
-    from course.scenes import load_scene
-    from course.triton_raster import screen_triangles_fast
+    from course.core.camera import Camera
+    from course.core.scenes import load_scene
+    from course.kernels.triton_raster import screen_triangles_fast
+    from course.measure.bench import load_lab
 
     lab = load_lab("lab6_raster", "solutions")
     mesh = load_scene("suzanne", device="cpu").mesh
@@ -208,8 +208,8 @@ def mesh_cases() -> dict:
     """name -> (vertices, faces, mvp float64, width, height)."""
     import dataclasses
 
-    from course.camera import Camera
-    from course.scenes import load_scene
+    from course.core.camera import Camera
+    from course.core.scenes import load_scene
 
     scene = load_scene("suzanne", device="cpu")
     mesh = scene.mesh
@@ -227,7 +227,7 @@ def mesh_cases() -> dict:
 
 
 def run_mesh_stages(data: dict, device: str) -> dict:
-    from course.triton_raster import screen_triangles_triton, visibility_fused
+    from course.kernels.triton_raster import screen_triangles_triton, visibility_fused
 
     out = {}
     for name, (v, f, mvp, w, h) in data.items():
@@ -251,7 +251,7 @@ def lab_pieces(lab, vertices, faces, mvp, width, height):
 
 
 def check_screen(data: dict, out: dict, where: str) -> None:
-    from course.bench import load_lab
+    from course.measure.bench import load_lab
 
     lab = load_lab("lab6_raster", "solutions")
     for name, (v, f, mvp, w, h) in data.items():
@@ -284,7 +284,7 @@ def check_screen(data: dict, out: dict, where: str) -> None:
 def test_soup_exercises_every_clipping_case():
     """The soup is worth testing: faces cut into one piece and into two, faces behind the
     near plane, and the special faces (NaN, inf, degenerate) rejected by the lab."""
-    from course.bench import load_lab
+    from course.measure.bench import load_lab
 
     lab = load_lab("lab6_raster", "solutions")
     v, f, mvp, w, h = mesh_cases()["soup"]
@@ -306,7 +306,7 @@ def check_ids(data: dict, out: dict, where: str) -> None:
     by design: an exact depth tie between a face's second piece and another face goes to
     the other face here (slot order: every first piece before every second piece), to the
     lower face in the lab; ties need coplanar overlapping faces, so they are rare."""
-    from course.bench import load_lab
+    from course.measure.bench import load_lab
 
     lab = load_lab("lab6_raster", "solutions")
     for key, ids in out.items():
@@ -352,8 +352,8 @@ def test_compiled_fused_pipeline():
     """The same on CUDA, plus Suzanne at 640x480 (thousands of small and large boxes)."""
     import dataclasses
 
-    from course.scenes import load_scene
-    from course.triton_intersect import interpreting
+    from course.core.scenes import load_scene
+    from course.kernels.triton_intersect import interpreting
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
@@ -374,9 +374,9 @@ def test_graph_replay_matches_eager():
     every camera it is called with, each call in a tensor of its own."""
     import dataclasses
 
-    from course.scenes import load_scene
-    from course.triton_intersect import interpreting
-    from course.triton_raster import FusedVisibility, visibility_fused
+    from course.core.scenes import load_scene
+    from course.kernels.triton_intersect import interpreting
+    from course.kernels.triton_raster import FusedVisibility, visibility_fused
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
@@ -412,7 +412,7 @@ def _tiny_mesh():
 def _mesh_entry(name: str):
     """The mesh entry point ``name`` as ``fn(vertices, faces, mvp, width, height, **knobs)``
     (FusedVisibility: its constructor, which takes no matrix)."""
-    import course.triton_raster as fused
+    import course.kernels.triton_raster as fused
 
     if name != "FusedVisibility":
         return getattr(fused, name)
@@ -432,7 +432,7 @@ MESH_ENTRIES = ("screen_triangles_triton", "visibility_fused", "FusedVisibility"
 def test_bad_mesh_arguments_are_named(entry):
     """Each bad argument of the mesh entry points raises a ValueError naming it, whatever
     the device: the device is checked last."""
-    from course.testing import expect_error
+    from course.grading.testing import expect_error
 
     fn = _mesh_entry(entry)
     v, f, mvp, w, h = _tiny_mesh()
@@ -476,8 +476,8 @@ def test_bad_mesh_arguments_are_named(entry):
 @pytest.mark.parametrize("entry", MESH_ENTRIES)
 def test_cpu_mesh_needs_the_interpreter(entry):
     """Compiled, the kernels need CUDA tensors: a CPU mesh is refused, naming vertices."""
-    from course.testing import expect_error
-    from course.triton_intersect import interpreting
+    from course.grading.testing import expect_error
+    from course.kernels.triton_intersect import interpreting
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: CPU tensors are accepted")
@@ -491,8 +491,8 @@ def test_fused_visibility_call_checks_the_matrix(device, monkeypatch):
     elsewhere through visibility_fused. On the CPU, interpreting() is patched to True
     (TRITON_INTERPRET=1 can only be set before triton's import) so that the object can be
     made; the error comes before any launch."""
-    import course.triton_raster as fused
-    from course.testing import expect_error
+    import course.kernels.triton_raster as fused
+    from course.grading.testing import expect_error
 
     if device == "cpu":
         monkeypatch.setattr(fused, "interpreting", lambda: True)
@@ -507,8 +507,8 @@ def test_fused_visibility_call_checks_the_matrix(device, monkeypatch):
 @needs_triton
 def test_bad_raster_arguments_are_named():
     """rasterize_triton's checks before the device's (its out buffer is checked after)."""
-    from course.testing import expect_error
-    from course.triton_raster import rasterize_triton
+    from course.grading.testing import expect_error
+    from course.kernels.triton_raster import rasterize_triton
 
     screen = torch.zeros(2, 3, 4)
     for name, case, args, kwargs in (
@@ -525,7 +525,7 @@ def test_bad_raster_arguments_are_named():
 
 
 if __name__ == "__main__":
-    import course.triton_raster as fused
+    import course.kernels.triton_raster as fused
 
     # The interpreter pays per operation and program, not per lane: larger blocks than the
     # GPU's defaults run these cases three times faster (the results must not change).

@@ -39,7 +39,7 @@ import course
 modules = [m.name for m in pkgutil.walk_packages(course.__path__, "course.")]
 imported_triton = []
 for name in modules:
-    if not name.startswith("course.triton_"):
+    if not name.startswith("course.kernels.triton_"):
         importlib.import_module(name)
         if "triton" in sys.modules and not imported_triton:
             imported_triton.append(name)
@@ -47,7 +47,7 @@ for name in modules:
     importlib.import_module(name)
 message = None
 try:
-    import course.triton_intersect as ti
+    import course.kernels.triton_intersect as ti
     ti.interpreting()
 except ImportError as exc:
     message = str(exc)
@@ -84,12 +84,12 @@ def _run(script: str, *args, hide=True, timeout=300) -> str:
 def test_import_course_does_not_import_triton():
     data = json.loads(_run(IMPORT_ALL, hide=False).splitlines()[-1])
     assert not data["imported_triton"], (
-        f"importing {data['imported_triton'][0]} imported triton: only course.triton_* may")
+        f"importing {data['imported_triton'][0]} imported triton: only course.kernels.triton_* may")
 
 
 def test_course_modules_import_without_triton():
     data = json.loads(_run(IMPORT_ALL).splitlines()[-1])
-    assert "course.triton_intersect" in data["modules"]
+    assert "course.kernels.triton_intersect" in data["modules"]
     assert data["message"] and "triton" in data["message"], (
         f"a fused kernel without Triton should raise an ImportError naming it, got "
         f"{data['message']!r}")

@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 import course
-from course.grading.wire import import_file
+from course.core.files import import_file
 
 _ref = import_file(Path(course.__file__).resolve().parent.parent / "solutions" /
                    "lab0_interop.py", "renamer_reference")

@@ -10,9 +10,9 @@ how to see one's score.
 With ``notes`` (``rtcourse release`` does it unless ``--no-notes``) the handout also gets
 the lecture as the references draw it: every notebook is executed here, on the reference
 solutions (``RTCOURSE_SMALL=1``), and shipped with its outputs in ``slides/``, rendered as
-slides and lecture notes into ``notes/`` (offline pages, see ``course.slides``), and its
+slides and lecture notes into ``notes/`` (offline pages, see ``course.tools.slides``), and its
 figures and tables are kept per cell in ``slides/figures/``, where a notebook run on the
-student's unwritten labs finds them (``course.lecture``).
+student's unwritten labs finds them (``course.tools.lecture``).
 """
 
 from __future__ import annotations
@@ -96,9 +96,9 @@ def lecture_notes(root, out, names=None, log=print) -> list[Path]:
     raises on the references stops the release: its notes would teach an error."""
     import nbformat
 
-    from course.lecture import FIGURES, save_reference_outputs
-    from course.lecture import write_index as write_figures
-    from course.slides import (
+    from course.tools.lecture import FIGURES, save_reference_outputs
+    from course.tools.lecture import write_index as write_figures
+    from course.tools.slides import (
         error_cells,
         execute,
         progress_bar,

@@ -10,7 +10,7 @@ import math
 
 import torch
 
-from course.raymath import check_inputs
+from course.core.raymath import check_inputs
 
 INTEGRATORS = ("exact", "riemann")
 """Per-step integrators of :func:`segment_integral` (the accuracy knob of the marchers)."""

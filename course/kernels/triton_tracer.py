@@ -16,7 +16,7 @@ does with divergent branches anyway; the default launch (32 lanes, one warp per 
 makes a program exactly one warp, so the loop condition is a warp vote and the lanes of
 different warps never wait for each other.
 
-Each step of the walk does, per lane (see course.flat_bvh for the layouts and the contract):
+Each step of the walk does, per lane (see course.kernels.flat_bvh for the layouts and the contract):
 
 1. TRAVERSE: a lane at an interior node reads its row of ``pairs`` (both children's boxes
    and links: four 16-byte loads, the layout the CUDA C kernel reads), tests both boxes,
@@ -51,10 +51,10 @@ owns its column for the program's lifetime, so nothing needs synchronising. With
 ``stack_regs=4`` the top four entries stay in registers (shifted on every push and pop)
 and only deeper ones go to the buffer.
 
-Accuracy contract: that of course.flat_bvh (float32 slab test with NaN-safe zero
+Accuracy contract: that of course.kernels.flat_bvh (float32 slab test with NaN-safe zero
 directions and Ize's widened exit, float32 Möller–Trumbore with IEEE division, closed
 ``[t_min, t_max]``, ties to the lower triangle index, NaN/inf/zero rays miss, not
-watertight). The uber kernel shades by the contract of course.whitted_support, in float32.
+watertight). The uber kernel shades by the contract of course.given.lab3, in float32.
 
 Runs compiled on CUDA, or in Triton's CPU interpreter under ``TRITON_INTERPRET=1`` (set
 before ``triton`` is imported; slow, for tiny tests). Importing this module without
@@ -69,7 +69,8 @@ from dataclasses import dataclass
 
 import torch
 
-from course.flat_bvh import (
+from course.core.types import Hits
+from course.kernels.flat_bvh import (
     EXIT_SCALE,
     STACK_DEPTH,
     FlatBVH,
@@ -77,8 +78,7 @@ from course.flat_bvh import (
     check_rays,
     flat_bvh_for,
 )
-from course.triton_intersect import _ieee_quiet, _jit, _require_triton, tl, triton
-from course.types import Hits
+from course.kernels.triton_intersect import _ieee_quiet, _jit, _require_triton, tl, triton
 
 __all__ = [
     "TracerKernelInfo",
@@ -601,7 +601,7 @@ def _device_check(device: torch.device) -> None:
     if not interpreting() and device.type != "cuda":
         raise ValueError(f"origins: the compiled Triton kernels need CUDA tensors, got {device} "
                          "(for the CPU, set TRITON_INTERPRET=1 before importing triton, or use "
-                         "course.flat_bvh.trace_flat_torch)")
+                         "course.kernels.flat_bvh.trace_flat_torch)")
 
 
 def _stack(n: int, block: int, device, bvh: FlatBVH) -> tuple[torch.Tensor, int]:
@@ -625,9 +625,9 @@ class TracerKernelInfo:
     block: int
 
     def occupancy(self, arch=None):
-        """``course.occupancy.occupancy`` of this launch (Hopper preset by default: H100
+        """``course.measure.occupancy.occupancy`` of this launch (Hopper preset by default: H100
         and H200 share the SM), or None when the registers are unknown."""
-        from course.occupancy import HOPPER_H100, occupancy
+        from course.measure.occupancy import HOPPER_H100, occupancy
 
         if self.n_regs is None:
             return None
@@ -651,7 +651,7 @@ def _info(name: str, handle, num_warps: int, block: int) -> TracerKernelInfo:
 
 def _bvh_args(bvh: FlatBVH, device):
     if not isinstance(bvh, FlatBVH):
-        raise TypeError(f"bvh: expected a course.flat_bvh.FlatBVH, got {type(bvh).__name__}")
+        raise TypeError(f"bvh: expected a course.kernels.flat_bvh.FlatBVH, got {type(bvh).__name__}")
     if bvh.nodes.device != device:
         raise ValueError(f"bvh: expected a BVH on {device} like the rays (bvh.to(device)), "
                          f"got {bvh.nodes.device}")
@@ -765,9 +765,9 @@ def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
                           uniform_branches: bool = DEFAULT_UNIFORM, return_info: bool = False):
     """Radiance along each primary ray by the Whitted contract, in one kernel launch.
 
-    scene: a ``course.whitted_support.WhittedScene`` (its BVH is cached per scene object
+    scene: a ``course.given.lab3.WhittedScene`` (its BVH is cached per scene object
     unless ``bvh`` is given); origins, directions: (N, 3) float primary rays (unit
-    directions, e.g. ``course.camera.primary_rays``); max_depth: mirror bounces (2: up to
+    directions, e.g. ``course.core.camera.primary_rays``); max_depth: mirror bounces (2: up to
     two reflected rays); offset: the contract's OFFSET (default: whitted_support's).
     Returns (N, 3) float32 linear RGB, or ``(rgb, TracerKernelInfo)`` with ``return_info``.
     """
@@ -779,7 +779,7 @@ def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
     n, device = o.shape[0], o.device
     _device_check(device)
     if offset is None:
-        from course.whitted_support import OFFSET as offset
+        from course.given.lab3 import OFFSET as offset
     if bvh is None:
         bvh = flat_bvh_for(scene).to(device)
     pairs, root, tris_f, tris_i, root_ref = _bvh_args(bvh, device)

@@ -1,7 +1,7 @@
 """Scenes, lights, the froxel grid and input checks shared by Lab 5's skeleton and reference.
 
 Given code, not exercises: the lab's skeleton, its reference, the brute-force reference
-renderer (:mod:`course.froxel_reference`), the grader and the benchmarks all describe a
+renderer (:mod:`course.given.lab5_reference`), the grader and the benchmarks all describe a
 scene with these dataclasses, so there is one copy of them. They are frozen dataclasses of
 the ``course`` package: they travel to a sandboxed worker by value.
 
@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from course.camera import Camera, _camera_axes
+from course.core.camera import Camera, _camera_axes
 
 PHASES = ("hg", "schlick")
 """Phase functions of the lighting stage: Henyey–Greenstein or Schlick's approximation."""
@@ -290,7 +290,7 @@ class FroxelGrid:
 
     def __post_init__(self):
         if not isinstance(self.camera, Camera):
-            raise TypeError(f"camera: expected a course.camera.Camera, got "
+            raise TypeError(f"camera: expected a course.core.camera.Camera, got "
                             f"{type(self.camera).__name__}")
         for name in ("tile", "slices"):
             v = getattr(self, name)
@@ -406,7 +406,7 @@ def check_grid(grid) -> FroxelGrid:
 
 def check_scene(scene) -> Scene:
     if not isinstance(scene, Scene):
-        raise TypeError(f"scene: expected a course.froxel_support.Scene, got "
+        raise TypeError(f"scene: expected a course.given.lab5.Scene, got "
                         f"{type(scene).__name__}")
     return scene
 

@@ -1,7 +1,7 @@
 """The lecture's own tracer in CUDA C: the speed-of-light reference for the Triton kernels.
 
 One thread per ray, written as a CUDA programmer writes it, with real per-thread branches
-and loops where Triton needs masked lock-step steps. It walks course.flat_bvh's ``pairs``
+and loops where Triton needs masked lock-step steps. It walks course.kernels.flat_bvh's ``pairs``
 layout, the packed node of the lecture:
 
 * an interior node is one 64-byte row holding **both children's boxes** and their links
@@ -26,10 +26,10 @@ every entry point raises ``RuntimeError("needs CUDA and nvcc: ...")`` (see
 
 The compiled kernels are read back with ``cudaFuncGetAttributes`` (registers per thread,
 local memory per thread, the largest block the kernel can launch with) and
-``cudaOccupancyMaxActiveBlocksPerMultiprocessor``, next to ``course.occupancy``'s model of
+``cudaOccupancyMaxActiveBlocksPerMultiprocessor``, next to ``course.measure.occupancy``'s model of
 the same numbers (:func:`cuda_kernel_info`).
 
-Accuracy contract: course.flat_bvh's (float32, IEEE division, NaN-safe slab test with
+Accuracy contract: course.kernels.flat_bvh's (float32, IEEE division, NaN-safe slab test with
 Ize's widened exit, closed ``[t_min, t_max]``, ties to the lower original triangle index,
 NaN/inf/zero-direction rays miss, not watertight). Any hit returns the first hit found.
 """
@@ -42,8 +42,8 @@ from dataclasses import dataclass
 
 import torch
 
-from course.flat_bvh import EXIT_SCALE, STACK_DEPTH, FlatBVH, check_ray_bounds
-from course.types import Hits
+from course.core.types import Hits
+from course.kernels.flat_bvh import EXIT_SCALE, STACK_DEPTH, FlatBVH, check_ray_bounds
 
 __all__ = ["CudaKernelInfo", "cuda_kernel_info", "trace_flat_cuda", "unavailable_reason"]
 
@@ -342,7 +342,7 @@ def trace_flat_cuda(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf
     if o.device.type != "cuda":
         raise ValueError(f"origins: expected CUDA tensors, got {o.device}")
     if not isinstance(bvh, FlatBVH) or bvh.nodes.device != o.device:
-        raise ValueError("bvh: expected a course.flat_bvh.FlatBVH on the rays' device")
+        raise ValueError("bvh: expected a course.kernels.flat_bvh.FlatBVH on the rays' device")
     if isinstance(block, bool) or not isinstance(block, int) or block % 32 or not \
             0 < block <= 1024:
         raise ValueError(f"block: expected a multiple of 32 in 32..1024, got {block!r}")
@@ -402,7 +402,7 @@ class CudaKernelInfo:
     num_regs, local_bytes (per thread: the stack), max_threads_per_block, shared_bytes: from
     cudaFuncGetAttributes; blocks_per_sm_cuda: cudaOccupancyMaxActiveBlocksPerMultiprocessor
     at ``block`` threads; occupancy_cuda: that in warps over the SM's 64 (Hopper);
-    blocks_per_sm_model, occupancy_model: course.occupancy for the same inputs.
+    blocks_per_sm_model, occupancy_model: course.measure.occupancy for the same inputs.
     """
 
     name: str
@@ -421,10 +421,10 @@ def cuda_kernel_info(any_hit: bool = False, block: int = DEFAULT_BLOCK, arch=Non
                      stack: int = SHORT_STACK, capped: bool = False) -> CudaKernelInfo:
     """Read the compiled kernel's attributes and occupancy (see CudaKernelInfo).
 
-    arch: the course.occupancy preset to model (default: Hopper, the H100/H200 SM);
+    arch: the course.measure.occupancy preset to model (default: Hopper, the H100/H200 SM);
     stack: the variant's stack entries (SHORT_STACK or STACK_DEPTH, see stack_entries).
     """
-    from course.occupancy import HOPPER_H100, occupancy
+    from course.measure.occupancy import HOPPER_H100, occupancy
 
     arch = arch or HOPPER_H100
     if stack not in (SHORT_STACK, STACK_DEPTH):

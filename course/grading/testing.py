@@ -239,7 +239,7 @@ def run_in_triton_interpreter(script, inputs, tmp_path, timeout: float = 300):
 
     import pytest
 
-    repo = Path(__file__).resolve().parents[1]
+    repo = Path(__file__).resolve().parents[2]
     source, target = Path(tmp_path) / "inputs.pt", Path(tmp_path) / "outputs.pt"
     torch.save(inputs, source)
     env = dict(os.environ, TRITON_INTERPRET="1",
@@ -311,7 +311,7 @@ def _ids_to_rgb(ids: torch.Tensor) -> np.ndarray:
 def _to_rgb(x: torch.Tensor, kind: str, lo: float, hi: float) -> np.ndarray:
     """(H, W[, C]) -> (H, W, 3) uint8 for a PNG: colours through sRGB, scalars (depth)
     as grey from ``lo`` (black) to ``hi`` (white), ids hashed; NaN is magenta."""
-    from course.image import to_srgb8
+    from course.core.image import to_srgb8
 
     if kind == "id":
         return _ids_to_rgb(x if x.dim() == 2 else x[..., 0])

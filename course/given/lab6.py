@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import torch
 
-from course.types import Mesh
+from course.core.types import Mesh
 
 EMPTY = torch.iinfo(torch.int64).max
 """The key of a pixel no fragment reached: larger than every packed key (the "far" value

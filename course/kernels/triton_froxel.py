@@ -70,7 +70,7 @@ import weakref
 
 import torch
 
-from course.froxel_support import (
+from course.given.lab5 import (
     INTEGRATIONS,
     LIGHT_STEPS,
     MIN_LIGHT_DISTANCE,
@@ -92,7 +92,14 @@ from course.froxel_support import (
     slice_offset,
     volume_bounds,
 )
-from course.triton_intersect import _ieee_quiet, _jit, _require_triton, interpreting, tl, triton
+from course.kernels.triton_intersect import (
+    _ieee_quiet,
+    _jit,
+    _require_triton,
+    interpreting,
+    tl,
+    triton,
+)
 
 __all__ = ["render_froxels_fused"]
 
@@ -902,7 +909,7 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, sl
                          light_steps=LIGHT_STEPS, counts=True, num_warps=None):
     """Lab 5's ``render_froxels`` (non-temporal) in five Triton launches: ``(image, report)``.
 
-    scene: a ``course.froxel_support.Scene``; camera: its ``Camera``; depth_image (H, W)
+    scene: a ``course.given.lab5.Scene``; camera: its ``Camera``; depth_image (H, W)
     view depths >= 0 (+inf: sky), opaque_image (H, W, 3), float32 or float64 on one CUDA
     device (or the CPU under ``TRITON_INTERPRET=1``); the keywords as ``render_froxels``.
     Returns the image (H, W, 3) in the images' dtype and a report with the keys of

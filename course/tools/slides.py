@@ -36,7 +36,7 @@ import nbformat
 
 _HEADING = re.compile(r"^\s*(#{1,6})\s+(.+?)\s*#*\s*$")
 
-ASSETS = Path(__file__).resolve().parent / "assets" / "web"
+ASSETS = Path(__file__).resolve().parents[1] / "assets" / "web"
 STATIC = "_static"  # the pages' folder of browser files, next to them
 _REVEAL = f"{STATIC}/reveal"
 PAGE_URLS = {  # nbconvert's CDN addresses, replaced by the copies in STATIC
@@ -194,9 +194,9 @@ def render_notebook(path: Path, out: Path, *, execute_first=True, notebook=None)
 
 
 def progress_bar(total: int, desc: str):
-    """A per-notebook progress bar (``course.progress``: tqdm, on a terminal); None when
+    """A per-notebook progress bar (``course.core.progress``: tqdm, on a terminal); None when
     output goes elsewhere (a log, a pipe, CI), where callers print a line per notebook."""
-    from course.progress import progress, progress_enabled
+    from course.core.progress import progress, progress_enabled
 
     if not progress_enabled():
         return None

@@ -10,8 +10,8 @@ import math
 
 import torch
 
-from course.raymath import gamma
-from course.types import Hits, Mesh, Rays
+from course.core.raymath import gamma
+from course.core.types import Hits, Mesh, Rays
 
 STRUCTURES = ("grid", "grid2", "bvh", "kd")
 """The structures this lab builds, by their ``"kind"``."""
@@ -43,7 +43,7 @@ def check_trace_inputs(rays, mesh, intersect) -> None:
     Raises TypeError/ValueError naming ``rays``, ``mesh`` or ``intersect``.
     """
     if not isinstance(rays, Rays):
-        raise TypeError(f"rays: expected course.types.Rays, got {type(rays).__name__}")
+        raise TypeError(f"rays: expected course.core.types.Rays, got {type(rays).__name__}")
     check_mesh(mesh)
     rays.validate()
     if mesh.dtype != rays.dtype:
@@ -56,13 +56,13 @@ def check_trace_inputs(rays, mesh, intersect) -> None:
 
 
 def check_mesh(mesh, finite: bool = False) -> None:
-    """Provided: ``mesh`` must be a valid ``course.types.Mesh`` (TypeError/ValueError).
+    """Provided: ``mesh`` must be a valid ``course.core.types.Mesh`` (TypeError/ValueError).
 
     finite: also require finite vertices (every builder does: a NaN or inf corner has no
     bounds to sort by). Raises ValueError naming ``mesh``, the count and the first vertex.
     """
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     mesh.validate()
     if finite:
         bad = ~torch.isfinite(mesh.vertices).all(-1)
@@ -342,7 +342,7 @@ def new_counters(n: int, device, names=COUNTERS) -> dict:
 
 
 def as_hits(closest: dict) -> Hits:
-    """Provided: the closest-hit state as ``course.types.Hits``."""
+    """Provided: the closest-hit state as ``course.core.types.Hits``."""
     return Hits(t=closest["t"], triangle=closest["triangle"], u=closest["u"], v=closest["v"])
 
 

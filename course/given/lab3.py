@@ -2,7 +2,7 @@
 slow, obvious reference renderer, and the input checks shared by skeleton and reference.
 
 Given code, not exercises: the lab's skeleton and its reference import these, and so do the
-GPU tracers of ``course.flat_bvh``/``course.triton_tracer``/``course.cuda_tracer``, so that
+GPU tracers of ``course.kernels.flat_bvh``/``course.kernels.triton_tracer``/``course.kernels.cuda_tracer``, so that
 every organisation of the tracer renders *the same* image.
 
 The scene (:class:`WhittedScene`, tensors, one float dtype and one device)
@@ -47,9 +47,9 @@ At the closest hit ``p`` of a ray ``(o, d)``, ``d`` unit, on triangle ``f`` of m
 The tracer callable (how Lab 3 meets Lab 2 without depending on it)
 -------------------------------------------------------------------
 ``trace(scene, origins (N, 3), directions (N, 3), t_min (N,), t_max (N,), any_hit: bool)
--> course.types.Hits`` (``t = inf`` and ``triangle = -1`` where missed). With ``any_hit``
+-> course.core.types.Hits`` (``t = inf`` and ``triangle = -1`` where missed). With ``any_hit``
 it may return any hit in the interval (a shadow ray needs only "blocked or not").
-:func:`trace_brute_force` is the given one; ``course.flat_bvh.trace_bvh`` the fast one.
+:func:`trace_brute_force` is the given one; ``course.kernels.trace.trace_bvh`` the fast one.
 
 Precision: float32 and float64. Half precision cannot hold a 1e-4 offset next to a
 coordinate of 1 (its spacing there is 1e-3), so float16/bfloat16 are rejected with a
@@ -67,8 +67,8 @@ from typing import ClassVar
 
 import torch
 
-from course.camera import Camera
-from course.types import Hits, Mesh, _validate
+from course.core.camera import Camera
+from course.core.types import Hits, Mesh, _validate
 
 OFFSET = 1e-4
 """The secondary-ray offset in float32, relative to ``max(1, |p|_inf)``: about 800 float32
@@ -230,7 +230,7 @@ def whitted_scene(name: str, device=None, dtype: torch.dtype = torch.float32) ->
       units wide), dark grey, lit only by ambient light (one directional light grazes them
       at n . l = 0 exactly): a ray between them bounces until the depth limit.
     """
-    from course.scenes import load_mesh, load_scene  # scenes import trimesh: only on demand
+    from course.core.scenes import load_mesh, load_scene  # scenes import trimesh: only on demand
 
     if name == "cornell_mirror":
         mesh = load_scene("cornell_box", device=device, dtype=dtype).mesh
@@ -471,7 +471,7 @@ def check_scene(scene) -> None:
     """``scene`` must be a valid WhittedScene (TypeError/ValueError naming the problem:
     ``scene``, a field, ``lights`` or ``material``)."""
     if not isinstance(scene, WhittedScene):
-        raise TypeError(f"scene: expected course.whitted_support.WhittedScene, got "
+        raise TypeError(f"scene: expected course.given.lab3.WhittedScene, got "
                         f"{type(scene).__name__}")
     scene.validate()
     if scene.dtype not in DTYPES:
@@ -592,9 +592,9 @@ def check_layout_inputs(layout, origins, directions, t_min, t_max) -> tuple[str,
 
 
 def check_mesh(mesh) -> None:
-    """Provided: ``mesh`` must be a valid course.types.Mesh of float32/float64."""
+    """Provided: ``mesh`` must be a valid course.core.types.Mesh of float32/float64."""
     if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.types.Mesh, got {type(mesh).__name__}")
+        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     mesh.validate()
     if mesh.dtype not in DTYPES:
         raise TypeError(f"mesh: expected float32 or float64 vertices, got {mesh.dtype}")

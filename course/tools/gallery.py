@@ -14,10 +14,10 @@ from pathlib import Path
 
 import torch
 
-from course.bench import load_lab
-from course.grading.wire import import_file
-from course.image import save_png
-from course.progress import progress
+from course.core.files import import_file
+from course.core.image import save_png
+from course.core.progress import progress
+from course.measure.bench import load_lab
 
 
 def showcases(root: Path) -> list[tuple[int, Path]]:

@@ -7,7 +7,7 @@ the atomic minimum. That is the right way to *learn* it, but every intermediate 
 trip through DRAM. A compute-shader rasterizer keeps a fragment in registers from the
 inside test to the ``atomicMin``. These kernels are that design, given (not an exercise),
 so the lab can measure raster against ray-traced visibility with both sides fused
-(``course.triton_tracer`` is the other side).
+(``course.kernels.triton_tracer`` is the other side).
 
 Two raster kernels, because triangle sizes on screen differ by orders of magnitude:
 
@@ -55,7 +55,7 @@ from __future__ import annotations
 
 import torch
 
-from course.triton_intersect import (
+from course.kernels.triton_intersect import (
     _ieee_quiet,
     _jit,
     _require_triton,

@@ -23,7 +23,7 @@ import math
 
 import torch
 
-from course.froxel_support import (
+from course.given.lab5 import (
     MIN_LIGHT_DISTANCE,
     SCHLICK_K_MAX,
     ConstantFog,

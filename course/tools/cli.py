@@ -10,14 +10,14 @@ _COMMAND = ["rtcourse"]  # the command that runs ("rtcourse release"), named in 
 
 
 def _root() -> Path:
-    from course.grading.runner import repo_root
+    from course.core.files import repo_root
 
     return repo_root(_COMMAND[0])
 
 
 def cmd_demo(args):
-    from course.device import default_device
-    from course.gallery import build_gallery
+    from course.core.device import default_device
+    from course.tools.gallery import build_gallery
 
     root = _root()
     device = str(default_device(args.device))
@@ -63,7 +63,7 @@ def cmd_mutants(args):
 
 
 def cmd_release(args):
-    from course.grading.release import release
+    from course.tools.release import release
 
     files = release(_root(), args.out, notes=args.notes)
     print(f"wrote {len(files)} files of the student handout to {Path(args.out).resolve()}")
@@ -71,7 +71,7 @@ def cmd_release(args):
 
 def cmd_gradescope(args):
     from course.grading.budget import settings_text
-    from course.grading.gradescope import build_autograder
+    from course.tools.gradescope import build_autograder
 
     try:
         names = build_autograder(_root(), args.out, labs=args.lab)
@@ -82,7 +82,7 @@ def cmd_gradescope(args):
 
 
 def cmd_slides(args):
-    from course.slides import render_slides
+    from course.tools.slides import render_slides
 
     try:
         rows = render_slides(_root(), Path(args.out), execute=args.execute,

@@ -40,7 +40,7 @@ import math
 
 import torch
 
-from course.triton_intersect import _ieee_quiet, _is_pow2, _jit, _require_triton, tl, triton
+from course.kernels.triton_intersect import _ieee_quiet, _is_pow2, _jit, _require_triton, tl, triton
 
 __all__ = ["bake_light_triton", "march_grid_triton"]
 
@@ -230,7 +230,7 @@ def bake_light_triton(density: torch.Tensor, box_min, box_max, light_direction,
     if not _is_pow2(block) or not _is_pow2(num_warps) or num_warps > 32:
         raise ValueError(f"block, num_warps: expected powers of two (num_warps <= 32), "
                          f"got {block!r}, {num_warps!r}")
-    from course.triton_intersect import interpreting
+    from course.kernels.triton_intersect import interpreting
     if not interpreting() and dens.device.type != "cuda":
         raise ValueError(f"density: the compiled Triton kernel needs a CUDA tensor, got "
                          f"{dens.device} (for the CPU, set TRITON_INTERPRET=1 before "
@@ -304,7 +304,7 @@ def march_grid_triton(origins: torch.Tensor, directions: torch.Tensor, box_min, 
         raise ValueError(f"source: expected the cells of density {tuple(dens.shape)}, "
                          f"got {tuple(src.shape)}")
     channels = 1 if src.ndim == 3 else src.shape[3]
-    from course.triton_intersect import interpreting
+    from course.kernels.triton_intersect import interpreting
     if not interpreting() and device.type != "cuda":
         raise ValueError(f"origins: the compiled Triton kernel needs CUDA tensors, got {device} "
                          "(for the CPU, set TRITON_INTERPRET=1 before importing triton)")

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import torch
 
-from course.device import default_device
-from course.types import Rays
+from course.core.device import default_device
+from course.core.types import Rays
 
 
 def _vec3(x, name: str) -> torch.Tensor:

@@ -30,11 +30,11 @@ import numpy as np
 import torch
 import trimesh
 
-from course.camera import Camera
-from course.device import default_device
-from course.types import Mesh
+from course.core.camera import Camera
+from course.core.device import default_device
+from course.core.types import Mesh
 
-ASSETS = Path(__file__).parent / "assets"
+ASSETS = Path(__file__).resolve().parents[1] / "assets"
 _ASSET_FILES = {"suzanne": "suzanne.glb", "bunny": "bunny.obj"}
 
 

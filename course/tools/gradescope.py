@@ -36,8 +36,8 @@ import zipfile
 from pathlib import Path
 
 from course.grading.catalog import lab_catalog, lab_file_rank
-from course.grading.release import course_files
 from course.grading.runner import lab_test_files
+from course.tools.release import course_files
 
 PACKAGE = "rtcourse"  # the folder of the zip holding the course
 STUDENT_USER = "rtcourse-student"
@@ -109,7 +109,7 @@ mkdir -p "$RESULTS"
 rm -f "$RESULTS/results.json"
 cd "$SOURCE"
 
-"$PYTHON" -m course.grading.gradescope collect "$SUBMISSION" "$WORK" ${LABS[@]+"${LABS[@]}"}
+"$PYTHON" -m course.tools.gradescope collect "$SUBMISSION" "$WORK" ${LABS[@]+"${LABS[@]}"}
 
 if [ -z "${RTCOURSE_WORKER_USER+set}" ] && [ "$(id -u)" = 0 ] && id -u @USER@ >/dev/null 2>&1
 then
@@ -120,7 +120,7 @@ if [ -n "${RTCOURSE_WORKER_USER:-}" ]; then
     chmod -R a+rX "$WORK"       # the submission is the worker's to read
 fi
 
-"$PYTHON" -m course.cli grade --impl "$WORK" ${LABS[@]+"${LABS[@]}"} --json "$RESULTS/results.json"
+"$PYTHON" -m course.tools.cli grade --impl "$WORK" ${LABS[@]+"${LABS[@]}"} --json "$RESULTS/results.json"
 
 if [ ! -s "$RESULTS/results.json" ]; then
     printf '%s\n' '{"score": 0, "output": "The autograder stopped before it could grade this submission. Please tell the course staff."}' > "$RESULTS/results.json"
@@ -203,7 +203,7 @@ def collect_submission(submission, dest, modules) -> dict[str, Path | None]:
 
 
 def _collect_main(submission: str, dest: str, labs=None) -> int:
-    from course.grading.runner import repo_root
+    from course.core.files import repo_root
 
     modules = [lab.module for lab in lab_catalog(lab_test_files(repo_root(), labs)).values()]
     found = collect_submission(submission, dest, modules)
@@ -214,7 +214,7 @@ def _collect_main(submission: str, dest: str, labs=None) -> int:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m course.grading.gradescope")
+    parser = argparse.ArgumentParser(prog="python -m course.tools.gradescope")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("collect", help="copy a submission's lab files into a folder")
     p.add_argument("submission")

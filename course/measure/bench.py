@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from course.device import default_device
+from course.core.device import default_device
 
 
 @dataclass(frozen=True)
@@ -163,9 +163,9 @@ class ResultTable:
         return row
 
     def _progress(self):
-        """Count measured rows on a progress bar (only on a terminal; see course.progress):
+        """Count measured rows on a progress bar (only on a terminal; see course.core.progress):
         a sweep shows it is alive, and with ``total`` how far it has come."""
-        from course.progress import progress, progress_enabled
+        from course.core.progress import progress, progress_enabled
 
         if not progress_enabled():
             return
@@ -299,8 +299,7 @@ def load_lab(name: str, impl: str | None = None):
     the student handout) or a folder holding lab files. Trusted code only: this imports
     the module into the calling process.
     """
-    from course.grading.runner import repo_root
-    from course.grading.wire import import_file
+    from course.core.files import import_file, repo_root
 
     root = repo_root()
     impl = impl or ("solutions" if (root / "solutions").is_dir() else "labs")

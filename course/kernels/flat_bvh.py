@@ -1,9 +1,9 @@
 """A flat, GPU-ready BVH and a closest/any-hit tracer on top of it (given, not an exercise).
 
 Lab 3 organises a tracer; it does not ask students to build another acceleration structure
-(that was Lab 2). This module gives the kernels of ``course.triton_tracer`` and
-``course.cuda_tracer`` the structure they walk, and gives every lab a fast tracer callable
-with the lab's signature, :func:`trace_bvh`.
+(that was Lab 2). This module gives the kernels of ``course.kernels.triton_tracer`` and
+``course.kernels.cuda_tracer`` the structure they walk, and ``course.kernels.trace`` the
+walk behind every lab's fast tracer callable, ``trace_bvh``.
 
 The build (``build_flat_bvh``) is a binned-SAH BVH made level by level in torch: every node
 of one tree level is split at once (a scatter of triangle boxes into 16 bins per axis, prefix
@@ -70,9 +70,9 @@ from dataclasses import dataclass
 
 import torch
 
-from course.accel_support import TreeLevels, expand_ranges, surface_area
-from course.raymath import gamma
-from course.types import Hits
+from course.core.raymath import gamma
+from course.core.types import Hits
+from course.given.lab2 import TreeLevels, expand_ranges, surface_area
 
 __all__ = [
     "BINS",
@@ -80,7 +80,6 @@ __all__ = [
     "FlatBVH",
     "build_flat_bvh",
     "flat_bvh_for",
-    "trace_bvh",
     "trace_flat_torch",
 ]
 
@@ -460,7 +459,7 @@ def trace_flat_torch(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.in
 
     Every ray takes one step per iteration (visit a node, or test its current leaf's
     triangles, all of them at once), working only on the rays still alive; the Python loop
-    runs over traversal steps, never over rays. Same arguments as :func:`trace_bvh`, with
+    runs over traversal steps, never over rays. Same arguments as ``trace_bvh``, with
     the BVH given; returns float32 Hits on the rays' device.
     """
     o, d, t_lo, t_hi = check_rays(origins, directions, t_min, t_max)
@@ -553,28 +552,3 @@ def _walk(bvh: FlatBVH, o, d, t_lo, t_hi, any_hit: bool) -> Hits:
     tri = torch.where(hit, tri_index[best_row.clamp(min=0)], -1)
     return Hits(t=torch.where(hit, best_t, math.inf), triangle=tri,
                 u=torch.where(hit, best_u, 0.0), v=torch.where(hit, best_v, 0.0))
-
-
-def trace_bvh(scene, origins, directions, t_min=0.0, t_max=math.inf,
-              any_hit: bool = False) -> Hits:
-    """Closest (or any) hit of each ray in ``scene``: the lab's tracer callable.
-
-    scene: a ``WhittedScene`` (or anything with ``vertices`` (V, 3) float and ``faces``
-        (F, 3) int64); its BVH is built on first use and cached (:func:`flat_bvh_for`).
-    origins, directions: (N, 3) float (traced in float32; directions need not be unit);
-    t_min, t_max: numbers or (N,) tensors, the closed interval of accepted hits.
-    any_hit: stop at the first hit found (shadow rays): ``triangle >= 0`` says "occluded".
-    Returns float32 ``Hits`` on the rays' device. Runs the Triton kernel on CUDA and the
-    torch traversal elsewhere; both follow the contract of this module's docstring.
-    """
-    if not isinstance(any_hit, bool):
-        raise TypeError(f"any_hit: expected a bool, got {type(any_hit).__name__}")
-    check_rays(origins, directions, t_min, t_max)
-    bvh = flat_bvh_for(scene)
-    if origins.device.type == "cuda":
-        from course import triton_tracer
-
-        if triton_tracer.triton_available() and not triton_tracer.interpreting():
-            return triton_tracer.trace_flat_triton(bvh.to(origins.device), origins, directions,
-                                                   t_min, t_max, any_hit=any_hit)
-    return trace_flat_torch(bvh, origins, directions, t_min, t_max, any_hit=any_hit)

@@ -1,0 +1,1 @@
+"""The framework every lab uses: rays, meshes, cameras, scenes, images, ray maths."""

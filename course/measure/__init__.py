@@ -1,0 +1,1 @@
+"""What labs and kernels are measured with: timing, op and register counts, occupancy."""

@@ -1,0 +1,1 @@
+"""rtcourse and what it builds: the handout, the Gradescope zip, slides, the gallery."""
