@@ -82,6 +82,7 @@ from course.given.lab5 import (  # noqa: F401  (given helpers)
     MIN_LIGHT_DISTANCE,
     PHASES,
     SCHLICK_K_MAX,
+    SLICES,
     ConstantFog,
     DirectionalLight,
     FogVolume,
@@ -110,6 +111,7 @@ from course.given.lab5 import (  # noqa: F401  (given helpers)
     light_frame,
     ray_boxes,
     sample_texture,
+    scene_grid,
     slice_offset,
     volume_bounds,
 )
@@ -835,16 +837,16 @@ def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out
     return out
 
 
-def render_froxels(scene, camera, depth_image, opaque_image, *, tile=8, slices=64, near=0.1,
-                   far=100.0, phase="hg", integration="energy", volumetric_shadows=True,
+def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slices=SLICES,
+                   near=None, far=None, phase="hg", integration="energy", volumetric_shadows=True,
                    shadow_resolution=128, volume_resolution=None, light_steps=LIGHT_STEPS,
                    temporal=False, frame=0, history=None):
     """One frame of the pipeline: ``(image (H, W, 3), report)``.
 
     voxelize -> light_froxels -> (temporal: reproject + temporal_blend of the lit source
     and the extinction) -> integrate_froxels -> apply_froxels, on a
-    ``FroxelGrid(camera, tile, slices, near, far)``, in the dtype and on the device of the
-    images. With ``temporal`` the froxels sample at ``frame_jitter(frame)`` (material and
+    ``scene_grid(scene, camera, tile, slices, near, far)`` (None: the tile size and depth
+    range the scene's media need, see there), in the dtype and on the device of the images. With ``temporal`` the froxels sample at ``frame_jitter(frame)`` (material and
     lighting alike), and ``history`` (the previous report's ``"history"``, or None) is
     reprojected and blended with weight ``BLEND`` for the new frame.
 
@@ -859,7 +861,7 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=8, slices=6
     ``{"grid", "source", "extinction", "frame"}`` for the next frame).
     """
     check_scene(scene)
-    grid = FroxelGrid(camera, tile, slices, near, far)
+    grid = scene_grid(scene, camera, tile, slices, near, far)
     check_images(camera, depth_image, opaque_image)
     check_choice(phase, "phase", PHASES)
     check_choice(integration, "integration", INTEGRATIONS)

@@ -56,6 +56,7 @@ from course.given.lab5 import (
     frame_jitter,
     frustum_bounds,
     ray_boxes,
+    scene_grid,
 )
 from course.given.lab5_reference import media as ref_media
 from course.given.lab5_reference import phase_value, reference_render
@@ -269,6 +270,11 @@ SUN_BOX = ((-3.0, 0.0, -10.0), (3.0, 3.0, 2.0))
 FOG_SUN = DirectionalLight(direction=(0.5, 0.7, -0.5), irradiance=(3.0, 3.0, 3.0))
 SUN_CAMERA = Camera(eye=(0.5, 1.5, 0.0), target=(0.5, 1.7, -5.0), fov_y=50.0, width=64,
                     height=36)
+# The sun on a 2 m box of fog seen from 5 m in a 64 x 36 image: the box spans 15 pixels,
+# two 8-pixel tiles (+20% in mean radiance with tile 8 and slices over 0.1 .. 100 m).
+VIEW_BOX = ((-1.0, 0.0, -1.0), (1.0, 2.0, 1.0))
+VIEW_CAMERA = Camera(eye=(0.5, 1.5, 5.0), target=(0.0, 1.0, 0.0), fov_y=50.0, width=64,
+                     height=36)
 
 
 def sky_images(camera, dtype=F32, device="cpu"):
@@ -1197,6 +1203,29 @@ def test_render_froxels_sun_in_fog_box_defaults_against_quadrature(impl, device)
 
 
 @pytest.mark.task(7)
+@pytest.mark.points(0.5)
+def test_render_froxels_fog_box_in_view_defaults_against_quadrature(impl, device):
+    """A small box of fog in view: with its defaults the pipeline takes the grid the scene
+    needs (``scene_grid``: tiles small enough that the box spans many, slices over the box's
+    depths), within 2% of the quadrature (measured on the reference: -0.3%; with tile 8 and
+    0.1 .. 100 m: +20%)."""
+    scene = Scene(media=(fog_box(*VIEW_BOX),), lights=(FOG_SUN,))
+    want = fog_box_quadrature(VIEW_CAMERA, *VIEW_BOX, FOG_SUN, 0.1)
+    depth, opaque = sky_images(VIEW_CAMERA, F32, device)
+    image, report = impl.render_froxels(scene, VIEW_CAMERA, depth, opaque)
+    err = mean_error(image, want)
+    grid = report["grid"]
+    assert abs(err) <= 0.02, (
+        f"render_froxels (the sun on a 2 m box of fog seen from 5 m, defaults): mean radiance "
+        f"{err:+.2%} off the single-scattering quadrature (allowed 2%), on a grid of tile "
+        f"{grid.tile}, near {grid.near:.3g}, far {grid.far:.3g}. With tile, near and far None "
+        f"the grid is scene_grid(scene, camera, tile, slices, near, far)")
+    assert grid == scene_grid(scene, VIEW_CAMERA), (
+        f"render_froxels: report['grid'] = {grid} is not scene_grid(scene, camera) for the "
+        f"default tile, near and far")
+
+
+@pytest.mark.task(7)
 @pytest.mark.points(1)
 def test_render_froxels_shadow_into_fog_against_reference(impl, device):
     image, _ = render(impl, SHADOW, device, shadow_resolution=256)
@@ -1354,6 +1383,33 @@ def test_render_froxels_extremes_and_bad_input(impl, device):
 
 # ---------------------------------------------------------------------------------------
 # The reference renderer itself (course code; ungraded)
+
+
+def test_scene_grid_fits_the_media():
+    """Given code: the tile and depth range come from the media; given numbers are kept."""
+    box = Scene(media=(fog_box(*VIEW_BOX),), lights=(FOG_SUN,))
+    grid = scene_grid(box, VIEW_CAMERA)
+    corners = torch.tensor([[x, y, z] for x in (-1.0, 1.0) for y in (0.0, 2.0)
+                            for z in (-1.0, 1.0)], dtype=F64)
+    fwd = torch.tensor(VIEW_CAMERA.target, dtype=F64) - torch.tensor(VIEW_CAMERA.eye, dtype=F64)
+    depths = (corners - torch.tensor(VIEW_CAMERA.eye, dtype=F64)) @ (fwd / fwd.norm())
+    assert (grid.near, grid.far) == pytest.approx((depths.min().item(), depths.max().item()),
+                                                  rel=1e-9), "scene_grid: the box's depths"
+    # 15 pixels across the box: tiles of 1 pixel give it 15 >= 12 tiles.
+    assert grid.tile == 1 and grid.slices == 64, grid
+    big = dataclasses.replace(VIEW_CAMERA, width=640, height=360)
+    assert scene_grid(box, big).tile == 8, "150 pixels across the box: 8-pixel tiles suffice"
+    kept = scene_grid(box, VIEW_CAMERA, tile=8, slices=16, near=0.5, far=50.0)
+    assert (kept.tile, kept.slices, kept.near, kept.far) == (8, 16, 0.5, 50.0)
+    # Unbounded media keep 0.1 .. 100 m; a camera inside the box keeps tile 8 and near 0.1
+    # (the box's far corner sets far); media behind the camera keep the defaults.
+    assert scene_grid(HOMOGENEOUS, CAMERA) == FroxelGrid(CAMERA)
+    inside = scene_grid(Scene(media=(fog_box(*SUN_BOX),)), SUN_CAMERA)
+    assert inside.tile == 8 and inside.near == 0.1 and 10.0 < inside.far < 10.2, inside
+    behind = Scene(media=(fog_box((-1.0, 0.0, 8.0), (1.0, 2.0, 10.0)),))
+    assert scene_grid(behind, VIEW_CAMERA) == FroxelGrid(VIEW_CAMERA), "media behind the eye"
+    with pytest.raises(ValueError, match="tile"):
+        scene_grid(box, VIEW_CAMERA, tile=0)
 
 
 def test_reference_renderer_closed_form():

@@ -581,6 +581,61 @@ def volume_bounds(scene: Scene, grid: FroxelGrid):
     return lo, hi
 
 
+
+# The froxel grid a scene requires. Froxels sample the media at their centres and the image
+# reads them bilinearly between tile centres: a fog volume spanning few tiles on screen
+# loses or gains light along its silhouette (a 4 m box 8 tiles across: -6% in mean
+# radiance), and slices spread over 0.1 .. 100 m put few of them where a small volume is.
+TILE, SLICES, NEAR, FAR = 8, 64, 0.1, 100.0
+TILES_PER_VOLUME = 12
+
+
+def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None,
+               far=None) -> FroxelGrid:
+    """The ``FroxelGrid`` for ``scene`` seen by ``camera``; None picks what the scene needs.
+
+    ``near``/``far`` None: the view-depth range of the media (the corners of every fog
+    volume's box) within ``NEAR .. FAR``, so the slices lie where the media are and no
+    light is lost before ``near`` or after ``far``; ``NEAR .. FAR`` when a medium is unbounded
+    (height or constant fog) or the media lie behind the camera. ``tile`` None: the largest
+    of ``TILE``, ``TILE / 2``, ... 1 at which every fog volume in front of the camera (and not
+    around it) spans ``TILES_PER_VOLUME`` tiles across its thinnest side at its centre's
+    depth. A scene of unbounded media, or volumes filling the view, keeps ``TILE``; a 2 m box
+    5 m away in a 64 x 36 image gets tile 1 (36 x 64 x 64 froxels, few of them lit).
+    Given numbers are kept (and checked by ``FroxelGrid``).
+    """
+    if tile is None or near is None or far is None:
+        eye, _, _, fwd, (_, half_h) = FroxelGrid(camera).axes()
+        depths, sizes = [], []
+        for m in scene.media:
+            if not isinstance(m, FogVolume):
+                depths = None
+                continue
+            center = torch.tensor(m.center, dtype=torch.float64)
+            rotation = torch.tensor(m.rotation, dtype=torch.float64)
+            half = torch.tensor(m.half_size, dtype=torch.float64)
+            signs = torch.tensor([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
+                                 dtype=torch.float64)
+            if depths is not None:
+                depths += (((signs * half) @ rotation + center - eye) @ fwd).tolist()
+            inside = bool((((eye - center) @ rotation.T).abs() <= half).all())
+            z = float((center - eye) @ fwd)
+            if z > 0 and not inside:
+                sizes.append(2 * min(m.half_size) * camera.height / (2 * half_h * z))
+        if near is None or far is None:
+            fitted = depths and max(depths) > NEAR
+            lo = min(max(min(depths), NEAR), FAR) if fitted else NEAR
+            hi = min(max(max(depths), lo * 1.01), FAR) if fitted else FAR
+            given = isinstance(near, (int, float)) and not isinstance(near, bool)
+            near = lo if near is None else near  # a bad given one is named by FroxelGrid
+            far = (max(hi, near * 1.01) if given else hi) if far is None else far
+        if tile is None:
+            tile = TILE
+            while tile > 1 and any(s < TILES_PER_VOLUME * tile for s in sizes):
+                tile //= 2
+    return FroxelGrid(camera, tile, slices, near, far)
+
+
 VOLUME_RESOLUTION = 32
 """Extinction and transmittance volume resolution for scenes without local fog volumes."""
 MAX_VOLUME_RESOLUTION = 64

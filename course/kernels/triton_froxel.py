@@ -76,9 +76,9 @@ from course.given.lab5 import (
     MIN_LIGHT_DISTANCE,
     PHASES,
     SCHLICK_K_MAX,
+    SLICES,
     ConstantFog,
     DirectionalLight,
-    FroxelGrid,
     HeightFog,
     PointLight,
     SpotLight,
@@ -89,6 +89,7 @@ from course.given.lab5 import (
     check_volume_resolution,
     frustum_bounds,
     light_frame,
+    scene_grid,
     slice_offset,
     volume_bounds,
 )
@@ -903,8 +904,8 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
     return plan
 
 
-def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, slices=64,
-                         near=0.1, far=100.0, phase="hg", integration="energy",
+def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=None,
+                         slices=SLICES, near=None, far=None, phase="hg", integration="energy",
                          volumetric_shadows=True, shadow_resolution=128, volume_resolution=None,
                          light_steps=LIGHT_STEPS, counts=True, num_warps=None):
     """Lab 5's ``render_froxels`` (non-temporal) in five Triton launches: ``(image, report)``.
@@ -932,7 +933,7 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=8, sl
     """
     _require_triton()
     check_scene(scene)
-    grid = FroxelGrid(camera, tile, slices, near, far)
+    grid = scene_grid(scene, camera, tile, slices, near, far)
     # The lab's check_images also scans the depths for NaN and negative values, which
     # waits for the GPU: here only shapes, dtypes and devices are checked (a NaN depth
     # reads as no fog, a negative one as before near).
