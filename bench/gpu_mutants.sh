@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# The generated-mutant score on a many-core machine: every lab at once, two workers each
+# (CUDA hidden from the workers), each lab's table written as it finishes; meanwhile Lab 5's
+# froxel tests and its 1080p frame on the GPU.
+#
+#   OUT=bench/results/nvidia-h200/mutants SAMPLE=40 SEED=1 bash bench/gpu_mutants.sh
+set -uo pipefail
+cd "$(dirname "$0")/.."
+OUT="${OUT:-bench/results/gpu-run/mutants}"
+mkdir -p "$OUT"
+if ls .whl/*.whl >/dev/null 2>&1; then
+    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+        --target /tmp/site .whl/*.whl && export PYTHONPATH=/tmp/site
+fi
+export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
+nproc > "$OUT/device.txt"; nvidia-smi -L >> "$OUT/device.txt" 2>&1
+( timeout "${GPU_TIMEOUT:-400}" python3 -m pytest -q -p no:cacheprovider tests/test_lab5_froxel.py \
+    tests/hidden/test_lab5_hidden.py tests/meta/test_triton_froxel.py > "$OUT/lab5_cuda.log" 2>&1
+  echo "lab5 tests: exit $?" >> "$OUT/lab5_cuda.log"
+  timeout 100 python3 bench/lab5_froxel.py --device cuda --gpu-target >> "$OUT/lab5_cuda.log" 2>&1
+  echo "lab5 frame: exit $?" >> "$OUT/lab5_cuda.log" ) &
+for lab in ${LABS:-0 1 2 3 4 5 6}; do
+    ( timeout "${MUTANT_TIMEOUT:-540}" python3 -m course.tools.cli mutants --generated --lab "$lab" \
+        --sample "${SAMPLE:-40}" --seed "${SEED:-1}" --workers "${WORKERS:-2}" \
+        --json "$OUT/lab$lab.json" > "$OUT/lab$lab.log" 2>&1
+      echo "mutants lab $lab: exit $?" >> "$OUT/lab$lab.log" ) &
+done
+wait
+for f in "$OUT"/*.log; do tail -n 2 "$f"; done
