@@ -385,7 +385,7 @@ def integrate_froxels(source, extinction, grid, method="energy"):
 
 
 # ---------------------------------------------------------------------------------------
-# Task 7: application and the whole frame
+# Task 7: application (and task 8, the whole frame)
 
 
 def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out=None):
@@ -428,4 +428,4 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slice
     ``history_valid`` (fraction of froxels that kept history) and ``history`` (a dict
     ``{"grid", "source", "extinction", "frame"}`` for the next frame).
     """
-    raise NotImplementedError("not implemented yet: render_froxels (task 7)")
+    raise NotImplementedError("not implemented yet: render_froxels (task 8)")

@@ -795,7 +795,7 @@ def integrate_froxels(source, extinction, grid, method="energy"):
 
 
 # ---------------------------------------------------------------------------------------
-# Task 7: application and the whole frame
+# Task 7: application (and task 8, the whole frame)
 
 
 def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out=None):

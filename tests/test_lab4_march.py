@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from functools import partial
 
 import pytest
 import torch
@@ -39,6 +40,7 @@ from course.grading.testing import (
     check_tensor,
     expect_error,
     generator,
+    replaced,
 )
 
 LAB_MODULE = "lab4_march"
@@ -1174,6 +1176,61 @@ def test_shadow_transmittance(impl, device):
                  lo.to(device), hi.to(device), dens, 4, case="points of shape (N, 2)")
 
 
+# march_single_scatter integrates its in-scattered source with march_box (task 1), which
+# calls segment_integral (task 2): here the march is the given one below, so task 3 is graded
+# on its own (its phase function, shadow march and source), whatever the lab's march_box.
+
+
+def given_step(sigma, length):
+    """The exact per-step integral (task 2), given: ``(phi(sigma ds) ds, e^(-sigma ds))``."""
+    tau = sigma * length
+    small = tau < 1e-6
+    weight = torch.where(small, length * (1 - tau / 2),
+                         -torch.expm1(-tau) / torch.where(small, 1.0, sigma))
+    return weight, torch.exp(-tau)
+
+
+def given_march_box(origins, directions, box_min, box_max, density, emission=None, steps=64,
+                    *, integrator="exact", min_transmittance=0.0, jitter=False, seed=0):
+    """In place of the lab's ``march_box`` under ``march_single_scatter``: the grader's
+    midpoint march with the exact step (``emission`` a callable of world points, one per
+    ray, as the source is)."""
+    assert integrator == "exact" and not jitter, "the given march is the midpoint, exact one"
+    like = {"dtype": origins.dtype, "device": origins.device}
+    lo, hi = (torch.as_tensor(b).to(**like) for b in (box_min, box_max))
+    near, far, hit = (x.to(origins.device) for x in ref_interval(origins, directions, lo, hi))
+    near, far = (torch.where(hit, x, 0).to(origins.dtype) for x in (near, far))
+    dt = (far - near) / max(steps, 1)
+    ds = torch.where(hit, dt * directions.norm(dim=-1), 0)
+    radiance, transmittance = 0, torch.ones(len(origins), **like)
+    samples = torch.zeros(len(origins), dtype=torch.int64, device=origins.device)
+    for i in range(steps):
+        active = hit & (transmittance >= min_transmittance)
+        offset = (origins - lo) + (near + (i + 0.5) * dt)[:, None] * directions
+        points, local = lo + offset, offset / (hi - lo)
+        sigma = torch.where(active, given_field(density, points, local), 0)
+        weight, t_step = given_step(sigma, torch.where(active, ds, 0))
+        q = given_field(emission, points, local)
+        mask, seen = (active, transmittance) if q.ndim == 1 else (active[:, None],
+                                                                  transmittance[:, None])
+        radiance = radiance + seen * (weight if q.ndim == 1 else weight[:, None]) \
+            * torch.where(mask, q, 0)
+        transmittance = transmittance * t_step
+        samples += active
+    return {"radiance": radiance, "transmittance": transmittance, "samples": samples}
+
+
+def probe_single_scatter(lab, *args, **kwargs):
+    """``march_single_scatter`` next to the lab, on the given march."""
+    with replaced(lab, {"march_box": given_march_box}):
+        return lab.march_single_scatter(*args, **kwargs)
+
+
+def single_scatter(impl, *args, **kwargs):
+    """The lab's ``march_single_scatter`` (tasks 1 and 2 given)."""
+    return impl.probe(probe_single_scatter, *args, **kwargs)
+
+
 @pytest.mark.task(3)
 @pytest.mark.points(1)
 def test_single_scatter_matches_closed_form(impl, device):
@@ -1194,8 +1251,8 @@ def test_single_scatter_matches_closed_form(impl, device):
     errors = {}
     for steps in (16, 32, 64):
         what = f"march_single_scatter(steps={steps}, shadow_steps=1)"
-        result = impl.march_single_scatter(o.to(device), d.to(device), SCATTER_LO, SCATTER_HI,
-                                           dens, albedo, light, irradiance, g, steps, 1)
+        result = single_scatter(impl, o.to(device), d.to(device), SCATTER_LO, SCATTER_HI,
+                                dens, albedo, light, irradiance, g, steps, 1)
         got = result_dict(result, what, MARCH_KEYS, 48, F64, device)
         no_nan(what, radiance=got["radiance"], transmittance=got["transmittance"])
         assert_close(got["transmittance"], torch.exp(-sigma * length), rtol=1e-12,
@@ -1212,8 +1269,8 @@ def test_single_scatter_matches_closed_form(impl, device):
         f"steps; errors {errors}, orders {orders}")
     # Coloured albedo and irradiance, more shadow steps (exact already), g < 0.
     rgb = torch.tensor([0.9, 0.5, 0.2], dtype=F64, device=device)
-    result = impl.march_single_scatter(o.to(device), d.to(device), SCATTER_LO, SCATTER_HI, dens,
-                                       rgb, light, 2.0 * rgb, -0.3, 64, 4)
+    result = single_scatter(impl, o.to(device), d.to(device), SCATTER_LO, SCATTER_HI, dens,
+                            rgb, light, 2.0 * rgb, -0.3, 64, 4)
     got = result_dict(result, "march_single_scatter(albedo (3,), light_irradiance (3,))",
                       MARCH_KEYS, 48, F64, device, channels=3)
     scale = (ref_phase(u[:, 1], -0.3) / ref_phase(u[:, 1], g) / irradiance)[:, None] \
@@ -1221,7 +1278,7 @@ def test_single_scatter_matches_closed_form(impl, device):
     assert_close(got["radiance"], want[:, None] * scale, rtol=3e-3, atol=1e-6,
                  name="march_single_scatter with albedo (3,) and light_irradiance (3,), g=-0.3: "
                       "radiance (N, 3)", where="(ray, channel)")
-    cpu_agrees(device, "march_single_scatter", got, impl.march_single_scatter, o.to(device),
+    cpu_agrees(device, "march_single_scatter", got, partial(single_scatter, impl), o.to(device),
                d.to(device), SCATTER_LO, SCATTER_HI, dens, rgb, light, 2.0 * rgb, -0.3, 64, 4)
     expect_error("g", impl.march_single_scatter, o.to(device), d.to(device), SCATTER_LO,
                  SCATTER_HI, dens, albedo, light, 1.0, 1.0, 8, 1, case="g=1.0")
@@ -1260,18 +1317,18 @@ def test_single_scatter_oblique_light_against_quadrature(impl, device):
         field = density.to(device) if isinstance(density, torch.Tensor) else density
         what = f"march_single_scatter ({name}, oblique light, steps=128, " \
                f"shadow_steps={shadow_steps})"
-        result = impl.march_single_scatter(o.to(device), d.to(device), lo.to(device),
-                                           hi.to(device), field, albedo, light.to(device),
-                                           irradiance, g, 128, shadow_steps)
+        result = single_scatter(impl, o.to(device), d.to(device), lo.to(device),
+                                hi.to(device), field, albedo, light.to(device), irradiance, g,
+                                128, shadow_steps)
         got = result_dict(result, what, MARCH_KEYS, 24, F64, device)
         assert_close(got["radiance"], want, rtol=2e-3, atol=1e-5,
                      name=f"{what}: radiance against a fine quadrature", where="ray")
     # Without enough shadow steps the quadratic case is visibly off; with more it converges.
     errs = []
     for shadow_steps in (1, 4):
-        result = impl.march_single_scatter(o.to(device), d.to(device), lo.to(device),
-                                           hi.to(device), bowl_density, albedo,
-                                           light.to(device), irradiance, g, 128, shadow_steps)
+        result = single_scatter(impl, o.to(device), d.to(device), lo.to(device),
+                                hi.to(device), bowl_density, albedo, light.to(device),
+                                irradiance, g, 128, shadow_steps)
         errs.append((result["radiance"].cpu() - want).abs().max().item())
     assert errs[1] < errs[0] / 4, (
         f"march_single_scatter: shadow_steps 1 -> 4 should cut the error of the quadratic "

@@ -75,7 +75,10 @@ LAB_MODULE = "lab5_froxel"
 TASKS = {1: "Froxel grid and exponential slicing", 2: "V-buffer voxelisation",
          3: "Lighting: phase functions, light lists, sun shadows",
          4: "Volumetric shadow maps", 5: "Temporal integration", 6: "Final integration",
-         7: "Application and the whole frame"}
+         7: "Application", 8: "The whole frame (end to end)"}
+# The one task graded on the lab's own chain (voxelize -> light_froxels -> integrate_froxels
+# -> apply_froxels under render_froxels); every other task gets its inputs from the grader.
+END_TO_END = 8
 
 F64, F32 = torch.float64, torch.float32
 INF = math.inf
@@ -1028,7 +1031,8 @@ def test_integrate_froxels_naive_leaks(impl, device):
 
 
 # ---------------------------------------------------------------------------------------
-# Task 7: application and the whole frame
+# Task 7: application. Task 8: the whole frame, the lab's own chain end to end (small:
+# a mistake in an earlier task has cost its points there already)
 
 
 @pytest.mark.task(7)
@@ -1100,8 +1104,8 @@ def compare(what, got, ref, max_tol, mean_tol):
     assert mean <= mean_tol, f"{what}: mean error {mean:.2%} of {scale:.3g}, allowed {mean_tol:.0%}"
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(1)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_homogeneous_closed_form(impl, device):
     image, report = render(impl, HOMOGENEOUS, device, volumetric_shadows=False)
     fog = HOMOGENEOUS.media[0]
@@ -1122,8 +1126,8 @@ def test_render_froxels_homogeneous_closed_form(impl, device):
         "render_froxels: every froxel of a homogeneous fog is lit (report['froxels_lit'])"
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(1)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_height_fog_against_reference(impl, device):
     image, _ = render(impl, HEIGHT, device)
     depth, opaque = images()
@@ -1133,8 +1137,8 @@ def test_render_froxels_height_fog_against_reference(impl, device):
             "brute-force reference", image.reshape(-1, 3)[PIXELS], ref["image"], 0.05, 0.01)
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(1)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_fog_box_point_light_against_reference(impl, device):
     depth, opaque = images()
     # The light's paths cross the fog box (4 m): 12 shadow steps resolve its texture.
@@ -1150,8 +1154,8 @@ def test_render_froxels_fog_box_point_light_against_reference(impl, device):
             f"of the view but {report['froxels_lit']} of {report['froxels']} froxels were lit")
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(0.5)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_point_light_in_fog_against_quadrature(impl, device):
     """The lamp's light crosses the fog to reach each froxel: within 1% of the quadrature
     (measured on the reference: -0.5%), and 125% too bright without that attenuation."""
@@ -1178,8 +1182,8 @@ def test_render_froxels_point_light_in_fog_against_quadrature(impl, device):
         "render_froxels(volumetric_shadows=False): the unattenuated lamp is far too bright"
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(0.5)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_sun_in_fog_box_defaults_against_quadrature(impl, device):
     """With its defaults the pipeline covers the fog box (not the whole frustum) with its
     extinction volume at a resolution chosen from the box's size: within 2% of the
@@ -1202,8 +1206,8 @@ def test_render_froxels_sun_in_fog_box_defaults_against_quadrature(impl, device)
         "render_froxels(volumetric_shadows=False): the unshadowed fog box is far too bright"
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(0.5)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_fog_box_in_view_defaults_against_quadrature(impl, device):
     """A small box of fog in view: with its defaults the pipeline takes the grid the scene
     needs (``scene_grid``: tiles small enough that the box spans many, slices over the box's
@@ -1225,8 +1229,8 @@ def test_render_froxels_fog_box_in_view_defaults_against_quadrature(impl, device
         f"default tile, near and far")
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(1)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_shadow_into_fog_against_reference(impl, device):
     image, _ = render(impl, SHADOW, device, shadow_resolution=256)
     depth, opaque = images()
@@ -1243,8 +1247,8 @@ def test_render_froxels_shadow_into_fog_against_reference(impl, device):
         "render_froxels: the occluder must cast a visible shadow into the fog"
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(0.5)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_energy_independent_of_slices(impl, device):
     scene = Scene(media=(ConstantFog(scattering=(0.2, 0.2, 0.2), extinction=0.25),),
                   lights=(SUN,))
@@ -1265,8 +1269,8 @@ def test_render_froxels_energy_independent_of_slices(impl, device):
         "render_froxels(integration='naive') leaks light in thick slices"
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(0.5)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_models_only_what_is_needed(impl, device):
     depth, opaque = images(device=device)
     empty = Scene(lights=(SUN, PointLight(position=(0.0, 2.0, -5.0))))
@@ -1290,8 +1294,8 @@ def test_render_froxels_models_only_what_is_needed(impl, device):
         "render_froxels: light_evaluations counts the froxel-light pairs evaluated"
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(1)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_temporal(impl, device):
     scene = fog_box_scene(F32)
     depth, opaque = images(device=device)
@@ -1337,8 +1341,8 @@ def test_render_froxels_temporal(impl, device):
                        "puts all history outside the frustum: the frame without history")
 
 
-@pytest.mark.task(7)
-@pytest.mark.points(0.5)
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
 def test_render_froxels_extremes_and_bad_input(impl, device):
     # Opaque fog (sigma_t = 1e6): the wall disappears, T = 0, no NaN.
     dense = Scene(media=(ConstantFog(scattering=(5e5,) * 3, extinction=1e6),), lights=(SUN,),

@@ -9,7 +9,7 @@ every task that used to carry such a mistake further, and may lose points only i
 task and the end-to-end one; where the end-to-end test names the step that is wrong (Labs 3
 and 6), the name must be the mutated one. Labs 1 and 4 have no end-to-end task: their later
 tasks run on given kernels (Lab 1's closest_hit on a given Möller–Trumbore, Lab 4's step
-integral in a given march).
+integral and its single scattering in a given march).
 """
 
 from __future__ import annotations
@@ -41,8 +41,9 @@ CASES = [
     Case("pack_bgra_order", 1, "pack_rgba8 or render_rotating or FrameLoop"),
     # Lab 1: Möller–Trumbore (task 2), closest_hit's default variant (task 6).
     Case("mt_no_u_plus_v", 2, "moller_trumbore_matches or closest_hit"),
-    # Lab 4: march_box (task 1), which task 2's whole marches used to run.
-    Case("march_transmittance_first", 1, "march_box or segment_integral"),
+    # Lab 4: march_box (task 1), which task 2's whole marches and task 3's single
+    # scattering used to run.
+    Case("march_transmittance_first", 1, "march_box or segment_integral or single_scatter"),
     # Lab 2: the grid builder (task 1) fed the grid walk, closest_hit (task 5) and the
     # two-level grid's top level (task 6).
     Case("grid_cells_one_short", 1, "grid_resolution_and_build or grid_dda or "
@@ -51,6 +52,10 @@ CASES = [
     Case("specular_not_normalised", 1, "shade_direct_matches or render_whitted_matches or "
          "render_wavefront_matches or render_persistent_matches or whole_tracer",
          names="shade_direct"),
+    # Lab 5: the V-buffer's phase g (task 2) fed every whole frame, once graded under
+    # task 7 with the application.
+    Case("g_not_scattering_weighted", 2, "voxelize or media_at or apply_froxels or "
+         "render_froxels"),
     # Lab 6: the fill rule (task 2) fed rasterize (task 3) and everything after it.
     Case("no_fill_rule", 2, "coverage_fill or rasterize_visibility or "
          "perspective_correct_exact or hybrid or rasterize_mesh"),
@@ -59,8 +64,8 @@ CASES = [
 SLOW_CASES = [
     # Lab 1: an absolute determinant test in Möller–Trumbore (task 2) under closest_hit.
     Case("mt_absolute_epsilon", 2, "moller_trumbore or closest_hit"),
-    # Lab 4: the back-to-front update in march_box (task 1) under task 2's marches.
-    Case("march_back_to_front", 1, "march_box or segment_integral"),
+    # Lab 4: the back-to-front update in march_box (task 1) under tasks 2 and 3.
+    Case("march_back_to_front", 1, "march_box or segment_integral or single_scatter"),
     # Lab 2: the DDA (task 1) under closest_hit, 'auto' and the two-level walk.
     Case("dda_lower_face_when_stepping_up", 1, "grid_dda or closest_hit_entry or auto_builds "
          "or two_level_matches or two_level_mailboxing or counters_show"),
@@ -121,7 +126,7 @@ def _run(cases, tmp_path):
 
 
 def test_every_chained_lab_has_an_end_to_end_task():
-    for lab in (2, 3, 6):
+    for lab in (2, 3, 5, 6):
         task = end_to_end_task(lab)
         assert task is not None, f"lab {lab}: no END_TO_END task (the lab's whole chain)"
         assert task == max(ast.literal_eval(next(
