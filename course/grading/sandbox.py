@@ -251,6 +251,37 @@ def _process_bytes(pid) -> int:
         return 0
 
 
+def memory_room(cgroup: str = "/sys/fs/cgroup", meminfo: str = "/proc/meminfo") -> int | None:
+    """Bytes of memory still free to this process's container: its cgroup's limit less its
+    usage (cgroup v2, else v1), and at most the kernel's ``MemAvailable``; None when neither
+    is known. A grading container (Gradescope's: 768 MB) is far below the default limit."""
+    free = []
+    for limit, usage in (("memory.max", "memory.current"),
+                         ("memory/memory.limit_in_bytes", "memory/memory.usage_in_bytes")):
+        try:
+            text = Path(cgroup, limit).read_text().strip()
+            if text != "max" and int(text) < 2**60:  # v1 says "no limit" with a huge number
+                free.append(int(text) - int(Path(cgroup, usage).read_text()))
+            break
+        except (OSError, ValueError):
+            continue
+    try:
+        for line in Path(meminfo).read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                free.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    return max(0, min(free)) if free else None
+
+
+# The worker tree's own Python and torch, before the submission allocates anything.
+BASELINE_BYTES = 2**30
+# What the grader keeps for itself out of the container's free memory, and the least
+# limit a worker gets (below it, the kernel's out-of-memory killer decides: it takes the
+# worker's processes first, see the worker's oom_score_adj).
+GRADER_RESERVE, MIN_TREE_BYTES = 128 * 2**20, 512 * 2**20
+
+
 class Worker:
     """One worker serving every lab file of a submission folder, restarted after a failure.
 
@@ -265,6 +296,12 @@ class Worker:
                  reply_bytes: int | None = None):
         self.folder = folder
         self.memory_bytes = memory_bytes
+        # The whole tree's limit: the extra memory asked for on top of the baseline, but no
+        # more than the container has free (less the grader's reserve).
+        room = memory_room()
+        self.tree_limit = memory_bytes + BASELINE_BYTES
+        if room is not None:
+            self.tree_limit = min(self.tree_limit, max(room - GRADER_RESERVE, MIN_TREE_BYTES))
         self.reply_bytes = int(reply_bytes or _env_float("RTCOURSE_REPLY_MB",
                                                          DEFAULT_REPLY_MB) * 2**20)
         self.startup_timeout = startup_timeout
@@ -404,6 +441,11 @@ class Worker:
         except subprocess.TimeoutExpired:
             code = "unknown"
         self.stop()
+        if code == -signal.SIGKILL:
+            raise WorkerCrashed(
+                f"the worker process was killed (SIGKILL) during {where}: the machine ran "
+                f"out of memory (the kernel ends the submission's processes first), or the "
+                f"submission killed itself")
         raise WorkerCrashed(
             f"the submission ended the worker process (exit code {code}) during {where}: "
             f"sys.exit/os._exit or a crash in native code ends the grading of that call")
@@ -416,11 +458,11 @@ class Worker:
             now = time.monotonic()
             if self.memory_bytes > 0 and now >= next_look:
                 next_look = now + _MEMORY_POLL
-                if self._tree_bytes() > self.memory_bytes + 2**30:
+                if self._tree_bytes() > self.tree_limit:
                     self.stop()
                     raise MemoryLimitExceeded(
-                        f"{where} used more than {self.memory_bytes / 2**30:.1f} GiB of "
-                        f"memory and was stopped")
+                        f"{where} used more than {self.tree_limit / 2**30:.2f} GiB of "
+                        f"memory (the grader's limit on this machine) and was stopped")
             if now > deadline:
                 self.stop()
                 raise TimeLimitExceeded(f"{where} did not finish within the time limit and "

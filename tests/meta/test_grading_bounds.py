@@ -388,3 +388,51 @@ def test_a_killed_grader_leaves_nothing(tmp_path):
         time.sleep(0.2)
     assert not _processes_with(str(sub)) and not _processes_with(MARK)
     assert not list((tmp_path / "tmp").glob("rtcourse-worker-*"))
+
+
+# ------------------------------------------------------------ memory of a small container
+
+
+def test_memory_room_reads_the_container_limit(tmp_path):
+    from course.grading.sandbox import memory_room
+
+    meminfo = tmp_path / "meminfo"
+    meminfo.write_text("MemTotal:       16000000 kB\nMemAvailable:    8000000 kB\n")
+    v2 = tmp_path / "v2"
+    v2.mkdir()
+    (v2 / "memory.max").write_text("805306368\n")  # Gradescope's 768 MB
+    (v2 / "memory.current").write_text(str(400 * 2**20))
+    assert memory_room(str(v2), str(meminfo)) == 368 * 2**20
+    (v2 / "memory.max").write_text("max\n")
+    assert memory_room(str(v2), str(meminfo)) == 8000000 * 1024, "no limit: MemAvailable"
+    v1 = tmp_path / "v1" / "memory"
+    v1.mkdir(parents=True)
+    (v1 / "memory.limit_in_bytes").write_text(str(2**30))
+    (v1 / "memory.usage_in_bytes").write_text(str(2**28))
+    assert memory_room(str(tmp_path / "v1"), str(meminfo)) == 3 * 2**28
+    assert memory_room(str(tmp_path / "none"), str(tmp_path / "none")) is None
+
+
+def test_worker_limit_fits_the_container(tmp_path, monkeypatch):
+    """On a 768 MB container the worker's limit is what the container has free (less the
+    grader's reserve), not the default 4 GiB extra; its processes are the kernel's first
+    choice when memory runs out."""
+    from course.grading import sandbox
+
+    monkeypatch.setattr(sandbox, "memory_room", lambda: 368 * 2**20 + sandbox.GRADER_RESERVE)
+    worker = sandbox.Worker(str(tmp_path), memory_bytes=4 * 2**30)
+    assert worker.tree_limit == sandbox.MIN_TREE_BYTES, "never below the least limit"
+    monkeypatch.setattr(sandbox, "memory_room", lambda: 3 * 2**30)
+    assert sandbox.Worker(str(tmp_path), memory_bytes=4 * 2**30).tree_limit == \
+        3 * 2**30 - sandbox.GRADER_RESERVE
+    monkeypatch.setattr(sandbox, "memory_room", lambda: None)
+    assert sandbox.Worker(str(tmp_path), memory_bytes=2**30).tree_limit == \
+        2**30 + sandbox.BASELINE_BYTES
+    (tmp_path / "lab8_oom.py").write_text(
+        "def score():\n    return int(open('/proc/self/oom_score_adj').read())\n")
+    lab = sandbox.SandboxedLab("lab8_oom", sandbox.Worker(str(tmp_path), memory_bytes=2**30),
+                               60.0)
+    try:
+        assert lab.score() == 1000, "the submission's process: the out-of-memory killer's first"
+    finally:
+        lab._worker.stop()
