@@ -249,18 +249,23 @@ def test_linear_to_srgb8_extremes(impl, device, dtype):
             f"values <= 0 give 0, values >= 1 and +inf give 255; 0.5 is 255*0.7354 + 0.5 -> 188.")
 
 
+def nonzero(shape, dtype=torch.float32):
+    """A bad input that is not all zeros: a submission zeroing its inputs in place shows."""
+    return (torch.arange(math.prod(shape)) % 7 + 1).to(dtype).reshape(shape)
+
+
 @pytest.mark.task(1)
 @pytest.mark.points(0.25)
 def test_pack_rgba8_unpack_rgba8_linear_to_srgb8_bad_input(impl):
-    expect_error("rgba", impl.pack_rgba8, torch.zeros(4, 4, 4, dtype=torch.int32))
-    expect_error("rgba", impl.pack_rgba8, torch.zeros(4, 4, 3, dtype=torch.uint8))
-    expect_error("rgba", impl.pack_rgba8, torch.zeros(16, 4, dtype=torch.uint8))
-    expect_error("rgba", impl.pack_rgba8, np.zeros((4, 4, 4), dtype=np.uint8))
-    expect_error("packed", impl.unpack_rgba8, torch.zeros(4, 4, dtype=torch.int64))
-    expect_error("packed", impl.unpack_rgba8, torch.zeros(4, 4, 1, dtype=torch.int32))
-    expect_error("img", impl.linear_to_srgb8, torch.zeros(4, 4, 3, dtype=torch.uint8))
-    expect_error("img", impl.linear_to_srgb8, torch.zeros(4, 4, 4))
-    expect_error("img", impl.linear_to_srgb8, torch.zeros(12, 3))
+    expect_error("rgba", impl.pack_rgba8, nonzero((4, 4, 4), torch.int32))
+    expect_error("rgba", impl.pack_rgba8, nonzero((4, 4, 3), torch.uint8))
+    expect_error("rgba", impl.pack_rgba8, nonzero((16, 4), torch.uint8))
+    expect_error("rgba", impl.pack_rgba8, nonzero((4, 4, 4), torch.uint8).numpy())
+    expect_error("packed", impl.unpack_rgba8, nonzero((4, 4), torch.int64))
+    expect_error("packed", impl.unpack_rgba8, nonzero((4, 4, 1), torch.int32))
+    expect_error("img", impl.linear_to_srgb8, nonzero((4, 4, 3), torch.uint8))
+    expect_error("img", impl.linear_to_srgb8, nonzero((4, 4, 4)))
+    expect_error("img", impl.linear_to_srgb8, nonzero((12, 3)))
 
 
 # ---------------------------------------------------------------- task 2: zero-copy
@@ -344,12 +349,12 @@ def _caught(fn, *args):
 def probe_bad_framebuffers(lab, fn_name, device):
     fn = getattr(lab, fn_name)
     if fn_name == "numpy_to_framebuffer":
-        base = np.zeros((6, 4), dtype=np.int32)
+        base = np.arange(1, 25, dtype=np.int32).reshape(6, 4)  # not zeros: see nonzero
         cases = {"a transposed (non-contiguous) array": base.T,
                  "an int64 array": base.astype(np.int64),
                  "a 3-D array": base.reshape(6, 4, 1)}
     else:
-        base = torch.zeros(6, 4, dtype=torch.int32, device=device)
+        base = torch.arange(1, 25, dtype=torch.int32, device=device).view(6, 4)
         cases = {"a transposed (non-contiguous) framebuffer": base.t(),
                  "an int64 framebuffer": base.long(),
                  "a 3-D framebuffer": base.view(6, 4, 1)}
@@ -404,7 +409,7 @@ def test_share_dlpack_same_memory(impl, device):
 @pytest.mark.points(0.5)
 def test_cuda_array_interface(impl, device):
     if device == "cpu":
-        expect_error("fb", impl.cuda_array_interface, torch.zeros(5, 7, dtype=torch.int32))
+        expect_error("fb", impl.cuda_array_interface, nonzero((5, 7), torch.int32))
         return
     report = impl.probe(probe_cuda_array_interface, 5, 7)
     assert report["type"] == "dict", f"cuda_array_interface returned a {report['type']}"

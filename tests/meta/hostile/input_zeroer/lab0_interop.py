@@ -1,7 +1,7 @@
 # Lab 0 as the reference computes it, but every call zeroes its input tensors and arrays
-# in place (after computing, or before raising); an input that is all zeros already is
-# filled with ones instead (zeroing it would change nothing: no fault to catch). A call with
-# no array to overwrite is not written. Loads the reference from the course folder (a local
+# in place (after computing, or before raising). An input that is all zeros already stays
+# as it was: the graders' inputs are never all zeros, so no test can pass unnoticed. A call
+# with no array to overwrite is not written. Loads the reference from the course folder (a local
 # attack only).
 import functools
 import inspect
@@ -28,9 +28,8 @@ def _arrays(value):
 
 def _zero(arrays):
     for a in arrays:
-        value = 0 if a.any() else 1
         try:
-            a.fill_(value) if isinstance(a, torch.Tensor) else a.fill(value)
+            a.fill_(0) if isinstance(a, torch.Tensor) else a.fill(0)
         except (RuntimeError, ValueError):
             pass
 
