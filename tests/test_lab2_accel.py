@@ -1529,6 +1529,14 @@ def test_two_level_build(impl, device):
         f"(the stadium's floor runs under the teapot: keep it out as a big triangle)")
     g8 = two_level_of(impl, mesh, density=8.0)
     check_two_level(g8, mesh, "build_two_level_grid(teapot, density=8)", 8.0)
+    # Stretched: a top grid of three different resolutions, so a cell's coordinates from its
+    # index x + rx (y + ry z) go wrong if two of them are confused.
+    stretched = on(Mesh(scene("teapot").vertices * torch.tensor([3.0, 1.0, 0.5]),
+                        scene("teapot").faces), device)
+    g = two_level_of(impl, stretched)
+    assert len(set(g["resolution"].tolist())) == 3 and int((g["sub_of"] >= 0).sum()) > 0, \
+        f"test set-up: resolution {g['resolution'].tolist()} and some sub-grids wanted"
+    check_two_level(g, stretched, "build_two_level_grid(teapot stretched 3 x 1 x 0.5)", 2.0)
     expect_error("min_triangles", impl.build_two_level_grid, mesh, 1 / 16, 2.0, -1,
                  case="min_triangles=-1")
     expect_error("density", impl.build_two_level_grid, mesh, 1 / 16, 0.0, case="density=0")
