@@ -10,7 +10,11 @@ the pristine one. It forks
 * one fresh *probe* process per ``impl.probe`` request on ``CONTROL_FD``: the probe's
   function is loaded before the submission is imported there, so nothing the submission
   did in earlier calls is seen, and a probe whose process had the grader's own code changed
-  by the submission is refused (see :func:`fingerprint`).
+  by the submission is refused (see :func:`fingerprint`). What this does not stop: the
+  submission runs in the probe's process, so code written against this grader could write
+  a made-up reply to the probe's pipe itself and exit. Only a check outside that process
+  could tell; the probes' observations (addresses, views, what was called) cannot be made
+  from outside it.
 
 The keeper is a child subreaper: whatever the submission starts, even a grandchild that
 left its session, is reparented to it and killed when the server ends or the grader
