@@ -271,6 +271,17 @@ def check_corridor(render, dtype, device, what: str) -> None:
                           f"depth limit)")
 
 
+def reordered_materials(scene: WhittedScene, order) -> WhittedScene:
+    """The same scene with its material table reordered: old material ``order[k]`` is
+    material ``k`` (the image does not change)."""
+    order = torch.as_tensor(order, device=scene.device)
+    inverse = torch.empty_like(order)
+    inverse[order] = torch.arange(len(order), device=scene.device)
+    return dataclasses.replace(scene, material=inverse[scene.material], kd=scene.kd[order],
+                               ks=scene.ks[order], shininess=scene.shininess[order],
+                               kr=scene.kr[order])
+
+
 def without_cube(scene: WhittedScene) -> WhittedScene:
     """The courtyard without its cube (its last 12 triangles): the other indices stay."""
     return dataclasses.replace(scene, faces=scene.faces[:-12], material=scene.material[:-12])
@@ -644,8 +655,9 @@ def test_render_whitted_extremes(impl, device):
         o, d = bad_rays(dtype, device)
         check_background(with_blocks(impl, "render_whitted", scene, o, d, trace_brute_force), scene,
                          f"render_whitted ({dtype})")
-        # Rays that escape the courtyard into the sky return the background, exactly.
-        sky = scene_on("courtyard_both", dtype, device)
+        # Rays that escape the courtyard into the sky return the background, exactly: also
+        # when material 0 is the mirror (a miss has no material; it never reflects).
+        sky = reordered_materials(scene_on("courtyard_both", dtype, device), [1, 0, 2])
         o, d = camera_rays("courtyard_both", dtype, device, 16)
         zeros = torch.zeros(len(o), dtype=dtype, device=device)
         escaped = ~trace_brute_force(sky, o, d, zeros, zeros + INF).hit
@@ -654,7 +666,9 @@ def test_render_whitted_extremes(impl, device):
                      device=device)
         assert_close(image.cpu()[escaped.cpu()], sky.background.cpu().expand(int(escaped.sum()), 3),
                      name=f"render_whitted ({dtype}): primary rays that escape into the sky "
-                          f"(the background, exactly)", where="(escaped ray, channel)")
+                          f"(the background, exactly; the mirror is material 0 here, and a "
+                          f"ray that missed spawns no reflection)",
+                     where="(escaped ray, channel)")
     expect_render_errors(impl.render_whitted, device)
 
 
@@ -885,6 +899,9 @@ def persistent_stats(stats, pool_size: int, what: str) -> dict:
     for key in ("steps", "work_generated", "work_processed", "shadow_rays"):
         assert isinstance(stats.get(key), int), \
             f"{what}: stats[{key!r}] must be an int, got {stats.get(key)!r}"
+    assert stats.get("pool_size") == pool_size, (
+        f"{what}: stats['pool_size'] = {stats.get('pool_size')!r}, expected the pool's "
+        f"{pool_size} slots")
     active = stats.get("active_lanes")
     if not isinstance(active, list) or len(active) != stats["steps"]:
         raise AssertionError(f"{what}: stats['active_lanes'] must list the busy slots of each "
@@ -950,6 +967,13 @@ def test_render_persistent_stats(impl, device):
             assert s["steps"] == max_depth + 1, (
                 f"{what}: with a slot for every ray the pool needs one step per bounce "
                 f"({max_depth + 1}), took {s['steps']}")
+    # The default pool: pool_size=4096 slots (the signature's default).
+    _, stats = with_blocks(impl, "render_persistent", scene, o, d, trace_brute_force, max_depth)
+    s = persistent_stats(stats, 4096, f"render_persistent (two mirrors, {n} rays, the default "
+                                      f"pool_size=4096)")
+    assert s["steps"] == max_depth + 1 and s["active_lanes"] == [n] * (max_depth + 1), (
+        f"render_persistent with the default pool of 4096 slots: {n} rays need one step per "
+        f"bounce with {n} busy slots each; got active_lanes {s['active_lanes']}")
     scene = scene_on("cornell_mirror", F64, device)
     o, d = camera_rays("cornell_mirror", F64, device)
     _, stats = with_blocks(impl, "render_persistent", scene, o, d, trace_brute_force, 2, 64)
@@ -1079,6 +1103,26 @@ def test_layout_memory(impl, device, dtype):
     expect_error("order", impl.layout_float4, mesh, order[:-1], case="order of F - 1 entries")
 
 
+def intersect_in_small_tiles(lab, pairs: int, *args):
+    """``lab.intersect_layout(*args)`` with the memory budget of ``pair_tiles`` cut to
+    ``pairs`` (ray, triangle) pairs, so that each ray meets the triangles in several tiles
+    (run next to the lab; the budget is restored after)."""
+    import sys
+
+    import course.given.lab3 as given
+
+    module = sys.modules.get(getattr(lab, "__name__", None), lab)
+    owners = [m for m in (given, module) if hasattr(m, "MEMORY_BUDGET_BYTES")]
+    saved = [(m, m.MEMORY_BUDGET_BYTES) for m in owners]
+    try:
+        for m in owners:
+            m.MEMORY_BUDGET_BYTES = pairs * given.BYTES_PER_PAIR
+        return lab.intersect_layout(*args)
+    finally:
+        for m, budget in saved:
+            m.MEMORY_BUDGET_BYTES = budget
+
+
 @pytest.mark.task(5)
 @pytest.mark.points(1)
 @pytest.mark.parametrize("dtype", [F32, F64], ids=["f32", "f64"])
@@ -1092,15 +1136,25 @@ def test_intersect_layout(impl, device, dtype):
     expected = trace_brute_force(scene, o, d, t_min, t_max)
     assert 50 < int(expected.hit.sum()) < 280, "grader bug: mix hits and misses"
     order = torch.randperm(mesh.num_faces, generator=generator(6)).to(device)
-    for what, layout in (("indexed", impl.layout_indexed(mesh)),
-                         ("float4", impl.layout_float4(mesh)),
-                         ("float4 in a shuffled order", impl.layout_float4(mesh, order)),
-                         ("woop", impl.layout_woop(mesh))):
+    layouts = {"indexed": impl.layout_indexed(mesh), "float4": impl.layout_float4(mesh),
+               "float4 in a shuffled order": impl.layout_float4(mesh, order),
+               "woop": impl.layout_woop(mesh)}
+    for what, layout in layouts.items():
         hits = impl.intersect_layout(layout, o, d, t_min, t_max)
         check_layout_hits(hits, expected, f"intersect_layout ({what}, {dtype})", dtype)
         for k in (4, 5):  # a NaN origin, a zero direction
             assert int(hits.triangle[k]) == -1, (
                 f"intersect_layout ({what}): ray {k} (NaN origin or zero direction) must miss")
+    # A memory budget of 40 pairs: pair_tiles hands each ray the triangles in 4 tiles; the
+    # hit kept over all tiles is the nearest (among equal t the lowest index), whatever
+    # order the tiles' indices come in (the shuffled float4 layout).
+    rays = tuple(x[:90] for x in (o, d, t_min, t_max))
+    expected = trace_brute_force(scene, *rays)
+    for what in ("indexed", "float4 in a shuffled order", "woop"):
+        hits = impl.probe(intersect_in_small_tiles, 40, layouts[what], *rays)
+        check_layout_hits(hits, expected, f"intersect_layout ({what}, {dtype}) with a memory "
+                          f"budget of 40 (ray, triangle) pairs: the closest hit over several "
+                          f"tiles of triangles", dtype)
     expect_error("layout", impl.intersect_layout, {"kind": "bvh"}, o, d, t_min, t_max,
                  case="a dict of kind 'bvh'")
 

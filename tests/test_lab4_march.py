@@ -417,6 +417,28 @@ def ref_optical_depth(o, d, lo, hi, grid, emission=None):
     return depth, radiance
 
 
+def ref_voxel_steps(o, d, lo, hi, sizes, tol):
+    """The voxels each ray's chord crosses (float64): 1 + the interior voxel planes it
+    crosses, 0 for a miss. Returns (count, clear): ``clear`` where no two crossings and no
+    crossing and an end of the chord lie within ``eps = tol * (1 + t_far)`` of each other
+    (there rounding may decide either way) and the chord is longer than ``2 eps``."""
+    o, d, lo, hi = f64(o, d, lo, hi)
+    near, far, hit = ref_interval(o, d, lo, hi)
+    voxel = (hi - lo) / torch.tensor(sizes, dtype=F64)
+    t = torch.cat([(lo[a] + torch.arange(1, sizes[a], dtype=F64)[None] * voxel[a]
+                    - o[:, a:a + 1]) / d[:, a:a + 1] for a in range(3)], 1)
+    t = torch.where(torch.isfinite(t), t, -INF)  # planes the ray runs along: never crossed
+    near, far = near[:, None], far[:, None]
+    crossed = (t > near) & (t < far)
+    count = torch.where(hit, 1 + crossed.sum(1), 0)
+    eps = tol * (1 + far.abs().nan_to_num(0))
+    inner = torch.where(crossed, t, INF).sort(1).values
+    gaps = (inner[:, 1:] - inner[:, :-1]).nan_to_num(INF)
+    close = ((t - near).abs() <= eps) | ((t - far).abs() <= eps)
+    clear = ~hit | ((far - near > 2 * eps)[:, 0] & ~close.any(1) & (gaps > eps).all(1))
+    return count, clear
+
+
 def ref_sphere_hit(o, d, center, radius):
     """Returns (t, cos, clearance), (N,) each: the first t >= 0 where the ray meets the
     sphere's surface (the far root from inside; inf where missed), the cosine of the angle
@@ -1220,10 +1242,33 @@ def given_march_box(origins, directions, box_min, box_max, density, emission=Non
     return {"radiance": radiance, "transmittance": transmittance, "samples": samples}
 
 
+def given_sample_grid(grid, uvw):
+    """In place of the lab's ``sample_grid`` (task 1) under ``march_single_scatter``:
+    trilinear at box coordinates, clamped to the border, 0 at NaN/inf coordinates."""
+    flat = uvw.reshape(-1, 3)
+    finite = torch.isfinite(flat).all(-1)
+    values = given_field(grid, flat, torch.nan_to_num(flat, nan=0.5, posinf=2.0, neginf=-1.0))
+    values = torch.where(finite[:, None] if values.ndim == 2 else finite, values, 0)
+    return values.reshape(*uvw.shape[:-1], *grid.shape[3:])
+
+
 def probe_single_scatter(lab, *args, **kwargs):
-    """``march_single_scatter`` next to the lab, on the given march."""
-    with replaced(lab, {"march_box": given_march_box}):
+    """``march_single_scatter`` next to the lab, on the given march and grid sampling."""
+    with replaced(lab, {"march_box": given_march_box, "sample_grid": given_sample_grid}):
         return lab.march_single_scatter(*args, **kwargs)
+
+
+def scatter_grid():
+    """A (4, 5, 3) density grid for the scattering box, 0.2 .. 1.7, varying on every axis."""
+    return 0.2 + 1.5 * torch.rand(4, 5, 3, generator=generator(141), dtype=F64)
+
+
+def scatter_grid_density(p):
+    """The medium of ``scatter_grid()`` as a callable: its trilinear field at world points
+    of the scattering box."""
+    lo, hi = (torch.tensor(b, dtype=F64, device=p.device) for b in (SCATTER_LO, SCATTER_HI))
+    q = p.double()
+    return given_field(scatter_grid().to(p.device), q, (q - lo) / (hi - lo)).to(p.dtype)
 
 
 def single_scatter(impl, *args, **kwargs):
@@ -1280,6 +1325,29 @@ def test_single_scatter_matches_closed_form(impl, device):
                       "radiance (N, 3)", where="(ray, channel)")
     cpu_agrees(device, "march_single_scatter", got, partial(single_scatter, impl), o.to(device),
                d.to(device), SCATTER_LO, SCATTER_HI, dens, rgb, light, 2.0 * rgb, -0.3, 64, 4)
+    # A dense box (T falls to e^-19) with the default min_transmittance=0: no ray stops early.
+    dense = torch.full((1, 1, 1), 8.0, dtype=F64, device=device)
+    what = "march_single_scatter(sigma=8, steps=16, the default min_transmittance=0)"
+    got = result_dict(single_scatter(impl, o.to(device), d.to(device), SCATTER_LO, SCATTER_HI,
+                                     dense, albedo, light, irradiance, g, 16, 1),
+                      what, MARCH_KEYS, 48, F64, device)
+    _, _, hit = ref_interval(o, d, SCATTER_LO, SCATTER_HI)
+    assert_equal(got["samples"], torch.where(hit, 16, 0).long(), where="ray",
+                 name=f"{what}: samples (min_transmittance=0 never stops a march: every ray "
+                      f"that meets the box takes every step)")
+    assert_close(got["transmittance"], torch.exp(-8.0 * length), rtol=1e-10, atol=0,
+                 name=f"{what}: transmittance of the view ray e^(-sigma D)", where="ray")
+    # A grid is sampled at box coordinates (x - box_min) / (box_max - box_min) (the box is
+    # 1 x 2 x 1): the same medium as a grid and as a callable of world points scatters alike.
+    what = "march_single_scatter (a (4, 5, 3) grid density, steps=32, shadow_steps=4)"
+    got, twin = (result_dict(single_scatter(impl, o.to(device), d.to(device), SCATTER_LO,
+                                            SCATTER_HI, field, albedo, light, irradiance, g, 32,
+                                            4), what, MARCH_KEYS, 48, F64, device)
+                 for field in (scatter_grid().to(device), scatter_grid_density))
+    assert_close(got["radiance"], twin["radiance"], rtol=1e-9, atol=1e-12, where="ray",
+                 name=f"{what}: radiance against the same trilinear medium given as a callable "
+                      f"of world points (the source's sigma: the grid sampled at box "
+                      f"coordinates (x - box_min) / (box_max - box_min))")
     expect_error("g", impl.march_single_scatter, o.to(device), d.to(device), SCATTER_LO,
                  SCATTER_HI, dens, albedo, light, 1.0, 1.0, 8, 1, case="g=1.0")
     expect_error("shadow_steps", impl.march_single_scatter, o.to(device), d.to(device),
@@ -1400,6 +1468,13 @@ def test_voxel_walk_optical_depth_exact(impl, device):
                 and (steps[hit & (want > 0)] >= 1).all(), (
             f"{what}: steps per ray must be 0 for misses, at least 1 through the medium and at "
             f"most X + Y + Z + 1 = 19; got {steps.tolist()}")
+        count, clear = ref_voxel_steps(oo, dd, lo, hi, (6, 5, 7), 1e-9 if dtype == F64 else 1e-4)
+        assert clear.double().mean() > 0.8, "test set-up: most rays cross no corner"
+        assert_equal(steps[clear], count[clear], where="ray (of those crossing no edge)",
+                     name=f"{what}: steps = the voxels the chord crosses (1 + the voxel planes "
+                          f"it crosses inside the box). A ray leaves the grid when its index "
+                          f"leaves 0 .. size - 1 or t reaches t_far, whichever comes first "
+                          f"(rounding may put the last plane a hair before t_far)")
     cpu_agrees(device, "voxel_walk", got, impl.voxel_walk, oo.to(device), dd.to(device),
                lo.to(device), hi.to(device), gg.to(device), rtol=1e-5, atol=1e-6)
     # A box at 1e5 in float32 keeps the accuracy it has near the origin.
@@ -1506,6 +1581,8 @@ def test_voxel_walk_empty_space_skipping(impl, device):
     grid = blob_grid()
     emission = (grid > 0) * 0.5 + torch.zeros(24, 24, 24, dtype=F64)
     emission[0, 23, 0] = 2.0  # emits without absorbing: still occupied
+    colour = emission[..., None] * torch.tensor([1.0, 0.5, 0.25], dtype=F64)
+    colour[2, 20, 5] = torch.tensor([0.0, 0.0, 0.3], dtype=F64)  # blue only, no density
     for m in (1, 3, 4, 5, 8):
         occ = check_tensor(impl.build_occupancy(grid.to(device), m), f"build_occupancy(grid, {m})",
                            shape=(-(-24 // m),) * 3, dtype=torch.bool, device=device).cpu()
@@ -1520,6 +1597,12 @@ def test_voxel_walk_empty_space_skipping(impl, device):
         want[0, 23 // m, 0] = True
         assert_equal(occ_e, want, name=f"build_occupancy(density, {m}, emission): emitting "
                      "voxels are occupied too", where="macro cell")
+        occ_c = check_tensor(impl.build_occupancy(grid.to(device), m, colour.to(device)),
+                             f"build_occupancy(grid, {m}, emission (24, 24, 24, 3))",
+                             shape=(-(-24 // m),) * 3, dtype=torch.bool, device=device).cpu()
+        want[2 // m, 20 // m, 5 // m] = True
+        assert_equal(occ_c, want, name=f"build_occupancy(density, {m}, emission (X, Y, Z, C)): "
+                     "a voxel emitting in any channel is occupied", where="macro cell")
 
     o, d = box_rays(300, seed=131, lo=[0.0] * 3, hi=[1.0] * 3)
     lo, hi = torch.zeros(3, dtype=F64, device=device), torch.ones(3, dtype=F64, device=device)
@@ -1548,6 +1631,15 @@ def test_voxel_walk_empty_space_skipping(impl, device):
         totals[m] = (got["steps"].sum().item(), got["samples"].sum().item())
         assert (got["samples"].cpu() <= plain["samples"].cpu()).all(), (
             f"{what}: no ray may read more voxels than without skipping")
+    # Colour emission (X, Y, Z, 3): skipped macro cells add no light in any channel.
+    _, want_c = ref_optical_depth(o, d, lo.cpu(), hi.cpu(), grid, colour)
+    occ = impl.build_occupancy(grid.to(device), 4, colour.to(device))
+    what = "voxel_walk (emission (24, 24, 24, 3), occupancy with macro_cell=4)"
+    got = walk(impl, o.to(device), d.to(device), lo, hi, grid.to(device), colour.to(device), occ,
+               4, what=what, n=300, dtype=F64, device=device, channels=3)
+    assert_close(got["radiance"], want_c, rtol=1e-10, atol=1e-13, where="(ray, channel)",
+                 name=f"{what}: radiance unchanged by skipping (an empty macro cell emits "
+                      f"nothing)")
     report = ", ".join(f"macro_cell={m}: {s} steps / {r} samples" for m, (s, r) in totals.items())
     assert totals[1][1] < 0.5 * totals[None][1], (
         f"voxel_walk: with a per-voxel occupancy grid, empty voxels are not sampled: expected "

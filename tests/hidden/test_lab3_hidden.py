@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 
 import pytest
 import test_lab3_wavefront as visible
@@ -128,6 +129,60 @@ def test_surface_at_shade_direct_hidden_views(impl, device):
                        dtype, device, tol=tol(name))
         check_shadow_count(shadow_rays, expected_shadow_rays(scene, p, n),
                            f"shade_direct on the hidden view {name} ({dtype})")
+
+
+def grazing_frames(n: int, seed: int, light: torch.Tensor):
+    """float32 hit frames where both the view and the light graze the surface: unit normals
+    with ``n . l`` and ``-n . d`` of 1e-9 .. 1e-6, kept where ``n . d < 0 < n . l`` in
+    float32 (facing the ray, the light above)."""
+    g = generator(seed)
+    l = light.double()
+    u = torch.randn(n, 3, generator=g, dtype=F64)
+    tilt = 10 ** (-3 * torch.rand(n, 2, generator=g, dtype=F64) - 6)
+    normal = u - (u @ l)[:, None] * l + tilt[:, :1] * l
+    normal = normal / normal.norm(dim=1, keepdim=True)
+    t = torch.randn(n, 3, generator=g, dtype=F64)
+    t = t - (t * normal).sum(1, keepdim=True) * normal - tilt[:, 1:] * normal
+    normal, d = normal.float(), (t / t.norm(dim=1, keepdim=True)).float()
+    keep = ((normal * d).sum(1) < 0) & ((normal * light.float()).sum(1) > 0)
+    return normal[keep], d[keep]
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.25)
+def test_shade_direct_grazing_view_and_light(impl, device):
+    """A view and a light that both graze the surface, a shininess of 12.5: h lies a hair
+    above the surface, where rounding can put n . h below 0; max(0, n . h)^s keeps the
+    radiance finite (a negative number to a fractional power is NaN)."""
+    mesh = Mesh(torch.tensor([[-9.0, -9.0, -9.0], [-8.0, -9.0, -9.0], [-9.0, -8.0, -9.0]],
+                             device=device), torch.tensor([[0, 1, 2]], device=device))
+    scene = make_scene(mesh, [0], {"kd": [[0.5, 0.4, 0.3]], "ks": [[0.6, 0.6, 0.6]],
+                                   "shininess": [12.5], "kr": [[0, 0, 0]]},
+                       dir_lights=[((0.3, 0.8, 0.5), (2.0, 2.0, 2.0))], ambient=(0.1, 0.1, 0.1))
+    light = scene.dir_directions[0].cpu()
+    normals, d = grazing_frames(4000, 43, light)
+    points = torch.rand(len(d), 3, generator=generator(44)).float()
+    m = torch.zeros(len(d), dtype=torch.int64)
+    radiance, _ = impl.shade_direct(scene, points.to(device), normals.to(device), d.to(device),
+                                    m.to(device), trace_brute_force)
+    radiance = check_tensor(radiance, "shade_direct (grazing frames)", shape=(len(d), 3),
+                            dtype=F32, device=device).cpu().double()
+    n64, d64, l64 = normals.double(), d.double(), light.double()
+    cos = n64 @ l64
+    h = l64 - d64
+    h = h / h.norm(dim=1, keepdim=True)
+    lobe = (12.5 + 8) / (8 * math.pi) * (n64 * h).sum(1).clamp(min=0) ** 12.5
+    kd, ks = scene.kd[0].cpu().double(), scene.ks[0].cpu().double()
+    want = 0.1 * kd + torch.where(cos > 0, 2.0 * cos, 0)[:, None] * (kd / math.pi
+                                                                     + ks * lobe[:, None])
+    bad = ~torch.isfinite(radiance).all(1)
+    assert not bad.any(), (
+        f"shade_direct: {int(bad.sum())} of {len(d)} grazing hits (view and light both within "
+        f"1e-6 of the surface, shininess 12.5) give NaN, first hit {int(bad.nonzero()[0, 0])}: "
+        f"rounding can make n . h slightly negative there; the lobe is max(0, n . h)^s")
+    assert_close(radiance, want, rtol=1e-5, atol=1e-6, where="(hit, channel)",
+                 name="shade_direct (grazing view and light): ambient plus a vanishing direct "
+                      "term")
 
 
 @pytest.mark.task(1)
