@@ -345,7 +345,9 @@ def ray_box(origins, inv_directions, box_min, box_max, t_min=0.0, t_max=math.inf
     * A ray starting *on* a slab plane with ``d = 0`` gives ``0 * inf = NaN``: that slab
       says nothing, so the reduction over the slabs drops NaN (``fmax``/``fmin``).
     * Conservative: ``t_far`` is scaled by ``1 + 2 gamma(3)`` (Ize 2013, "Robust BVH Ray
-      Traversal"), so rounding never turns a hit into a miss; an empty box
+      Traversal"), so rounding never turns a hit into a miss (a wider margin of a few
+      ``gamma(3)`` is as good: ``t_far`` is graded to about 1e-5, and a ray that misses the
+      box by less than that may be reported either way); an empty box
       (``min > max`` on any axis, a flat box ``min == max`` is not empty) and a ray with
       NaN/inf components never hit.
 

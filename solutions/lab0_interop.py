@@ -320,6 +320,9 @@ def render_rotating_triangle(frame_index: int, out: torch.Tensor, *, period: int
     Pixel (x, y) samples its centre (x + 0.5, y + 0.5). Vertices: ``triangle_vertices``.
     Inside (all barycentrics >= 0): colour floor(255 b_k + 0.5) from red, green, blue at
     v0, v1, v2, alpha 255. Outside: BACKGROUND_RGBA. Writes ``out`` in place, returns it.
+
+    Accuracy contract: float32 is fine; pixels whose centre lies within 1e-4 pixel of an
+    edge may go either way.
     """
     if isinstance(frame_index, bool) or not isinstance(frame_index, int):
         raise TypeError(f"frame_index: expected an int, got {type(frame_index).__name__}")

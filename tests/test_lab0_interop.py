@@ -329,6 +329,12 @@ def probe_cuda_array_interface(lab, height, width):
               "version": info.get("version"),
               "pointer_ok": isinstance(data, tuple) and len(data) == 2 and data[0] == fb.data_ptr(),
               "read_only": data[1] if isinstance(data, tuple) and len(data) == 2 else None}
+    report["stream"] = info.get("stream")
+    side = torch.cuda.Stream()
+    with torch.cuda.stream(side):
+        on_side = lab.cuda_array_interface(fb)
+    report["side_stream"] = on_side.get("stream") if isinstance(on_side, dict) else None
+    report["side_stream_handle"] = side.cuda_stream
     if report["pointer_ok"]:  # a consumer builds a view from the dict alone
         view = torch.as_tensor(types.SimpleNamespace(__cuda_array_interface__=info),
                                device="cuda")
@@ -421,6 +427,13 @@ def test_cuda_array_interface(impl, device):
     assert report["pointer_ok"], ("cuda_array_interface: 'data' must be (fb.data_ptr(), "
                                   "False): the device pointer and a read-only flag")
     assert report["read_only"] is False, "cuda_array_interface: the framebuffer is writable"
+    assert report["stream"] == 1, (
+        f"cuda_array_interface on the default stream: 'stream' should be 1 (the legacy default "
+        f"stream; 0 is not allowed in version 3), got {report['stream']!r}")
+    assert report["side_stream"] == report["side_stream_handle"], (
+        f"cuda_array_interface under torch.cuda.stream(s): 'stream' should be the current "
+        f"stream's handle s.cuda_stream = {report['side_stream_handle']}, got "
+        f"{report['side_stream']!r}: a consumer synchronises with the producer's stream")
     assert report.get("fb_sees_consumer_write"), (
         "cuda_array_interface: a consumer's write through the described memory did not "
         "reach fb")
@@ -546,6 +559,21 @@ def test_FrameDownloader_refuses_overflow(impl, device):
     with pytest.raises(RuntimeError):
         downloader.receive()
 
+    # One staging buffer is a valid ring (num_buffers >= 1): one frame in flight at a time.
+    single = impl.FrameDownloader(shape, device, num_buffers=1)
+    for i in range(3):
+        single.submit(make_frame(10 + i, shape, device))
+        try:
+            single.submit(make_frame(20 + i, shape, device))
+        except RuntimeError:
+            pass
+        else:
+            raise AssertionError(
+                "FrameDownloader(num_buffers=1) accepted a second frame while one was in "
+                "flight: it would overwrite the only staging buffer. Raise RuntimeError.")
+        assert_equal(single.receive(), make_frame(10 + i, shape, "cpu"), where="pixel",
+                     name=f"FrameDownloader(num_buffers=1): frame {i} received after its submit")
+
 
 @pytest.mark.task(3)
 @pytest.mark.points(0.25)
@@ -565,6 +593,12 @@ def test_measure_copy_bandwidth(impl, device, pinned):
     gbps = impl.measure_copy_bandwidth(1 << 16, pinned, device, repeats=2)
     assert isinstance(gbps, float) and math.isfinite(gbps) and gbps > 0, (
         f"measure_copy_bandwidth should return a positive float (GB/s), got {gbps!r}")
+    # 64 KiB in 0.65 s .. 6.5 ns: far wider than any machine or load, yet a bandwidth in the
+    # wrong units (bytes/s, seconds/byte, bytes x seconds) lands outside by many decades.
+    assert 1e-4 <= gbps <= 1e4, (
+        f"measure_copy_bandwidth(65536, pinned={pinned}, {device!r}) = {gbps!r} GB/s: outside "
+        f"any plausible range [1e-4, 1e4] GB/s (64 KiB copied in 0.65 s .. 6.5 ns). The "
+        f"bandwidth is nbytes / seconds per copy / 1e9.")
     expect_error("nbytes", impl.measure_copy_bandwidth, 0, pinned, device)
 
 

@@ -476,6 +476,57 @@ def check_degenerate_cases(impl, variant, device, dtype=torch.float32):
     behind = run(o_under, torch.tensor([0.0, 0.0, 1.0]), tri[0], tri[1], tri[2])
     expect_misses(variant, "triangle behind the ray (t = -2, t_min = 0)", *behind)
 
+    # The triangle is closed: rays through its corners and onto its edges hit. Every value
+    # here is a short binary fraction, so any test's arithmetic is exact and u, v, 1 - u - v
+    # come out exactly 0 (or 1) on the boundary: nothing for rounding to decide.
+    aim_uv = torch.tensor([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.5, 0.0], [0.0, 0.5],
+                           [0.5, 0.5], [0.25, 0.75], [0.25, 0.25]], dtype=F64)
+    aim = torch.cat([aim_uv, torch.full((len(aim_uv), 1), 2.0, dtype=F64)], dim=-1)
+    slopes = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.25, -0.5, 1.0],
+                           [-0.5, 0.25, -1.0]], dtype=F64)
+    o_edge = (aim[:, None] - 2 * slopes[None]).reshape(-1, 3)
+    d_edge = slopes[None].expand(len(aim), -1, -1).reshape(-1, 3)
+    t, u, v = run(o_edge, d_edge, tri[0], tri[1], tri[2])
+    no_nan(variant, "rays onto the corners and edges of a triangle", t, u, v)
+    missed = t.cpu() == INF
+    if missed.any():
+        i = int(missed.nonzero()[0, 0])
+        raise AssertionError(
+            f"{variant}: {int(missed.sum())} of {len(t)} rays aimed exactly at a corner or an "
+            f"edge of the triangle (0,0,2), (1,0,2), (0,1,2) miss it. First: ray {i}, origin "
+            f"{o_edge[i].tolist()}, direction {d_edge[i].tolist()}, aimed at barycentrics "
+            f"u, v = {aim_uv[i // len(slopes)].tolist()}. The triangle is closed: u >= 0, "
+            f"v >= 0 and u + v <= 1 (areas or edge functions >= 0) include the boundary.")
+    want_uv = aim_uv.repeat_interleave(len(slopes), dim=0)
+    assert_close(t, torch.full_like(t, 2.0), rtol=tol,
+                 name=f"{variant}: t of rays onto the triangle's corners and edges", where="ray")
+    assert_close(u, want_uv[:, 0], atol=tol, name=f"{variant}: u of rays onto the triangle's "
+                 "corners and edges", where="ray")
+    assert_close(v, want_uv[:, 1], atol=tol, name=f"{variant}: v of rays onto the triangle's "
+                 "corners and edges", where="ray")
+
+    # Default arguments t_min = 0.0, t_max = inf: hits at t = 0 (origin on the triangle),
+    # t = 1e-4 and t = 1e6 count, as with the bounds passed explicitly.
+    o_def = torch.tensor([[0.25, 0.25, 2.0], [0.25, 0.25, 2.0 - 2.0**-13],
+                          [0.25, 0.25, 2.0 - 2.0**20], [0.25, 0.25, 4.0]], dtype=F64)
+    d_def = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0],
+                          [0.0, 0.0, 1.0]], dtype=F64)
+    args = [x.to(device, dtype) for x in (o_def, d_def, tri[0], tri[1], tri[2])]
+    if variant == "woop_unit":
+        transform = impl.woop_precompute(*args[2:])
+        defaults = impl.woop_unit(args[0], args[1], transform)
+    else:
+        defaults = getattr(impl, variant)(*args)
+    defaults = checked(defaults, variant, (4,), dtype, device)
+    explicit = run(o_def, d_def, tri[0], tri[1], tri[2], 0.0, INF)
+    for name, a, b in zip("tuv", defaults, explicit):
+        assert_equal(a, b, name=f"{variant}: {name} with the default t_min, t_max vs passing "
+                     "t_min=0.0, t_max=inf (hits at t = 0, 1.2e-4, 1e6 and a triangle behind "
+                     "the ray); the defaults must be t_min=0.0 and t_max=math.inf", where="ray")
+    assert (explicit[0].cpu()[:3] < INF).all(), (
+        f"{variant}: rays hitting at t = 0 (origin on the triangle), t = 1.2e-4 and t = 1e6 with "
+        f"t_min=0, t_max=inf must hit; got t = {explicit[0].cpu().tolist()}")
+
     # Rays leaving a hit point with t_min = 1e-4 must not find the same triangle again.
     tris = soup(64, seed=21)
     o64, d64, pick = rays_at(tris, 64, seed=22)
@@ -698,10 +749,49 @@ def test_moller_trumbore_matches_float64_reference(impl, device):
     check_matches_reference(impl, "moller_trumbore", device)
 
 
+def check_relative_parallel_test(impl, device):
+    """Möller–Trumbore's parallel test is relative: rays with ``|det|`` far below
+    ``eps |d| |e1| |e2|`` miss, rays far above it that cross the triangle hit. The corners
+    and directions are short binary fractions, so ``det`` (= the tilt ``dz``) and the rest
+    are exact in any evaluation order; e1 has no positive component in one winding."""
+    corners = torch.tensor([[[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 0.0]],
+                            [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 0.0]]], dtype=F64)
+    tilts = torch.tensor([2.0**-40, -(2.0**-40), 2.0**-34, -(2.0**-34), 2.0**-8, -(2.0**-8)],
+                         dtype=F64)
+    target = torch.tensor([0.75, 0.5, 0.0], dtype=F64)  # inside both, crossed at t = 1
+    d = torch.cat([torch.tensor([-0.5, 0.25], dtype=F64).expand(len(tilts), 2),
+                   tilts[:, None]], dim=-1)
+    o = target - d
+    o, d = o[:, None].expand(-1, 2, -1), d[:, None].expand(-1, 2, -1)
+    tv = corners[None].expand(len(tilts), -1, -1, -1)
+    e1, e2 = tv[..., 1, :] - tv[..., 0, :], tv[..., 2, :] - tv[..., 0, :]
+    det = (e1 * torch.linalg.cross(d, e2)).sum(-1)
+    relative = det.abs() / (d.abs().amax(-1) * e1.abs().amax(-1) * e2.abs().amax(-1))
+    eps = torch.finfo(torch.float32).eps
+    parallel = relative < 1e-2 * eps
+    assert bool((parallel | (relative > 1e3 * eps)).all()), "test set-up: ambiguous tilt"
+    t, u, v = checked(impl.moller_trumbore(*(x.to(device, torch.float32) for x in (
+        o, d, tv[..., 0, :], tv[..., 1, :], tv[..., 2, :]))), "moller_trumbore",
+        (len(tilts), 2), torch.float32, device)
+    no_nan("moller_trumbore", "rays parallel to the plane to within rounding", t, u, v)
+    hit = t.cpu() < INF
+    wrong = hit == parallel
+    if wrong.any():
+        i = tuple(wrong.nonzero()[0].tolist())
+        raise AssertionError(
+            f"moller_trumbore: ray {i} with direction {d[i].tolist()} against the triangle "
+            f"{tv[i].tolist()} has |det| = {relative[i].item():.3g} |d| |e1| |e2| (max-norms), "
+            f"{'far below' if parallel[i] else 'far above'} eps = {eps:.3g}: it must "
+            f"{'miss (parallel to within rounding)' if parallel[i] else 'hit at t = 1'}, got "
+            f"{'a hit' if hit[i] else 'a miss'}. Reject |det| <= eps * |d| |e1| |e2| with "
+            f"max-norms, |x|_max = x.abs().amax(-1) (the absolute values, whatever the signs).")
+
+
 @pytest.mark.task(2)
 @pytest.mark.points(1)
 def test_moller_trumbore_degenerate_and_interval_cases(impl, device):
     check_degenerate_cases(impl, "moller_trumbore", device)
+    check_relative_parallel_test(impl, device)
 
 
 @pytest.mark.task(2)
@@ -756,6 +846,26 @@ def test_woop_precompute_maps_to_unit_triangle(impl, device):
     d = torch.tensor([[0.5, 0.0, 1.5], [0.0, 0.05, 1.0]], device=device)
     expect_misses("woop_unit", "degenerate triangles' transforms",
                   *impl.woop_unit(o[:, None], d[:, None], transform[None]))
+    # Corners with inf or NaN coordinates: no NaN in the transform either, and every ray
+    # misses (e1 x e2 may be inf there, |e1 x e2| > 0, and the rows inf / inf = NaN).
+    bad = torch.tensor([[[0.0, 0.0, 0.0], [INF, 0.0, 0.0], [1.0, 1.0, 1.0]],
+                        [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, -INF, 1.0]],
+                        [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, math.nan, 1.0]]], device=device)
+    transform = check_tensor(impl.woop_precompute(bad[:, 0], bad[:, 1], bad[:, 2]),
+                             "woop_precompute of triangles with inf/NaN corners", shape=(3, 3, 4),
+                             dtype=torch.float32, device=device).cpu()
+    nan = torch.isnan(transform)
+    if nan.any():
+        k = int(nan.nonzero()[0, 0])
+        raise AssertionError(
+            f"woop_precompute: the transform of triangle {bad[k].cpu().tolist()} contains "
+            f"{int(nan[k].sum())} NaN values: {transform[k].tolist()}. Non-finite input gives "
+            f"misses, never NaN outputs: give a triangle whose transform is not finite the "
+            f"zero transform too, as a degenerate one.")
+    o = torch.tensor([[0.25, 0.25, -1.0], [0.3, 0.1, -1.0]], device=device)
+    d = torch.tensor([[0.0, 0.0, 1.0], [0.1, 0.05, 1.0]], device=device)
+    expect_misses("woop_unit", "transforms of triangles with inf/NaN corners",
+                  *impl.woop_unit(o[:, None], d[:, None], transform.to(device)[None]))
     check_bad_input(impl, "woop_unit", device)
 
 
@@ -1117,18 +1227,20 @@ def test_ray_sphere_matches_float64(impl, device):
     assert not torch.isnan(t).any(), "ray_sphere: NaN in t (misses must be inf)"
 
     # Exact roots at t = 4 and 6; the closed interval; one shared sphere (radius a number).
-    o1 = torch.zeros(6, 3, device=device)
-    d1 = torch.tensor([[0.0, 0.0, 1.0]] * 6, device=device)
-    four = torch.tensor(4.0)
-    t_lo = torch.tensor([0.0, 4.0, torch.nextafter(four, four + 1).item(), 0.0, 0.0, 7.0],
-                        device=device)
-    t_hi = torch.tensor([INF, INF, INF, 4.0, torch.nextafter(four, four - 1).item(), INF],
-                        device=device)
+    o1 = torch.zeros(10, 3, device=device)
+    d1 = torch.tensor([[0.0, 0.0, 1.0]] * 10, device=device)
+    four, six = torch.tensor(4.0), torch.tensor(6.0)
+    above4, below6 = torch.nextafter(four, four + 1).item(), torch.nextafter(six, six - 1).item()
+    t_lo = torch.tensor([0.0, 4.0, above4, 0.0, 0.0, 7.0, 5.0, 5.0, 6.0,
+                         torch.nextafter(six, six + 1).item()], device=device)
+    t_hi = torch.tensor([INF, INF, INF, 4.0, torch.nextafter(four, four - 1).item(), INF, 6.0,
+                         below6, 6.0, INF], device=device)
     t1 = impl.ray_sphere(o1, d1, torch.tensor([0.0, 0.0, 5.0], device=device), 1.0, t_lo, t_hi)
-    assert_equal(t1, torch.tensor([4.0, 4.0, 6.0, 4.0, INF, INF]),
+    assert_equal(t1, torch.tensor([4.0, 4.0, 6.0, 4.0, INF, INF, 6.0, INF, 6.0, INF]),
                  name="ray_sphere: sphere at z=5, r=1 hit from the origin (roots 4 and 6) with "
-                      "t_min/t_max [0,inf], [4,inf], [4+ulp,inf], [0,4], [0,4-ulp], [7,inf]",
-                 where="ray")
+                      "t_min/t_max [0,inf], [4,inf], [4+ulp,inf], [0,4], [0,4-ulp], [7,inf], "
+                      "[5,6], [5,6-ulp], [6,6], [6+ulp,inf] (the interval is closed for the far "
+                      "root too)", where="ray")
 
     # NaN/inf/zero rays and a sphere behind the ray miss without NaN.
     o2 = torch.tensor([[math.nan, 0, 0], [0, 0, 0], [INF, 0, 0], [0, 0, 0], [0, 0, 10.0]],

@@ -40,4 +40,34 @@ EQUIVALENT = {
         "X+Y+Z-2 iterations are active and X+Y+Z-1 still finish every ray (checked on 300 "
         "random grids of 1..5 per axis, with and without occupancy, corner-aligned and "
         "axis-parallel rays: identical outputs)",
+    # Lab 0
+    "lab0_interop:linear_to_srgb8:const_float:1":
+        "posinf=1.1 is clamped to 1 by the next clamp(0, 1) (and srgb_encode clamps again): "
+        "+inf still gives 255",
+    "lab0_interop:linear_to_srgb8:const_float:4":
+        "srgb_encode clamps its input to [0, 1] itself, so clamp(0, 1.1) encodes the same "
+        "values",
+    "lab0_interop:measure_copy_bandwidth:const_int:3":
+        "warmup=2 instead of 1 only changes how long the measurement runs",
+    "lab0_interop:pack_rgba8:const_int:10":
+        "3**31 never matches, but the int64 -> int32 cast wraps modulo 2**32 on CPU and "
+        "CUDA, giving the same two's-complement word",
+    "lab0_interop:pack_rgba8:op_Sub_Add:0":
+        "word + 2**32 equals word - 2**32 modulo 2**32, and the int64 -> int32 cast wraps "
+        "modulo 2**32: the same int32",
+    "lab0_interop:render_rotating_triangle:cmp_GtE_Gt:0":
+        "only pixel centres whose barycentric rounds to exactly 0 change, within 1e-4 pixel "
+        "of an edge, which the contract lets go either way (the docstring says so)",
+    "lab0_interop:render_rotating_triangle:const_int:9":
+        "inside pixels have barycentrics >= 0 summing to 1, so none exceeds 1 beyond "
+        "rounding (far below 0.5/255); outside pixels take the background: the upper clamp "
+        "never changes a code",
+    "lab0_interop:run_frame_loop:const_int:2":
+        "a third device framebuffer is allocated but never used (only indices i % 2 and 0 "
+        "are read)",
+    # Lab 1
+    "lab1_intersect:ray_box:const_int:5":
+        "a t_far margin of 3 gamma(3) instead of 2 stays conservative and differs by about "
+        "gamma(3) relative: only rays missing the box by that much change, which the "
+        "contract lets go either way (the docstring says so)",
 }
