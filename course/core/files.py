@@ -94,9 +94,42 @@ def run_parts(namespace: dict) -> None:
     whose functions see each other (and whatever replaces one of them) through its
     globals. Each part is compiled with its own file name, so tracebacks and
     ``inspect.getsource`` show the part's lines."""
-    for part in module_parts(Path(namespace["__file__"]).resolve()):
+    path = Path(namespace["__file__"]).resolve()
+    parts = module_parts(path)
+    if not parts:  # a module copied without its parts would define nothing: say so
+        raise ImportError(f"{path}: its parts ({path.stem}{PARTS}/*.py beside it) are missing; "
+                          f"copy the module with them (course.core.files.copy_module)")
+    for part in parts:
         code = compile(part.read_bytes(), str(part), "exec", dont_inherit=True)
-        exec(code, namespace)
+        exec(code, namespace)  # noqa: S102  (a module's own part)
+
+
+_FUTURE = "from __future__ import annotations\n"
+_CALL = ("from course.core.files import run_parts as _run_parts\n",
+         "_run_parts(globals())\n", "del _run_parts\n")
+
+
+def joined_source(path) -> str:
+    """The module file ``path`` and its parts as the text of one module file, as a student
+    hands a lab in (a Gradescope submission is one file per lab): the parts' texts, less
+    their ``from __future__`` line (the module's own), in place of its ``run_parts`` call."""
+    path = Path(path)
+    text, parts = path.read_text(), module_parts(path)
+    if not parts:
+        return text
+    lines = text.splitlines(keepends=True)
+    if not all(lines.count(line) == 1 for line in _CALL) or _FUTURE not in lines:
+        raise ValueError(f"{path}: expected {_FUTURE.strip()!r} and the lines "
+                         f"{[line.strip() for line in _CALL]} once each")
+    joined = []
+    for line in lines:
+        if line == _CALL[1]:
+            for part in parts:
+                body = [x for x in part.read_text().splitlines(keepends=True) if x != _FUTURE]
+                joined += ["\n\n"] * (part != parts[0]) + body
+        elif line not in _CALL:
+            joined.append(line)
+    return "".join(joined)
 
 
 def copy_module(path, folder, texts=None) -> Path:

@@ -3,7 +3,6 @@
 # functions are this file's globals (see that file's docstring).
 from __future__ import annotations
 
-
 # =======================================================================================
 # Task 6: the two-level grid
 
