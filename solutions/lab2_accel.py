@@ -117,7 +117,7 @@ task order, in *this* module's namespace. So the reference is one module, as a s
 file is: its functions call each other through this module's globals (a grader that
 replaces ``build_grid`` here is seen by ``closest_hit``), its private helpers and caches
 (``_GRAPHS``) are this module's, and a traceback or ``inspect.getsource`` of a function
-shows the part's file and line (``inspect`` looks for a class in this file: not found).
+shows the part's file and line (not of a class: ``inspect`` looks for it in this file).
 A part imports nothing (but ``from __future__ import annotations``): it uses the names
 imported here and those the other parts define. What reads the reference's text instead
 of importing it (mutants, the sandbox's signatures, the meta tests) finds its files with

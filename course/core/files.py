@@ -8,7 +8,8 @@ A module in parts (a long reference solution: ``solutions/lab2_accel.py``) is on
 the graders load by path, and the folder ``<its name>_parts/`` beside it, whose files it runs
 in its own namespace (:func:`run_parts`). Whatever reads such a module's source, rather than
 importing it, finds its files with :func:`module_files` and the file of one of its
-functions with :func:`defining_file`; :func:`copy_module` writes a (changed) copy of it.
+functions with :func:`defining_file`; :func:`copy_module` writes a (changed) copy of it,
+:func:`joined_source` its text as one file (what a student hands in).
 """
 
 from __future__ import annotations
@@ -93,7 +94,7 @@ def run_parts(namespace: dict) -> None:
     ``run_parts(globals())``) in that namespace, in order: together they are one module,
     whose functions see each other (and whatever replaces one of them) through its
     globals. Each part is compiled with its own file name, so tracebacks and
-    ``inspect.getsource`` show the part's lines."""
+    ``inspect.getsource`` of a function show the part's lines."""
     path = Path(namespace["__file__"]).resolve()
     parts = module_parts(path)
     if not parts:  # a module copied without its parts would define nothing: say so
