@@ -33,7 +33,7 @@ log="$OUT/gpu_${PART:-all}.log"
     timeout 240 python3 -m pytest tests -q -p no:cacheprovider --ignore=tests/meta \
         --junitxml "$OUT/run/pytest_cuda.xml" 2>&1 | tail -25
     echo "== 2. sandboxed grading on cuda"
-    rm -rf /tmp/sub && mkdir -p /tmp/sub && cp solutions/lab*_*.py /tmp/sub/
+    rm -rf /tmp/sub && mkdir -p /tmp/sub && cp -r solutions/lab*_* /tmp/sub/  # with parts
     timeout 200 python3 -m course.tools.cli grade --impl /tmp/sub --json "$OUT/run/sandboxed_cuda.json" \
         2>&1 | tail -25
     fi

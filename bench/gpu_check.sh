@@ -29,7 +29,7 @@ CLI="python3 -m course.tools.cli"
     --maxfail=30 > "$OUT/tests_cuda.log" 2>&1
   echo "tests: exit $?" >> "$OUT/tests_cuda.log" ) &
 tests=$!
-rm -rf /tmp/sub && mkdir -p /tmp/sub && cp solutions/lab*_*.py /tmp/sub/
+rm -rf /tmp/sub && mkdir -p /tmp/sub && cp -r solutions/lab*_* /tmp/sub/  # with parts
 ( timeout "${GRADE_TIMEOUT:-280}" $CLI grade --impl /tmp/sub --json "$OUT/sandboxed_cuda.json" \
     > "$OUT/sandboxed_cuda.log" 2>&1
   echo "grade: exit $?" >> "$OUT/sandboxed_cuda.log" ) &

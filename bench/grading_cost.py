@@ -44,6 +44,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from course.core.files import joined_source
 from course.grading.catalog import lab_catalog
 from course.grading.runner import lab_test_files
 from course.measure.bench import ResultTable
@@ -116,7 +117,8 @@ def measure_lab(lab: int, module: str, work: Path, interval: float, cpus: str) -
         archive.extractall(source)
     submission, results = folder / "submission", folder / "results"
     submission.mkdir()
-    shutil.copy(ROOT / "solutions" / f"{module}.py", submission)
+    # One file, as a student hands it in (a reference kept in parts, joined).
+    (submission / f"{module}.py").write_text(joined_source(ROOT / "solutions" / f"{module}.py"))
     env = dict(os.environ, CUDA_VISIBLE_DEVICES="", RTCOURSE_SUBMISSION_DIR=str(submission),
                RTCOURSE_RESULTS_DIR=str(results), RTCOURSE_PYTHON=sys.executable)
     for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "MALLOC_ARENA_MAX",

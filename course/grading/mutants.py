@@ -2,8 +2,9 @@
 
 A grader is only as good as the mistakes it catches. Each lab lists its
 mutants in ``solutions/mutants/labN.py``; :func:`grade_mutant` writes the
-mutated module into a scratch folder and grades it on the tests of the
-function it breaks (the ``tests`` ``-k`` expression), in a fresh process.
+mutated module (with its parts, where it is kept in parts) into a scratch folder
+and grades it on the tests of the function it breaks (the ``tests`` ``-k``
+expression), in a fresh process.
 """
 
 from __future__ import annotations
@@ -72,11 +73,16 @@ def apply_mutant(mutant: Mutant, source: str) -> str:
 
 
 def grade_mutant(mutant: Mutant, root, workdir, timeout: float = 600) -> dict:
-    """Grade the mutated solution on its tests; return the results dictionary."""
+    """Grade the mutated solution on its tests; return the results dictionary. The
+    mistake goes into the file that defines ``mutant.function`` (the module, or one of
+    its parts: the others are copied unchanged)."""
+    from course.core.files import copy_module, defining_file
+
     root, workdir = Path(root), Path(workdir)
-    source = (root / "solutions" / f"{mutant.module}.py").read_text()
-    workdir.mkdir(parents=True, exist_ok=True)
-    (workdir / f"{mutant.module}.py").write_text(apply_mutant(mutant, source))
+    solution = root / "solutions" / f"{mutant.module}.py"
+    path = defining_file(solution, mutant.function)
+    name = path.relative_to(solution.parent).as_posix()
+    copy_module(solution, workdir, {name: apply_mutant(mutant, path.read_text())})
     out = workdir / "results.json"
     # The mutant is our own code: grade it in-process in the child for speed.
     cmd = [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(workdir), "--trusted",

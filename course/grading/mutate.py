@@ -44,13 +44,14 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from course.core.files import copy_module, module_files
 from course.grading.catalog import functions_of, lab_catalog, skeleton_functions
 from course.grading.runner import lab_test_files
 
 
 @dataclass(frozen=True)
 class Generated:
-    """One mutation: replace ``source[start:end]`` of the module by ``replacement``."""
+    """One mutation: replace ``source[start:end]`` of ``file`` by ``replacement``."""
 
     id: str  # module:function:kind:n
     module: str
@@ -61,6 +62,7 @@ class Generated:
     end: int
     original: str
     replacement: str
+    file: str  # the module's file defining ``function``: itself or a part, as copy_module names it
 
     @property
     def lab(self) -> int:
@@ -191,8 +193,9 @@ def _functions(tree, names):
             yield node.name, node
 
 
-def generate(module: str, source: str, functions) -> list[Generated]:
-    """Every mutation of the named top-level functions/classes of one module."""
+def generate(module: str, source: str, functions, file: str | None = None) -> list[Generated]:
+    """Every mutation of the named top-level functions/classes of one module's file ``file``
+    (``module.py`` by default; or one of its parts) whose text is ``source``."""
     tree = ast.parse(source)
     parents = {child: parent for parent in ast.walk(tree) for child in ast.iter_child_nodes(parent)}
     starts = _offsets(source)
@@ -221,7 +224,7 @@ def generate(module: str, source: str, functions) -> list[Generated]:
                 found.append(Generated(
                     id=f"{module}:{qualname}:{kind}:{n}", module=module, function=qualname,
                     kind=kind, line=node.lineno, start=start, end=end, original=original,
-                    replacement=replacement))
+                    replacement=replacement, file=file or f"{module}.py"))
     return found
 
 
@@ -242,7 +245,7 @@ class LabPlan:
     module: str
     mutants: list[Generated]
     tests: dict[str, list[str]]  # function -> names of the graded tests exercising it
-    source: str  # the solution's text the mutants apply to
+    sources: dict[str, str]  # file (Generated.file) -> the solution's text the mutants apply to
 
 
 def plan(root, labs=None) -> list[LabPlan]:
@@ -255,8 +258,9 @@ def plan(root, labs=None) -> list[LabPlan]:
         solution = root / "solutions" / f"{info.module}.py"
         if not (skeleton.is_file() and solution.is_file()):
             continue
-        source = solution.read_text()
-        tree = ast.parse(source)
+        sources = {f.relative_to(solution.parent).as_posix(): f.read_text()
+                   for f in module_files(solution)}  # the module, then its parts (if any)
+        tree = ast.Module([n for text in sources.values() for n in ast.parse(text).body], [])
         skeleton_tree = ast.parse(skeleton.read_text())
         written = {n.name for n in skeleton_tree.body
                    if isinstance(n, (ast.FunctionDef, ast.ClassDef))
@@ -274,8 +278,9 @@ def plan(root, labs=None) -> list[LabPlan]:
                 users = [f for f in public if _reaches(graph, f, name)]
                 tests[name] = sorted({t for f in users for t in direct.get(f, [])})
         tests = {f: names for f, names in tests.items() if names}
-        plans.append(LabPlan(number, info.module, generate(info.module, source, tests), tests,
-                             source))
+        mutants = [m for file, text in sources.items()
+                   for m in generate(info.module, text, tests, file)]
+        plans.append(LabPlan(number, info.module, mutants, tests, sources))
     return plans
 
 
@@ -338,7 +343,7 @@ def _grade_one(root: Path, spec: dict, scratch: Path) -> dict:
 
     folder = scratch / spec["id"].replace(":", "__")
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / f"{spec['module']}.py").write_text(spec["source"])
+    copy_module(root / "solutions" / f"{spec['module']}.py", folder, {spec["file"]: spec["source"]})
     keyword = " or ".join(spec["tests"])
     files = [str(f) for f in lab_test_files(root, [spec["module"].split("_")[0][3:]])]
     outcome = _Outcome()
@@ -420,9 +425,9 @@ def run(root, mutants: list[Generated], plans: list[LabPlan], *, workers: int = 
     ``progress`` shows a bar on a terminal."""
     root = Path(root)
     tests = {(p.module, f): names for p in plans for f, names in p.tests.items()}
-    sources = {p.module: p.source for p in plans}
+    sources = {(p.module, file): text for p in plans for file, text in p.sources.items()}
     specs = [{"id": m.id, "module": m.module, "tests": tests[(m.module, m.function)],
-              "source": m.apply(sources[m.module])} for m in mutants]
+              "file": m.file, "source": m.apply(sources[(m.module, m.file)])} for m in mutants]
     shards = [specs[i::workers] for i in range(workers)]
     from concurrent.futures import ThreadPoolExecutor
 

@@ -53,6 +53,7 @@ from pathlib import Path
 
 import torch
 
+from course.core.files import module_files
 from course.grading import wire
 from course.grading.worker import Changed, call_checked, check_written, too_large_message
 
@@ -105,7 +106,7 @@ class Redactor:
         root = Path(root)
         visible = set()
         for path in [*root.glob("tests/test_*.py"), *root.glob("labs/*.py"),
-                     *root.glob("solutions/*.py")]:
+                     *(f for p in root.glob("solutions/*.py") for f in module_files(p))]:
             visible |= _source_lines(path)
         for path in root.glob("tests/hidden/*.py"):
             self.lines |= _source_lines(path) - visible
@@ -180,17 +181,18 @@ def reference_file(root, name: str) -> Path | None:
 
 def reference_signatures(path) -> dict[str, list[str]] | None:
     """Positional parameter names of every function, class (its ``__init__``) and method
-    (``Class.method``) of a lab file, read from its source without running it."""
+    (``Class.method``) of a lab file (and of its parts, for a reference kept in parts), read
+    from its source without running it."""
     if path is None:
         return None
-    tree = ast.parse(Path(path).read_text())
+    body = [n for f in module_files(path) for n in ast.parse(f.read_text()).body]
     table: dict[str, list[str]] = {}
 
     def names(fn, drop_first):
         params = [a.arg for a in fn.args.posonlyargs + fn.args.args]
         return params[1:] if drop_first else params
 
-    for node in tree.body:
+    for node in body:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             table[node.name] = names(node, False)
         elif isinstance(node, ast.ClassDef):

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from course.core.files import module_files
 from course.grading.mutants import grade_mutant, load_mutants
 from course.tools.release import release
 
@@ -45,7 +46,8 @@ def test_handout_holds_no_solutions(handout):
 
 
 def _public_api(path: Path) -> dict:
-    """Public functions, classes and methods with their parameter names."""
+    """Public functions, classes and methods with their parameter names (of a lab file and
+    its parts, if any)."""
     api = {}
 
     def visit(nodes, prefix=""):
@@ -60,7 +62,8 @@ def _public_api(path: Path) -> dict:
                     api[prefix + node.name] = [a.arg for a in args.posonlyargs + args.args
                                                + args.kwonlyargs]
 
-    visit(ast.parse(path.read_text()).body)
+    for f in module_files(path):
+        visit(ast.parse(f.read_text()).body)
     return api
 
 

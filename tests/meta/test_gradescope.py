@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from course.core.files import module_files
 from course.grading.catalog import lab_catalog
 from course.grading.runner import lab_test_files
 from course.tools.gradescope import STUDENT_USER, build_autograder, collect_submission
@@ -84,6 +85,9 @@ def test_package_layout(package):
         assert script in names and modes[script] & stat.S_IXUSR, f"{script}: not executable"
     assert f"rtcourse/{HIDDEN}" in names, "the hidden graders ship in the autograder"
     assert "rtcourse/solutions/lab0_interop.py" in names, "the references ship for instructors"
+    parts = [f for p in (ROOT / "solutions").glob("lab*_*.py") for f in module_files(p)[1:]]
+    assert parts and all(f"rtcourse/{f.relative_to(ROOT).as_posix()}" in names for f in parts), \
+        "a reference kept in parts ships with its parts"
     assert "rtcourse/pyproject.toml" in names and "rtcourse/course/tools/cli.py" in names
     assert not any(n.startswith(("rtcourse/tests/meta/", "rtcourse/.git/")) for n in names)
 

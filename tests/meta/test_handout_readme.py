@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from course.core.files import module_files
 from course.grading.catalog import lab_catalog
 from course.grading.runner import lab_test_files
 from course.tools.release import LABS_README, release
@@ -49,9 +50,13 @@ def test_readme_counts_hidden_points_without_shipping_them(handout):
 
 
 def _function_source(path: Path, names) -> dict[str, str]:
-    source = path.read_text()
-    return {node.name: ast.get_source_segment(source, node) for node in ast.parse(source).body
-            if isinstance(node, ast.FunctionDef) and node.name in names}
+    """The source of each function of ``names`` in a lab file (or in its parts)."""
+    found = {}
+    for source in (f.read_text() for f in module_files(path)):
+        found.update({node.name: ast.get_source_segment(source, node)
+                      for node in ast.parse(source).body
+                      if isinstance(node, ast.FunctionDef) and node.name in names})
+    return found
 
 
 def test_one_task_raises_the_score_by_its_points(handout, tmp_path):

@@ -10,15 +10,18 @@ from pathlib import Path
 
 import pytest
 
+from course.core.files import module_files
+
 ROOT = Path(__file__).resolve().parents[2]
 SKELETONS = sorted((ROOT / "labs").glob("lab*_*.py"))
 _SIMPLE = (ast.Expr, ast.Assign, ast.AnnAssign, ast.AugAssign)
 
 
 def _functions(path: Path) -> dict[str, ast.AST]:
-    tree = ast.parse(path.read_text(), filename=str(path))
+    """Top-level functions and methods of a lab file (and of its parts, if any)."""
     found = {}
-    for node in tree.body:
+    for node in (n for f in module_files(path)
+                 for n in ast.parse(f.read_text(), filename=str(f)).body):
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             found[node.name] = node
         elif isinstance(node, ast.ClassDef):

@@ -1,0 +1,311 @@
+# Lab 2 reference, task 7: the sync-free BVH walk (bvh_closest_hit_fast, CUDA graphs).
+# Run by solutions/lab2_accel.py in its own namespace: its imports and the other parts'
+# functions are this file's globals (see that file's docstring).
+from __future__ import annotations
+
+# =======================================================================================
+# Task 7: sync-free BVH traversal
+
+
+def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
+                         check_every: int = 8, compile=False, compact: bool = True,
+                         walk: dict | None = None, fuse_steps: int = 1):
+    """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop,
+    and no stack: a step any compiler can fuse with the next.
+
+    rays: N rays; mesh: the BVH's mesh; bvh: a BVH dict; any_hit: stop each ray at its
+    first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
+    steps run between two looks at the rays (one host sync each); compile: False, True or
+    a ``torch.compile`` mode for the steps; ``"reduce-overhead"`` compiles them as
+    ``"default"`` and, on a GPU, replays the ``k`` steps of a look from one CUDA graph,
+    captured once per (padded) number of rays and kept for later calls with the same
+    ``walk`` (packed here: a graph of one step, replayed ``k`` times, not kept); compact: at a look, drop finished rays if at most half (an
+    eighth with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
+    once and trace it many times (default: packed here, for the octants of these rays);
+    fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
+    could stay in registers across them, but the compile time grows with them (2 CPU
+    cores: 21 s for 1 step, 2 minutes for 8) and 8 ran slower than 1 on the CPU and on an
+    H200 (``bench/lab2_accel.py`` measures it).
+    Returns ``(Hits, counters)`` like :func:`bvh_closest_hit` (``"steps"`` = node boxes
+    tested, as :func:`bvh_closest_hit_stackless` counts them, ``"tests"`` = triangle tests);
+    with ``any_hit`` the hit of a ray is *a* hit in its interval (the first found), not
+    necessarily the closest.
+
+    :func:`bvh_closest_hit` compacts the active rays every step (``nonzero``) and sizes
+    its stack from ``sp.max()``: each is a host sync, and on a GPU a sync per step (plus
+    a hundred small kernel launches) is the whole cost. A stack in a tensor is also a
+    scatter per push, which ends every fused kernel. Here:
+
+    * :func:`pack_bvh` lays the tree out once per ray octant, near child first, with skip
+      links: the stackless walk of :func:`bvh_closest_hit_stackless` over the array of the
+      ray's octant visits the nodes an ordered stack traversal would, and a ray's whole
+      state is a few numbers: node, leaf slot, closest hit, counters;
+    * every tensor keeps its shape: all rays step together, finished ones masked
+      (``node == M``); rays that miss the root box never start;
+    * a step does **one** box test and **one** triangle test per ray and keeps what its
+      state asks for: outside a leaf, the node's box (hit: descend to ``i + 1``, or enter
+      the leaf's slots; miss or beyond the closest hit: ``skip``); inside a leaf, the next
+      slot (Möller–Trumbore in the mesh's dtype; ties to the lowest triangle index);
+      after the last slot, ``skip``;
+    * the host looks only every ``k`` steps: stop when every ray is done, compact if few
+      rays are left;
+    * a step is gathers from read-only tables and elementwise ops, nothing else, so
+      ``torch.compile`` turns it into **one kernel** (one thread per ray, the state in
+      registers): the lecture's kernel, written in torch; on a GPU one CUDA graph holds
+      the ``k`` steps between two looks. With a ``walk`` packed once, the rays are padded
+      (with finished ones) to a few sizes, so the graphs of a size are captured once and
+      replayed by every later traversal of that size: a warm traversal pays no capture and
+      no compiled call.
+
+    The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
+    in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
+    (rounding may decide a ray grazing an edge differently when the ops are fused).
+    """
+    check_trace_inputs(rays, mesh, moller_trumbore_rows)
+    check_structure(bvh, "bvh", "bvh", mesh)
+    _positive_int(check_every, "check_every", 1, 1024)
+    _positive_int(fuse_steps, "fuse_steps", 1, 64)
+    if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
+                       "max-autotune-no-cudagraphs"):
+        raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
+    o, d, inv = rays.origins, rays.directions, 1 / rays.directions
+    octant = ray_octants(d)  # the array whose order is near-first for the ray
+    packed_here = walk is None  # fresh tables: no later call can reuse graphs that read them
+    if packed_here:  # only the octants these rays go in
+        walk = pack_bvh(bvh, mesh, torch.unique(octant).tolist())
+    else:
+        check_walk(walk, mesh, rays)
+    n, device, dtype = len(rays), rays.device, rays.dtype
+    m = walk["nodes"]
+    _, _, hit_root = slab_test(o, inv, walk["lo"], walk["hi"], rays.t_min, rays.t_max)
+    out = {"t": torch.full((n,), math.inf, dtype=dtype, device=device),
+           "tri": torch.full((n,), -1, dtype=torch.int32, device=device),
+           "u": torch.zeros(n, dtype=dtype, device=device),
+           "v": torch.zeros(n, dtype=dtype, device=device),
+           "steps": torch.zeros(n, dtype=torch.int32, device=device),
+           "tests": torch.zeros(n, dtype=torch.int32, device=device)}
+    names = ("t", "tri", "u", "v", "steps", "tests")
+    ray = hit_root.nonzero()[:, 0]  # the rest miss everything: they never start
+    # Per ray: read-only columns (one (11, n) tensor: a compaction gathers it at once) and
+    # the row of its octant's array, then the state the steps carry.
+    fixed = (torch.cat((o[ray], d[ray], inv[ray], rays.t_min[ray, None], rays.t_max[ray, None]),
+                       1).T.contiguous(), walk["base"][octant[ray]].int())
+    # node, slot, end, then the outputs: distinct tensors (aliased inputs would make
+    # torch.compile specialise the first call of every traversal apart).
+    state = [torch.zeros(len(ray), dtype=torch.int32, device=device) for _ in range(3)]
+    state += [out[name][ray] for name in names]
+    tables = (walk["boxes"], walk["links"], walk["slots"], walk["tri"])
+    graphs = compile == "reduce-overhead" and device.type == "cuda"
+    steps = (_fast_steps if compile is False else _compiled_fast_steps(
+        "in place" if graphs else compile))
+    # k steps as calls of `fuse` steps each (eager: one call of k); extra steps of finished
+    # rays change nothing, so the counters never depend on the knobs.
+    fuse = check_every if compile is False else min(fuse_steps, check_every)
+    calls = -(-check_every // fuse)
+    cache = graphs and not packed_here
+    if cache:  # pad to a graph size: the graphs of a size are captured once and kept
+        fixed, state = _padded(fixed, state, m)
+    graph = None
+    for _ in range(0, m + mesh.num_faces + 1, calls * fuse):  # a step per node or slot
+        if not len(ray):
+            break
+        if graphs:
+            if graph is None and cache:  # the graph of a look at this size, kept across calls
+                graph = _step_graph(steps, fixed, state, tables, m, fuse, bool(any_hit), calls)
+            elif graph is None:  # tables of this call only: a graph of one call, replayed
+                graph = _StepGraph(steps, fixed, state, (tables, m, fuse, bool(any_hit)), 1)
+            state = graph.run(fixed, state, 1 if cache else calls)
+        else:
+            for _ in range(calls):
+                state = list(steps(fixed, state, tables, m, fuse, bool(any_hit)))
+        running = state[0] < m
+        active = int(running.sum())  # the one host sync per k steps
+        if active == 0:
+            break
+        # A compaction is ~20 small ops of host time (with graphs, copies into the buffers of
+        # another cached graph): compact only when it saves the device far more.
+        if compact and active <= len(ray) // (8 if graphs else 2):
+            for i, name in enumerate(names):
+                out[name][ray] = state[3 + i][:len(ray)]
+            keep = running.nonzero()[:, 0]  # padding rows never run: keep < len(ray)
+            ray = ray[keep]
+            fixed = (fixed[0][:, keep], fixed[1][keep])
+            state = [x[keep] for x in state]
+            if cache:
+                fixed, state = _padded(fixed, state, m)
+            graph = None
+    for i, name in enumerate(names):
+        out[name][ray] = state[3 + i][:len(ray)]
+    return (Hits(t=out["t"], triangle=out["tri"].long(), u=out["u"], v=out["v"]),
+            {"steps": out["steps"].long(), "tests": out["tests"].long()})
+
+
+def _fast_steps(fixed, state, tables, m: int, k: int, any_hit: bool):
+    """``k`` steps of :func:`bvh_closest_hit_fast`: ``fixed`` (the (11, n) ray columns and
+    the (n,) octant rows), ``state`` in, the new state out; nothing here waits for the
+    device (what ``torch.compile`` fuses)."""
+    columns, base = fixed
+    for _ in range(k):
+        state = _fast_step(*columns.unbind(0), base, *state, *tables, m, any_hit)
+    return state
+
+
+def _graph_size(n: int) -> int:
+    """The number of rays a graph is captured for: ``n`` rounded up to a multiple of a
+    sixteenth of its power of two (at most ~12% padding), so that the sizes a compaction
+    produces repeat from call to call and their graphs are reused."""
+    quantum = max(128, 1 << max(0, n.bit_length() - 4))
+    return -(-n // quantum) * quantum
+
+
+def _padded(fixed, state, m: int):
+    """``fixed`` and ``state`` padded with finished rays (node ``m``, no hit) up to
+    ``_graph_size``; the real rays stay first."""
+    n = len(fixed[1])
+    pad = _graph_size(n) - n
+    if pad == 0:
+        return fixed, state
+    columns = torch.nn.functional.pad(fixed[0], (0, pad))
+    fill = (m, 0, 0, math.inf, -1, 0, 0, 0, 0)  # node, slot, end, t, tri, u, v, steps, tests
+    state = [torch.cat((x, torch.full((pad,), f, dtype=x.dtype, device=x.device)))
+             for x, f in zip(state, fill)]
+    return (columns, torch.nn.functional.pad(fixed[1], (0, pad))), state
+
+
+class _StepGraph:
+    """The ``calls`` compiled calls of one look of :func:`bvh_closest_hit_fast`, updating
+    the state in place (:func:`_fast_steps_in_place`), captured once in a CUDA graph for a
+    number of rays and replayed at every look of every later traversal of that size: one
+    graph launch per look instead of ``calls`` compiled calls (whose Python wrappers cost
+    more host time than their kernels' device time), and no capture after a compaction
+    once the sizes have been seen.
+
+    The graph reads and writes its own buffers (``fixed`` and ``state`` of the capture);
+    :meth:`run` copies other tensors of the same size into them first. A walk packed inside
+    the call (``walk=None``) has tables no later call reads: its graphs hold one call,
+    replayed ``calls`` times, and are not kept (a capture then costs one compiled call)."""
+
+    def __init__(self, steps, fixed, state, args, calls: int):
+        self.fixed, self.state, self.args = fixed, state, args
+        # One call first, outside the capture, on a copy of the state: whatever the compiler
+        # still has to (re)compile for these shapes happens there, and the walk itself
+        # advances only by the graph's steps, so every traversal of these rays sees the
+        # same sizes at its compactions and a warm one captures nothing.
+        steps(fixed, [x.clone() for x in state], *args)
+        # capture_begin/end on a side stream, not the torch.cuda.graph context: that one
+        # runs gc.collect() and empties the cache at every capture (tens of ms each).
+        self.graph = torch.cuda.CUDAGraph()
+        side = torch.cuda.Stream()
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side):
+            self.graph.capture_begin()
+            for _ in range(calls):
+                steps(fixed, state, *args)
+            self.graph.capture_end()
+        torch.cuda.current_stream().wait_stream(side)
+
+    def run(self, fixed, state, replays: int = 1):
+        """Replay ``replays`` times on ``fixed`` and ``state`` (copied into the graph's
+        buffers unless they are them); returns the buffers holding the new state."""
+        for mine, theirs in zip((*self.fixed, *self.state), (*fixed, *state)):
+            if mine is not theirs:
+                mine.copy_(theirs)
+        for _ in range(replays):
+            self.graph.replay()
+        return self.state
+
+
+_GRAPHS: collections.OrderedDict = collections.OrderedDict()
+_MAX_GRAPHS = 32
+
+
+def _step_graph(steps, fixed, state, tables, m: int, fuse: int, any_hit: bool, calls: int):
+    """The cached :class:`_StepGraph` for these tables and this size (least recently used
+    ones dropped beyond ``_MAX_GRAPHS``). The key holds the tables' addresses and the entry
+    the tables themselves, so a cached graph never reads freed memory."""
+    key = (len(fixed[1]), fixed[0].dtype, fixed[0].device, m, fuse, any_hit, calls,
+           tuple(t.data_ptr() for t in tables))
+    entry = _GRAPHS.get(key)
+    if entry is not None and all(a is b for a, b in zip(entry[0], tables)):
+        _GRAPHS.move_to_end(key)
+        return entry[1]
+    graph = _StepGraph(steps, fixed, state, (tables, m, fuse, any_hit), calls)
+    _GRAPHS[key] = (tables, graph)
+    while len(_GRAPHS) > _MAX_GRAPHS:
+        _GRAPHS.popitem(last=False)
+    return graph
+
+
+def _fast_step(ox, oy, oz, dx, dy, dz, ix, iy, iz, t_min, t_max, base,
+               node, slot, end, best_t, best_tri, best_u, best_v, steps, tests,
+               boxes, links, slots, tri_of, m: int, any_hit: bool):
+    """One step of :func:`bvh_closest_hit_fast` for every ray: (n,) columns in, the new
+    state out, no host sync, no scatter, no data-dependent Python control flow.
+    Rays: origin, direction, inverse direction columns, ``t_min, t_max`` and ``base`` (the
+    row of the octant's array, int32). State: ``node`` (``m`` = done), ``slot < end``: the
+    leaf slots still to test, closest ``t, triangle, u, v``, counters. Tables:
+    :func:`pack_bvh`'s ``boxes, links, slots, tri``."""
+    active = node < m
+    leafing = active & (slot < end)
+    row = base + torch.where(active, node, 0)  # finished rays all read row 0: cached
+    # The node's box, against [t_min, min(t_max, closest t)] (the conservative slab test).
+    grow = 1 + 2 * gamma(3, ox.dtype)
+    t_in, t_out = t_min, torch.minimum(t_max, best_t)
+    for a, (o, inv) in enumerate(((ox, ix), (oy, iy), (oz, iz))):
+        t0 = (boxes[row, a] - o) * inv
+        t1 = (boxes[row, 3 + a] - o) * inv
+        t_in = torch.fmax(t_in, torch.minimum(t0, t1))
+        t_out = torch.fmin(t_out, torch.maximum(t0, t1) * grow)
+    entered = active & ~leafing & (t_in <= t_out)  # d != 0: some axis bounds t_out
+    skip, first, count = links[row, 0], links[row, 1], links[row, 2]
+    # The leaf slot (slot 0 for rays that are not in a leaf: cached, the result unused).
+    s = torch.where(leafing, slot, 0)
+    tri = slots[s]
+    t, u, v, hit = moller_trumbore_rows((ox, oy, oz), (dx, dy, dz), tri[:, 0:3].unbind(1),
+                                        tri[:, 3:6].unbind(1), tri[:, 6:9].unbind(1), t_min,
+                                        t_max)
+    index = tri_of[s]
+    better = leafing & hit & ((t < best_t) | ((t == best_t) & (index < best_tri)))
+    best_t = torch.where(better, t, best_t)
+    best_tri = torch.where(better, index, best_tri)
+    best_u = torch.where(better, u, best_u)
+    best_v = torch.where(better, v, best_v)
+    steps = steps + (active & ~leafing).int()  # box tests
+    tests = tests + leafing.int()
+    # Next: descend into an inner node, enter a leaf's slots, or skip the subtree.
+    into_leaf = entered & (count > 0)
+    leaf_done = leafing & (slot + 1 >= end)
+    stay = into_leaf | (leafing & ~leaf_done)
+    down = entered & (count == 0)
+    node = torch.where(active & ~stay, torch.where(down, node + 1, skip), node)
+    slot = torch.where(leafing, slot + 1, torch.where(into_leaf, first, slot))
+    end = torch.where(into_leaf, first + count, end)
+    if any_hit:
+        node = torch.where(best_tri >= 0, m, node)
+    return node, slot, end, best_t, best_tri, best_u, best_v, steps, tests
+
+
+def _fast_steps_in_place(fixed, state, tables, m: int, k: int, any_hit: bool):
+    """:func:`_fast_steps` writing the new state into ``state``'s tensors (for a CUDA graph
+    replayed many times); elementwise, so each ray reads its state before it writes it."""
+    for x, new in zip(state, _fast_steps(fixed, state, tables, m, k, any_hit)):
+        x.copy_(new)
+    return state
+
+
+_COMPILED: dict = {}
+
+
+def _compiled_fast_steps(mode):
+    """``torch.compile`` of :func:`_fast_steps` (``"in place"``: of
+    :func:`_fast_steps_in_place`, as ``"default"``), one per mode, kept across calls
+    (dynamic shapes: compaction changes the number of rays without a recompile)."""
+    mode = "default" if mode is True else mode
+    if mode not in _COMPILED:
+        # Every (k, any-hit, dtype) is a specialisation of its own: allow enough of them
+        # that none falls back to eager after dynamo's default limit of 8.
+        torch._dynamo.config.recompile_limit = max(torch._dynamo.config.recompile_limit, 64)
+        fn = _fast_steps_in_place if mode == "in place" else _fast_steps
+        _COMPILED[mode] = torch.compile(fn, mode="default" if mode == "in place" else mode,
+                                        dynamic=True)
+    return _COMPILED[mode]
