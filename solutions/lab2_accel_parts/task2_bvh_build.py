@@ -60,6 +60,7 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
                                    the left child of node ``i`` is ``i + 1``
     ``right``      (M,) int64      right child (after the whole left subtree), -1 for a leaf
     ``first``      (M,) int64      a leaf holds ``triangles[first : first + count]``
+                                   (an inner node's is never read: any value)
     ``count``      (M,) int64      0 for inner nodes
     ``triangles``  (F,) int64      triangle indices in leaf order: each exactly once
     =============  ==============  =========================================================

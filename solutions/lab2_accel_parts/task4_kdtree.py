@@ -25,6 +25,7 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
     ``left``       (M,) int64      the lower child (``x[axis] <= split``); the upper child
                                    is ``left + 1``; ``-1`` for a leaf
     ``first``      (M,) int64      a leaf holds ``triangles[first : first + count]``
+                                   (an inner node's is never read: any value)
     ``count``      (M,) int64
     ``triangles``  (K,) int64      leaf lists; a triangle straddling a split is in both
                                    children, so ``K >= F``
