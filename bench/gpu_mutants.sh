@@ -3,7 +3,7 @@
 # (CUDA hidden from the workers), each lab's table written as it finishes; meanwhile Lab 5's
 # froxel tests and its 1080p frame on the GPU.
 #
-#   OUT=bench/results/nvidia-h200/mutants SAMPLE=40 SEED=1 [LABS="4 5"] [GPU=0] bash bench/gpu_mutants.sh
+#   OUT=bench/results/nvidia-h200/mutants SAMPLE=40 SEEDS="1 2" [LABS="4 5"] [GPU=0] bash bench/gpu_mutants.sh
 # writes OUT.tar.gz (the logs and each lab's JSON table).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -20,11 +20,15 @@ nproc > "$OUT/device.txt"; nvidia-smi -L >> "$OUT/device.txt" 2>&1
   echo "lab5 tests: exit $?" >> "$OUT/lab5_cuda.log"
   timeout 100 python3 bench/lab5_froxel.py --device cuda --gpu-target >> "$OUT/lab5_cuda.log" 2>&1
   echo "lab5 frame: exit $?" >> "$OUT/lab5_cuda.log" ) &
-for lab in ${LABS:-0 1 2 3 4 5 6}; do
-    ( timeout "${MUTANT_TIMEOUT:-540}" python3 -m course.tools.cli mutants --generated --lab "$lab" \
-        --sample "${SAMPLE:-40}" --seed "${SEED:-1}" --workers "${WORKERS:-2}" \
-        --json "$OUT/lab$lab.json" > "$OUT/lab$lab.log" 2>&1
-      echo "mutants lab $lab: exit $?" >> "$OUT/lab$lab.log" ) &
+for seed in ${SEEDS:-${SEED:-1}}; do
+    for lab in ${LABS:-0 1 2 3 4 5 6}; do
+        # Lab 0's tests time copies and frame loops: its mutants take ~10x longer.
+        workers=$([ "$lab" = 0 ] && echo "${WORKERS0:-4}" || echo "${WORKERS:-2}")
+        ( timeout "${MUTANT_TIMEOUT:-540}" python3 -m course.tools.cli mutants --generated \
+            --lab "$lab" --sample "${SAMPLE:-40}" --seed "$seed" --workers "$workers" \
+            --json "$OUT/lab${lab}_seed$seed.json" > "$OUT/lab${lab}_seed$seed.log" 2>&1
+          echo "mutants lab $lab seed $seed: exit $?" >> "$OUT/lab${lab}_seed$seed.log" ) &
+    done
 done
 wait
 for f in "$OUT"/*.log; do tail -n 2 "$f"; done
