@@ -317,8 +317,9 @@ def cull_lights(grid, lights, device="cpu"):
     edges, closed by the ``near`` and ``far`` depths. A point or spot light reaches
     nothing beyond its ``range``: it is listed wherever its sphere ``(position, range)``
     is not entirely outside one of the six planes (signed distance >= -range for all six:
-    conservative, never drops a tile the sphere touches). Directional lights are listed
-    everywhere.
+    conservative, never drops a tile the sphere touches). A sphere exactly tangent to a
+    plane (distance exactly -range) may go either way: the light gives nothing at its
+    range. Directional lights are listed everywhere.
     """
     check_grid(grid)
     lights = check_lights(lights)
@@ -573,6 +574,8 @@ def light_transmittance(extinction, lo, hi, points, position, steps=LIGHT_STEPS)
     inside the box is marched (slab test): ``steps`` equal steps, midpoint rule,
     ``exp(-sum_m sigma(mid_m) ds)``, exact for a medium constant along it. 1 where the
     segment misses the box or has zero length (a point on the light); in [0, 1], no NaN.
+    A segment lying in the plane of one of the box's faces (a tie between inside and
+    outside) may count as either.
     """
     check_volume(extinction, "extinction", extinction.shape if isinstance(
         extinction, torch.Tensor) and extinction.ndim == 3 else (1, 1, 1))

@@ -55,6 +55,8 @@ from course.given.lab5 import (
     SpotLight,
     frame_jitter,
     frustum_bounds,
+    light_coords,
+    light_frame,
     ray_boxes,
     scene_grid,
 )
@@ -541,6 +543,31 @@ def tile_samples(grid, per_axis=6, depths=24):
     return ref_points(grid, coords)
 
 
+TILE_PLANES = ("left", "right", "top", "bottom", "near", "far")
+
+
+def tile_plane_distances(grid, point):
+    """Signed distances (ny, nx, 6) of a world point to every tile's frustum planes
+    (``TILE_PLANES``), positive inside, float64: side planes through the eye and two corner
+    rays of the tile (cross products), the near and far planes along the view axis."""
+    eye, _, _, fwd, _ = grid.axes()
+    j = torch.arange(grid.ny + 1, dtype=F64)[:, None].expand(-1, grid.nx + 1)
+    i = torch.arange(grid.nx + 1, dtype=F64)[None, :].expand(grid.ny + 1, -1)
+    c = ref_dirs(grid, i, j)  # (ny + 1, nx + 1, 3): rays through the tile corners
+    centre = ref_dirs(grid, i[:-1, :-1] + 0.5, j[:-1, :-1] + 0.5)
+    rel = torch.tensor(point, dtype=F64) - eye
+    dists = []
+    for a, b in ((c[:-1, :-1], c[1:, :-1]), (c[:-1, 1:], c[1:, 1:]),
+                 (c[:-1, :-1], c[:-1, 1:]), (c[1:, :-1], c[1:, 1:])):
+        n = torch.linalg.cross(a, b)
+        n = n * torch.sign((n * centre).sum(-1, keepdim=True))  # facing the tile's centre
+        dists.append((n @ rel) / n.norm(dim=-1))
+    depth = float(rel @ fwd)
+    dists += [torch.full((grid.ny, grid.nx), depth - grid.near, dtype=F64),
+              torch.full((grid.ny, grid.nx), grid.far - depth, dtype=F64)]
+    return torch.stack(dists, -1)
+
+
 @pytest.mark.task(3)
 @pytest.mark.points(1)
 def test_cull_lights_keeps_every_touched_tile(impl, device):
@@ -575,6 +602,21 @@ def test_cull_lights_keeps_every_touched_tile(impl, device):
                 f"tiles dropped). Test the sphere against each tile plane with distance >= "
                 f"-range, so spheres straddling a tile border are kept.")
     assert not got[-1].any(), "cull_lights: a light beyond far + range reaches no tile"
+    # A sphere entirely outside one of a tile's six planes (beyond 0.1 mm) is culled there.
+    for n, light in enumerate(lights):
+        if isinstance(light, DirectionalLight):
+            continue
+        dist = tile_plane_distances(grid, light.position)
+        outside = (dist < -light.range - 1e-4).any(-1) & got[n]
+        if outside.any():
+            j, i = outside.nonzero()[0].tolist()
+            plane = int(dist[j, i].argmin())
+            raise AssertionError(
+                f"cull_lights: light {n} (position {light.position}, range {light.range:.2f}) "
+                f"is listed in tile (row {j}, column {i}) ({int(outside.sum())} such tiles), "
+                f"but its sphere lies entirely outside the tile's {TILE_PLANES[plane]} plane "
+                f"(signed distance {dist[j, i, plane].item():.4g} < -range). Each tile's "
+                f"planes pass through its own pixel edges.")
     touched = sum(int(((pts - torch.tensor(x.position, dtype=F64)).norm(dim=-1)
                        < x.range).any(-1).sum()) for x in lights[1:])
     listed = int(got[1:].sum())
@@ -606,6 +648,25 @@ def test_shadow_map_matches_exact_shadow_rays(impl, device):
     far_away = impl.shadow_lookup(smap, torch.tensor([[50.0, 0.0, 0.0]], dtype=F64,
                                                      device=device)).cpu()
     assert far_away.item() == 1, "shadow_lookup: points outside the map are lit"
+    # A small map (8 texels of 20 cm) entirely in the box's shadow: every point over it is
+    # dark, the border texels too; around it the points are outside the map and lit.
+    center = (-0.4, 2.0, -7.3)
+    smap = impl.build_shadow_map(SHADOW, light, center, 0.8, 8, F64, device)
+    points = torch.tensor(center, dtype=F64) + (torch.rand(3000, 3, generator=g, dtype=F64)
+                                                * 2 - 1) * torch.tensor([1.2, 0.5, 1.2])
+    a, b, _ = light_coords(smap, points)
+    over = (a.abs() < 1) & (b.abs() < 1)
+    exact = torch.isinf(ray_boxes(points, torch.tensor(light.direction, dtype=F64).expand(
+        3000, 3), SHADOW.occluders)).to(F64)
+    assert 0.3 < over.double().mean() < 0.7 and exact[over].max() == 0, \
+        "test set-up: the small map lies in the shadow"
+    vis = impl.shadow_lookup(smap, points.to(device)).cpu()
+    edge = ((a.abs() > 0.75) | (b.abs() > 0.75)) & over
+    assert_equal(vis[over], exact[over], name=f"shadow_lookup on a map of 8 x 8 texels lying "
+                 f"entirely in the occluder's shadow ({int(edge.sum())} of the points over "
+                 f"the map's border texels): 0 over every texel", where="point over the map")
+    assert_equal(vis[~over], torch.ones(int((~over).sum()), dtype=F64),
+                 name="shadow_lookup: points outside the map are lit", where="point")
 
 
 def uniform_vbuffer(grid, sigma_s, sigma_t, g, dtype, device, mask=None):
@@ -652,12 +713,15 @@ def test_light_froxels_matches_closed_form(impl, device):
     sigma_s, g = (0.05, 0.04, 0.03), 0.4
     for jitter in (0.5, 0.2):
         vb = uniform_vbuffer(grid, sigma_s, 0.06, g, F64, device)
-        src, report = impl.light_froxels(scene, grid, vb, jitter, volumetric_shadows=False)
+        given = (jitter,) if jitter != 0.5 else ()  # the default jitter is 0.5
+        label = "" if given else ", the default"
+        src, report = impl.light_froxels(scene, grid, vb, *given, volumetric_shadows=False)
         check_tensor(src, "light_froxels source", shape=(*grid.shape, 3), dtype=F64,
                      device=device)
         assert_close(src, expected_source(grid, scene, jitter, sigma_s, g), rtol=1e-7,
-                     atol=1e-12, name=f"light_froxels (jitter={jitter}): sigma_s (ambient + "
-                     f"sum phase(v.l) E) at the froxel sample points (froxel_sample_coords)",
+                     atol=1e-12, name=f"light_froxels (jitter={jitter}{label}): sigma_s "
+                     f"(ambient + sum phase(v.l) E) at the froxel sample points "
+                     f"(froxel_sample_coords)",
                      where="froxel [k, j, i, rgb]")
         assert report["froxels_lit"] == math.prod(grid.shape), \
             f"light_froxels: every froxel holds fog here, report says {report['froxels_lit']}"
@@ -675,6 +739,11 @@ def test_light_froxels_matches_closed_form(impl, device):
     assert report["froxels_lit"] == int(mask.sum()), (
         f"light_froxels: report['froxels_lit'] = {report['froxels_lit']}, want the "
         f"{int(mask.sum())} froxels with scattering medium")
+    tiles = int(mask.any(0).sum()) + 1  # and the emitting froxel's tile
+    assert report["tiles_with_media"] == tiles, (
+        f"light_froxels: report['tiles_with_media'] = {report['tiles_with_media']}, want "
+        f"{tiles}: the tiles holding fog and the one holding only an emitting froxel "
+        f"(emission 0.5, no extinction: a medium too)")
     assert report["light_evaluations"] <= len(scene.lights) * int(mask.sum()), \
         "light_froxels: light_evaluations counts froxel-light pairs actually evaluated"
     # A light inside the fog, on a froxel's sample point: finite.
@@ -683,6 +752,33 @@ def test_light_froxels_matches_closed_form(impl, device):
     src, _ = impl.light_froxels(inside, grid, uniform_vbuffer(grid, sigma_s, 0.06, g, F32,
                                                               device), 0.5)
     no_nan("light_froxels (a point light on a froxel's sample point)", source=src)
+    # Constant fog along every path to the light: one step of light_transmittance is exact.
+    one, _ = impl.light_froxels(inside, grid, uniform_vbuffer(grid, sigma_s, 0.06, g, F32,
+                                                              device), 0.5, light_steps=1)
+    assert_close(one, src, rtol=1e-5, atol=1e-7, name="light_froxels(light_steps=1) in "
+                 "constant fog: the same attenuation as the default steps", where="froxel")
+    # The sun over a roof 40 m from the origin: froxels under it are in its shadow map (over
+    # the bounding sphere of frustum_bounds(grid)) and keep only the ambient light.
+    cam = dataclasses.replace(grid.camera, eye=(40.5, 1.0, 2.0), target=(40.0, 0.8, -6.0))
+    street = dataclasses.replace(grid, camera=cam, far=12.0)
+    sun = DirectionalLight(direction=(0.2, 1.0, -0.1), irradiance=(3.0, 3.0, 3.0))
+    roofed = Scene(media=(ConstantFog(),), lights=(sun,), ambient=(0.1, 0.1, 0.1),
+                   occluders=(Box((36.0, 3.0, -9.0), (44.0, 3.5, -2.0)),))
+    src, _ = impl.light_froxels(roofed, street, uniform_vbuffer(street, sigma_s, 0.06, g, F64,
+                                                                device), 0.5,
+                                volumetric_shadows=False)
+    lit = expected_source(street, roofed, 0.5, sigma_s, g)
+    dark = expected_source(street, dataclasses.replace(roofed, lights=()), 0.5, sigma_s, g)
+    p = ref_points(street, sample_coords(street, 0.5)).reshape(-1, 3)
+    vis = torch.isinf(ray_boxes(p, torch.tensor(sun.direction, dtype=F64).expand(len(p), 3),
+                                roofed.occluders)).to(F64).reshape(street.shape)
+    assert 0.1 < 1 - vis.mean() < 0.5, "test set-up: some froxels in the roof's shadow"
+    want = dark + vis[..., None] * (lit - dark)
+    # Texels of 20 cm and a bias of two blur the shadow's edge by a froxel or so.
+    assert_fraction(((src.cpu() - want).abs() > 1e-6 * want.max()).any(-1),
+                    name="light_froxels (the sun, a roof in the shadow map) vs exact shadow "
+                         "rays from the froxel sample points", at_most=0.05,
+                    where="froxel [k, j, i]")
     expect_error("phase", impl.light_froxels, scene, grid, vb, 0.5, phase="rayleigh",
                  case="an unknown phase function")
     expect_error("vbuffer", impl.light_froxels, scene, grid, {"scattering": 1}, 0.5,
@@ -716,6 +812,8 @@ def test_transmittance_volume_sun(impl, device):
     tv = impl.transmittance_volume(ext, lo, hi, light, 48)
     assert isinstance(tv, LightVolume) and tv.data.ndim == 3, \
         "transmittance_volume: return a LightVolume with (R, R, K) data"
+    check_tensor(tv.data, "transmittance_volume(resolution=48) data (K = 2 resolution depth "
+                 "samples by default)", shape=(48, 48, 96), dtype=F64, device=device)
     g = generator(7)
     pts = torch.tensor(lo, dtype=F64) + torch.rand(2000, 3, generator=g, dtype=F64) * (
         torch.tensor(hi, dtype=F64) - torch.tensor(lo, dtype=F64))
@@ -741,6 +839,15 @@ def test_transmittance_volume_sun(impl, device):
     assert t[deep].max() < 0.05 and t[deep].median() < 1e-6, (
         f"sample_light_volume: points 4 m deep inside sigma_t = 1e6 toward the sun are dark, "
         f"got up to {t[deep].max():.3g} (median {t[deep].median():.3g})")
+    # One texel: its ray through the sphere's centre in one step (K = 2), midpoint inside.
+    one = impl.transmittance_volume(ext, lo, hi, light, 1)
+    check_tensor(one.data, "transmittance_volume(resolution=1) data", shape=(1, 1, 2),
+                 dtype=F64, device=device)
+    chord = 2 * 0.5 * math.dist(lo, hi)
+    assert_close(one.data.reshape(2), torch.tensor([1.0, math.exp(-sigma * chord)], dtype=F64),
+                 rtol=1e-9, name="transmittance_volume(resolution=1): 1 on the light side, "
+                 "exp(-sigma_t(centre) * diameter) after its one step across the sphere",
+                 where="depth sample")
     expect_error("light", impl.transmittance_volume, ext, lo, hi, PointLight(), 8,
                  kinds=(TypeError,), case="a point light")
 
@@ -754,6 +861,8 @@ def test_transmittance_volume_spot(impl, device):
                      outer_deg=30.0)
     tv = impl.transmittance_volume(ext, lo, hi, spot, 48)
     assert tv.kind == "persp", "transmittance_volume: a spot light gets a 'persp' volume"
+    check_tensor(tv.data, "transmittance_volume(spot, resolution=48) data", shape=(48, 48, 96),
+                 dtype=F64, device=device)
     g = generator(8)
     pts = torch.tensor([-1.5, 0.0, -7.5], dtype=F64) + torch.rand(1000, 3, generator=g,
                                                                     dtype=F64) * 3
@@ -769,6 +878,33 @@ def test_transmittance_volume_spot(impl, device):
     behind = impl.sample_light_volume(tv, torch.tensor([[0.0, 8.0, -6.0]], dtype=F64,
                                                        device=device)).cpu()
     assert behind.item() == 1, "sample_light_volume: behind a spot light T = 1"
+    # sample_light_volume alone, on data linear in the texel and depth-sample indices:
+    # trilinear interpolation reproduces it exactly between texel centres (a = -1 + (2 i + 1)
+    # / R) and depth samples (near + k (far - near) / (K - 1)), clamped at the ends.
+    r, k = 6, 10
+    ii, jj, kk = torch.meshgrid(*(torch.arange(n, dtype=F64) for n in (r, r, k)), indexing="ij")
+    data = 0.1 + 0.02 * ii + 0.03 * jj + 0.05 * kk
+    away = tuple(-x for x in DirectionalLight(direction=(0.3, 1.0, 0.2)).direction)
+    pts = torch.tensor([-4.0, -2.0, -10.0], dtype=F64) + torch.rand(
+        2000, 3, generator=g, dtype=F64) * torch.tensor([8.0, 8.0, 8.0])
+    for volume in (LightVolume("ortho", (0.0, 6.0, -6.0), light_frame(away), 3.0, 1.0, 7.0,
+                               data.to(device)),
+                   LightVolume("persp", spot.position, light_frame(spot.direction), 0.6, 0.5,
+                               6.0, data.to(device))):
+        a, b, depth = light_coords(volume, pts)
+        inside = (a.abs() <= 1) & (b.abs() <= 1)
+        ci = ((a + 1) / 2 * r - 0.5).clamp(0, r - 1)
+        cj = ((b + 1) / 2 * r - 0.5).clamp(0, r - 1)
+        ck = ((depth - volume.near) / (volume.far - volume.near) * (k - 1)).clamp(0, k - 1)
+        want = torch.where(inside, 0.1 + 0.02 * ci + 0.03 * cj + 0.05 * ck, 1.0)
+        assert 0.2 < inside.double().mean() < 0.9, "test set-up: points in and around the map"
+        got = check_tensor(impl.sample_light_volume(volume, pts.to(device)),
+                           f"sample_light_volume ({volume.kind})", shape=(2000,), dtype=F64,
+                           device=device)
+        assert_close(got, want, atol=1e-9, name=f"sample_light_volume ({volume.kind} volume "
+                     f"of data linear in i, j, k): trilinear in the texels and the depth "
+                     f"samples (sample k at depth near + k (far - near) / (K - 1)), clamped "
+                     f"at the ends; 1 outside the map", where="point")
 
 
 @pytest.mark.task(4)
@@ -1028,6 +1164,17 @@ def test_integrate_froxels_naive_leaks(impl, device):
     assert_close(energy.cpu()[-1, ..., 0], bound, rtol=1e-9,
                  name="integrate_froxels(method='energy') on the same medium: 0.5 (1 - T)")
     assert_close(t_n, t_e.cpu(), rtol=1e-12, name="naive and energy share the transmittance")
+    # The naive sum itself on a varying medium: L_k = sum_{m <= k} T_m S_m D_m, T_m the
+    # transmittance in front of slice m.
+    g = generator(15)
+    sig = 10 ** (torch.rand(grid.shape, generator=g, dtype=F64) * 3 - 2)
+    src = torch.rand(*grid.shape, 3, generator=g, dtype=F64)
+    naive, _ = impl.integrate_froxels(src.to(device), sig.to(device), grid, "naive")
+    tau = sig * column_lengths(grid)
+    in_front = torch.exp(-(tau.cumsum(0) - tau))
+    want = (in_front[..., None] * src * column_lengths(grid)[..., None]).cumsum(0)
+    assert_close(naive, want, rtol=1e-9, name="integrate_froxels(method='naive'): the sum of "
+                 "T S D over the slices in front (T before the slice)", where="froxel [k, j, i, rgb]")
 
 
 # ---------------------------------------------------------------------------------------
@@ -1314,7 +1461,9 @@ def test_render_froxels_temporal(impl, device):
                  name="render_froxels(temporal, frame=1, no history) vs voxelize, light_froxels, "
                       "integrate_froxels and apply_froxels at jitter frame_jitter(1): material "
                       "and lighting must share one jitter", where="pixel (row, col, rgb)")
-    zero, _ = impl.render_froxels(scene, CAMERA, depth, opaque, temporal=True, frame=0, **args)
+    zero, rep = impl.render_froxels(scene, CAMERA, depth, opaque, temporal=True, **args)
+    assert rep["jitter"] == pytest.approx(frame_jitter(0)), \
+        "render_froxels: frame defaults to 0 (jitter frame_jitter(0))"
     assert (zero.cpu() - one.cpu()).abs().max() > 1e-4, "render_froxels: frames 0 and 1 jitter"
     # A static camera converges toward the reference over frames.
     ref = reference_render(fog_box_scene(), CAMERA, depth, opaque, near=NEAR, far=FAR,

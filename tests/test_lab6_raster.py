@@ -894,16 +894,17 @@ def test_pack_depth_id(impl, device):
                                 device=device).cpu()
         assert_equal(ids_back, torch.cat([ids, torch.tensor([-1])]),
                      name="triangle_ids: the low 32 bits, -1 for EMPTY", where="key")
-    # 24 bits: unorm24 of the window depth in [0, 1].
-    window = torch.cat([torch.tensor([0.0, 1.0, 0.5, 1e-9, 1 - 1e-9], dtype=F64),
+    # 24 bits: unorm24 of the window depth in [0, 1]; depths beyond 1 (and +inf) clamp to 1.
+    window = torch.cat([torch.tensor([0.0, 1.0, 0.5, 1e-9, 1 - 1e-9, 1.0000001, 1.5, 7.5, 1e30,
+                                      math.inf], dtype=F64),
                         torch.rand(200, generator=generator(101), dtype=F64)])
     ids = torch.arange(len(window))
     for dtype in (torch.float32, torch.float64):
         keys = impl.pack_depth_id(window.to(device, dtype), ids.to(device), 24).cpu()
-        want = torch.round(window.to(dtype).double() * (2**24 - 1)).to(torch.int64)
+        want = torch.round(window.to(dtype).double().clamp(0, 1) * (2**24 - 1)).to(torch.int64)
         assert_equal(keys >> 32, want, name=(
-            f"pack_depth_id(depth_bits=24, {dtype}): round(depth * (2**24 - 1)) in the high bits"),
-            where="fragment")
+            f"pack_depth_id(depth_bits=24, {dtype}): round(clamp(depth, 0, 1) * (2**24 - 1)) in "
+            f"the high bits"), where="fragment")
         assert_equal(keys & MASK, ids, name="pack_depth_id(24): the id in the low bits",
                      where="fragment")
     # Bad input.

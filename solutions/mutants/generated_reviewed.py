@@ -70,4 +70,27 @@ EQUIVALENT = {
         "a t_far margin of 3 gamma(3) instead of 2 stays conservative and differs by about "
         "gamma(3) relative: only rays missing the box by that much change, which the "
         "contract lets go either way (the docstring says so)",
+    # Lab 5
+    "lab5_froxel:cull_lights:cmp_GtE_Gt:3":
+        "a tie only: a bottom distance of exactly -range is a sphere tangent to the plane, "
+        "decided by rounding, and the light gives nothing at exactly its range; the "
+        "docstring says ties may go either way",
+    "lab5_froxel:cull_lights:cmp_GtE_Gt:4":
+        "a tie only: a view depth of exactly near - range is a sphere tangent to the near "
+        "plane, and the light gives nothing at exactly its range (docstring: either way)",
+    "lab5_froxel:light_transmittance:drop_nan_to_num:0":
+        "the NaN (0 * inf) arises only for a segment parallel to an axis lying exactly in a "
+        "face plane of the box: a tie between inside and outside (docstring: either)",
+    "lab5_froxel:apply_froxels:drop_nan_to_num:0":
+        "depth_to_slice is NaN only for NaN depths, which check_images rejects; the "
+        "clamp(0, slices) after it maps -inf/+inf exactly as nan_to_num does",
+    "lab5_froxel:apply_froxels:const_float:0":
+        "the nan= replacement is never used: NaN depths are rejected by check_images",
+    # Lab 6
+    "lab6_raster:bounding_boxes:const_int:3":
+        "the bound only caps the floats before the int64 conversion; any cap >= size - 0.5 "
+        "gives the same boxes once begin/end are clamped to [0, size]",
+    "lab6_raster:coverage:cmp_Gt_GtE:0":
+        "drawn already requires area != 0 on the line before, so area >= 0 and area > 0 "
+        "keep the same triangles",
 }
