@@ -130,11 +130,16 @@ def check_triangle_frame(frame: torch.Tensor, frame_index: int, name: str, perio
     outside = ~inside & judged
     assert_equal(rgba[outside], background[outside], name=f"{name} background pixels (RGBA)",
                  where="background pixel")
-    interior = inside & judged
-    expected = torch.cat([torch.floor(bary * 255 + 0.5), torch.full_like(bary[..., :1], 255)],
-                         dim=-1)
-    assert_close(rgba[interior], expected[interior], atol=1, name=f"{name} triangle colours "
-                 "(RGBA, floor(255*b + 0.5), alpha 255)", where="covered pixel")
+    # Colours are exact, except where 255*b + 0.5 lies within float32 rounding of an integer
+    # (1e-3 of a code is about the 1e-4 pixel the coverage contract leaves free).
+    value = bary * 255 + 0.5
+    expected = torch.cat([torch.floor(value), torch.full_like(bary[..., :1], 255)], dim=-1)
+    decided = torch.cat([(value - torch.round(value)).abs() >= 1e-3,
+                         torch.ones_like(inside[..., None])], dim=-1)
+    assert_close(rgba, expected, mask=(inside & judged)[..., None] & decided,
+                 name=f"{name} (frame {frame_index}, period {period}) triangle colours (RGBA: "
+                 "floor(255*b + 0.5) exactly, rounding half up, alpha 255)",
+                 where="covered pixel (y, x, channel)")
 
 
 # ---------------------------------------------------------------- task 1: packing
@@ -469,6 +474,10 @@ def display_checksum(frame_index, frame):
             frame.device.type, str(frame.dtype))
 
 
+def display_address(frame_index, frame):
+    return frame.data_ptr()
+
+
 @pytest.mark.task(3)
 @pytest.mark.points(1.0)
 @pytest.mark.parametrize("num_buffers", [2, 3])
@@ -599,6 +608,10 @@ def test_measure_copy_bandwidth(impl, device, pinned):
         f"measure_copy_bandwidth(65536, pinned={pinned}, {device!r}) = {gbps!r} GB/s: outside "
         f"any plausible range [1e-4, 1e4] GB/s (64 KiB copied in 0.65 s .. 6.5 ns). The "
         f"bandwidth is nbytes / seconds per copy / 1e9.")
+    one = impl.measure_copy_bandwidth(1, pinned, device, repeats=1)  # the smallest block
+    assert isinstance(one, float) and math.isfinite(one) and one > 0, (
+        f"measure_copy_bandwidth(1, pinned={pinned}, {device!r}, repeats=1) should return a "
+        f"positive float (GB/s): nbytes may be any positive int, 1 included; got {one!r}")
     expect_error("nbytes", impl.measure_copy_bandwidth, 0, pinned, device)
 
 
@@ -626,6 +639,14 @@ def test_run_frame_loop_displays_every_frame_in_order(impl, device, overlap):
             f"run_frame_loop(overlap={overlap}): frame {want[0]} was displayed with (index, "
             f"checksum, shape, device, dtype) {got}, expected {want}: the host frame shown is "
             f"not the frame rendered with that index")
+    # The frames shown are the two staging buffers, reused (like two PBOs), never more.
+    result = impl.run_frame_loop(render_test_frame, 9, shape, device, overlap=overlap,
+                                 display=display_address)
+    buffers = len(set(result.get("displayed", [])))
+    assert 1 <= buffers <= 2, (
+        f"run_frame_loop(overlap={overlap}) showed frames in {buffers} different host buffers "
+        f"over 9 frames: it downloads into two staging buffers (a FrameDownloader with "
+        f"num_buffers=2) and displays those, reused every other frame")
 
 
 # ---------------------------------------------------------------- task 4: frame loop
@@ -678,6 +699,10 @@ def test_render_rotating_triangle_period(impl, device):
     assert_equal(frame(120), frame(0), where="pixel",
                  name="frame 120 vs frame 0 with the default period 120")
     assert not torch.equal(frame(1), frame(0)), "frames 0 and 1 are identical: no rotation"
+    # period=1 is valid (an int >= 1): every frame is frame 0.
+    check_triangle_frame(frame(5, period=1), 5, "render_rotating_triangle(5, period=1)", period=1)
+    assert_equal(frame(5, period=1), frame(0), where="pixel",
+                 name="frame 5 with period=1 vs frame 0 (period 1: the triangle never turns)")
 
 
 def probe_render_in_place(lab, device):
@@ -696,15 +721,18 @@ def test_render_rotating_triangle_writes_in_place(impl, device):
     assert report["all_written"], "render_rotating_triangle left pixels of out unwritten"
 
 
-def probe_frame_loop(lab, device, width, height, steps):
-    kept, pointers, frames = [], [], []
+def probe_frame_loop(lab, device, width, height, steps, keep=None):
+    """Step a FrameLoop ``steps`` times: every step's framebuffer address, and a copy of the
+    frames whose index is in ``keep`` (all by default)."""
+    kept, pointers, frames = [], [], {}
     with replaced(lab, {"pack_rgba8": given_pack_rgba8}):
         loop = lab.FrameLoop(width, height, device)
-        for _ in range(steps):
+        for k in range(steps):
             fb = loop.step()
             kept.append(fb)  # alive, so a per-frame allocation could not reuse its address
             pointers.append(fb.data_ptr())
-            frames.append(fb.detach().clone().cpu())
+            if keep is None or k in keep:
+                frames[k] = fb.detach().clone().cpu()
     return {"pointers": pointers, "frames": frames}
 
 
@@ -716,9 +744,23 @@ def test_FrameLoop_reuses_one_framebuffer(impl, device):
         f"FrameLoop.step() returned {len(set(report['pointers']))} different buffers over 4 "
         f"frames: allocate the framebuffer once in __init__ and render into it every step "
         f"(a registered PBO is never reallocated)")
-    for k, frame in enumerate(report["frames"]):
+    for k, frame in report["frames"].items():
         check_tensor(frame, f"FrameLoop.step() #{k}", shape=(22, 30), dtype=torch.int32)
         check_triangle_frame(frame, k, f"FrameLoop.step() #{k}")
+
+    # The default period is 120, as in render_rotating_triangle: step #120 repeats step #0.
+    frames = impl.probe(probe_frame_loop, device, 30, 22, 121, keep=(0, 119, 120))["frames"]
+    check_triangle_frame(frames[119], 119, "FrameLoop.step() #119 (default period 120)")
+    assert_equal(frames[120], frames[0], where="pixel", name="FrameLoop.step() #120 vs #0 (the "
+                 "default period is 120, as in render_rotating_triangle)")
+
+    # A framebuffer one pixel wide or one pixel high is valid (width, height >= 1).
+    for width, height in ((1, 9), (9, 1)):
+        report = impl.probe(probe_frame_loop, device, width, height, 2)
+        for k, frame in report["frames"].items():
+            where = f"FrameLoop({width}, {height}).step() #{k}"
+            check_tensor(frame, where, shape=(height, width), dtype=torch.int32)
+            check_triangle_frame(frame, k, where)
 
 
 @pytest.mark.task(4)

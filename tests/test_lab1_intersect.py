@@ -1242,6 +1242,23 @@ def test_ray_sphere_matches_float64(impl, device):
                       "[5,6], [5,6-ulp], [6,6], [6+ulp,inf] (the interval is closed for the far "
                       "root too)", where="ray")
 
+    # Default arguments t_min = 0.0, t_max = inf: the same as passing them. Origins on the
+    # sphere (a root at t = 0: inward and outward) and 2^-11, 2^-13 before it, and 1e6 away.
+    o3 = torch.tensor([[0.0, 0.0, 4.0], [0.0, 0.0, 6.0], [0.0, 0.0, 4.0 - 2.0**-11],
+                       [0.0, 0.0, 4.0 - 2.0**-13], [0.0, 0.0, 5.0 - 1e6]], device=device)
+    d3 = torch.tensor([[0.0, 0.0, 1.0]] * 5, device=device)
+    c3 = torch.tensor([0.0, 0.0, 5.0], device=device)
+    defaults = check_tensor(impl.ray_sphere(o3, d3, c3, 1.0), "ray_sphere(o, d, center, 1.0)",
+                            shape=(5,), dtype=torch.float32, device=device)
+    explicit = impl.ray_sphere(o3, d3, c3, 1.0, 0.0, INF)
+    assert_equal(defaults, explicit, name="ray_sphere: t with the default t_min, t_max vs "
+                 "passing t_min=0.0, t_max=inf (origins on a sphere, 1.2e-4 to 4.9e-4 before it "
+                 "and 1e6 away); the defaults must be t_min=0.0 and t_max=math.inf", where="ray")
+    t_ref3, _ = ref_sphere(o3, d3, c3, 1.0)
+    assert_close(defaults, t_ref3, rtol=1e-5, atol=1e-6, name="ray_sphere with the default "
+                 "t_min = 0: a root at t = 0 (origin on the sphere) or just beyond is the hit",
+                 where="ray")
+
     # NaN/inf/zero rays and a sphere behind the ray miss without NaN.
     o2 = torch.tensor([[math.nan, 0, 0], [0, 0, 0], [INF, 0, 0], [0, 0, 0], [0, 0, 10.0]],
                       device=device)

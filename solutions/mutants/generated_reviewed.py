@@ -93,4 +93,25 @@ EQUIVALENT = {
     "lab6_raster:coverage:cmp_Gt_GtE:0":
         "drawn already requires area != 0 on the line before, so area >= 0 and area > 0 "
         "keep the same triangles",
+    # Lab 0, the second sample
+    "lab0_interop:FrameDownloader:op_Add_Sub:0":
+        "(slot - 1) % n walks the ring backwards: any cyclic order reuses a slot only n "
+        "submits later, while at most n - 1 others are pending (FIFO through pending), so "
+        "the frames received and the buffers reused are the same; for n = 1, 2 identical",
+    "lab0_interop:measure_copy_bandwidth:const_int:0":
+        "a default of 6 repeats instead of 5 only changes how long the measurement runs",
+    "lab0_interop:pack_rgba8:const_int:11":
+        "word >= 2**32 never matches (words < 2**32), but the int64 -> int32 cast wraps "
+        "modulo 2**32 on CPU and CUDA, giving the same two's-complement word",
+    "lab0_interop:run_frame_loop:const_int:4":
+        "without overlap the loop renders into framebuffers[1] instead of framebuffers[0]: "
+        "both are allocated alike (shape, dtype, device) and the other is never used",
+    # Lab 1, the second sample
+    "lab1_intersect:closest_hit:drop_clamp:0":
+        "the lab's kernels return t = inf, never NaN, for misses (masked_result), so some "
+        "column always equals the row minimum (column 0 when all are inf): the clamp never "
+        "binds",
+    "lab1_intersect:woop_precompute:cmp_Gt_GtE:0":
+        "area2 == 0 makes n / area2 NaN (0/0) or inf, so the transform is not finite and "
+        "the isfinite check zeroes it anyway",
 }

@@ -36,7 +36,8 @@ pytestmark = pytest.mark.visibility("after_due_date")
 
 def check_kernel_hidden(impl, variant, device):
     """One kernel on a soup of 37 triangles far from the unit cube's corner, 121 rays with
-    their own [t_min, t_max] intervals, in float32 and float64."""
+    their own [t_min, t_max] intervals, and on triangles with corners symmetric about the
+    origin, in float32 and float64."""
     tris = soup(37, seed=5151) * 3 - 1
     o64, d64, _ = rays_at(tris, 121, seed=5152)
     g = generator(5153)
@@ -52,6 +53,25 @@ def check_kernel_hidden(impl, variant, device):
         assert ref[3].sum() > 20, "test set-up: too few hits"
         compare_hits(variant, f"hidden soup, 121 rays x 37 triangles with per-ray intervals, "
                      f"{dtype}", got, ref, eps)
+
+    # Triangles with two corners opposite each other through the world origin (a quad centred
+    # on the origin, split along a diagonal, has them): ordinary triangles all the same.
+    g = generator(5157)
+    a = torch.rand(3, 4, 3, generator=g, dtype=F64) * 2 - 1
+    b = torch.rand(3, 4, 3, generator=g, dtype=F64) * 2 - 1
+    tris = torch.cat([torch.stack([a[0], -a[0], b[0]], 1), torch.stack([a[1], b[1], -a[1]], 1),
+                      torch.stack([b[2], a[2], -a[2]], 1)])
+    o64, d64, _ = rays_at(tris, 60, seed=5158)
+    for dtype in (torch.float32, F64):
+        o, d, tri = (x.to(device, dtype) for x in (o64, d64, tris))
+        v0, v1, v2 = tri[None, :, 0], tri[None, :, 1], tri[None, :, 2]
+        got = checked(intersect(impl, variant, o[:, None], d[:, None], v0, v1, v2),
+                      variant, (60, 12), dtype, device)
+        eps = torch.finfo(dtype).eps
+        ref = ref_triangle(o[:, None], d[:, None], v0, v1, v2, margin_eps=eps)
+        assert ref[3].sum() > 20, "test set-up: too few hits"
+        compare_hits(variant, f"12 triangles with v1 = -v0, v2 = -v0 or v2 = -v1 (two corners "
+                     f"symmetric about the origin), 60 rays, {dtype}", got, ref, eps)
 
 
 @pytest.mark.task(1)
