@@ -157,6 +157,9 @@ def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Ten
     Rays that missed get points and normals 0 and material -1 (``t = inf`` must not turn
     into ``inf * 0 = NaN`` anywhere).
 
+    ``hits`` is taken as given: the ``Hits`` of these N rays from ``trace``. Any other value
+    is outside the contract (it need not be checked, nor raise any particular error).
+
     Hints: ``hits.hit`` is the mask of hits; index with ``hits.triangle.clamp(min=0)`` and
     mask the misses with ``torch.where``.
     """

@@ -55,7 +55,11 @@ def reflect(directions: torch.Tensor, normals: torch.Tensor) -> torch.Tensor:
 
 def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
                hits: Hits):
-    """``(points, normals, material)`` at each ray's hit; zeros and -1 where it missed."""
+    """``(points, normals, material)`` at each ray's hit; zeros and -1 where it missed.
+
+    ``hits`` is taken as given: the ``Hits`` of these N rays from ``trace``. Any other value
+    is outside the contract (it need not be checked, nor raise any particular error).
+    """
     check_scene(scene)
     n = check_vectors(scene.vertices, origins=origins, directions=directions)
     if not isinstance(hits, Hits) or len(hits) != n:

@@ -1098,6 +1098,19 @@ def test_layout_memory(impl, device, dtype):
                  where="(triangle, corner, axis)",
                  name="layout_woop: M [v, 1] for the corners v0, v1, v2 (Woop's unit triangle: "
                       "(0,0,0), (1,0,0), (0,1,0))")
+    # The third column of the frame is the unit normal normalize(e1 x e2) (right-handed):
+    # M [n, 0] = (0, 0, 1), so z' is the signed distance from the plane along n.
+    c64 = corners.double()
+    normal = torch.linalg.cross(c64[:, 1] - c64[:, 0], c64[:, 2] - c64[:, 0], dim=-1)
+    normal = normal / normal.norm(dim=1, keepdim=True)
+    lifted = (m[:, :, :3] @ normal[:, :, None])[..., 0]
+    e_z = torch.tensor([0.0, 0.0, 1.0], dtype=F64)
+    scale = (m[:, :, :3].abs() @ normal.abs()[:, :, None])[..., 0]
+    off = (lifted - e_z).abs() > 8 * torch.finfo(dtype).eps * scale + 1e-12
+    assert_close(torch.where(off, lifted, e_z)[ok], e_z.expand(int(ok.sum()), 3),
+                 where="(triangle, axis)",
+                 name="layout_woop: M [n, 0] for the unit normal n = normalize(e1 x e2) (the "
+                      "frame's third column, in that order: (0, 0, 1); e2 x e1 gives -1)")
     assert woop.get("bytes_per_triangle") == pytest.approx(12 * size)
     expect_error("mesh", impl.layout_woop, mesh.vertices, case="a tensor instead of a Mesh")
     expect_error("order", impl.layout_float4, mesh, order[:-1], case="order of F - 1 entries")

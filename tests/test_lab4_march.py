@@ -30,6 +30,7 @@ from __future__ import annotations
 import itertools
 import math
 from functools import partial
+from types import SimpleNamespace
 
 import pytest
 import torch
@@ -815,6 +816,9 @@ def test_march_box_early_termination_and_jitter(impl, device):
                       "same for all its steps (and for any step count)", where="ray")
     other = offsets(1, jitter=True, seed=8)
     assert (other - xi).abs().max() > 0.1, "march_box: another seed must give other offsets"
+    assert_close(offsets(1, jitter=True), offsets(1, jitter=True, seed=0), atol=0.0,
+                 name="march_box(jitter=True) without a seed: the signature's default seed=0 "
+                      "(the same offsets as seed=0)", where="ray")
 
 
 @pytest.mark.task(1)
@@ -869,6 +873,15 @@ def test_march_box_extremes(impl, device):
                     emis.to(device, dtype), 16, what=f"march_box (box at {shift:g}, {dtype})",
                     n=32, dtype=dtype, device=device)
         results.append(got)
+    # The float64 march at the origin against the grader's midpoint march (grids sampled
+    # with grid_sample at box coordinates, the exact step in float64).
+    want = march_given_box(SimpleNamespace(segment_integral=lambda s, ds, _: given_step(s, ds)),
+                           torch.round(o * 64) / 64, d, [0.0] * 3, [1.0] * 3, grid, emis, 16)
+    for key in ("radiance", "transmittance"):
+        assert_close(results[0][key], want[key], rtol=1e-9, atol=1e-12,
+                     name=f"march_box (a varied 4x4x4 grid, float64): {key} against a midpoint "
+                          f"march sampling the grids trilinearly at the box coordinates "
+                          f"((o - box_min) + t d) / (box_max - box_min)", where="ray")
     assert_close(results[1]["radiance"], results[0]["radiance"], rtol=1e-4, atol=1e-6,
                  name="march_box: float32 radiance of a varied grid in a box at 1e5 against "
                       "the same scene at the origin in float64. Sample the grid at "
@@ -1337,6 +1350,16 @@ def test_single_scatter_matches_closed_form(impl, device):
                       f"that meets the box takes every step)")
     assert_close(got["transmittance"], torch.exp(-8.0 * length), rtol=1e-10, atol=0,
                  name=f"{what}: transmittance of the view ray e^(-sigma D)", where="ray")
+    # Directions of any length: 1e-170 (|d|^2 underflows, so d / |d| is inf and NaN), and
+    # NaN/inf/zero directions. The phase p(d . l) of such rays must not turn into NaN.
+    bo, bd = bad_rays()
+    short_o, short_d = torch.cat([o[:8], bo]), torch.cat([d[:8] * 1e-170, bd])
+    what = ("march_single_scatter (directions of length 1e-170, whose |d| underflows to 0, "
+            "and NaN/inf/zero directions)")
+    got = result_dict(single_scatter(impl, short_o.to(device), short_d.to(device), SCATTER_LO,
+                                     SCATTER_HI, dens, albedo, light, irradiance, g, 8, 1),
+                      what, MARCH_KEYS, len(short_o), F64, device)
+    no_nan(what, radiance=got["radiance"], transmittance=got["transmittance"])
     # A grid is sampled at box coordinates (x - box_min) / (box_max - box_min) (the box is
     # 1 x 2 x 1): the same medium as a grid and as a callable of world points scatters alike.
     what = "march_single_scatter (a (4, 5, 3) grid density, steps=32, shadow_steps=4)"

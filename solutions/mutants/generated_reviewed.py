@@ -114,4 +114,25 @@ EQUIVALENT = {
     "lab1_intersect:woop_precompute:cmp_Gt_GtE:0":
         "area2 == 0 makes n / area2 NaN (0/0) or inf, so the transform is not finite and "
         "the isfinite check zeroes it anyway",
+    # Lab 3, the second sample
+    "lab3_wavefront:render_persistent:cmp_Lt_LtE:0":
+        "every slot is emptied (pixel -1) at the end of each step, so at the refill no slot "
+        "holds a pixel, 0 or otherwise: free is every slot with < 0 and with <= 0",
+    "lab3_wavefront:render_whitted:cmp_Lt_LtE:0":
+        "depth <= max_depth differs only at depth == max_depth, the last iteration, where "
+        "alive only feeds throughput, o and d, never read after the loop",
+    "lab3_wavefront:surface_at:bool_Or_And:0":
+        "only a hits that is not the Hits of the N rays is treated differently; the provided "
+        "checks do not validate hits, so that input is outside the contract (the docstring "
+        "says so)",
+    # Lab 4, the second sample
+    "lab4_march:voxel_walk:cmp_Lt_LtE:3":
+        "on an axis with step 0 the direction component is exactly 0, so the located index, "
+        "clamped into the block, equals the current one: min(located, index) = index "
+        "(checked on 300 random grids, float32/float64, macro cells 1..3, rays in voxel "
+        "planes and through corners: identical outputs)",
+    "lab4_march:voxel_walk:drop_clamp:1":
+        "active lanes have every cell index in [0, size) already; an inactive lane has at "
+        "most one index at -1, a valid negative index, and what it reads is masked (same "
+        "300-grid check: identical outputs)",
 }
