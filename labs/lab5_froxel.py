@@ -226,8 +226,9 @@ def cull_lights(grid, lights, device="cpu"):
     nothing beyond its ``range``: it is listed wherever its sphere ``(position, range)``
     is not entirely outside one of the six planes (signed distance >= -range for all six:
     conservative, never drops a tile the sphere touches). A sphere exactly tangent to a
-    plane (distance exactly -range) may go either way: the light gives nothing at its
-    range. Directional lights are listed everywhere.
+    plane (distance exactly -range), or within rounding of it (the planes may be computed
+    in float32: about 1e-7 of the light's distance from the eye), may go either way: the
+    light gives nothing at its range. Directional lights are listed everywhere.
     """
     raise NotImplementedError("not implemented yet: cull_lights (task 3)")
 

@@ -808,6 +808,20 @@ def test_transmittance_volume_sun(impl, device):
                        "extinction_volume", shape=(n, n, n), dtype=F64, device=device)
     assert_close(ext, torch.full((n, n, n), sigma, dtype=F64), rtol=1e-12,
                  name="extinction_volume of constant fog")
+    # Media that vary in space (height fog, rotated textured boxes): media_at at the voxel
+    # centres lo + (index + 0.5) / R (hi - lo), x the first axis.
+    box_lo, box_hi, r = (-2.5, 0.2, -8.0), (1.5, 2.4, -2.0), 6
+    centres = (torch.arange(r, dtype=F64) + 0.5) / r
+    frac = torch.stack(torch.meshgrid(centres, centres, centres, indexing="ij"), -1)
+    lo64, hi64 = torch.tensor(box_lo, dtype=F64), torch.tensor(box_hi, dtype=F64)
+    want = ref_media(mixed_scene(), (lo64 + frac * (hi64 - lo64)).reshape(-1, 3))[1]
+    assert want.std() > 0.1 * want.mean(), "test set-up: extinction varies over the box"
+    got = check_tensor(impl.extinction_volume(mixed_scene(), box_lo, box_hi, r, F64, device),
+                       "extinction_volume (mixed media)", shape=(r, r, r), dtype=F64,
+                       device=device)
+    assert_close(got, want.reshape(r, r, r), rtol=1e-9, atol=1e-12, name=(
+        "extinction_volume of height fog and fog volumes over a box: the extinction at the "
+        "voxel centres lo + (i + 0.5) / R (hi - lo), indexed [x, y, z]"), where="voxel")
     light = DirectionalLight(direction=(0.4, 1.0, 0.3))
     tv = impl.transmittance_volume(ext, lo, hi, light, 48)
     assert isinstance(tv, LightVolume) and tv.data.ndim == 3, \
@@ -1427,6 +1441,9 @@ def test_render_froxels_models_only_what_is_needed(impl, device):
                        name="render_froxels without media: the opaque image")
     assert report["froxels_lit"] == 0 and report["light_evaluations"] == 0, \
         f"render_froxels without media must light nothing, report {report}"
+    assert report["history_valid"] == 0, (
+        f"render_froxels without temporal integration: no froxel kept history, "
+        f"report['history_valid'] must be 0, got {report['history_valid']!r}")
     far_light = PointLight(position=(25.0, 1.0, -10.0), intensity=(5, 5, 5), range=2.0)
     near_light = PointLight(position=(0.0, 1.0, -7.0), intensity=(5, 5, 5), range=3.0)
     scene = dataclasses.replace(fog_box_scene(F32), lights=(near_light, far_light))
@@ -1452,6 +1469,9 @@ def test_render_froxels_temporal(impl, device):
                                    **args)
     assert rep["jitter"] == pytest.approx(frame_jitter(1)), \
         "render_froxels: frame n samples at frame_jitter(n)"
+    assert rep["history_valid"] == 0 and isinstance(rep["history"], dict), (
+        f"render_froxels(temporal, history=None): no froxel kept history (history_valid 0, "
+        f"got {rep['history_valid']!r}) and report['history'] is the dict for the next frame")
     grid = FroxelGrid(CAMERA, TILE, SLICES, NEAR, FAR)
     vb = impl.voxelize(scene, grid, frame_jitter(1), F32, device)
     src, _ = impl.light_froxels(scene, grid, vb, frame_jitter(1))

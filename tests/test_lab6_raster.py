@@ -554,6 +554,25 @@ def test_clip_triangles_near_plane(impl, device):
             f"{case}: triangles out per triangle in (3 corners inside: 1, two: 2 (a quad), "
             f"one: 1, none or outside one plane or NaN or a clipped corner at w <= 0: 0)"),
             where="input triangle")
+    # Every corner exactly on one plane of the view volume: on its boundary, not outside
+    # (the half-spaces x < -w, ... are strict), so the triangle is kept, once and whole.
+    base = torch.tensor([[0.25, -0.5, 0.0, 1.0], [0.5, 0.25, 0.5, 2.0],
+                         [-0.75, 0.5, -1.0, 4.0]], dtype=F64)
+    planes = {"x = -w": (0, -1), "x = w": (0, 1), "y = -w": (1, -1), "y = w": (1, 1),
+              "z = -w (the near plane)": (2, -1), "z = w (the far plane)": (2, 1)}
+    on_plane = base.repeat(len(planes), 1, 1)
+    for n, (axis, sign) in enumerate(planes.values()):
+        on_plane[n, :, axis] = sign * on_plane[n, :, 3]
+    for dtype in (torch.float32, F64):
+        _, source, _ = impl.clip_triangles(on_plane.to(device, dtype))
+        source = source.cpu().tolist()
+        wrong = [name for n, name in enumerate(planes) if source.count(n) != 1]
+        assert not wrong, (
+            f"clip_triangles ({dtype}): triangles with all three corners on the plane "
+            f"{', '.join(wrong)} came out {[source.count(n) for n in range(len(planes))]} "
+            f"times (one each expected, in the order {list(planes)}): a corner on a plane "
+            f"lies on the view volume's boundary, not outside it (reject only x < -w, x > w, "
+            f"y < -w, y > w, z < -w, z > w, w <= 0)")
     empty = impl.clip_triangles(torch.zeros(0, 3, 4, device=device))
     assert [tuple(x.shape) for x in empty] == [(0, 3, 4), (0,), (0, 3, 3)], \
         f"clip_triangles of no triangles: got shapes {[tuple(x.shape) for x in empty]}"
@@ -845,6 +864,22 @@ def test_coverage_culling_degenerate_subpixel(impl, device):
         assert_equal(coverage_matrix(tri, pix, 300, width * height), want.to(torch.int64),
                      name=f"coverage of sub-pixel triangles ({dtype}) vs the exact top-left rule",
                      where="(triangle, pixel)")
+    # Culling keeps every front face however small (E_12(v0) > 0, twice its area in square
+    # pixels, many below 1 here) and drops every back face.
+    q = torch.round(tiny * 16).to(torch.int64)
+    area = ((q[:, 0, 0] - q[:, 1, 0]) * (q[:, 2, 1] - q[:, 1, 1])
+            - (q[:, 0, 1] - q[:, 1, 1]) * (q[:, 2, 0] - q[:, 1, 0]))  # E_12(v0), times 256
+    front = want & (area > 0)[:, None]
+    small = (area > 0) & (area <= 256) & want.any(1)
+    assert int(small.sum()) > 10 and int((want & (area < 0)[:, None]).sum()) > 10, \
+        "test set-up: small front faces and back faces that cover a pixel centre"
+    for dtype in (torch.float32, torch.float64):
+        tri, pix, _ = fragments(impl, tiny.to(device, dtype), width, height, True, device)
+        assert_equal(coverage_matrix(tri, pix, 300, width * height), front.to(torch.int64),
+                     name=(f"coverage of sub-pixel triangles with cull_backfaces=True ({dtype}): "
+                           f"the front faces' pixels (positive area, however small: "
+                           f"{int(small.sum())} have E_12(v0) <= 1 pixel), no back face's"),
+                     where="(triangle, pixel)")
     # No triangles; bad input.
     tri, pix, bary = fragments(impl, torch.zeros(0, 3, 4, device=device), width, height,
                                device=device)
@@ -1123,6 +1158,22 @@ def test_rasterize_visibility_buffer(impl, device):
         f"rasterize with memory_budget_bytes={budget}: an op created a tensor of {largest} "
         f"bytes for 12 triangles over 8x8 pixels (allowed: the budget, or what one triangle's "
         f"clamped box of at most 8x8 pixels needs). Chunk the triangles by their box sizes.")
+    # 96 slivers along the bottom row of a 64x64 screen: boxes 64 columns wide, 1 row high
+    # (column 0 .. 64, row 63 .. 64): a box's size is its width times its height.
+    sliver = torch.tensor([[-2.0, 63.25], [30.0, 63.75], [70.0, 63.25]], dtype=F64)
+    slivers = screen4(sliver.expand(96, 3, 2).contiguous(),
+                      inv_w=1 / torch.arange(1.0, 97.0, dtype=F64))
+    budget = 2**15
+    largest, keys = impl.probe(probe_largest_tensor, slivers.float().to(device), 64, 64, budget)
+    assert_equal(keys, reference_keys(slivers.float().double(), 64, 64), name=(
+        "rasterize of 96 slivers along the bottom row with a small memory budget"),
+        where="pixel")
+    bound = max(budget, 128 * 64, 8 * 64 * 64)
+    assert largest <= bound, (
+        f"rasterize with memory_budget_bytes={budget}: an op created a tensor of {largest} "
+        f"bytes for 96 triangles whose boxes span 64 columns x 1 row of a 64x64 screen "
+        f"(allowed: the budget, what one triangle's box of 64 pixels needs, or the (64 * 64,) "
+        f"int64 buffer). A box holds (col_end - col_begin) * (row_end - row_begin) pixels.")
     # Culling, an empty scene, bad input.
     reversed_ = screen[:, [0, 2, 1]].float().to(device)
     culled = rasterized(impl, reversed_, width, height, cull_backfaces=True).cpu()
@@ -1490,6 +1541,17 @@ def test_hybrid_shadows_match_traced(impl, reference, device):
     big = impl.shadow_epsilon(Mesh(mesh.vertices * 1000, mesh.faces))
     assert 0 < eps < 1e-2, f"shadow_epsilon of a scene ~8 across: {eps!r}"
     assert abs(big / eps - 1000) < 1, f"shadow_epsilon must scale with the scene: {eps} -> {big}"
+    # Far from the origin the ulps of the coordinates count, on either side of it.
+    for shift in (1e3, -1e3):
+        moved = Mesh((mesh.vertices.double() + shift).float(), mesh.faces)
+        v = moved.vertices.double()
+        want = (1e-4 * float((v.amax(0) - v.amin(0)).norm())
+                + 8 * torch.finfo(torch.float32).eps * float(v.abs().max()))
+        got = impl.shadow_epsilon(moved)
+        assert got == pytest.approx(want, rel=1e-6), (
+            f"shadow_epsilon of the scene moved by {shift:+g} on every axis: {got!r}, expected "
+            f"1e-4 * extent + 8 * eps * max|x| = {want:.6g} (max|x| the largest absolute "
+            f"coordinate)")
     expect_error("light_direction", impl.hybrid_shadows, trace_shadow_scene, mesh.to(device),
                  face.to(device), bary.to(device), light[:2].to(device),
                  case="a light direction of shape (2,)")

@@ -135,4 +135,24 @@ EQUIVALENT = {
         "active lanes have every cell index in [0, size) already; an inactive lane has at "
         "most one index at -1, a valid negative index, and what it reads is masked (same "
         "300-grid check: identical outputs)",
+    # Lab 5, the second sample
+    "lab5_froxel:cull_lights:narrow_dtype:1":
+        "float32 tile-edge NDC changes the plane distances by ~1e-7 of the light's distance: "
+        "only spheres within rounding of tangent go the other way (docstring: either way)",
+    "lab5_froxel:build_shadow_map:const_float:0":
+        "the plane's margin beyond the occluders is free: the data are depths from the map's "
+        "own origin and shadow_lookup measures from that origin, so visibility is unchanged",
+    "lab5_froxel:light_transmittance:cmp_Gt_GtE:0":
+        "where span == 0 the optical depth is multiplied by span = 0 whatever points are "
+        "sampled: T = 1 both ways",
+    "lab5_froxel:transmittance_volume:const_int:4":
+        "the fallback shape only feeds check_volume for a non-3-D extinction, which is "
+        "rejected with (1, 1, 1) or (1, 1, 2) alike",
+    # Lab 6, the second sample
+    "lab6_raster:clip_triangles:const_int:4":
+        "isfinite(clip).all(-2).all(-1) and .all(-1).all(-1) both reduce the (F, 3, 4) "
+        "corners and coordinates to (F,): the same mask",
+    "lab6_raster:shade:cmp_GtE_Gt:0":
+        "torch.where(face > 0, face, 0) and torch.where(face >= 0, face, 0) both give 0 for "
+        "face == 0; empty pixels are zeroed by the final torch.where(face >= 0, ...)",
 }
