@@ -25,7 +25,7 @@ side), and a slice of the teapot in a stadium (Suzanne, 968 triangles, inside a 
 thousand times larger: the case that defeats a uniform grid). Extremes: rays parallel to the
 axes with +0.0 and -0.0 components, rays starting inside the scene, on cell boundaries and
 in split planes, rays that miss the scene, NaN/inf rays, a single triangle, coincident
-triangles, a scene translated by 1e5, and t_min/t_max clipping.
+triangles, a scene translated by 1e5, one shrunk 100 times, and t_min/t_max clipping.
 """
 
 from __future__ import annotations
@@ -129,6 +129,9 @@ def scene(name: str) -> Mesh:
         # Six big triangles through the unit cube: every one spans many cells.
         g = generator(31)
         return mesh_of(torch.rand(6, 3, 3, generator=g, dtype=F64) * 1.4 - 0.2)
+    if name == "tiny":
+        soup = load_scene("random_soup", device="cpu", dtype=F64, n=200, seed=7).mesh
+        return mesh_of(soup.vertices[soup.faces] * 0.01)
     if name == "far":
         soup = load_scene("random_soup", device="cpu", dtype=F64, n=120, seed=41).mesh
         return mesh_of(soup.vertices[soup.faces] + 1e5)
@@ -672,8 +675,10 @@ def check_kdtree(tree, mesh: Mesh, what: str) -> None:
 @pytest.mark.points(1)
 def test_grid_resolution_and_build(impl, device):
     # The heuristic: about lambda N cells, nearly cubic; thin axes get one cell.
+    # (10, 10, 0.37): k * extent_z = 1.9 >= 1, so z is not thin: round(1.9) = 2 cells.
     for extent, n, lam in (((1, 1, 1), 1000, 2.0), ((4, 1, 2), 500, 3.0), ((1, 1, 0), 800, 2.0),
-                           ((10, 0.01, 10), 5000, 1.0), ((1, 1, 1), 1, 2.0)):
+                           ((10, 0.01, 10), 5000, 1.0), ((1, 1, 1), 1, 2.0),
+                           ((10, 10, 0.37), 5000, 1.0)):
         res = impl.grid_resolution(extent, n, lam)
         assert isinstance(res, tuple) and len(res) == 3 and all(
             isinstance(r, int) and r >= 1 for r in res), (
@@ -686,6 +691,14 @@ def test_grid_resolution_and_build(impl, device):
         assert not widths or max(widths) <= 2.0 * min(widths), (
             f"grid_resolution(extent={extent}, ...) = {res}: cell sizes {widths} are far from "
             f"cubes")
+        # A one-cell axis is thin (thinner than a cell: k * extent < 1) or rounds to one cell
+        # (k * extent < 1.5): never much wider than the cells of the other axes.
+        single = [e for e, r in zip(extent, res) if r == 1 and e > 0]
+        assert not (widths and single) or max(single) <= 2.0 * min(widths), (
+            f"grid_resolution(extent={extent}, N={n}, density={lam}) = {res}: an axis of "
+            f"extent {max(single):g} gets one cell, {max(single) / min(widths):.2f} times as "
+            f"wide as the cells of the other axes ({min(widths):.4g}): only an axis with "
+            f"k * extent < 1 is thin (drops out with one cell); others get round(k * extent)")
         for e, r in zip(extent, res):
             if e == 0:
                 assert r == 1, f"grid_resolution(extent={extent}, ...) = {res}: a flat axis " \
@@ -694,8 +707,9 @@ def test_grid_resolution_and_build(impl, device):
     expect_error("extent", impl.grid_resolution, (1, 1), 10, case="a 2-element extent")
     # The build: CSR lists that are exactly each triangle's box of cells, and that box is
     # conservative (every cell the triangle's bounds touch) and tight (no farther).
+    # "tiny": the soup shrunk 100 times: the padding must shrink with the scene.
     for name, resolution in (("soup", None), ("teapot", None), ("shards", (7, 3, 5)),
-                             ("single", None)):
+                             ("single", None), ("tiny", None)):
         mesh = on(scene(name), device)
         grid = impl.build_grid(mesh, resolution)
         what = f"build_grid({name}, resolution={resolution})"
@@ -992,6 +1006,24 @@ def skip_reference(bvh) -> list[int]:
     return end
 
 
+def leaf_tests_bound(rays: Rays, bvh) -> torch.Tensor:
+    """(N,) int64: the triangles in the leaves whose box (padded by 1e-5 of the root's
+    size) the ray's segment [t_min, t_max] crosses, in float64: the most triangle tests a
+    walk that tests only the leaves it hits can run (CPU)."""
+    leaf = (bvh["left"].cpu() < 0).nonzero()[:, 0]
+    lo, hi = bvh["lo"].cpu().double(), bvh["hi"].cpu().double()
+    pad = 1e-5 * float((hi[0] - lo[0]).amax())
+    lo, hi = lo[leaf] - pad, hi[leaf] + pad
+    o, d = rays.origins.double()[:, None], rays.directions.double()[:, None]
+    t0, t1 = (lo - o) / d, (hi - o) / d  # 0 / 0 = NaN (in a slab plane): no bound
+    near, far = torch.minimum(t0, t1), torch.maximum(t0, t1)
+    near = torch.where(near.isnan(), -INF, near).amax(-1)
+    far = torch.where(far.isnan(), INF, far).amin(-1)
+    crossed = (torch.maximum(near, rays.t_min.double()[:, None])
+               <= torch.minimum(far, rays.t_max.double()[:, None]))
+    return (crossed.long() * bvh["count"].cpu()[leaf]).sum(1)
+
+
 @pytest.mark.task(3)
 @pytest.mark.points(1)
 def test_bvh_stackless_traversal(impl, device):
@@ -1015,6 +1047,16 @@ def test_bvh_stackless_traversal(impl, device):
                             f"bvh_closest_hit_stackless({name}, median BVH)")
         hit_root = stackless["steps"] >= 1
         assert hit_root.any(), "bvh_closest_hit_stackless: count a step per node visited"
+        # A leaf whose box the ray misses is skipped: its triangles are never tested.
+        most = leaf_tests_bound(rays.to("cpu"), bvh)
+        over = stackless["tests"] > most
+        if over.any():
+            i = int(over.nonzero()[0, 0])
+            raise AssertionError(
+                f"bvh_closest_hit_stackless({name}, median BVH): {int(over.sum())} rays test "
+                f"triangles of leaves whose box they miss. First: ray {i} ({describe(rays.to('cpu'), i)}) "
+                f"ran {int(stackless['tests'][i])} tests, its segment crosses leaf boxes of "
+                f"{int(most[i])} triangles: test a leaf's triangles only if its box is hit")
 
 
 @pytest.mark.task(3)
@@ -1064,6 +1106,24 @@ def test_bvh_traversal_extremes(impl, device):
         assert hits.triangle.tolist() == [0, 0], (
             f"BVH traversal: 40 coincident triangles, the rays hit all at the same t: the "
             f"lowest index (0) must win for both rays, got {hits.triangle.tolist()}")
+    # Two overlapping triangles in the plane z = 0.5, triangle 1 in the left leaf: the ray
+    # hits it at t = 1.5, and the right leaf (triangle 0), flat, is entered at t = 1.5 too:
+    # a node is culled only if its entry t is *beyond* the closest hit, so triangle 0 wins.
+    flat = mesh_of(torch.tensor([[[0.25, 0.25, 0.5], [1.0, 0.25, 0.5], [0.25, 1.0, 0.5]],
+                                 [[0.0, 0.0, 0.5], [0.75, 0.0, 0.5], [0.0, 0.75, 0.5]]],
+                                dtype=F64), device=device)
+    rays = Rays.create(torch.tensor([[0.3125, 0.3125, -1.0], [0.3125, 0.3125, 2.0]]),
+                       torch.tensor([[0.0, -0.0, 1.0], [-0.0, 0.0, -1.0]])).to(device)
+    bvh = median_bvh(flat, 1)
+    assert bvh["triangles"].tolist() == [1, 0], "test set-up: triangle 1 in the left leaf"
+    for fn in (impl.bvh_closest_hit, impl.bvh_closest_hit_stackless):
+        hits, _ = fn(rays, flat, bvh, mt64)
+        label = getattr(fn, "__name__", None) or getattr(fn, "_name", "traversal")
+        assert hits.triangle.tolist() == [0, 0] and hits.t.tolist() == [1.5, 1.5], (
+            f"{label}: two overlapping triangles in the plane z = 0.5, both hit at t = 1.5, "
+            f"triangle 1's leaf first; the other leaf's box (flat) is entered at t = 1.5, "
+            f"not beyond the closest hit: visit it, the lowest index (0) must win; got "
+            f"triangles {hits.triangle.tolist()} at t = {hits.t.tolist()}")
 
 
 # ---------------------------------------------------------------------------------------
@@ -1363,10 +1423,11 @@ def simple_two_level(mesh: Mesh, top_res=(3, 3, 3), sub_res=(5, 4, 3), min_trian
 GRID2_COUNTERS = ("steps", "tests", "skipped")
 
 
-def check_two_level(g, mesh: Mesh, what: str, density: float) -> None:
+def check_two_level(g, mesh: Mesh, what: str, density: float, min_triangles: int = 16) -> None:
     """Structure of a two-level grid: the top lists and sub-grids together list every
-    triangle in every top cell its bounds reach, sub-grids sit in their cells and cover
-    their triangles, and each sub-grid's resolution follows the density heuristic."""
+    triangle in every top cell its bounds reach, a top cell has a sub-grid iff it holds more
+    than ``min_triangles`` small triangles, sub-grids sit in their cells and cover their
+    triangles, and each sub-grid's resolution follows the density heuristic."""
     device, f = mesh.device, mesh.num_faces
     assert isinstance(g, dict) and g.get("kind") == "grid2", \
         f"{what}: expected a dict with kind 'grid2'"
@@ -1426,17 +1487,26 @@ def check_two_level(g, mesh: Mesh, what: str, density: float) -> None:
     entry_sub_cell = torch.repeat_interleave(torch.arange(sc), s_count)
     entry_sub = sub_cell_owner[entry_sub_cell]
     in_sub = set(zip(entry_sub.tolist(), s_tris.tolist()))
+    n_small = [0] * c  # small triangles per top cell
     for t in range(f):
         for x in range(int(c_lo[t, 0]), int(c_hi[t, 0]) + 1):
             for y in range(int(c_lo[t, 1]), int(c_hi[t, 1]) + 1):
                 for z in range(int(c_lo[t, 2]), int(c_hi[t, 2]) + 1):
                     cid = x + int(res[0]) * (y + int(res[1]) * z)
+                    n_small[cid] += not big[t]
                     sg = int(sub_of[cid])
                     ok = (cid, t) in listed or (sg >= 0 and not big[t] and (sg, t) in in_sub)
                     if not ok:
                         raise AssertionError(
                             f"{what}: triangle {t} overlaps top cell {(x, y, z)} but is neither "
                             f"in its direct list nor in its sub-grid")
+    wrong = [i for i in range(c) if (n_small[i] > min_triangles) != (int(sub_of[i]) >= 0)]
+    if wrong:
+        i = wrong[0]
+        raise AssertionError(
+            f"{what}: top cell {i} holds {n_small[i]} small triangles and "
+            f"{'has' if int(sub_of[i]) >= 0 else 'lacks'} a sub-grid: a cell gets one iff it "
+            f"holds more than min_triangles={min_triangles} ({len(wrong)} cells wrong)")
     dense_direct = sub_of[cell_of] >= 0
     assert big[tris[dense_direct]].all(), (
         f"{what}: a cell with a sub-grid lists only its big triangles directly (the small ones "

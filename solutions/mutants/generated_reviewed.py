@@ -155,4 +155,27 @@ EQUIVALENT = {
     "lab6_raster:shade:cmp_GtE_Gt:0":
         "torch.where(face > 0, face, 0) and torch.where(face >= 0, face, 0) both give 0 for "
         "face == 0; empty pixels are zeroed by the final torch.where(face >= 0, ...)",
+    # Lab 2, the second sample
+    "lab2_accel:build_lbvh:op_Sub_Add:7":
+        "before is read only at a node's start and at its right child's start, both the "
+        "start of exactly one leaf: '+' adds 2 to both and their difference (left_size) is "
+        "unchanged; leaf rows are masked",
+    "lab2_accel:build_two_level_grid:drop_clamp:0":
+        "a sub-grid exists only for a cell with n_small > min_triangles >= 0, so n_sub >= 1 "
+        "for every sub-grid: the clamp never binds",
+    "lab2_accel:bvh_closest_hit_fast:bool_And_Or:1":
+        "decides only whether rays are padded with finished rays to graph sizes and graphs "
+        "kept: padding rows never run and are cut off before the results are written",
+    "lab2_accel:bvh_closest_hit_fast:const_int:0":
+        "the default check_every only sets how many steps run between host looks; extra "
+        "steps of finished rays change nothing (a timing knob)",
+    "lab2_accel:bvh_closest_hit_fast:const_int:12":
+        "the loop bound m + F + 1 already covers a ray's box tests and slots; a looser bound "
+        "only allows more looks, and the loop breaks when no ray runs",
+    "lab2_accel:bvh_closest_hit_fast:const_int:14":
+        "replays a cached graph twice per look (CUDA graphs only): extra steps of finished "
+        "rays change nothing, unfinished ones only get further before the next look",
+    "lab2_accel:grid_closest_hit:cmp_Gt_GtE:0":
+        "differs only where step == 0, where t_next is replaced by inf through torch.where: "
+        "the boundary computed there is never used",
 }
