@@ -58,6 +58,7 @@ from course.given.lab5 import (
     light_coords,
     light_frame,
     ray_boxes,
+    sample_texture,
     scene_grid,
 )
 from course.given.lab5_reference import media as ref_media
@@ -71,6 +72,7 @@ from course.grading.testing import (
     expect_error,
     generator,
     poisoned,
+    replaced,
 )
 
 LAB_MODULE = "lab5_froxel"
@@ -1263,6 +1265,111 @@ def compare(what, got, ref, max_tol, mean_tol):
                  f"{max_tol:.0%} of the largest radiance {scale:.3g}", where="pixel (index, rgb)")
     mean = (got - ref).abs().mean().item() / scale
     assert mean <= mean_tol, f"{what}: mean error {mean:.2%} of {scale:.3g}, allowed {mean_tol:.0%}"
+
+
+# When a whole frame is wrong, the grader swaps in its own V-buffer, integration and
+# application (it can compute each exactly, below) one at a time: a swap that repairs the
+# frame names the wrong step; when none does, it is light_froxels or render_froxels itself.
+
+
+def given_voxelize(scene, grid, jitter=0.5, dtype=F32, device="cpu"):
+    """In place of the lab's ``voxelize``: the grader's float64 media at the sample points."""
+    z = ref_depths(grid.near, grid.far, grid.slices)
+    depth = z[:-1] + jitter * (z[1:] - z[:-1])
+    jj, ii = torch.meshgrid(torch.arange(grid.ny, dtype=F64) + 0.5,
+                            torch.arange(grid.nx, dtype=F64) + 0.5, indexing="ij")
+    points = torch.tensor(grid.camera.eye, dtype=F64) + depth[:, None, None, None] * ref_dirs(
+        grid, ii, jj)[None]
+    sigma_s, sigma_t, emissive, g = ref_media(scene, points.reshape(-1, 3))
+    return {k: v.reshape(*grid.shape, *v.shape[1:]).to(device, dtype) for k, v in
+            (("scattering", sigma_s), ("extinction", sigma_t), ("emissive", emissive),
+             ("g", g))}
+
+
+def given_integrate_froxels(source, extinction, grid, method="energy"):
+    """In place of the lab's ``integrate_froxels``: prefix sums over the tile-centre rays."""
+    z = ref_depths(grid.near, grid.far, grid.slices)
+    jj, ii = torch.meshgrid(torch.arange(grid.ny, dtype=F64) + 0.5,
+                            torch.arange(grid.nx, dtype=F64) + 0.5, indexing="ij")
+    length = (z[1:] - z[:-1])[:, None, None] * ref_dirs(grid, ii, jj).norm(dim=-1)
+    sig, src = extinction.double().cpu(), source.double().cpu()
+    tau = sig * length
+    piece = src * (length * phi64(tau) if method == "energy" else length)[..., None]
+    behind = torch.cumsum(tau, 0)
+    radiance = torch.cumsum(torch.exp(-(behind - tau))[..., None] * piece, 0)
+    return radiance.to(source), torch.exp(-behind).to(source)
+
+
+def given_apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out=None):
+    """In place of the lab's ``apply_froxels``: the trilinear lookup at each pixel."""
+    h, w = depth_image.shape
+    nodes = torch.cat([torch.cat([torch.zeros(1, grid.ny, grid.nx, 3, dtype=F64),
+                                  inscatter.double().cpu()]),
+                       torch.cat([torch.ones(1, grid.ny, grid.nx, dtype=F64),
+                                  transmittance.double().cpu()])[..., None]], -1)
+    depth = depth_image.double().cpu()
+    z = torch.log(depth / grid.near) / math.log(grid.far / grid.near) * grid.slices
+    z = torch.where(depth < grid.near, 0.0, z.nan_to_num(posinf=grid.slices)).clamp(
+        0, grid.slices)
+    rows = ((torch.arange(h, dtype=F64) + 0.5) / grid.tile)[:, None].expand(h, w)
+    cols = ((torch.arange(w, dtype=F64) + 0.5) / grid.tile)[None, :].expand(h, w)
+    values = sample_texture(nodes, torch.stack([z + 0.5, rows, cols], -1))
+    result = (opaque_image.double().cpu() * values[..., 3:] + values[..., :3]).to(opaque_image)
+    return result if out is None else out.copy_(result)
+
+
+GIVEN_STAGES = {"voxelize": given_voxelize, "integrate_froxels": given_integrate_froxels,
+                "apply_froxels": given_apply_froxels}
+
+
+def probe_render_with(lab, stage, *args, **kwargs):
+    """``render_froxels`` next to the lab with the grader's ``stage`` in place of its own."""
+    with replaced(lab, {stage: GIVEN_STAGES[stage]}):
+        return lab.render_froxels(*args, **kwargs)[0]
+
+
+# Two media of very different scattering and phase: a thin, mostly absorbing height fog
+# (g -0.5) and a brighter, forward-scattering constant fog (g 0.8) filling the view, in the
+# sun's light: where they overlap, g is their scattering-weighted mean.
+MIXED = Scene(media=(HeightFog(scattering=(0.005, 0.005, 0.005), extinction=0.05, base=0.0,
+                               falloff=0.3, g=-0.5),
+                     ConstantFog(scattering=(0.03, 0.025, 0.02), extinction=0.035, g=0.8)),
+              lights=(DirectionalLight(direction=(0.1, 0.3, -1.0), irradiance=(2, 2, 2)),))
+
+
+@pytest.mark.task(END_TO_END)
+@pytest.mark.points(0.25)
+def test_render_froxels_whole_frame_names_the_wrong_step(impl, device):
+    """Two media mixed, the sun without volumetric shadows, against the brute-force
+    reference; a wrong frame names the stage whose given stand-in repairs it."""
+    depth, opaque = images()
+    args = {"tile": TILE, "slices": SLICES, "near": NEAR, "far": FAR,
+            "volumetric_shadows": False}
+    ref = reference_render(MIXED, CAMERA, depth, opaque, near=NEAR, far=FAR, samples=64,
+                           pixels=PIXELS, volumetric_shadows=False)["image"]
+    what = "render_froxels (height fog and a fog box, the sun) on your own stages"
+
+    def check(image, name):
+        compare(name, image.detach().cpu().double().reshape(-1, 3)[PIXELS], ref, 0.05, 0.01)
+
+    try:
+        check(impl.render_froxels(MIXED, CAMERA, depth.to(device), opaque.to(device),
+                                  **args)[0], what)
+    except Exception as error:  # noqa: BLE001 (a wrong stage may also raise: name it too)
+        wrong = []
+        for stage in GIVEN_STAGES:
+            try:
+                check(impl.probe(probe_render_with, stage, MIXED, CAMERA, depth.to(device),
+                                 opaque.to(device), **args), stage)
+            except Exception:  # noqa: BLE001, S112 (not repaired by this stage)
+                continue
+            wrong.append(stage)
+        hint = (f"the step that is wrong: {', '.join(wrong)} (with the grader's own in its "
+                f"place the frame is right)" if wrong else
+                "the step that is wrong: light_froxels or render_froxels itself (the "
+                "grader's voxelize, integrate_froxels and apply_froxels, each in place of "
+                "yours, do not repair the frame)")
+        raise AssertionError(f"{type(error).__name__}: {error}\n{hint}") from None
 
 
 @pytest.mark.task(END_TO_END)

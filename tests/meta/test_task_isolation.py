@@ -6,8 +6,8 @@ the grader, given building blocks, the reference's visibility buffer) and grade 
 whole chain in one small end-to-end task (``END_TO_END`` in the grader), which a mistake
 anywhere may also cost. Here a shipped mutant of an early task is graded on the tests of
 every task that used to carry such a mistake further, and may lose points only in its own
-task and the end-to-end one; where the end-to-end test names the step that is wrong (Labs 3
-and 6), the name must be the mutated one. Labs 1 and 4 have no end-to-end task: their later
+task and the end-to-end one; where the end-to-end test names the step that is wrong (Labs 3,
+5 and 6), the name must be the mutated one. Labs 1 and 4 have no end-to-end task: their later
 tasks run on given kernels (Lab 1's closest_hit on a given Möller–Trumbore, Lab 4's step
 integral and its single scattering in a given march).
 """
@@ -55,7 +55,7 @@ CASES = [
     # Lab 5: the V-buffer's phase g (task 2) fed every whole frame, once graded under
     # task 7 with the application.
     Case("g_not_scattering_weighted", 2, "voxelize or media_at or apply_froxels or "
-         "render_froxels"),
+         "render_froxels", names="voxelize"),
     # Lab 6: the fill rule (task 2) fed rasterize (task 3) and everything after it.
     Case("no_fill_rule", 2, "coverage_fill or rasterize_visibility or "
          "perspective_correct_exact or hybrid or rasterize_mesh"),
