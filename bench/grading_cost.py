@@ -70,8 +70,17 @@ def _command(pid: int) -> str:
         words = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
     except OSError:
         return "?"
-    text = " ".join(w.decode(errors="replace") for w in words if w)
+    text = " ".join(_portable(w.decode(errors="replace"), i) for i, w in enumerate(words) if w)
     return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _portable(word: str, index: int) -> str:
+    """A command-line word as any machine would write it: the program by its name, paths in
+    the temporary folder as ``$TMPDIR/...`` (the record names no folder of this machine)."""
+    if index == 0 and word.startswith("/"):
+        return Path(word).name
+    tmp = tempfile.gettempdir().rstrip("/") + "/"
+    return "$TMPDIR/" + word[len(tmp):] if word.startswith(tmp) else word
 
 
 def tree_pss(pid: int) -> dict[int, tuple[int, int, str]]:
