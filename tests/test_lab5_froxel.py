@@ -1679,6 +1679,11 @@ def test_scene_grid_fits_the_media():
     assert grid.tile == 1 and grid.slices == 64, grid
     big = dataclasses.replace(VIEW_CAMERA, width=640, height=360)
     assert scene_grid(box, big).tile == 8, "150 pixels across the box: 8-pixel tiles suffice"
+    # A small box far away in a 1080p image: tiles of 1 would make 130M froxels; the grid
+    # never has more tiles than 8-pixel tiles at 1920 x 1080.
+    hd = dataclasses.replace(VIEW_CAMERA, eye=(0.5, 1.5, 60.0), width=1920, height=1080)
+    assert scene_grid(box, hd).tile == 8, "a 2 m box 60 m away at 1080p: tile 8 (the cap)"
+    assert scene_grid(box, dataclasses.replace(hd, width=960, height=540)).tile == 4
     kept = scene_grid(box, VIEW_CAMERA, tile=8, slices=16, near=0.5, far=50.0)
     assert (kept.tile, kept.slices, kept.near, kept.far) == (8, 16, 0.5, 50.0)
     # Unbounded media keep 0.1 .. 100 m; a camera inside the box keeps tile 8 and near 0.1

@@ -581,13 +581,15 @@ def volume_bounds(scene: Scene, grid: FroxelGrid):
     return lo, hi
 
 
-
 # The froxel grid a scene requires. Froxels sample the media at their centres and the image
 # reads them bilinearly between tile centres: a fog volume spanning few tiles on screen
 # loses or gains light along its silhouette (a 4 m box 8 tiles across: -6% in mean
 # radiance), and slices spread over 0.1 .. 100 m put few of them where a small volume is.
 TILE, SLICES, NEAR, FAR = 8, 64, 0.1, 100.0
 TILES_PER_VOLUME = 12
+# Smaller tiles never make more screen tiles than 8-pixel tiles at 1920 x 1080: a small
+# volume far away in a large image keeps the talk's grid rather than 130M froxels.
+MAX_TILES = 240 * 135
 
 
 def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None,
@@ -600,8 +602,9 @@ def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None
     (height or constant fog) or the media lie behind the camera. ``tile`` None: the largest
     of ``TILE``, ``TILE / 2``, ... 1 at which every fog volume in front of the camera (and not
     around it) spans ``TILES_PER_VOLUME`` tiles across its thinnest side at its centre's
-    depth. A scene of unbounded media, or volumes filling the view, keeps ``TILE``; a 2 m box
-    5 m away in a 64 x 36 image gets tile 1 (36 x 64 x 64 froxels, few of them lit).
+    depth, as long as the screen holds at most ``MAX_TILES`` tiles. A scene of unbounded
+    media, or volumes filling the view, keeps ``TILE``; a 2 m box 5 m away in a 64 x 36
+    image gets tile 1 (36 x 64 x 64 froxels, few of them lit).
     Given numbers are kept (and checked by ``FroxelGrid``).
     """
     if tile is None or near is None or far is None:
@@ -631,7 +634,9 @@ def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None
             far = (max(hi, near * 1.01) if given else hi) if far is None else far
         if tile is None:
             tile = TILE
-            while tile > 1 and any(s < TILES_PER_VOLUME * tile for s in sizes):
+            while tile > 1 and any(s < TILES_PER_VOLUME * tile for s in sizes) and (
+                    -(-camera.width // (tile // 2)) * -(-camera.height // (tile // 2))
+                    <= MAX_TILES):
                 tile //= 2
     return FroxelGrid(camera, tile, slices, near, far)
 
