@@ -22,7 +22,7 @@ MUTANTS = load_mutants(ROOT)
 
 def _rtcourse(*args, cwd, timeout=900):
     return subprocess.run([sys.executable, "-m", "course.tools.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout)
+                          capture_output=True, text=True, timeout=timeout, check=False)
 
 
 @pytest.fixture(scope="module")
