@@ -66,11 +66,18 @@ UNIFORM = [True, False]  # skip stages no lane needs / run every stage masked
 # with the stack's top in registers first, then one knob changed at a time.
 TRITON_LAUNCHES = [
     {"block": b, "num_warps": w, "uniform_branches": u, "stack_regs": r, "tris_per_step": k,
-     "speculate": sp}
-    for b, w, u, r, k, sp in [
-        (32, 1, True, 4, 1, False), (32, 1, True, 0, 1, False), (32, 1, True, 4, 2, False),
-        (32, 1, True, 4, 1, True), (32, 1, True, 4, 2, True), (32, 1, False, 4, 1, False),
-        (64, 1, True, 4, 1, False), (64, 1, True, 4, 1, True), (64, 2, True, 4, 1, False)]
+     "speculate": sp, "loop": lp, "stack": st}
+    for b, w, u, r, k, sp, lp, st in [
+        (32, 1, True, 4, 1, False, "if", "global"), (32, 1, True, 0, 1, False, "if", "global"),
+        (32, 1, True, 4, 2, False, "if", "global"), (32, 1, True, 4, 1, True, "if", "global"),
+        (32, 1, True, 4, 2, True, "if", "global"), (32, 1, False, 4, 1, False, "if", "global"),
+        (64, 1, True, 4, 1, False, "if", "global"), (64, 1, True, 4, 1, True, "if", "global"),
+        (64, 2, True, 4, 1, False, "if", "global"),
+        # the CUDA C kernel's loop shape, then its stack's place
+        (32, 1, True, 0, 1, False, "while", "global"), (32, 1, True, 4, 1, False, "while", "global"),
+        (32, 1, True, 0, 1, True, "while", "global"), (32, 1, True, 0, 1, False, "if", "local"),
+        (32, 1, True, 0, 1, True, "if", "local"), (32, 1, True, 0, 1, False, "while", "local"),
+        (32, 1, True, 0, 1, True, "while", "local"), (32, 1, True, 0, 2, True, "while", "local")]
 ]
 CUDA_BLOCKS = [64, 128, 256]
 CUDA_CAPPED = [False, True]  # the compiler's registers / at most 40 (MIN_BLOCKS)
@@ -181,16 +188,21 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
         launches = TRITON_LAUNCHES if device.type == "cuda" else TRITON_LAUNCHES[:1]
         for kw in launches:
             fn = triton_tracer.trace_flat_triton
-            hits, info = fn(bvh, rays_o, rays_d, return_info=True, **kw)
+            try:
+                hits, info = fn(bvh, rays_o, rays_d, return_info=True, **kw)
+            except Exception as error:  # a launch that does not compile is a row of its own
+                print(f"Triton {kw}: failed: {type(error).__name__}: {str(error)[:300]}")
+                continue
             reference = reference or hits
             t = time_fn(fn, bvh, rays_o, rays_d, repeats=repeats, warmup=1, **kw)
             launch = (_launch(kw["block"], kw["num_warps"], kw["uniform_branches"])
                       + f", stack top {kw['stack_regs']} in registers, "
                       f"{kw['tris_per_step']} tri/step"
-                      + (", speculative" if kw["speculate"] else ""))
+                      + (", speculative" if kw["speculate"] else "")
+                      + f", {kw['loop']}-{kw['loop']} loop, {kw['stack']} stack")
             row = table.add(scene=scene_name, rays=kind, impl="Triton", launch=launch, n_rays=n,
                             stack_regs=kw["stack_regs"], tris_per_step=kw["tris_per_step"],
-                            speculate=kw["speculate"],
+                            speculate=kw["speculate"], loop=kw["loop"], stack=kw["stack"],
                             ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
                             **triton_row(info), same_as_first=agreement(hits, reference),
                             **hit_errors(scene, rays_o, rays_d, hits, sample))

@@ -77,6 +77,18 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
     for spec in (False, True):
         out["any", spec] = tt.trace_flat_triton(deep, *args, any_hit=True,
                                                 speculate=spec).to("cpu")
+    # The while-while loop and the local-memory stack (compiled only; the interpreter runs
+    # one while-while walk, its stack in the buffer): the same results as the if-if loop.
+    loops = ([("while", "global", 0, True)] if tt.interpreting() else
+             [(loop, stack, regs, spec) for loop in ("if", "while") for stack in ("global", "local")
+              for regs in (0, 4) for spec in (False, True) if not (stack == "local" and regs)])
+    out["loops"] = {key: tt.trace_flat_triton(deep, *args, loop=key[0], stack=key[1],
+                                              stack_regs=key[2], speculate=key[3]).to("cpu")
+                    for key in loops}
+    out["loops_any"] = {key: tt.trace_flat_triton(deep, *args, loop=key[0], stack=key[1],
+                                                  stack_regs=key[2], speculate=key[3],
+                                                  any_hit=True).to("cpu")
+                        for key in loops}
     v, f, o, d = axis_parallel_case()
     out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
                                        o.to(device), d.to(device)).to("cpu")
@@ -117,6 +129,14 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
         check_hits(case, out["any", spec], f"{label} any hit, speculate={spec}", any_hit=True,
                    ref=ref)
         assert torch.equal(out["any", spec].hit, out["deep"].hit)
+    for (loop, stack, regs, spec), hits in out["loops"].items():
+        what = f"{label}: loop={loop!r}, stack={stack!r}, stack_regs={regs}, speculate={spec}"
+        for field in ("t", "triangle", "u", "v"):
+            assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
+                f"{what} changed {field} on rays "
+                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0].tolist()}")
+        check_hits(case, out["loops_any"][loop, stack, regs, spec], f"{what} any hit",
+                   any_hit=True, ref=ref)
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device="cpu")
         want = render_reference(scene, o, d)
@@ -193,6 +213,8 @@ def test_bad_arguments_raise_clear_errors():
                          ({"block": 48}, "block"), ({"num_warps": 3}, "num_warps"),
                          ({"block": 32, "num_warps": 2}, "block"), ({"bvh": "x"}, "bvh"),
                          ({"stack_regs": 2}, "stack_regs"), ({"tris_per_step": 3}, "tris_per"),
+                         ({"loop": "do"}, "loop"), ({"stack": "shared"}, "stack"),
+                         ({"stack": "local", "stack_regs": 4}, "stack_regs"),
                          ({"t_min": torch.zeros(7)}, "t_min")]:
         args = {"bvh": bvh, "origins": o, "directions": d, **kwargs}
         with pytest.raises((ValueError, TypeError), match=word):

@@ -94,8 +94,13 @@ DEFAULT_UNIFORM = True
 DEFAULT_STACK_REGS = 4
 DEFAULT_TRIS_PER_STEP = 1
 DEFAULT_SPECULATE = True
+DEFAULT_LOOP = "if"
+DEFAULT_STACK = "global"
+LOOPS = ("if", "while")
 # The uber kernel's walk, as measured for its frames (bench/results/nvidia-h200/lab3_packed/).
 UBER_STACK_REGS, UBER_TRIS_PER_STEP, UBER_SPECULATE = 4, 1, False
+LOCAL_STACK = tl.constexpr(-1) if tl is not None else -1
+"""``REGS`` of a stack in each lane's local memory (compiled only; ``stack="local"``)."""
 NONE = tl.constexpr(-2147483648) if tl is not None else -2147483648
 """The walk's "no node" (int32 min: every other negative value is a leaf's ``~first``)."""
 
@@ -138,6 +143,18 @@ def _f(x):
 
 
 @_jit
+def _rcp(x, VEC: tl.constexpr):
+    """``1 / x`` correctly rounded. Compiled: ``rcp.rn.f32`` (what the CUDA C kernel's
+    ``__frcp_rn`` is), a few instructions where the IEEE division ``div.rn.f32`` is a
+    subroutine; both round the exact quotient, so the bits are the same."""
+    if VEC:
+        return tl.inline_asm_elementwise("rcp.rn.f32 $0, $1;", "=f,f", [x], dtype=tl.float32,
+                                         is_pure=True, pack=1)
+    else:
+        return tl.math.div_rn(tl.full(x.shape, 1.0, tl.float32), x)
+
+
+@_jit
 def _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz, t_lo, t_hi,
           EXIT: tl.constexpr, SANITIZE: tl.constexpr):
     """Rays against one box each: (entry distance, hit?). Each axis's near plane is lo
@@ -176,11 +193,28 @@ def _dispatch(mask, ref, node, cur):
 
 
 @_jit
+def _local_stack(like):
+    """A 64-entry int32 array in each lane's local memory (what ``int stack[64]`` is in
+    CUDA C: interleaved across the warp, cached write-back in L1) and its address: a
+    ``.local`` declaration in inline PTX, kept by ptxas because its address is used."""
+    return tl.inline_asm_elementwise(
+        "{ .local .align 16 .b32 stk[64]; mov.u64 $0, stk; }", "=l,r", [like],
+        dtype=tl.int64, is_pure=False, pack=1)
+
+
+@_jit
 def _push(stack_ptr, slot, stride, sp, value, mask, s0, s1, s2, s3, REGS: tl.constexpr):
     """Push ``value`` in the lanes of ``mask``. REGS = 4: the top four entries live in
     registers (s0 the top); the one they push out goes to the memory stack, whose entries
-    are ``0 .. sp - 5``. REGS = 0: every entry in memory. Returns (sp, s0, s1, s2, s3)."""
-    if REGS == 0:
+    are ``0 .. sp - 5``. REGS = 0: every entry in memory. REGS = LOCAL_STACK: every entry in
+    the lane's local memory (see _local_stack; ``slot`` is its address). Returns (sp, s0,
+    s1, s2, s3)."""
+    if REGS == LOCAL_STACK:
+        tl.inline_asm_elementwise(
+            "{ .reg .pred p; setp.ne.s32 p, $3, 0; @p st.local.b32 [$1], $2; mov.b32 $0, 0; }",
+            "=r,l,r,r", [slot + sp.to(tl.int64) * 4, value, mask.to(tl.int32)],
+            dtype=tl.int32, is_pure=False, pack=1)
+    elif REGS == 0:
         tl.store(stack_ptr + sp * stride + slot, value, mask=mask)
     else:
         tl.store(stack_ptr + (sp - 4) * stride + slot, s3, mask=mask & (sp >= 4))
@@ -195,7 +229,12 @@ def _push(stack_ptr, slot, stride, sp, value, mask, s0, s1, s2, s3, REGS: tl.con
 def _pop(stack_ptr, slot, stride, sp, mask, s0, s1, s2, s3, REGS: tl.constexpr):
     """Pop the top entry in the lanes of ``mask`` (see _push). Returns (value, sp, s0..s3)."""
     sp = sp - mask.to(tl.int32)
-    if REGS == 0:
+    if REGS == LOCAL_STACK:
+        value = tl.inline_asm_elementwise(
+            "{ .reg .pred p; setp.ne.s32 p, $2, 0; mov.b32 $0, 0; @p ld.local.b32 $0, [$1]; }",
+            "=r,l,r", [slot + sp.to(tl.int64) * 4, mask.to(tl.int32)], dtype=tl.int32,
+            is_pure=False, pack=1)
+    elif REGS == 0:
         value = tl.load(stack_ptr + sp * stride + slot, mask=mask, other=0)
     else:
         value = s0
@@ -251,7 +290,7 @@ def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
     py = dz * e2x - dx * e2z
     pz = dx * e2y - dy * e2x
     det = e1x * px + e1y * py + e1z * pz
-    inv = tl.math.div_rn(tl.full(det.shape, 1.0, tl.float32), det)
+    inv = _rcp(det, VEC)
     sx = ox - v0x
     sy = oy - v0y
     sz = oz - v0z
@@ -269,11 +308,82 @@ def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
 
 
 @_jit
+def _start_waiting(alive, node, cur, SPECULATE: tl.constexpr):
+    """Speculative traversal: a leaf waiting in ``node`` becomes the pending leaf once the
+    current one is done."""
+    if SPECULATE:
+        waiting = alive & (cur < 0) & (node < 0) & (node != NONE)
+        cur = tl.where(waiting, -1 - node, cur)
+        node = tl.where(waiting, NONE, node)
+    return node, cur
+
+
+@_jit
+def _pop_or_finish(stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3,
+                   REGS: tl.constexpr, SPECULATE: tl.constexpr):
+    """A lane with no node pops its stack; with an empty stack and no leaf work it is done.
+    Without SPECULATE a lane with leaf work waits for it before popping."""
+    no_node = alive & (node == NONE)
+    alive = alive & ~(no_node & (cur < 0) & (sp == 0))
+    if SPECULATE:  # traverse on while the leaf's triangles are tested
+        pop = no_node & (sp > 0)
+    else:
+        pop = no_node & (cur < 0) & (sp > 0)
+    ref, sp, s0, s1, s2, s3 = _pop(stack_ptr, slot, stride, sp, pop, s0, s1, s2, s3, REGS)
+    node, cur = _dispatch(pop, ref, node, cur)
+    return alive, node, cur, sp, s0, s1, s2, s3
+
+
+@_jit
+def _while_while(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz,
+                 neg_x, neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t,
+                 best_row, best_tri, best_u, best_v, ANY_HIT: tl.constexpr,
+                 EXIT: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
+                 REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr):
+    """The walk as Aila & Laine's *while-while* loop, the shape of the CUDA C kernel: the
+    program traverses while some lane still looks for a leaf (a lane that found one waits
+    or, with SPECULATE, traverses on and parks one more), then tests triangles while some
+    lane has leaf work, then pops. A warp running that C code diverges the same way; here
+    each inner loop is a vote over the lanes. Same state and results as the *if-if* loop
+    of ``_trace``."""
+    votes = tl.reduce(alive.to(tl.int32), 0, _or)
+    while votes != 0:
+        # TRAVERSE (and pop) until every lane has a leaf or is done.
+        searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
+        while searching != 0:
+            node, sp, cur, s0, s1, s2, s3 = _visit(
+                pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
+                t_lo, best_t, alive & (node >= 0), node, sp, cur, s0, s1, s2, s3, EXIT, VEC,
+                SANITIZE, REGS)
+            alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
+                stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS,
+                SPECULATE)
+            searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
+        # INTERSECT while some lane has leaf work (a parked leaf follows its predecessor).
+        testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
+        while testing != 0:
+            for _k in tl.static_range(TRIS):
+                test = alive & (cur >= 0)
+                best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
+                    tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
+                    best_t, best_row, best_tri, best_u, best_v, VEC)
+                if ANY_HIT:
+                    alive = alive & ~hit
+            node, cur = _start_waiting(alive, node, cur, SPECULATE)
+            testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
+        # POP: lanes left with no node go on from their stack (or finish).
+        alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
+            stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
+        votes = tl.reduce(alive.to(tl.int32), 0, _or)
+    return best_t, best_row, best_u, best_v
+
+
+@_jit
 def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
            ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT: tl.constexpr,
            EXIT: tl.constexpr, UNIFORM: tl.constexpr, VEC: tl.constexpr,
            SANITIZE: tl.constexpr, REGS: tl.constexpr, TRIS: tl.constexpr,
-           SPECULATE: tl.constexpr):
+           SPECULATE: tl.constexpr, WHILE: tl.constexpr):
     """Walk the BVH for every lane with ``alive`` set: the TRAVERSE/INTERSECT/POP loop.
 
     pairs, tris: the int32 views of the ``pairs`` and ``triangles`` layouts; root: the
@@ -289,10 +399,9 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
     in both stages of a step instead of idling through one.
     Returns ``(t, row, u, v)``: row (int32) of the hit in the triangle layout, -1 on a miss.
     """
-    one = tl.full(ox.shape, 1.0, tl.float32)
-    ix = tl.math.div_rn(one, dx)  # IEEE: 1/+-0 = +-inf, which the slab test expects
-    iy = tl.math.div_rn(one, dy)
-    iz = tl.math.div_rn(one, dz)
+    ix = _rcp(dx, VEC)  # IEEE: 1/+-0 = +-inf, which the slab test expects
+    iy = _rcp(dy, VEC)
+    iz = _rcp(dz, VEC)
     neg_x = ix.to(tl.int32, bitcast=True) < 0  # the sign bit: -0 counts as negative
     neg_y = iy.to(tl.int32, bitcast=True) < 0
     neg_z = iz.to(tl.int32, bitcast=True) < 0
@@ -314,11 +423,20 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
     node = zero_i + NONE  # the pair row to visit next (or a leaf waiting); NONE: none
     cur = zero_i - 1  # the leaf row to test next; -1: none
     node, cur = _dispatch(alive, zero_i + root_ref, node, cur)
+    if REGS == LOCAL_STACK:
+        slot = _local_stack(zero_i)
     sp = zero_i
     s0 = zero_i
     s1 = zero_i
     s2 = zero_i
     s3 = zero_i
+    if WHILE:
+        best_t, best_row, best_u, best_v = _while_while(
+            pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz,
+            neg_x, neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t,
+            best_row, best_tri, best_u, best_v, ANY_HIT, EXIT, VEC, SANITIZE, REGS, TRIS,
+            SPECULATE)
+        return best_t, best_row, best_u, best_v
     # One vote per step for the loop and the TRAVERSE skip: bit 0 some lane alive, bit 1
     # some lane at an interior node.
     votes = tl.reduce(alive.to(tl.int32) | ((node >= 0).to(tl.int32) << 1), 0, _or)
@@ -351,19 +469,9 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
             if ANY_HIT:
                 alive = alive & ~hit
         # 3. POP: a lane with no node and no leaf work pops its stack (or finishes)
-        if SPECULATE:
-            # A leaf waiting in node starts once the current one is done.
-            waiting = alive & (cur < 0) & (node < 0) & (node != NONE)
-            cur = tl.where(waiting, -1 - node, cur)
-            node = tl.where(waiting, NONE, node)
-        no_node = alive & (node == NONE)
-        alive = alive & ~(no_node & (cur < 0) & (sp == 0))
-        if SPECULATE:  # traverse on while the leaf's triangles are tested
-            pop = no_node & (sp > 0)
-        else:
-            pop = no_node & (cur < 0) & (sp > 0)
-        ref, sp, s0, s1, s2, s3 = _pop(stack_ptr, slot, stride, sp, pop, s0, s1, s2, s3, REGS)
-        node, cur = _dispatch(pop, ref, node, cur)
+        node, cur = _start_waiting(alive, node, cur, SPECULATE)
+        alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
+            stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
         votes = tl.reduce(alive.to(tl.int32) | ((alive & (node >= 0)).to(tl.int32) << 1), 0,
                           _or)
     return best_t, best_row, best_u, best_v
@@ -384,7 +492,7 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, r
                   BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr,
                   UNIFORM: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
                   REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr,
-                  TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
+                  WHILE: tl.constexpr, TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
     slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = slot < n_rays
     ox = tl.load(o_ptr + slot * 3 + 0, mask=live, other=0.0)
@@ -406,7 +514,7 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, r
     alive = live & _valid(ox, oy, oz, dx, dy, dz) & (t_lo <= t_hi)
     t, row, u, v = _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
                           ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT, UNIFORM,
-                          VEC, SANITIZE, REGS, TRIS, SPECULATE)
+                          VEC, SANITIZE, REGS, TRIS, SPECULATE, WHILE)
     hit = row >= 0
     tri = tl.load(tris + row * 12 + 3, mask=hit, other=-1)
     tl.store(t_ptr + slot, tl.where(hit, t, float("inf")), mask=live)
@@ -462,7 +570,7 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
     for depth in range(MAX_DEPTH + 1):
         t, row, _u, _v = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot, stride,
                                 ox, oy, oz, dx, dy, dz, zero, inf, active, False, EXIT,
-                                UNIFORM, VEC, SANITIZE, REGS, TRIS, SPECULATE)
+                                UNIFORM, VEC, SANITIZE, REGS, TRIS, SPECULATE, False)
         hit = active & (row >= 0)
         miss = active & (row < 0)
         c_r += tl.where(miss, w_r * bg_r, 0.0)
@@ -534,7 +642,7 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
             _t, occluder, _u2, _v2 = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot,
                                             stride, px, py, pz, lx, ly, lz, zero, s_max, want,
                                             True, EXIT, UNIFORM, VEC, SANITIZE, REGS, TRIS,
-                                            SPECULATE)
+                                            SPECULATE, False)
             lit = want & (occluder < 0)
             hx = lx - dx
             hy = ly - dy
@@ -581,7 +689,9 @@ def interpreting() -> bool:
     return type(_trace_kernel).__name__ == "InterpretedFunction"
 
 
-def _check_walk(stack_regs: int, tris_per_step: int) -> None:
+def _check_walk(stack_regs: int, tris_per_step: int, loop: str = DEFAULT_LOOP) -> None:
+    if loop not in LOOPS:
+        raise ValueError(f"loop: expected one of {LOOPS}, got {loop!r}")
     if stack_regs not in (0, 4) or isinstance(stack_regs, bool):
         raise ValueError(f"stack_regs: expected 0 or 4, got {stack_regs!r}")
     if tris_per_step not in (1, 2) or isinstance(tris_per_step, bool):
@@ -668,7 +778,8 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                       uniform_branches: bool = DEFAULT_UNIFORM,
                       stack_regs: int = DEFAULT_STACK_REGS,
                       tris_per_step: int = DEFAULT_TRIS_PER_STEP,
-                      speculate: bool = DEFAULT_SPECULATE, return_info: bool = False):
+                      speculate: bool = DEFAULT_SPECULATE, loop: str = DEFAULT_LOOP,
+                      stack: str = DEFAULT_STACK, return_info: bool = False):
     """Closest (or any) hit of each ray by the Triton BVH walk (one ray per lane).
 
     bvh: ``build_flat_bvh(...)`` on the rays' device; origins, directions: (N, 3) float
@@ -677,14 +788,22 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     skip a stage of a step that no lane of the program needs (see ``_trace``);
     stack_regs: the stack's top entries kept in registers (0 or 4); tris_per_step:
     triangle tests per step (1 or 2); speculate: keep traversing while a leaf is tested
-    (see ``_trace``).
+    (see ``_trace``); loop: ``"if"``, one TRAVERSE and one INTERSECT stage per step, or
+    ``"while"``, traverse while some lane looks for a leaf, then test while some lane has
+    one (``_while_while``, the CUDA C kernel's shape); stack: ``"global"``, each lane's
+    entries in a scratch buffer, or ``"local"``, in the lane's local memory like CUDA C's
+    (compiled only: the interpreter uses the buffer; needs ``stack_regs=0``).
     Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
     """
     _require_triton()
     o, d, (t_lo, lo_value), (t_hi, hi_value) = check_ray_bounds(origins, directions, t_min,
                                                                 t_max)
     _check_launch(block, num_warps)
-    _check_walk(stack_regs, tris_per_step)
+    _check_walk(stack_regs, tris_per_step, loop)
+    if stack not in ("global", "local"):
+        raise ValueError(f"stack: expected 'global' or 'local', got {stack!r}")
+    if stack == "local" and stack_regs:
+        raise ValueError(f"stack_regs: expected 0 with stack='local', got {stack_regs!r}")
     n, device = o.shape[0], o.device
     _device_check(device)
     pairs, root, _tris_f, tris, root_ref = _bvh_args(bvh, device)
@@ -705,8 +824,8 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                 out_t, out_id, out_u, out_v, n, lanes,
                 BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE,
                 UNIFORM=bool(uniform_branches), VEC=compiled, SANITIZE=not compiled,
-                REGS=stack_regs, TRIS=tris_per_step, SPECULATE=bool(speculate),
-                TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
+                REGS=-1 if stack == "local" and compiled else stack_regs, TRIS=tris_per_step,
+                SPECULATE=bool(speculate), WHILE=loop == "while", TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
     hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
     if return_info:
         name = "any_hit" if any_hit else "closest_hit"
