@@ -15,13 +15,15 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
 
     rays: N rays; mesh: the BVH's mesh; bvh: a BVH dict; any_hit: stop each ray at its
     first hit (shadow rays: "is anything in ``[t_min, t_max]``?"); check_every: ``k``, the
-    steps run between two looks at the rays (one host sync each); compile: False, True or
-    a ``torch.compile`` mode for the steps; ``"reduce-overhead"`` compiles them as
-    ``"default"`` and, on a GPU, replays the ``k`` steps of a look from one CUDA graph,
-    captured once per (padded) number of rays and kept for later calls with the same
-    ``walk`` (packed here: a graph of one step, replayed ``k`` times, not kept); compact: at a look, drop finished rays if at most half (an
-    eighth with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
-    once and trace it many times (default: packed here, for the octants of these rays);
+    steps run between two looks at the rays (a look reads how many still run: on a GPU one
+    look late, see below); compile: False, True or a ``torch.compile`` mode for the steps;
+    ``"reduce-overhead"`` compiles them as ``"default"`` and, on a GPU, replays the ``k``
+    steps of a look from one CUDA graph, captured once per (padded) number of rays and
+    kept for later calls with the same ``walk`` (packed here: a graph of one step,
+    replayed ``k`` times, not kept); compact: at a look, drop finished rays if at most
+    half (a quarter with graphs) may still be running; walk: ``pack_bvh(bvh, mesh)``, to
+    pack a tree once and trace it many times (default: packed here, for the octants of
+    these rays);
     fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
     could stay in registers across them, but the compile time grows with them (2 CPU
     cores: 21 s for 1 step, 2 minutes for 8) and 8 ran slower than 1 on the CPU and on an
@@ -41,21 +43,35 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
       ray's octant visits the nodes an ordered stack traversal would, and a ray's whole
       state is a few numbers: node, leaf slot, closest hit, counters;
     * every tensor keeps its shape: all rays step together, finished ones masked
-      (``node == M``); rays that miss the root box never start;
+      (``node == M``); rays that miss the root box never start (one host sync, before any
+      step is queued). The rays live in two tensors, one column each (floats: origin,
+      direction, inverse, ``t_min, t_max``, closest ``t, u, v``; int32: octant row, node,
+      slot, end, counters, triangle, the ray's column in the outputs), with at least one
+      finished padding column after them;
     * a step does **one** box test and **one** triangle test per ray and keeps what its
       state asks for: outside a leaf, the node's box (hit: descend to ``i + 1``, or enter
       the leaf's slots; miss or beyond the closest hit: ``skip``); inside a leaf, the next
       slot (Möller–Trumbore in the mesh's dtype; ties to the lowest triangle index);
       after the last slot, ``skip``;
     * the host looks only every ``k`` steps: stop when every ray is done, compact if few
-      rays are left;
+      rays are left. On a GPU a look queues its steps, then copies the count of running
+      rays asynchronously to pinned host memory and records an event; the host then waits
+      only on the *previous* look's event, so the device always has the next look queued
+      while the host reads a count and decides. Rays only finish, so that count bounds
+      the rays running now: it sizes a compaction, and the one look too many run at the
+      end only steps finished rays. A compaction has no sync either: a cumulative sum of
+      the running flags gives each running ray its new column, scattered into an index
+      vector whose other entries point at the padding column; two ``index_select`` gather
+      both tensors straight into the next buffers (with graphs: the next graph's own), and
+      one indexed write per tensor puts every ray's results in the outputs (padding into
+      a spare last column);
     * a step is gathers from read-only tables and elementwise ops, nothing else, so
       ``torch.compile`` turns it into **one kernel** (one thread per ray, the state in
       registers): the lecture's kernel, written in torch; on a GPU one CUDA graph holds
       the ``k`` steps between two looks. With a ``walk`` packed once, the rays are padded
       (with finished ones) to a few sizes, so the graphs of a size are captured once and
       replayed by every later traversal of that size: a warm traversal pays no capture and
-      no compiled call.
+      no compiled call. A warm look is a graph launch, a copy and an event on the host.
 
     The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
     in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
