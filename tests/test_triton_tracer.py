@@ -82,20 +82,13 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
     loops = ([("while", "global", 0, True)] if tt.interpreting() else
              [(loop, stack, regs, spec) for loop in ("if", "while") for stack in ("global", "local")
               for regs in (0, 4) for spec in (False, True) if not (stack == "local" and regs)])
-    # Warps of one program looping on their own votes (compiled; the interpreter votes over
-    # the program, which cannot differ): block 64 or 128 in 2 or 4 warps.
-    loops += [] if tt.interpreting() else [
-        (loop, stack, 0, True, block) for loop in ("if", "while") for stack in ("global", "local")
-        for block in (64, 128)]
-    loops = [key if len(key) == 5 else (*key, 32) for key in loops]
-    def walk(key, **kw):
-        loop, stack, regs, spec, block = key
-        return tt.trace_flat_triton(deep, *args, loop=loop, stack=stack, stack_regs=regs,
-                                    speculate=spec, block=block, num_warps=block // 32,
-                                    warp_votes=block > 32, **kw).to("cpu")
-
-    out["loops"] = {key: walk(key) for key in loops}
-    out["loops_any"] = {key: walk(key, any_hit=True) for key in loops}
+    out["loops"] = {key: tt.trace_flat_triton(deep, *args, loop=key[0], stack=key[1],
+                                              stack_regs=key[2], speculate=key[3]).to("cpu")
+                    for key in loops}
+    out["loops_any"] = {key: tt.trace_flat_triton(deep, *args, loop=key[0], stack=key[1],
+                                                  stack_regs=key[2], speculate=key[3],
+                                                  any_hit=True).to("cpu")
+                        for key in loops}
     v, f, o, d = axis_parallel_case()
     out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
                                        o.to(device), d.to(device)).to("cpu")
@@ -136,15 +129,13 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
         check_hits(case, out["any", spec], f"{label} any hit, speculate={spec}", any_hit=True,
                    ref=ref)
         assert torch.equal(out["any", spec].hit, out["deep"].hit)
-    for key, hits in out["loops"].items():
-        loop, stack, regs, spec, block = key
-        what = (f"{label}: loop={loop!r}, stack={stack!r}, stack_regs={regs}, speculate={spec}, "
-                f"{block} lanes in {block // 32} warps voting apart")
+    for (loop, stack, regs, spec), hits in out["loops"].items():
+        what = f"{label}: loop={loop!r}, stack={stack!r}, stack_regs={regs}, speculate={spec}"
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
                 f"{what} changed {field} on rays "
                 f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0].tolist()}")
-        check_hits(case, out["loops_any"][key], f"{what} any hit",
+        check_hits(case, out["loops_any"][loop, stack, regs, spec], f"{what} any hit",
                    any_hit=True, ref=ref)
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device="cpu")

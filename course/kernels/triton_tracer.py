@@ -308,23 +308,6 @@ def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
 
 
 @_jit
-def _vote(bits, flags, lane_warp, my_warp, WARPS: tl.constexpr):
-    """The OR of ``bits`` (int32) over the lanes that share a loop: the program's lanes
-    (WARPS = 1, or interpreted: ``tl.reduce``, one warp's ``redux.sync``), or, with WARPS > 1
-    compiled, each warp's own 32 lanes: ``redux.sync.or`` in the warp, written to the warp's
-    word of ``flags`` and read back as a scalar, so the warps of one program run their loops
-    apart (no barrier inside them), as the warps of a CUDA block do. A Triton program is a
-    CTA and an SM holds at most 32 of them: one-warp programs cap it at 32 warps (50%)."""
-    if WARPS == 1:
-        return tl.reduce(bits, 0, _or)
-    else:
-        warp = tl.inline_asm_elementwise("redux.sync.or.b32 $0, $1, 0xffffffff;", "=r,r",
-                                         [bits], dtype=tl.int32, is_pure=True, pack=1)
-        tl.store(flags + lane_warp, warp)
-        return tl.load(flags + my_warp, volatile=True)
-
-
-@_jit
 def _start_waiting(alive, node, cur, SPECULATE: tl.constexpr):
     """Speculative traversal: a leaf waiting in ``node`` becomes the pending leaf once the
     current one is done."""
@@ -354,21 +337,19 @@ def _pop_or_finish(stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3
 @_jit
 def _while_while(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz,
                  neg_x, neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t,
-                 best_row, best_tri, best_u, best_v, flags, lane_warp, my_warp,
-                 ANY_HIT: tl.constexpr, EXIT: tl.constexpr, VEC: tl.constexpr,
-                 SANITIZE: tl.constexpr, REGS: tl.constexpr, TRIS: tl.constexpr,
-                 SPECULATE: tl.constexpr, WARPS: tl.constexpr):
+                 best_row, best_tri, best_u, best_v, ANY_HIT: tl.constexpr,
+                 EXIT: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
+                 REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr):
     """The walk as Aila & Laine's *while-while* loop, the shape of the CUDA C kernel: the
     program traverses while some lane still looks for a leaf (a lane that found one waits
     or, with SPECULATE, traverses on and parks one more), then tests triangles while some
     lane has leaf work, then pops. A warp running that C code diverges the same way; here
     each inner loop is a vote over the lanes. Same state and results as the *if-if* loop
     of ``_trace``."""
-    votes = _vote(alive.to(tl.int32), flags, lane_warp, my_warp, WARPS)
+    votes = tl.reduce(alive.to(tl.int32), 0, _or)
     while votes != 0:
         # TRAVERSE (and pop) until every lane has a leaf or is done.
-        searching = _vote((alive & (node >= 0) & (cur < 0)).to(tl.int32), flags, lane_warp,
-                           my_warp, WARPS)
+        searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
         while searching != 0:
             node, sp, cur, s0, s1, s2, s3 = _visit(
                 pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
@@ -377,10 +358,9 @@ def _while_while(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, i
             alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
                 stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS,
                 SPECULATE)
-            searching = _vote((alive & (node >= 0) & (cur < 0)).to(tl.int32), flags, lane_warp,
-                           my_warp, WARPS)
+            searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
         # INTERSECT while some lane has leaf work (a parked leaf follows its predecessor).
-        testing = _vote((alive & (cur >= 0)).to(tl.int32), flags, lane_warp, my_warp, WARPS)
+        testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
         while testing != 0:
             for _k in tl.static_range(TRIS):
                 test = alive & (cur >= 0)
@@ -390,20 +370,20 @@ def _while_while(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, i
                 if ANY_HIT:
                     alive = alive & ~hit
             node, cur = _start_waiting(alive, node, cur, SPECULATE)
-            testing = _vote((alive & (cur >= 0)).to(tl.int32), flags, lane_warp, my_warp, WARPS)
+            testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
         # POP: lanes left with no node go on from their stack (or finish).
         alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
             stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
-        votes = _vote(alive.to(tl.int32), flags, lane_warp, my_warp, WARPS)
+        votes = tl.reduce(alive.to(tl.int32), 0, _or)
     return best_t, best_row, best_u, best_v
 
 
 @_jit
-def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride, flags,
+def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
            ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT: tl.constexpr,
            EXIT: tl.constexpr, UNIFORM: tl.constexpr, VEC: tl.constexpr,
            SANITIZE: tl.constexpr, REGS: tl.constexpr, TRIS: tl.constexpr,
-           SPECULATE: tl.constexpr, WHILE: tl.constexpr, WARPS: tl.constexpr):
+           SPECULATE: tl.constexpr, WHILE: tl.constexpr):
     """Walk the BVH for every lane with ``alive`` set: the TRAVERSE/INTERSECT/POP loop.
 
     pairs, tris: the int32 views of the ``pairs`` and ``triangles`` layouts; root: the
@@ -443,14 +423,6 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride, flags,
     node = zero_i + NONE  # the pair row to visit next (or a leaf waiting); NONE: none
     cur = zero_i - 1  # the leaf row to test next; -1: none
     node, cur = _dispatch(alive, zero_i + root_ref, node, cur)
-    # Per-warp votes (see _vote): each lane's warp, and this thread's as a scalar.
-    lane_warp = tl.arange(0, ox.shape[0]) // 32
-    my_warp = 0
-    if WARPS > 1:
-        flags = flags + tl.program_id(0) * WARPS
-        my_warp = tl.inline_asm_elementwise("mov.u32 $0, %tid.x; shr.u32 $0, $0, 5;", "=r,r",
-                                            [tl.program_id(0)], dtype=tl.int32, is_pure=True,
-                                            pack=1)
     if REGS == LOCAL_STACK:
         slot = _local_stack(zero_i)
     sp = zero_i
@@ -462,13 +434,12 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride, flags,
         best_t, best_row, best_u, best_v = _while_while(
             pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz,
             neg_x, neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t,
-            best_row, best_tri, best_u, best_v, flags, lane_warp, my_warp, ANY_HIT, EXIT, VEC,
-            SANITIZE, REGS, TRIS, SPECULATE, WARPS)
+            best_row, best_tri, best_u, best_v, ANY_HIT, EXIT, VEC, SANITIZE, REGS, TRIS,
+            SPECULATE)
         return best_t, best_row, best_u, best_v
     # One vote per step for the loop and the TRAVERSE skip: bit 0 some lane alive, bit 1
     # some lane at an interior node.
-    votes = _vote(alive.to(tl.int32) | ((node >= 0).to(tl.int32) << 1), flags, lane_warp,
-                  my_warp, WARPS)
+    votes = tl.reduce(alive.to(tl.int32) | ((node >= 0).to(tl.int32) << 1), 0, _or)
     while (votes & 1) != 0:
         # 1. TRAVERSE
         visit = alive & (node >= 0)
@@ -487,7 +458,7 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride, flags,
             test = alive & (cur >= 0)
             hit = test & (zero_i != 0)
             if UNIFORM:
-                if _vote(test.to(tl.int32), flags, lane_warp, my_warp, WARPS) != 0:
+                if tl.max(test.to(tl.int32), axis=0) > 0:
                     best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
                         tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
                         best_t, best_row, best_tri, best_u, best_v, VEC)
@@ -501,8 +472,8 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride, flags,
         node, cur = _start_waiting(alive, node, cur, SPECULATE)
         alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
             stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
-        votes = _vote(alive.to(tl.int32) | ((alive & (node >= 0)).to(tl.int32) << 1), flags,
-                      lane_warp, my_warp, WARPS)
+        votes = tl.reduce(alive.to(tl.int32) | ((alive & (node >= 0)).to(tl.int32) << 1), 0,
+                          _or)
     return best_t, best_row, best_u, best_v
 
 
@@ -517,11 +488,11 @@ def _valid(ox, oy, oz, dx, dy, dz):
 
 @_jit
 def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, root, tris,
-                  root_ref, stack_ptr, flags, t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
+                  root_ref, stack_ptr, t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
                   BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr,
                   UNIFORM: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
                   REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr,
-                  WHILE: tl.constexpr, WARPS: tl.constexpr, TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
+                  WHILE: tl.constexpr, TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
     slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = slot < n_rays
     ox = tl.load(o_ptr + slot * 3 + 0, mask=live, other=0.0)
@@ -541,9 +512,9 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, r
         t_hi = zero + thi_value
     # Rays that cannot hit (NaN/inf, zero direction, t_max < t_min or NaN) never walk.
     alive = live & _valid(ox, oy, oz, dx, dy, dz) & (t_lo <= t_hi)
-    t, row, u, v = _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride, flags,
+    t, row, u, v = _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
                           ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT, UNIFORM,
-                          VEC, SANITIZE, REGS, TRIS, SPECULATE, WHILE, WARPS)
+                          VEC, SANITIZE, REGS, TRIS, SPECULATE, WHILE)
     hit = row >= 0
     tri = tl.load(tris + row * 12 + 3, mask=hit, other=-1)
     tl.store(t_ptr + slot, tl.where(hit, t, float("inf")), mask=live)
@@ -597,9 +568,9 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
     active = live & finite
     inv_pi = 0.3183098861837907
     for depth in range(MAX_DEPTH + 1):
-        t, row, _u, _v = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot, stride, out_ptr,
+        t, row, _u, _v = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot, stride,
                                 ox, oy, oz, dx, dy, dz, zero, inf, active, False, EXIT,
-                                UNIFORM, VEC, SANITIZE, REGS, TRIS, SPECULATE, False, 1)
+                                UNIFORM, VEC, SANITIZE, REGS, TRIS, SPECULATE, False)
         hit = active & (row >= 0)
         miss = active & (row < 0)
         c_r += tl.where(miss, w_r * bg_r, 0.0)
@@ -669,9 +640,9 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
             ndl = nx * lx + ny * ly + nz * lz
             want = hit & (ndl > 0.0)
             _t, occluder, _u2, _v2 = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot,
-                                            stride, out_ptr, px, py, pz, lx, ly, lz, zero, s_max, want,
+                                            stride, px, py, pz, lx, ly, lz, zero, s_max, want,
                                             True, EXIT, UNIFORM, VEC, SANITIZE, REGS, TRIS,
-                                            SPECULATE, False, 1)
+                                            SPECULATE, False)
             lit = want & (occluder < 0)
             hx = lx - dx
             hy = ly - dy
@@ -743,13 +714,11 @@ def _device_check(device: torch.device) -> None:
                          "course.kernels.flat_bvh.trace_flat_torch)")
 
 
-def _stack(n: int, block: int, device, bvh: FlatBVH,
-           entries: int | None = None) -> tuple[torch.Tensor, int]:
+def _stack(n: int, block: int, device, bvh: FlatBVH) -> tuple[torch.Tensor, int]:
     """The per-lane stacks: (entries, lanes) int32, lanes = n rounded up to blocks;
-    near-child-first traversal pushes at most one entry per interior level (depth - 1).
-    ``entries=1``: a stub for a walk whose stack is in local memory."""
+    near-child-first traversal pushes at most one entry per interior level (depth - 1)."""
     lanes = max(block, -(-n // block) * block)
-    entries = entries or max(1, min(STACK_DEPTH, bvh.depth - 1))
+    entries = max(1, min(STACK_DEPTH, bvh.depth - 1))
     return torch.empty(entries, lanes, dtype=torch.int32, device=device), lanes
 
 
@@ -810,8 +779,7 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                       stack_regs: int = DEFAULT_STACK_REGS,
                       tris_per_step: int = DEFAULT_TRIS_PER_STEP,
                       speculate: bool = DEFAULT_SPECULATE, loop: str = DEFAULT_LOOP,
-                      stack: str = DEFAULT_STACK, warp_votes: bool = False,
-                      return_info: bool = False):
+                      stack: str = DEFAULT_STACK, return_info: bool = False):
     """Closest (or any) hit of each ray by the Triton BVH walk (one ray per lane).
 
     bvh: ``build_flat_bvh(...)`` on the rays' device; origins, directions: (N, 3) float
@@ -824,9 +792,7 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     ``"while"``, traverse while some lane looks for a leaf, then test while some lane has
     one (``_while_while``, the CUDA C kernel's shape); stack: ``"global"``, each lane's
     entries in a scratch buffer, or ``"local"``, in the lane's local memory like CUDA C's
-    (compiled only: the interpreter uses the buffer; needs ``stack_regs=0``); warp_votes:
-    with ``num_warps > 1``, each warp runs the loops on its own lanes' votes (``_vote``;
-    compiled only, the interpreter votes over the program, with the same results).
+    (compiled only: the interpreter uses the buffer; needs ``stack_regs=0``).
     Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
     """
     _require_triton()
@@ -849,21 +815,17 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     out_v = torch.empty(n, dtype=torch.float32, device=device)
     handle = None
     if n:
+        stack, lanes = _stack(n, block, device, bvh)
         compiled = not interpreting()
-        local = stack == "local" and compiled
-        stack, lanes = _stack(n, block, device, bvh, 1 if local else None)
-        warps = num_warps if warp_votes and compiled else 1
-        flags = (torch.empty(lanes // block * num_warps, dtype=torch.int32, device=device)
-                 if warps > 1 else out_t)
         with _ieee_quiet():
             handle = _trace_kernel[(lanes // block,)](
                 o, d, o if t_lo is None else t_lo, lo_value, o if t_hi is None else t_hi,
-                hi_value, pairs, root, tris, root_ref, stack, flags,
+                hi_value, pairs, root, tris, root_ref, stack,
                 out_t, out_id, out_u, out_v, n, lanes,
                 BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE,
                 UNIFORM=bool(uniform_branches), VEC=compiled, SANITIZE=not compiled,
-                REGS=-1 if local else stack_regs, TRIS=tris_per_step,
-                SPECULATE=bool(speculate), WHILE=loop == "while", WARPS=warps, TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
+                REGS=-1 if stack == "local" and compiled else stack_regs, TRIS=tris_per_step,
+                SPECULATE=bool(speculate), WHILE=loop == "while", TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
     hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
     if return_info:
         name = "any_hit" if any_hit else "closest_hit"
