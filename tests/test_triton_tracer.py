@@ -201,6 +201,32 @@ def test_compiled_bunny_matches_torch_traversal():
     assert same >= 0.999, f"only {same:.2%} of the bunny's rays agree with the torch walk"
 
 
+
+@needs_triton
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_compiled_local_stack_allocates_only_the_outputs():
+    from course.kernels import triton_tracer as tt
+    from course.kernels.flat_bvh import build_flat_bvh
+
+    if tt.interpreting():
+        pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
+    case = make_case(n_tris=2000, n_rays=3000, seed=7)
+    bvh = build_flat_bvh(case["vertices"].cuda(), case["faces"].cuda())
+    o, d = case["origins"].cuda(), case["directions"].cuda()
+    peaks = {}
+    for stack in ("global", "local"):
+        tt.trace_flat_triton(bvh, o, d, stack=stack, stack_regs=0)  # compile outside
+        torch.cuda.synchronize()
+        base = torch.cuda.memory_allocated()
+        torch.cuda.reset_peak_memory_stats()
+        tt.trace_flat_triton(bvh, o, d, stack=stack, stack_regs=0)
+        peaks[stack] = torch.cuda.max_memory_allocated() - base
+    outputs = len(o) * (4 + 8 + 4 + 4)  # t, triangle (int64), u, v
+    # The allocator rounds every block up to 512 bytes.
+    assert peaks["local"] <= outputs + 4 * 512, (
+        f"stack='local' allocated {peaks['local']} bytes for {len(o)} rays; the outputs "
+        f"need {outputs}: a stack buffer ({peaks['global'] - peaks['local']} more bytes "
+        "with stack='global') is allocated that the kernel never reads")
 @needs_triton
 def test_bad_arguments_raise_clear_errors():
     from course.kernels import triton_tracer as tt

@@ -44,6 +44,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from course.core.device import allowed_cpus
 from course.core.files import copy_module, module_files
 from course.grading.catalog import functions_of, lab_catalog, skeleton_functions
 from course.grading.runner import lab_test_files
@@ -428,6 +429,16 @@ def run(root, mutants: list[Generated], plans: list[LabPlan], *, workers: int = 
     sources = {(p.module, file): text for p in plans for file, text in p.sources.items()}
     specs = [{"id": m.id, "module": m.module, "tests": tests[(m.module, m.function)],
               "file": m.file, "source": m.apply(sources[(m.module, m.file)])} for m in mutants]
+    return run_specs(root, specs, workers=workers, deadline=deadline, progress=progress)
+
+
+def run_specs(root, specs: list[dict], *, workers: int = 1, deadline: float = 300.0,
+              progress: bool = False) -> list[dict]:
+    """Grade mutated modules, one outcome dict each (``id``, ``killed``, ``ran``, ``by``,
+    ``error`` when the run proves nothing), in ``workers`` warm worker processes. A spec is
+    ``{"id", "module": "labN_name", "tests": [-k expressions, or-ed], "file": the mutated
+    file as copy_module names it, "source": its mutated text}``."""
+    root = Path(root)
     shards = [specs[i::workers] for i in range(workers)]
     from concurrent.futures import ThreadPoolExecutor
 
@@ -472,7 +483,7 @@ def main_cli(root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=N
     if only:
         mutants = [m for m in mutants if re.search(only, m.id)]
     reviewed = load_reviewed(root)
-    workers = workers or max(1, len(os.sched_getaffinity(0)))
+    workers = workers or allowed_cpus()
     total = sum(len(p.mutants) for p in plans)
     how = f"all {total}" if per_lab is None else f"{len(mutants)} of {total} (<= {per_lab} " \
         f"per lab, seed {seed})"

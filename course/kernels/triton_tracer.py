@@ -714,10 +714,15 @@ def _device_check(device: torch.device) -> None:
                          "course.kernels.flat_bvh.trace_flat_torch)")
 
 
-def _stack(n: int, block: int, device, bvh: FlatBVH) -> tuple[torch.Tensor, int]:
+def _stack(n: int, block: int, device, bvh: FlatBVH,
+           local: bool = False) -> tuple[torch.Tensor, int]:
     """The per-lane stacks: (entries, lanes) int32, lanes = n rounded up to blocks;
-    near-child-first traversal pushes at most one entry per interior level (depth - 1)."""
+    near-child-first traversal pushes at most one entry per interior level (depth - 1).
+    local: the kernel keeps its stacks in local memory, so the buffer is a (1, 1)
+    placeholder (the pointer argument must exist, nothing reads it)."""
     lanes = max(block, -(-n // block) * block)
+    if local:
+        return torch.empty(1, 1, dtype=torch.int32, device=device), lanes
     entries = max(1, min(STACK_DEPTH, bvh.depth - 1))
     return torch.empty(entries, lanes, dtype=torch.int32, device=device), lanes
 
@@ -815,17 +820,19 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     out_v = torch.empty(n, dtype=torch.float32, device=device)
     handle = None
     if n:
-        stack, lanes = _stack(n, block, device, bvh)
         compiled = not interpreting()
+        local = stack == "local" and compiled  # the interpreter has no local memory
+        buffer, lanes = _stack(n, block, device, bvh, local)
         with _ieee_quiet():
             handle = _trace_kernel[(lanes // block,)](
                 o, d, o if t_lo is None else t_lo, lo_value, o if t_hi is None else t_hi,
-                hi_value, pairs, root, tris, root_ref, stack,
+                hi_value, pairs, root, tris, root_ref, buffer,
                 out_t, out_id, out_u, out_v, n, lanes,
                 BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE,
                 UNIFORM=bool(uniform_branches), VEC=compiled, SANITIZE=not compiled,
-                REGS=-1 if stack == "local" and compiled else stack_regs, TRIS=tris_per_step,
-                SPECULATE=bool(speculate), WHILE=loop == "while", TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
+                REGS=-1 if local else stack_regs,  # -1: LOCAL_STACK TRIS=tris_per_step,
+                SPECULATE=bool(speculate), WHILE=loop == "while",
+                TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
     hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
     if return_info:
         name = "any_hit" if any_hit else "closest_hit"

@@ -39,9 +39,8 @@ def cmd_grade(args):
 
 
 def cmd_mutants(args):
-    import tempfile
-
-    from course.grading.mutants import grade_mutant, load_mutants
+    from course.core.device import allowed_cpus
+    from course.grading.mutants import catch_mutants, load_mutants
 
     root = _root()
     if args.generated:
@@ -49,16 +48,16 @@ def cmd_mutants(args):
 
         return main_cli(root, labs=args.lab, per_lab=args.sample, seed=args.seed,
                         workers=args.workers, json_path=args.json, only=args.only)
+    mutants = [m for m in load_mutants(root) if not args.lab or m.lab in args.lab]
+    outcomes = catch_mutants(mutants, root, workers=args.workers or allowed_cpus())
     survivors = 0
-    for mutant in load_mutants(root):
-        if args.lab and mutant.lab not in args.lab:
-            continue
-        with tempfile.TemporaryDirectory() as tmp:
-            data = grade_mutant(mutant, root, tmp)
-        caught = data["score"] < data["max_score"]
+    for mutant in mutants:
+        outcome = outcomes[mutant.name]
+        caught = outcome["killed"] and not outcome.get("error")
         survivors += not caught
-        print(f"lab {mutant.lab} {mutant.name:<32} {data['score']:.2f}/{data['max_score']:.2f}"
-              f"  {'caught' if caught else 'SURVIVED'}: {mutant.why}")
+        verdict = (f"caught by {outcome['by'][0]}" if caught else
+                   f"SURVIVED ({outcome.get('error') or str(outcome['ran']) + ' tests passed'})")
+        print(f"lab {mutant.lab} {mutant.name:<32} {verdict.splitlines()[0]}: {mutant.why}")
     return 1 if survivors else 0
 
 
@@ -127,7 +126,7 @@ def main(argv=None):
                    help="with --generated: at most this many mutants per lab, drawn with --seed")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=None,
-                   help="with --generated: parallel workers (default: the usable cores)")
+                   help="parallel workers (default: the usable cores)")
     p.add_argument("--only", default=None,
                    help="with --generated: only mutants whose id matches this regex")
     p.add_argument("--json", default=None, help="with --generated: write the table here")

@@ -123,7 +123,7 @@ MUTANTS = [
            tests="sphere_trace",
            why="over-relaxation without Keinert's check: steps jump through thin surfaces"),
     Mutant(name="hg_cos_unclamped", module=M, function="henyey_greenstein",
-           find="cos_theta = cos_theta.clamp(-1, 1)\n", replace="",
+           find="cos_theta = cos_theta.clamp(-1, 1)", replace="cos_theta = cos_theta",
            tests="henyey_greenstein",
            why="a cosine a rounding step past 1 makes the denominator negative: NaN phase"),
     Mutant(name="trace_no_inside_abs", module=M, function="sphere_trace",
