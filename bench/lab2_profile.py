@@ -4,7 +4,10 @@
 
 Traces the bunny's primary rays once to compile and warm up, then once under
 ``torch.profiler``: writes the kernel table (``profile.txt``), and the rays that still run
-after every look at them (how much of the work compaction can save).
+after every look at them (how much of the work compaction can save). Then where the host
+time goes (``host.txt``): the wall time of warm traversals without any profiler, and one
+under ``cProfile`` (Python's own profiler: every Python function with the host time spent
+in it, a sync counted where the host waits), the functions sorted by cumulative time.
 """
 
 from __future__ import annotations
@@ -59,6 +62,40 @@ def main(argv=None):
     print(text)
     Path(args.out).mkdir(parents=True, exist_ok=True)
     (Path(args.out) / "profile.txt").write_text(f"{' '.join(sys.argv)}\n\n{text}\n")
+    host = host_time(lambda: lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs), len(rays))
+    print(host)
+    (Path(args.out) / "host.txt").write_text(f"{' '.join(sys.argv)}\n\n{host}\n")
+
+
+def host_time(trace, n_rays: int, repeats: int = 10) -> str:
+    """Wall time of ``repeats`` warm traversals (each synced), then one under cProfile: the
+    report's text."""
+    import cProfile
+    import io
+    import pstats
+    import statistics
+    import time
+
+    walls = []
+    for _ in range(repeats):
+        torch.cuda.synchronize()
+        start = time.perf_counter()
+        trace()
+        torch.cuda.synchronize()
+        walls.append(time.perf_counter() - start)
+    wall = statistics.median(walls)
+    profiler = cProfile.Profile()
+    torch.cuda.synchronize()
+    profiler.enable()
+    trace()
+    torch.cuda.synchronize()
+    profiler.disable()
+    listing = io.StringIO()
+    pstats.Stats(profiler, stream=listing).sort_stats("cumulative").print_stats(40)
+    return (f"warm traversal, no profiler: median {wall * 1e3:.2f} ms of {repeats} "
+            f"({n_rays / wall / 1e6:.0f} M rays/s); min {min(walls) * 1e3:.2f} ms\n\n"
+            f"one traversal under cProfile (host time per Python function; a sync is "
+            f"time spent waiting in the call that reads the device):\n{listing.getvalue()}")
 
 
 if __name__ == "__main__":
