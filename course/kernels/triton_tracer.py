@@ -40,16 +40,25 @@ speculation +20% primary (5.7 -> 6.9 G), +8% diffuse (1.95 -> 2.10 G); the stack
 entries in registers (``stack_regs=4``) cost 12% (6.5 -> 5.7 G) against the stack in
 memory; two triangle tests per step +10% primary and -4% diffuse; 64 lanes per warp (two
 rays per thread) or two warps per program were slower. The CUDA C kernel on the same rays:
-11.8 G primary, 3.2 G diffuse.
+11.8 G primary, 3.2 G diffuse. Then (bench/results/nvidia-h200/lab3_loops/): the CUDA C
+kernel's loop shape (``loop="while"``, Aila & Laine's while-while) and its stack's place
+(``stack="local"``, each lane's entries in local memory) together with speculation: 8.0 G
+primary, 2.2 G diffuse, 69% and 70% of CUDA C's 11.6 G and 3.2 G in that run. Rows of
+one run varied by up to 2x for the same code, so single knobs are not ranked from it;
+``bench/lab3_gpu.py`` now also times the best launch of each tracer in alternating rounds.
+A one-warp program can hold at most half of an SM's warps (32 programs per SM); the CUDA C
+kernel runs at 62.5%.
 
-The stack. Triton has no per-lane arrays with dynamic indices in registers, so each lane's
-stack is a column of a scratch buffer in global memory, ``stack[level, lane]``: entries of
-one level of neighbouring lanes are neighbours, so pushes and pops of a warp at similar
-depths touch few cache lines (the interleaving CUDA gives local memory). It is what the
-CUDA kernel's local-memory stack is, too: both live in L1/L2-cached device memory. A lane
-owns its column for the program's lifetime, so nothing needs synchronising. With
-``stack_regs=4`` the top four entries stay in registers (shifted on every push and pop)
-and only deeper ones go to the buffer.
+The stack. Triton has no per-lane arrays with dynamic indices, so by default
+(``stack="global"``) each lane's stack is a column of a scratch buffer in global memory,
+``stack[level, lane]``: entries of one level of neighbouring lanes are neighbours, so
+pushes and pops of a warp at similar depths touch few cache lines (the interleaving CUDA
+gives local memory). It is what the CUDA kernel's local-memory stack is, too: both live in
+L1/L2-cached device memory. A lane owns its column for the program's lifetime, so nothing
+needs synchronising. With ``stack_regs=4`` the top four entries stay in registers (shifted
+on every push and pop) and only deeper ones go to the buffer. ``stack="local"`` declares a 64-entry array in each
+lane's local memory in inline PTX instead (``_local_stack``), as ``int stack[64]`` is in
+CUDA C: no buffer is allocated, and the hardware interleaves the lanes' entries itself.
 
 Accuracy contract: that of course.kernels.flat_bvh (float32 slab test with NaN-safe zero
 directions and Ize's widened exit, float32 Möller–Trumbore with IEEE division, closed
