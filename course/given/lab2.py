@@ -548,11 +548,14 @@ def check_walk(walk, mesh: Mesh, rays) -> None:
     if walk["slots"].dtype != mesh.dtype or len(walk["tri"]) != mesh.num_faces:
         raise ValueError(f"walk: packed for {len(walk['tri'])} {walk['slots'].dtype} "
                          f"triangles, the mesh has {mesh.num_faces} {mesh.dtype}")
-    need = torch.unique(ray_octants(rays.directions))
-    missing = need[walk["base"][need] < 0]
-    if len(missing):
-        raise ValueError(f"walk: not packed for octant(s) {missing.tolist()} of these rays: "
-                         f"pack_bvh(bvh, mesh, octants=...) with them, or all 8")
+    # The octants in use marked in 8 flags (no sort, one host sync), the missing ones
+    # listed only for the error.
+    need = torch.zeros(8, dtype=torch.bool, device=rays.device)
+    need.index_fill_(0, ray_octants(rays.directions), True)
+    missing = need & (walk["base"] < 0)
+    if bool(missing.any()):
+        raise ValueError(f"walk: not packed for octant(s) {missing.nonzero()[:, 0].tolist()} "
+                         f"of these rays: pack_bvh(bvh, mesh, octants=...) with them, or all 8")
 
 
 def moller_trumbore_rows(o, d, v0, e1, e2, t_min, t_max):
