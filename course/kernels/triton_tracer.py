@@ -110,6 +110,9 @@ LOOPS = ("if", "while")
 UBER_STACK_REGS, UBER_TRIS_PER_STEP, UBER_SPECULATE = 4, 1, False
 LOCAL_STACK = tl.constexpr(-1) if tl is not None else -1
 """``REGS`` of a stack in each lane's local memory (compiled only; ``stack="local"``)."""
+if STACK_DEPTH != 64:  # _local_stack declares 64 entries in its PTX
+    raise ImportError(f"triton_tracer: the local stack holds 64 entries, STACK_DEPTH is "
+                      f"{STACK_DEPTH}")
 NONE = tl.constexpr(-2147483648) if tl is not None else -2147483648
 """The walk's "no node" (int32 min: every other negative value is a leaf's ``~first``)."""
 
@@ -205,7 +208,8 @@ def _dispatch(mask, ref, node, cur):
 def _local_stack(like):
     """A 64-entry int32 array in each lane's local memory (what ``int stack[64]`` is in
     CUDA C: interleaved across the warp, cached write-back in L1) and its address: a
-    ``.local`` declaration in inline PTX, kept by ptxas because its address is used."""
+    ``.local`` declaration in inline PTX, kept by ptxas because its address is used. 64 is
+    flat_bvh's STACK_DEPTH: every FlatBVH is checked at build to need no more."""
     return tl.inline_asm_elementwise(
         "{ .local .align 16 .b32 stk[64]; mov.u64 $0, stk; }", "=l,r", [like],
         dtype=tl.int64, is_pure=False, pack=1)
