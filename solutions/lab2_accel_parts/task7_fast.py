@@ -76,26 +76,26 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     else:
         check_walk(walk, mesh, rays)
     n, device, dtype = len(rays), rays.device, rays.dtype
-    m = walk["nodes"]
     _, _, hit_root = slab_test(o, inv, walk["lo"], walk["hi"], rays.t_min, rays.t_max)
-    out = {"t": torch.full((n,), math.inf, dtype=dtype, device=device),
-           "tri": torch.full((n,), -1, dtype=torch.int32, device=device),
-           "u": torch.zeros(n, dtype=dtype, device=device),
-           "v": torch.zeros(n, dtype=dtype, device=device),
-           "steps": torch.zeros(n, dtype=torch.int32, device=device),
-           "tests": torch.zeros(n, dtype=torch.int32, device=device)}
-    names = ("t", "tri", "u", "v", "steps", "tests")
+    # The outputs as two (3, n) tensors, floats (t, u, v) and int32 (triangle, steps,
+    # tests): a compaction writes its rays' results back in two ops, and the walk's
+    # tensors come from one float and one int tensor in two gathers (_gather, _pack).
+    out_f = torch.zeros(3, n, dtype=dtype, device=device)
+    out_f[0] = math.inf
+    out_i = torch.zeros(3, n, dtype=torch.int32, device=device)
+    out_i[0] = -1
     ray = hit_root.nonzero()[:, 0]  # the rest miss everything: they never start
-    # Per ray: read-only columns (one (11, n) tensor: a compaction gathers it at once) and
-    # the row of its octant's array, then the state the steps carry.
-    fixed = (torch.cat((o[ray], d[ray], inv[ray], rays.t_min[ray, None], rays.t_max[ray, None]),
-                       1).T.contiguous(), walk["base"][octant[ray]].int())
-    # node, slot, end, then the outputs: distinct tensors (aliased inputs would make
-    # torch.compile specialise the first call of every traversal apart).
-    state = [torch.zeros(len(ray), dtype=torch.int32, device=device) for _ in range(3)]
-    state += [out[name][ray] for name in names]
+    if not len(ray):
+        return _hits(out_f, out_i)
+    # Every ray packed in one float and one int tensor (rows: see _STATE_ROWS); the walk's
+    # tensors are gathered from them, the started rays only, as at a compaction.
+    ints = torch.zeros(7, n, dtype=torch.int32, device=device)
+    ints[0] = walk["base"][octant]
+    ints[4] = -1
+    floats = torch.cat((o.T, d.T, inv.T, rays.t_min[None], rays.t_max[None], out_f))
+    m = walk["nodes"]
     tables = (walk["boxes"], walk["links"], walk["slots"], walk["tri"])
-    graphs = compile == "reduce-overhead" and device.type == "cuda"
+    graphs = compile == "reduce-overhead" and device.type in _GRAPH_DEVICES
     steps = (_fast_steps if compile is False else _compiled_fast_steps(
         "in place" if graphs else compile))
     # k steps as calls of `fuse` steps each (eager: one call of k); extra steps of finished
@@ -103,18 +103,22 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     fuse = check_every if compile is False else min(fuse_steps, check_every)
     calls = -(-check_every // fuse)
     cache = graphs and not packed_here
-    if cache:  # pad to a graph size: the graphs of a size are captured once and kept
-        fixed, state = _padded(fixed, state, m)
+    # Padded with finished rays to a graph size: the graphs of a size are captured once and
+    # kept for every later traversal.
+    fixed, state = _gather(floats, ints, ray, _graph_size(len(ray)) if cache else len(ray), m)
+    # A compiled call gets tensors of their own (rows at any offset would be inputs of
+    # another alignment, compiled apart); graphs copy the rows into their buffers.
+    alone = compile is not False and not graphs
+    if alone:
+        fixed, state = _own(fixed, state)
     graph = None
     for _ in range(0, m + mesh.num_faces + 1, calls * fuse):  # a step per node or slot
-        if not len(ray):
-            break
         if graphs:
             if graph is None and cache:  # the graph of a look at this size, kept across calls
                 graph = _step_graph(steps, fixed, state, tables, m, fuse, bool(any_hit), calls)
             elif graph is None:  # tables of this call only: a graph of one call, replayed
                 graph = _StepGraph(steps, fixed, state, (tables, m, fuse, bool(any_hit)), 1)
-            state = graph.run(fixed, state, 1 if cache else calls)
+            fixed, state = graph.run(fixed, state, 1 if cache else calls)
         else:
             for _ in range(calls):
                 state = list(steps(fixed, state, tables, m, fuse, bool(any_hit)))
@@ -122,22 +126,67 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
         active = int(running.sum())  # the one host sync per k steps
         if active == 0:
             break
-        # A compaction is ~20 small ops of host time (with graphs, copies into the buffers of
-        # another cached graph): compact only when it saves the device far more.
+        # A compaction is ~15 small ops of host time (with graphs, one copy into the buffers
+        # of another cached graph): compact only when it saves the device far more.
         if compact and active <= len(ray) // (8 if graphs else 2):
-            for i, name in enumerate(names):
-                out[name][ray] = state[3 + i][:len(ray)]
+            floats, ints = _pack(fixed, state)
+            _write_back(out_f, out_i, ray, floats, ints)
             keep = running.nonzero()[:, 0]  # padding rows never run: keep < len(ray)
             ray = ray[keep]
-            fixed = (fixed[0][:, keep], fixed[1][keep])
-            state = [x[keep] for x in state]
-            if cache:
-                fixed, state = _padded(fixed, state, m)
+            fixed, state = _gather(floats, ints, keep,
+                                   _graph_size(len(keep)) if cache else len(keep), m)
+            if alone:
+                fixed, state = _own(fixed, state)
             graph = None
-    for i, name in enumerate(names):
-        out[name][ray] = state[3 + i][:len(ray)]
-    return (Hits(t=out["t"], triangle=out["tri"].long(), u=out["u"], v=out["v"]),
-            {"steps": out["steps"].long(), "tests": out["tests"].long()})
+    _write_back(out_f, out_i, ray, *_pack(fixed, state))
+    return _hits(out_f, out_i)
+
+
+def _hits(out_f, out_i):
+    """``(Hits, counters)`` from the packed outputs."""
+    return (Hits(t=out_f[0], triangle=out_i[0].long(), u=out_f[1], v=out_f[2]),
+            {"steps": out_i[1].long(), "tests": out_i[2].long()})
+
+
+_GRAPH_DEVICES = ("cuda",)  # where "reduce-overhead" replays CUDA graphs
+
+# The packed rows: floats = ray columns (ox, oy, oz, dx, dy, dz, ix, iy, iz, t_min, t_max)
+# then t, u, v; ints = base (the octant's row), node, slot, end, triangle, steps, tests.
+_COLUMNS = 11
+_STATE_ROWS = ((1, None), (2, None), (3, None), (None, 11), (4, None), (None, 12), (None, 13),
+               (5, None), (6, None))  # node slot end t tri u v steps tests: (int row, float row)
+
+
+def _gather(floats, ints, index, size: int, m: int):
+    """``(fixed, state)`` of the rays ``index`` (columns of the packed tensors) padded to
+    ``size`` with finished rays (copies of the first, node ``m``): two gathers and a fill.
+    The tensors are rows of the gathered ones: views, contiguous."""
+    real = len(index)
+    if size > real:
+        index = torch.cat((index, index.new_zeros(size - real)))
+    f, i = floats.index_select(1, index), ints.index_select(1, index)
+    if size > real:
+        i[1, real:] = m  # the padding is finished: it never runs, its results are dropped
+    return (f[:_COLUMNS], i[0]), [i[r] if r is not None else f[c] for r, c in _STATE_ROWS]
+
+
+def _own(fixed, state):
+    """``fixed`` and ``state`` as tensors of their own (copies of the packed rows)."""
+    return (fixed[0].clone(), fixed[1].clone()), [x.clone() for x in state]
+
+
+def _pack(fixed, state):
+    """The inverse of :func:`_gather`: ``(floats, ints)`` of the current rays (3 ops)."""
+    node, slot, end, t, tri, u, v, steps, tests = state
+    return (torch.cat((fixed[0], torch.stack((t, u, v)))),
+            torch.stack((fixed[1], node, slot, end, tri, steps, tests)))
+
+
+def _write_back(out_f, out_i, ray, floats, ints):
+    """Results of the rays ``ray`` (the first ``len(ray)`` columns of the packed tensors)
+    into the outputs: two scatters."""
+    out_f[:, ray] = floats[_COLUMNS:, :len(ray)]
+    out_i[:, ray] = ints[4:, :len(ray)]
 
 
 def _fast_steps(fixed, state, tables, m: int, k: int, any_hit: bool):
@@ -158,20 +207,6 @@ def _graph_size(n: int) -> int:
     return -(-n // quantum) * quantum
 
 
-def _padded(fixed, state, m: int):
-    """``fixed`` and ``state`` padded with finished rays (node ``m``, no hit) up to
-    ``_graph_size``; the real rays stay first."""
-    n = len(fixed[1])
-    pad = _graph_size(n) - n
-    if pad == 0:
-        return fixed, state
-    columns = torch.nn.functional.pad(fixed[0], (0, pad))
-    fill = (m, 0, 0, math.inf, -1, 0, 0, 0, 0)  # node, slot, end, t, tri, u, v, steps, tests
-    state = [torch.cat((x, torch.full((pad,), f, dtype=x.dtype, device=x.device)))
-             for x, f in zip(state, fill)]
-    return (columns, torch.nn.functional.pad(fixed[1], (0, pad))), state
-
-
 class _StepGraph:
     """The ``calls`` compiled calls of one look of :func:`bvh_closest_hit_fast`, updating
     the state in place (:func:`_fast_steps_in_place`), captured once in a CUDA graph for a
@@ -186,6 +221,9 @@ class _StepGraph:
     replayed ``calls`` times, and are not kept (a capture then costs one compiled call)."""
 
     def __init__(self, steps, fixed, state, args, calls: int):
+        # Buffers of its own, each a tensor by itself: the step writes them in place (rows
+        # of a packed tensor would make inductor copy them back), and run() fills them.
+        fixed, state = _own(fixed, state)
         self.fixed, self.state, self.args = fixed, state, args
         # One call first, outside the capture, on a copy of the state: whatever the compiler
         # still has to (re)compile for these shapes happens there, and the walk itself
@@ -206,13 +244,15 @@ class _StepGraph:
 
     def run(self, fixed, state, replays: int = 1):
         """Replay ``replays`` times on ``fixed`` and ``state`` (copied into the graph's
-        buffers unless they are them); returns the buffers holding the new state."""
-        for mine, theirs in zip((*self.fixed, *self.state), (*fixed, *state)):
-            if mine is not theirs:
-                mine.copy_(theirs)
+        buffers, in one op, unless they are them); returns ``(fixed, state)``: the buffers,
+        holding the new state."""
+        pairs = [(mine, theirs) for mine, theirs in zip((*self.fixed, *self.state),
+                                                        (*fixed, *state)) if mine is not theirs]
+        if pairs:
+            torch._foreach_copy_([p[0] for p in pairs], [p[1] for p in pairs])
         for _ in range(replays):
             self.graph.replay()
-        return self.state
+        return self.fixed, self.state
 
 
 _GRAPHS: collections.OrderedDict = collections.OrderedDict()

@@ -11,7 +11,7 @@ EQUIVALENT = {
     "lab2_accel:kd_pack:const_int:10":
         "packed - 2**33 instead of packed - 2**32 before .to(torch.int32): the conversion "
         "keeps the low 32 bits, the same for both",
-    "lab2_accel:bvh_closest_hit_fast:bool_And_Or:3":
+    "lab2_accel:bvh_closest_hit_fast:bool_And_Or:4":
         "compacting the rays at every look instead of only when few run changes only the "
         "order in which unfinished rays are stepped, not their hits or counters",
     # Lab 3
@@ -169,10 +169,10 @@ EQUIVALENT = {
     "lab2_accel:bvh_closest_hit_fast:const_int:0":
         "the default check_every only sets how many steps run between host looks; extra "
         "steps of finished rays change nothing (a timing knob)",
-    "lab2_accel:bvh_closest_hit_fast:const_int:12":
+    "lab2_accel:bvh_closest_hit_fast:const_int:18":
         "the loop bound m + F + 1 already covers a ray's box tests and slots; a looser bound "
         "only allows more looks, and the loop breaks when no ray runs",
-    "lab2_accel:bvh_closest_hit_fast:const_int:14":
+    "lab2_accel:bvh_closest_hit_fast:const_int:20":
         "replays a cached graph twice per look (CUDA graphs only): extra steps of finished "
         "rays change nothing, unfinished ones only get further before the next look",
     "lab2_accel:grid_closest_hit:cmp_Gt_GtE:0":

@@ -1,0 +1,120 @@
+"""Lab 2's sync-free walk on its CUDA-graph path (``compile="reduce-overhead"``), emulated
+on the CPU: the graph class is swapped for one that keeps the same buffers and, when
+"replayed", runs the eager steps in place on them. So the path's buffer handling (rays
+gathered into a graph's buffers with padding, copied in at each look, compactions,
+write-backs) and its graph cache run here, and must find exactly what the eager walk
+finds, with the same counters.
+
+Not shipped to students (it runs ``solutions/``). ``test_lab2_graph_cache.py`` runs the
+real graphs on CUDA.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+REPO = Path(__file__).resolve().parents[2]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+from course.core.camera import primary_rays
+from course.core.scenes import load_scene
+from course.given.lab2 import pack_bvh
+from course.grading.testing import assert_equal
+from solutions import lab2_accel as lab
+
+
+class _Replay:
+    def __init__(self, replay):
+        self.replay = replay
+
+
+class EagerGraph(lab._StepGraph):
+    """``_StepGraph`` with its buffers and its ``run``, the capture replaced by eager steps
+    in place on the buffers."""
+
+    made = 0
+
+    def __init__(self, steps, fixed, state, args, calls: int):
+        EagerGraph.made += 1
+        self.fixed, self.state = lab._own(fixed, state)
+        self.args = args
+
+        def replay():
+            for _ in range(calls):
+                lab._fast_steps_in_place(self.fixed, self.state, *args)
+
+        self.graph = _Replay(replay)
+
+
+@pytest.fixture
+def emulated(monkeypatch):
+    monkeypatch.setattr(lab, "_StepGraph", EagerGraph)
+    monkeypatch.setattr(lab, "_GRAPH_DEVICES", ("cuda", "cpu"))
+    monkeypatch.setattr(lab, "_GRAPHS", collections.OrderedDict())
+    # No compile here: the path's buffers are what is tested, not inductor.
+    monkeypatch.setattr(lab, "_compiled_fast_steps", lambda mode: lab._fast_steps_in_place)
+
+
+def _suzanne(size: int):
+    scene = load_scene("suzanne")
+    mesh = scene.mesh
+    bvh = lab.build_sah_bvh(mesh)
+    return mesh, bvh, dataclasses.replace(scene.camera, width=size, height=size)
+
+
+def test_graph_path_matches_eager(emulated):
+    mesh, bvh, camera = _suzanne(40)
+    walk = pack_bvh(bvh, mesh)
+    moved = dataclasses.replace(camera, eye=tuple(t + 1.3 * (e - t) for e, t in
+                                                  zip(camera.eye, camera.target)))
+    for cam, any_hit, k in ((camera, False, 4), (moved, False, 3), (camera, True, 4)):
+        rays = primary_rays(cam)
+        # Rays that hit first, so that a padding column written to a real ray's output
+        # would show.
+        first, _ = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk)
+        rays = rays[torch.argsort((first.triangle < 0).int(), stable=True)]
+        ref_hits, ref = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, check_every=k,
+                                                 any_hit=any_hit)
+        assert int((ref_hits.triangle >= 0).sum()) > 150, "the rays should hit Suzanne"
+        for packed in (walk, None):
+            made = EagerGraph.made
+            hits, count = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=packed,
+                                                   check_every=k, any_hit=any_hit,
+                                                   compile="reduce-overhead")
+            what = f"emulated graphs (any_hit={any_hit}, k={k}, walk={packed is not None})"
+            for key in ("steps", "tests"):
+                assert_equal(count[key], ref[key], where="ray",
+                             name=f"{what}: counters[{key!r}] against eager")
+            assert_equal(hits.triangle, ref_hits.triangle, where="ray",
+                         name=f"{what}: triangles against eager")
+            for name in ("t", "u", "v"):
+                assert_equal(getattr(hits, name), getattr(ref_hits, name), where="ray",
+                             name=f"{what}: {name} against eager")
+            assert EagerGraph.made - made >= 2, f"{what}: never compacted into a new graph"
+    assert len(lab._GRAPHS) > 1, "the cached path should have compacted into other sizes"
+
+
+def test_cached_graphs_are_reused(emulated):
+    mesh, bvh, camera = _suzanne(48)
+    walk = pack_bvh(bvh, mesh)
+    rays = primary_rays(camera)
+    first = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, compile="reduce-overhead")
+    made, cached = EagerGraph.made, len(lab._GRAPHS)
+    again = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, compile="reduce-overhead")
+    assert EagerGraph.made == made and len(lab._GRAPHS) == cached, (
+        "a second traversal of the same rays made new graphs")
+    for a, b in ((first[0].triangle, again[0].triangle), (first[1]["steps"], again[1]["steps"])):
+        assert_equal(b, a, where="ray", name="second traversal against the first")
+    # Other rays in buffers a traversal left behind: nothing stale may leak into them.
+    half = rays[torch.arange(0, len(rays), 2)]
+    want, _ = lab.bvh_closest_hit_fast(half, mesh, bvh, walk=walk)
+    got, _ = lab.bvh_closest_hit_fast(half, mesh, bvh, walk=walk, compile="reduce-overhead")
+    assert_equal(got.triangle, want.triangle, where="ray", name="half the rays, graph path")
+    assert_equal(got.t, want.t, where="ray", name="half the rays' t, graph path")
