@@ -487,6 +487,8 @@ def main_cli(root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=N
     total = sum(len(p.mutants) for p in plans)
     how = f"all {total}" if per_lab is None else f"{len(mutants)} of {total} (<= {per_lab} " \
         f"per lab, seed {seed})"
+    if only:
+        how = f"{len(mutants)} of {total} (ids matching {only!r})"
     print(f"grading {how} generated mutants with {workers} worker(s)", flush=True)
     started = time.monotonic()
     outcomes = run(root, mutants, plans, workers=workers, progress=True)
