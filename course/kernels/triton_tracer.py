@@ -843,7 +843,7 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                 out_t, out_id, out_u, out_v, n, lanes,
                 BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE,
                 UNIFORM=bool(uniform_branches), VEC=compiled, SANITIZE=not compiled,
-                REGS=-1 if local else stack_regs,  # -1: LOCAL_STACK TRIS=tris_per_step,
+                REGS=-1 if local else stack_regs, TRIS=tris_per_step,  # -1: LOCAL_STACK
                 SPECULATE=bool(speculate), WHILE=loop == "while",
                 TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
     hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
