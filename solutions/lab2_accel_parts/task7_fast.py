@@ -119,19 +119,19 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
             elif graph is None:  # tables of this call only: a graph of one call, replayed
                 graph = _StepGraph(steps, fixed, state, (tables, m, fuse, bool(any_hit)), 1)
             fixed, state = graph.run(fixed, state, 1 if cache else calls)
+            active = int(graph.count)  # the one host sync per k steps
         else:
             for _ in range(calls):
                 state = list(steps(fixed, state, tables, m, fuse, bool(any_hit)))
-        running = state[0] < m
-        active = int(running.sum())  # the one host sync per k steps
+            active = int((state[0] < m).sum())  # the one host sync per k steps
         if active == 0:
             break
-        # A compaction is ~15 small ops of host time (with graphs, one copy into the buffers
+        # A compaction is ~15 small ops of host time (with graphs, copies into the buffers
         # of another cached graph): compact only when it saves the device far more.
         if compact and active <= len(ray) // (8 if graphs else 2):
             floats, ints = _pack(fixed, state)
             _write_back(out_f, out_i, ray, floats, ints)
-            keep = running.nonzero()[:, 0]  # padding rows never run: keep < len(ray)
+            keep = (state[0] < m).nonzero()[:, 0]  # padding never runs: keep < len(ray)
             ray = ray[keep]
             fixed, state = _gather(floats, ints, keep,
                                    _graph_size(len(keep)) if cache else len(keep), m)
@@ -235,21 +235,29 @@ class _StepGraph:
         self.graph = torch.cuda.CUDAGraph()
         side = torch.cuda.Stream()
         side.wait_stream(torch.cuda.current_stream())
+        # The rays still running counted in the graph too: a look is one graph launch and
+        # one read of a number.
+        self.count = torch.zeros((), dtype=torch.int64, device=state[0].device)
         with torch.cuda.stream(side):
             self.graph.capture_begin()
             for _ in range(calls):
                 steps(fixed, state, *args)
+            self.count.copy_((state[0] < args[1]).sum())
             self.graph.capture_end()
         torch.cuda.current_stream().wait_stream(side)
 
     def run(self, fixed, state, replays: int = 1):
         """Replay ``replays`` times on ``fixed`` and ``state`` (copied into the graph's
-        buffers, in one op, unless they are them); returns ``(fixed, state)``: the buffers,
-        holding the new state."""
-        pairs = [(mine, theirs) for mine, theirs in zip((*self.fixed, *self.state),
-                                                        (*fixed, *state)) if mine is not theirs]
-        if pairs:
-            torch._foreach_copy_([p[0] for p in pairs], [p[1] for p in pairs])
+        buffers unless they are them: one multi-tensor copy per dtype); returns ``(fixed,
+        state)``, the buffers holding the new state (``count``: the rays still running)."""
+        groups: dict = {}
+        for mine, theirs in zip((*self.fixed, *self.state), (*fixed, *state)):
+            if mine is not theirs:
+                pair = groups.setdefault((mine.dtype, mine.dim()), ([], []))
+                pair[0].append(mine)
+                pair[1].append(theirs)
+        for mine, theirs in groups.values():
+            torch._foreach_copy_(mine, theirs)
         for _ in range(replays):
             self.graph.replay()
         return self.fixed, self.state

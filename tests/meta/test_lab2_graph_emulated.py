@@ -45,10 +45,12 @@ class EagerGraph(lab._StepGraph):
         EagerGraph.made += 1
         self.fixed, self.state = lab._own(fixed, state)
         self.args = args
+        self.count = torch.zeros((), dtype=torch.int64)
 
         def replay():
             for _ in range(calls):
                 lab._fast_steps_in_place(self.fixed, self.state, *args)
+            self.count.copy_((self.state[0] < args[1]).sum())
 
         self.graph = _Replay(replay)
 
