@@ -176,8 +176,9 @@ EQUIVALENT = {
         "replays a cached graph twice per look (CUDA graphs only): extra steps of finished "
         "rays change nothing, unfinished ones only get further before the next look",
     # bvh_closest_hit_fast's knobs and bookkeeping (rtcourse mutants --generated --only
-    # bvh_closest_hit_fast: every survivor of that function reviewed here but three the
-    # CUDA-graph path shows, which the CPU graders do not run)
+    # bvh_closest_hit_fast: every survivor of that function reviewed here but four that
+    # only the CUDA-graph path shows, which the CPU graders do not run: bool_And_Or:0,
+    # cmp_Eq_NotEq:0, bool_And_Or:3, cmp_Lt_LtE:1)
     "lab2_accel:bvh_closest_hit_fast:op_BitOr_BitAnd:0":
         "dict | None is an annotation, never evaluated (from __future__ import annotations)",
     "lab2_accel:bvh_closest_hit_fast:const_int:1":
