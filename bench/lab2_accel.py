@@ -278,7 +278,7 @@ def run_fast_knobs(mode, device, table, log, headline=False):
     first = (mode["compile"] or ("default",))[0]
     compiled = [(k, first, 4, True, False, 1) for k in (8, 16, 32)]
     if device.type == "cuda":  # the same compiled step replayed from CUDA graphs
-        compiled += [(k, "reduce-overhead", 4, True, False, 1) for k in (16, 32)]
+        compiled += [(k, "reduce-overhead", 4, True, False, 1) for k in (16, 32, 64)]
         compiled += [(16, "reduce-overhead", 4, True, True, 1),
                      (16, "reduce-overhead", 4, False, False, 1)]
     graphs = "reduce-overhead" if device.type == "cuda" else first
