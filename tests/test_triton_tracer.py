@@ -77,9 +77,10 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
     for spec in (False, True):
         out["any", spec] = tt.trace_flat_triton(deep, *args, any_hit=True,
                                                 speculate=spec).to("cpu")
-    # The while-while loop and the local-memory stack (compiled only; the interpreter runs
-    # one while-while walk, its stack in the buffer): the same results as the if-if loop.
-    loops = ([("while", "global", 0, True)] if tt.interpreting() else
+    # Every loop shape and stack place (the local stack compiled only; the interpreter,
+    # whose default walk is the while-while loop, runs the if-if loop once more): the
+    # same results as the default walk.
+    loops = ([("if", "global", 4, True)] if tt.interpreting() else
              [(loop, stack, regs, spec) for loop in ("if", "while") for stack in ("global", "local")
               for regs in (0, 4) for spec in (False, True) if not (stack == "local" and regs)])
     out["loops"] = {key: tt.trace_flat_triton(deep, *args, loop=key[0], stack=key[1],

@@ -47,7 +47,10 @@ primary, 2.2 G diffuse, 69% and 70% of CUDA C's 11.6 G and 3.2 G in that run. Ro
 one run varied by up to 2x for the same code, so single knobs are not ranked from it;
 ``bench/lab3_gpu.py`` now also times the best launch of each tracer in alternating rounds.
 A one-warp program can hold at most half of an SM's warps (32 programs per SM); the CUDA C
-kernel runs at 62.5%.
+kernel runs at 62.5%. Measured again with the best launch of each tracer timed in 7
+alternating rounds (bench/results/nvidia-h200/lab3_head_to_head/): 71% primary (8.2 G
+against 11.5 G rays/s), 72% diffuse (2.3 G against 3.2 G), the same launch best for both
+(while-while, speculative, local stack: now the defaults).
 
 The stack. Triton has no per-lane arrays with dynamic indices, so by default
 (``stack="global"``) each lane's stack is a column of a scratch buffer in global memory,
@@ -100,12 +103,15 @@ __all__ = [
 DEFAULT_BLOCK = 32
 DEFAULT_NUM_WARPS = 1
 DEFAULT_UNIFORM = True
-DEFAULT_STACK_REGS = 4
+# The defaults are the launch measured fastest on primary and on diffuse rays
+# (bench/results/nvidia-h200/lab3_head_to_head/): while-while, speculative, local stack.
+DEFAULT_STACK_REGS = 0
 DEFAULT_TRIS_PER_STEP = 1
 DEFAULT_SPECULATE = True
-DEFAULT_LOOP = "if"
-DEFAULT_STACK = "global"
+DEFAULT_LOOP = "while"
+DEFAULT_STACK = None  # "local", or "global" when stack_regs keeps entries in registers
 LOOPS = ("if", "while")
+STACKS = ("global", "local")
 # The uber kernel's walk, as measured for its frames (bench/results/nvidia-h200/lab3_packed/).
 UBER_STACK_REGS, UBER_TRIS_PER_STEP, UBER_SPECULATE = 4, 1, False
 LOCAL_STACK = tl.constexpr(-1) if tl is not None else -1
@@ -797,7 +803,7 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                       stack_regs: int = DEFAULT_STACK_REGS,
                       tris_per_step: int = DEFAULT_TRIS_PER_STEP,
                       speculate: bool = DEFAULT_SPECULATE, loop: str = DEFAULT_LOOP,
-                      stack: str = DEFAULT_STACK, return_info: bool = False):
+                      stack: str | None = DEFAULT_STACK, return_info: bool = False):
     """Closest (or any) hit of each ray by the Triton BVH walk (one ray per lane).
 
     bvh: ``build_flat_bvh(...)`` on the rays' device; origins, directions: (N, 3) float
@@ -808,9 +814,11 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     triangle tests per step (1 or 2); speculate: keep traversing while a leaf is tested
     (see ``_trace``); loop: ``"if"``, one TRAVERSE and one INTERSECT stage per step, or
     ``"while"``, traverse while some lane looks for a leaf, then test while some lane has
-    one (``_while_while``, the CUDA C kernel's shape); stack: ``"global"``, each lane's
-    entries in a scratch buffer, or ``"local"``, in the lane's local memory like CUDA C's
-    (compiled only: the interpreter uses the buffer; needs ``stack_regs=0``).
+    one (``_while_while``, the CUDA C kernel's shape; the default); stack: ``"global"``,
+    each lane's entries in a scratch buffer, or ``"local"``, in the lane's local memory
+    like CUDA C's (compiled only: the interpreter uses the buffer; needs ``stack_regs=0``);
+    None (default): ``"local"``, or ``"global"`` with ``stack_regs=4``. The defaults are
+    the fastest launch measured on an H200 for primary and diffuse rays alike.
     Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
     """
     _require_triton()
@@ -818,8 +826,10 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                                                                 t_max)
     _check_launch(block, num_warps)
     _check_walk(stack_regs, tris_per_step, loop)
-    if stack not in ("global", "local"):
-        raise ValueError(f"stack: expected 'global' or 'local', got {stack!r}")
+    if stack is None:
+        stack = "local" if stack_regs == 0 else "global"
+    if stack not in STACKS:
+        raise ValueError(f"stack: expected 'global', 'local' or None, got {stack!r}")
     if stack == "local" and stack_regs:
         raise ValueError(f"stack_regs: expected 0 with stack='local', got {stack_regs!r}")
     n, device = o.shape[0], o.device
