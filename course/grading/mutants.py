@@ -111,9 +111,9 @@ def catch_mutants(mutants: list[Mutant], root, *, workers: int = 2,
     Graded like the generated mutants (course.grading.mutate): ``workers`` warm processes
     that import torch and the graders once and grade one mutant after another in-process,
     each stopped at its first failing test, CUDA hidden; a mutant that hangs past
-    ``deadline`` seconds counts as caught (the real grader's time limit fails it). About
-    twice as fast as :func:`grade_mutant` per mutant, which also scores every test.
-    """
+    ``deadline`` seconds counts as caught (the real grader's time limit fails it). The 129
+    shipped mutants take ~1 minute on 2 cores this way, ~6 minutes with :func:`grade_mutant`
+    (a fresh process each, every selected test scored)."""
     from course.core.files import defining_file
     from course.grading.mutate import run_specs
 
