@@ -11,7 +11,8 @@ On a GPU, in one run:
   thread per ray, local-memory stack, at several block sizes, with and without its register
   cap) and by the Triton kernel (course.kernels.triton_tracer, one ray per lane) at several launch
   shapes, with and without skipping the stages of a step that no lane needs; targets:
-  CUDA C >= 4.8 G primary rays/s, Triton >= 80% of CUDA C (best launch of each);
+  CUDA C >= 4.8 G primary rays/s, Triton >= 80% of CUDA C (best launch of each, then
+  those two timed again in alternating rounds, the ratio taken within each round);
 * **the ray sets** every tracer is timed on, the same for all of them (:func:`ray_sets`):
   seeded, in pixel order, reproducible from the seed on any machine; their SHA-256 digests
   and first rays go to ``ray_sets.json`` so another tracer can check it runs on exactly
@@ -232,7 +233,8 @@ def head_to_head(table, kind, fastest, bvh, rays_o, rays_d, rounds: int, repeats
     """The best CUDA C and the best Triton launch timed alternately, ``rounds`` times
     ``repeats`` calls each: the clocks and the neighbours on the GPU drift within a run (rows
     of the same code differ by up to 2x), so the ratio is taken within each round and its
-    median reported, with the spread. Returns the median ratio Triton / CUDA C."""
+    median reported, with the spread. Returns ``(median, min, max)`` of the ratios Triton /
+    CUDA C."""
     ratios = []
     for r in range(rounds):
         speed = {}
