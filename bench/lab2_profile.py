@@ -92,10 +92,14 @@ def host_time(trace, n_rays: int, repeats: int = 10) -> str:
     profiler.disable()
     listing = io.StringIO()
     pstats.Stats(profiler, stream=listing).sort_stats("cumulative").print_stats(40)
+    # Paths relative to the repository and to torch's folder: the report reads the same on
+    # any machine.
+    text = listing.getvalue().replace(f"{REPO}/", "").replace(
+        f"{Path(torch.__file__).parent.parent}/", "<site-packages>/")
     return (f"warm traversal, no profiler: median {wall * 1e3:.2f} ms of {repeats} "
             f"({n_rays / wall / 1e6:.0f} M rays/s); min {min(walls) * 1e3:.2f} ms\n\n"
             f"one traversal under cProfile (host time per Python function; a sync is "
-            f"time spent waiting in the call that reads the device):\n{listing.getvalue()}")
+            f"time spent waiting in the call that reads the device):\n{text}")
 
 
 if __name__ == "__main__":

@@ -165,13 +165,19 @@ def test_interpreted_kernels_follow_the_contract(tmp_path):
         assert info.n_regs is None and info.occupancy() is None
 
 
-@needs_triton
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-def test_compiled_kernels_follow_the_contract():
+def _compiled_tracer():
+    """course.kernels.triton_tracer, or a skip where this process interprets Triton."""
     from course.kernels import triton_tracer as tt
 
     if tt.interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
+    return tt
+
+
+@needs_triton
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_compiled_kernels_follow_the_contract():
+    _compiled_tracer()  # skips under the interpreter
     case = make_case(n_tris=2000, n_rays=3000, seed=7)
     out = run_kernels(case, render_cases(48), "cuda")
     check_all(case, render_cases(48), out, "compiled")
@@ -188,11 +194,9 @@ def test_compiled_kernels_follow_the_contract():
 def test_compiled_bunny_matches_torch_traversal():
     from course.core.camera import primary_rays
     from course.given.lab3 import whitted_camera, whitted_scene
-    from course.kernels import triton_tracer as tt
     from course.kernels.flat_bvh import flat_bvh_for, trace_flat_torch
 
-    if tt.interpreting():
-        pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
+    tt = _compiled_tracer()
     scene = whitted_scene("bunny_mirror", device="cpu")
     bvh = flat_bvh_for(scene)
     rays = primary_rays(whitted_camera("bunny_mirror", 96, 96), "cpu")
@@ -202,15 +206,12 @@ def test_compiled_bunny_matches_torch_traversal():
     assert same >= 0.999, f"only {same:.2%} of the bunny's rays agree with the torch walk"
 
 
-
 @needs_triton
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_compiled_local_stack_allocates_only_the_outputs():
-    from course.kernels import triton_tracer as tt
     from course.kernels.flat_bvh import build_flat_bvh
 
-    if tt.interpreting():
-        pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
+    tt = _compiled_tracer()
     case = make_case(n_tris=2000, n_rays=3000, seed=7)
     bvh = build_flat_bvh(case["vertices"].cuda(), case["faces"].cuda())
     o, d = case["origins"].cuda(), case["directions"].cuda()
