@@ -20,8 +20,8 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     ``"default"`` and, on a GPU, replays the ``k`` steps of a look from one CUDA graph,
     captured once per (padded) number of rays and kept for later calls with the same
     ``walk`` (packed here: a graph of one step, replayed ``k`` times, not kept); compact:
-    at a look, drop finished rays if at most half (an eighth with graphs) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree
-    once and trace it many times (default: packed here, for the octants of these rays);
+    at a look, drop finished rays if at most half (an eighth with graphs) are still
+    running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree once and trace it many times (default: packed here, for the octants of these rays);
     fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
     could stay in registers across them, but the compile time grows with them (2 CPU
     cores: 21 s for 1 step, 2 minutes for 8) and 8 ran slower than 1 on the CPU and on an
@@ -94,7 +94,7 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     # tensors are gathered from them, the started rays only, as at a compaction.
     ints = torch.zeros(7, n, dtype=torch.int32, device=device)
     ints[0] = walk["base"][octant]
-    ints[4] = -1
+    ints[4] = -1  # _TRIANGLE_ROW
     floats = torch.cat((o.T, d.T, inv.T, rays.t_min[None], rays.t_max[None], out_f))
     m = walk["nodes"]
     tables = (walk["boxes"], walk["links"], walk["slots"], walk["tri"])
@@ -156,6 +156,7 @@ _GRAPH_DEVICES = ("cuda",)  # where "reduce-overhead" replays CUDA graphs
 # The packed rows: floats = ray columns (ox, oy, oz, dx, dy, dz, ix, iy, iz, t_min, t_max)
 # then t, u, v; ints = base (the octant's row), node, slot, end, triangle, steps, tests.
 _COLUMNS = 11
+_TRIANGLE_ROW = 4  # of ints: the outputs triangle, steps, tests are its last three rows
 _STATE_ROWS = ((1, None), (2, None), (3, None), (None, 11), (4, None), (None, 12), (None, 13),
                (5, None), (6, None))  # node slot end t tri u v steps tests: (int row, float row)
 
@@ -187,9 +188,10 @@ def _pack(fixed, state):
 
 def _write_back(out_f, out_i, ray, floats, ints):
     """Results of the rays ``ray`` (the first ``len(ray)`` columns of the packed tensors)
-    into the outputs: two scatters."""
+    into the outputs: two scatters (floats' rows t, u, v; ints' rows triangle, steps,
+    tests)."""
     out_f[:, ray] = floats[_COLUMNS:, :len(ray)]
-    out_i[:, ray] = ints[4:, :len(ray)]
+    out_i[:, ray] = ints[_TRIANGLE_ROW:, :len(ray)]
 
 
 def _fast_steps(fixed, state, tables, m: int, k: int, any_hit: bool):
