@@ -3,8 +3,10 @@
     python bench/lab2_profile.py --size 1024 --compile reduce-overhead --out DIR
 
 Traces the bunny's primary rays once to compile and warm up, then once under
-``torch.profiler``: writes the kernel table (``profile.txt``), and the rays that still run
-after every look at them (how much of the work compaction can save). Then where the host
+``torch.profiler``: writes the kernel table (``profile.txt``), where the device waits for the
+host (its idle gaps, by the host operation running then; the trace itself in
+``trace.json``), and the rays that still run after every look at them (how much of the
+work compaction can save). Then where the host
 time goes (``host.txt``): the wall time of warm traversals without any profiler, and one
 under ``cProfile`` (Python's own profiler: every Python function with the host time spent
 in it, a sync counted where the host waits), the functions sorted by cumulative time.
@@ -52,19 +54,60 @@ def main(argv=None):
         lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)
         torch.cuda.synchronize()
     table = prof.key_averages().table(sort_by="cuda_time_total", row_limit=25)
+    trace_path = Path(args.out) / "trace.json"
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    prof.export_chrome_trace(str(trace_path))
+    idle = idle_report(trace_path)
     steps = counters["steps"] + counters["tests"]
     started = int((steps > 0).sum())
     lines = [(f"{len(rays):,} rays, {started:,} start (hit the root box); steps per ray: "
               f"mean {steps.double().mean():.1f}, max {int(steps.max())}"),
              ("still running after s steps: " + ", ".join(
                  f"{s}: {int((steps > s).sum()):,}" for s in (16, 32, 48, 64, 96, 128, 192)))]
-    text = "\n".join(lines) + "\n\n" + table
+    text = "\n".join(lines) + "\n\n" + idle + "\n\n" + table
     print(text)
-    Path(args.out).mkdir(parents=True, exist_ok=True)
     (Path(args.out) / "profile.txt").write_text(f"{' '.join(sys.argv)}\n\n{text}\n")
     host = host_time(lambda: lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs), len(rays))
     print(host)
     (Path(args.out) / "host.txt").write_text(f"{' '.join(sys.argv)}\n\n{host}\n")
+
+
+def idle_report(trace_path: Path, gap_us: float = 5.0, shown: int = 12) -> str:
+    """Where the device waits, from a chrome trace of one traversal: the wall time from the
+    first to the last device event, the time the device is busy (kernels and copies, their
+    union), and the gaps longer than ``gap_us`` with the host operation that was running
+    when each began (the one the device waits for)."""
+    import json
+
+    events = json.loads(trace_path.read_text())["traceEvents"]
+    device = sorted((e["ts"], e["ts"] + e.get("dur", 0)) for e in events
+                    if e.get("ph") == "X" and e.get("cat") in ("kernel", "gpu_memcpy",
+                                                               "gpu_memset"))
+    host = [e for e in events if e.get("ph") == "X" and e.get("cat") == "cpu_op"]
+    if not device:
+        return "no device events in the trace"
+    busy, gaps, end = 0.0, [], device[0][0]
+    for start, stop in device:
+        if start > end:
+            gaps.append((start - end, end))
+        busy += max(0.0, stop - max(start, end))
+        end = max(end, stop)
+    wall = end - device[0][0]
+
+    def running(t):  # the innermost host op around time t
+        around = [e for e in host if e["ts"] <= t <= e["ts"] + e.get("dur", 0)]
+        return min(around, key=lambda e: e.get("dur", 0))["name"] if around else "(Python)"
+
+    long = sorted((g for g in gaps if g[0] > gap_us), reverse=True)
+    by_op: dict = {}
+    for length, at in long:
+        by_op[running(at)] = by_op.get(running(at), 0.0) + length
+    lines = [(f"device busy {busy / 1e3:.2f} ms of {wall / 1e3:.2f} ms from its first event "
+              f"to its last; {len(long)} gaps over {gap_us:g} us, "
+              f"{sum(g for g, _ in long) / 1e3:.2f} ms in all; the host was in (total gap ms):")]
+    lines += [f"  {ms / 1e3:7.3f}  {name}" for name, ms in
+              sorted(by_op.items(), key=lambda kv: -kv[1])[:shown]]
+    return "\n".join(lines)
 
 
 def host_time(trace, n_rays: int, repeats: int = 10) -> str:

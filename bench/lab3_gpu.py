@@ -68,7 +68,7 @@ UNIFORM = [True, False]  # skip stages no lane needs / run every stage masked
 # with the stack's top in registers first, then one knob changed at a time.
 TRITON_LAUNCHES = [
     {"block": b, "num_warps": w, "uniform_branches": u, "stack_regs": r, "tris_per_step": k,
-     "speculate": sp, "loop": lp, "stack": st}
+     "speculate": sp, "loop": lp, "stack": st, "refill": None}
     for b, w, u, r, k, sp, lp, st in [
         (32, 1, True, 4, 1, False, "if", "global"), (32, 1, True, 0, 1, False, "if", "global"),
         (32, 1, True, 4, 2, False, "if", "global"), (32, 1, True, 4, 1, True, "if", "global"),
@@ -80,6 +80,10 @@ TRITON_LAUNCHES = [
         (32, 1, True, 0, 1, True, "while", "global"), (32, 1, True, 0, 1, False, "if", "local"),
         (32, 1, True, 0, 1, True, "if", "local"), (32, 1, True, 0, 1, False, "while", "local"),
         (32, 1, True, 0, 1, True, "while", "local"), (32, 1, True, 0, 2, True, "while", "local")]
+] + [  # persistent programs taking new rays once `refill` lanes are free (32: whole batches)
+    {"block": 32, "num_warps": 1, "uniform_branches": True, "stack_regs": 0, "tris_per_step": k,
+     "speculate": True, "loop": "while", "stack": "local", "refill": refill}
+    for refill, k in ((32, 1), (16, 1), (8, 1), (4, 1), (2, 1), (1, 1), (4, 2), (2, 2), (1, 2))
 ]
 CUDA_BLOCKS = [64, 128, 256]
 CUDA_CAPPED = [False, True]  # the compiler's registers / at most 40 (MIN_BLOCKS)
@@ -202,10 +206,12 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
                       + f", stack top {kw['stack_regs']} in registers, "
                       f"{kw['tris_per_step']} tri/step"
                       + (", speculative" if kw["speculate"] else "")
-                      + f", {kw['loop']}-{kw['loop']} loop, {kw['stack']} stack")
+                      + f", {kw['loop']}-{kw['loop']} loop, {kw['stack']} stack"
+                      + (f", refill at {kw['refill']} free lanes" if kw["refill"] else ""))
             row = table.add(scene=scene_name, rays=kind, impl="Triton", launch=launch, n_rays=n,
                             stack_regs=kw["stack_regs"], tris_per_step=kw["tris_per_step"],
                             speculate=kw["speculate"], loop=kw["loop"], stack=kw["stack"],
+                            refill=kw["refill"],
                             ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
                             **triton_row(info), same_as_first=agreement(hits, reference),
                             **hit_errors(scene, rays_o, rays_d, hits, sample))

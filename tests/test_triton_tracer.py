@@ -90,6 +90,11 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
                                                   stack_regs=key[2], speculate=key[3],
                                                   any_hit=True).to("cpu")
                         for key in loops}
+    # Persistent programs that take new rays as lanes free up: one program, so that every
+    # lane is refilled (whole batches, a quarter of the lanes free, any free lane).
+    out["refill"] = {(refill, any_hit): tt.trace_flat_triton(deep, *args, refill=refill,
+                                                             programs=1, any_hit=any_hit).to("cpu")
+                     for refill in (32, 8, 1) for any_hit in (False, True)}
     v, f, o, d = axis_parallel_case()
     out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
                                        o.to(device), d.to(device)).to("cpu")
@@ -138,6 +143,15 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
                 f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0].tolist()}")
         check_hits(case, out["loops_any"][loop, stack, regs, spec], f"{what} any hit",
                    any_hit=True, ref=ref)
+    for (refill, any_hit), hits in out["refill"].items():
+        what = f"{label}: refill={refill}, one program"
+        if any_hit:
+            check_hits(case, hits, f"{what}, any hit", any_hit=True, ref=ref)
+            continue
+        for field in ("t", "triangle", "u", "v"):
+            assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
+                f"{what} changed {field} on rays "
+                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0].tolist()}")
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device="cpu")
         want = render_reference(scene, o, d)
@@ -229,6 +243,8 @@ def test_compiled_local_stack_allocates_only_the_outputs():
         f"stack='local' allocated {peaks['local']} bytes for {len(o)} rays; the outputs "
         f"need {outputs}: a stack buffer ({peaks['global'] - peaks['local']} more bytes "
         "with stack='global') is allocated that the kernel never reads")
+
+
 @needs_triton
 def test_bad_arguments_raise_clear_errors():
     from course.kernels import triton_tracer as tt
@@ -243,6 +259,9 @@ def test_bad_arguments_raise_clear_errors():
                          ({"stack_regs": 2}, "stack_regs"), ({"tris_per_step": 3}, "tris_per"),
                          ({"loop": "do"}, "loop"), ({"stack": "shared"}, "stack"),
                          ({"stack": "local", "stack_regs": 4}, "stack_regs"),
+                         ({"refill": 0}, "refill"), ({"refill": 33}, "refill"),
+                         ({"refill": 8, "loop": "if"}, "refill"), ({"programs": 4}, "programs"),
+                         ({"refill": 8, "programs": 0}, "programs"),
                          ({"t_min": torch.zeros(7)}, "t_min")]:
         args = {"bvh": bvh, "origins": o, "directions": d, **kwargs}
         with pytest.raises((ValueError, TypeError), match=word):

@@ -22,6 +22,7 @@ Gradescope shows them to students only after the due date.
 
 from __future__ import annotations
 
+import linecache
 import os
 import re
 import traceback
@@ -136,6 +137,17 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.skip(reason="slow test: run with --runslow"))
         if "gpu" in item.keywords and not has_cuda:
             item.add_marker(pytest.mark.skip(reason="needs a CUDA device"))
+    if not long_feedback(config):
+        for item in items:
+            if isinstance(item, pytest.Function) and item.get_closest_marker("points"):
+                item.repr_failure = _plain_failure_report.__get__(item)
+
+
+def _plain_failure_report(item, excinfo):
+    """pytest's report of a graded test's failure, which the short feedback replaces
+    (``_give_feedback``): a plain traceback, cheap to build, where pytest's own parses the
+    source of every frame (most of the time a failing skeleton took to grade)."""
+    return excinfo.getrepr(style="native")
 
 
 def pytest_generate_tests(metafunc):
@@ -321,12 +333,12 @@ def _function_tasks(test_file: str, root: str, module: str) -> dict:
 
 
 def _frames(excinfo) -> list[tuple[str, int, str, str]]:
+    """``(file, line, function, source line)`` of each traceback entry. The line as a
+    printed traceback shows it, from linecache: pytest's ``entry.statement`` parses the
+    whole file per frame (most of a failing skeleton's grading time)."""
     frames = []
     for entry in excinfo.traceback:
-        try:
-            source = str(entry.statement).strip().splitlines()[0]
-        except (OSError, IndexError, ValueError, TypeError):  # no source to show
-            source = ""
+        source = linecache.getline(str(entry.path), entry.lineno + 1).strip()
         frames.append((str(entry.path), entry.lineno + 1, entry.name, source))
     return frames
 

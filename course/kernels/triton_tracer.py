@@ -110,6 +110,7 @@ DEFAULT_TRIS_PER_STEP = 1
 DEFAULT_SPECULATE = True
 DEFAULT_LOOP = "while"
 DEFAULT_STACK = None  # "local", or "global" when stack_regs keeps entries in registers
+DEFAULT_REFILL = None  # one program per block of rays
 LOOPS = ("if", "while")
 STACKS = ("global", "local")
 # The uber kernel's walk, as measured for its frames (bench/results/nvidia-h200/lab3_packed/).
@@ -354,45 +355,89 @@ def _pop_or_finish(stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3
 
 
 @_jit
+def _start(root, root_ref, ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, EXIT: tl.constexpr,
+           VEC: tl.constexpr, SANITIZE: tl.constexpr):
+    """A walk's start per lane: the inverse direction and its signs, and, for the lanes of
+    ``alive`` whose ray enters the root's box (row 0 of the float ``nodes``), the root as
+    the next node (or pending leaf). Returns ``(ix, iy, iz, neg_x, neg_y, neg_z, alive,
+    node, cur)``."""
+    ix = _rcp(dx, VEC)  # IEEE: 1/+-0 = +-inf, which the slab test expects
+    iy = _rcp(dy, VEC)
+    iz = _rcp(dz, VEC)
+    neg_x = ix.to(tl.int32, bitcast=True) < 0  # the sign bit: -0 counts as negative
+    neg_y = iy.to(tl.int32, bitcast=True) < 0
+    neg_z = iz.to(tl.int32, bitcast=True) < 0
+    zero_i = tl.zeros(ox.shape, tl.int32)
+    lx = tl.load(root + zero_i + 0)
+    ly = tl.load(root + zero_i + 1)
+    lz = tl.load(root + zero_i + 2)
+    hx = tl.load(root + zero_i + 3)
+    hy = tl.load(root + zero_i + 4)
+    hz = tl.load(root + zero_i + 5)
+    _, in_root = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz,
+                       t_lo, t_hi, EXIT, SANITIZE)
+    alive = alive & in_root
+    node = zero_i + NONE  # the pair row to visit next (or a leaf waiting); NONE: none
+    cur = zero_i - 1  # the leaf row to test next; -1: none
+    node, cur = _dispatch(alive, zero_i + root_ref, node, cur)
+    return ix, iy, iz, neg_x, neg_y, neg_z, alive, node, cur
+
+
+@_jit
+def _while_round(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz,
+                 neg_x, neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t,
+                 best_row, best_tri, best_u, best_v, ANY_HIT: tl.constexpr,
+                 EXIT: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
+                 REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr):
+    """One round of Aila & Laine's *while-while* loop, the shape of the CUDA C kernel: the
+    program traverses while some lane still looks for a leaf (a lane that found one waits
+    or, with SPECULATE, traverses on and parks one more), then tests triangles while some
+    lane has leaf work, then pops. A warp running that C code diverges the same way; here
+    each inner loop is a vote over the lanes. Returns the lanes' new state ``(alive, node,
+    cur, sp, s0..s3, best_t, best_row, best_tri, best_u, best_v)``."""
+    # TRAVERSE (and pop) until every lane has a leaf or is done.
+    searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
+    while searching != 0:
+        node, sp, cur, s0, s1, s2, s3 = _visit(
+            pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
+            t_lo, best_t, alive & (node >= 0), node, sp, cur, s0, s1, s2, s3, EXIT, VEC,
+            SANITIZE, REGS)
+        alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
+            stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
+        searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
+    # INTERSECT while some lane has leaf work (a parked leaf follows its predecessor).
+    testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
+    while testing != 0:
+        for _k in tl.static_range(TRIS):
+            test = alive & (cur >= 0)
+            best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
+                tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
+                best_t, best_row, best_tri, best_u, best_v, VEC)
+            if ANY_HIT:
+                alive = alive & ~hit
+        node, cur = _start_waiting(alive, node, cur, SPECULATE)
+        testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
+    # POP: lanes left with no node go on from their stack (or finish).
+    alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
+        stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
+    return alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row, best_tri, best_u, best_v
+
+
+@_jit
 def _while_while(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz,
                  neg_x, neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t,
                  best_row, best_tri, best_u, best_v, ANY_HIT: tl.constexpr,
                  EXIT: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
                  REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr):
-    """The walk as Aila & Laine's *while-while* loop, the shape of the CUDA C kernel: the
-    program traverses while some lane still looks for a leaf (a lane that found one waits
-    or, with SPECULATE, traverses on and parks one more), then tests triangles while some
-    lane has leaf work, then pops. A warp running that C code diverges the same way; here
-    each inner loop is a vote over the lanes. Same state and results as the *if-if* loop
-    of ``_trace``."""
+    """The walk as rounds of ``_while_round`` while some lane is alive: same state and
+    results as the *if-if* loop of ``_trace``."""
     votes = tl.reduce(alive.to(tl.int32), 0, _or)
     while votes != 0:
-        # TRAVERSE (and pop) until every lane has a leaf or is done.
-        searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
-        while searching != 0:
-            node, sp, cur, s0, s1, s2, s3 = _visit(
-                pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
-                t_lo, best_t, alive & (node >= 0), node, sp, cur, s0, s1, s2, s3, EXIT, VEC,
-                SANITIZE, REGS)
-            alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
-                stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS,
-                SPECULATE)
-            searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
-        # INTERSECT while some lane has leaf work (a parked leaf follows its predecessor).
-        testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
-        while testing != 0:
-            for _k in tl.static_range(TRIS):
-                test = alive & (cur >= 0)
-                best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
-                    tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-                    best_t, best_row, best_tri, best_u, best_v, VEC)
-                if ANY_HIT:
-                    alive = alive & ~hit
-            node, cur = _start_waiting(alive, node, cur, SPECULATE)
-            testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
-        # POP: lanes left with no node go on from their stack (or finish).
-        alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
-            stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
+        (alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row, best_tri, best_u,
+         best_v) = _while_round(
+            pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz, neg_x,
+            neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row,
+            best_tri, best_u, best_v, ANY_HIT, EXIT, VEC, SANITIZE, REGS, TRIS, SPECULATE)
         votes = tl.reduce(alive.to(tl.int32), 0, _or)
     return best_t, best_row, best_u, best_v
 
@@ -418,30 +463,14 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
     in both stages of a step instead of idling through one.
     Returns ``(t, row, u, v)``: row (int32) of the hit in the triangle layout, -1 on a miss.
     """
-    ix = _rcp(dx, VEC)  # IEEE: 1/+-0 = +-inf, which the slab test expects
-    iy = _rcp(dy, VEC)
-    iz = _rcp(dz, VEC)
-    neg_x = ix.to(tl.int32, bitcast=True) < 0  # the sign bit: -0 counts as negative
-    neg_y = iy.to(tl.int32, bitcast=True) < 0
-    neg_z = iz.to(tl.int32, bitcast=True) < 0
     zero_i = tl.zeros(ox.shape, tl.int32)
     best_t = t_hi
     best_row = zero_i - 1
     best_tri = zero_i + 2147483647  # original index, for the tie rule
     best_u = tl.zeros(ox.shape, tl.float32)
     best_v = tl.zeros(ox.shape, tl.float32)
-    lx = tl.load(root + zero_i + 0)
-    ly = tl.load(root + zero_i + 1)
-    lz = tl.load(root + zero_i + 2)
-    hx = tl.load(root + zero_i + 3)
-    hy = tl.load(root + zero_i + 4)
-    hz = tl.load(root + zero_i + 5)
-    _, in_root = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz,
-                       t_lo, t_hi, EXIT, SANITIZE)
-    alive = alive & in_root
-    node = zero_i + NONE  # the pair row to visit next (or a leaf waiting); NONE: none
-    cur = zero_i - 1  # the leaf row to test next; -1: none
-    node, cur = _dispatch(alive, zero_i + root_ref, node, cur)
+    ix, iy, iz, neg_x, neg_y, neg_z, alive, node, cur = _start(
+        root, root_ref, ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, EXIT, VEC, SANITIZE)
     if REGS == LOCAL_STACK:
         slot = _local_stack(zero_i)
     sp = zero_i
@@ -506,6 +535,43 @@ def _valid(ox, oy, oz, dx, dy, dz):
 
 
 @_jit
+def _load_rays(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, ray, live,
+               TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
+    """Rays ``ray`` in the lanes of ``live``: ``(ox, oy, oz, dx, dy, dz, t_lo, t_hi,
+    alive)``; alive: the ray can hit (rays with NaN/inf, a zero direction, t_max < t_min
+    or NaN never walk)."""
+    ox = tl.load(o_ptr + ray * 3 + 0, mask=live, other=0.0)
+    oy = tl.load(o_ptr + ray * 3 + 1, mask=live, other=0.0)
+    oz = tl.load(o_ptr + ray * 3 + 2, mask=live, other=0.0)
+    dx = tl.load(d_ptr + ray * 3 + 0, mask=live, other=1.0)
+    dy = tl.load(d_ptr + ray * 3 + 1, mask=live, other=1.0)
+    dz = tl.load(d_ptr + ray * 3 + 2, mask=live, other=1.0)
+    zero = tl.zeros(ox.shape, tl.float32)
+    if TLO_ARRAY:
+        t_lo = tl.load(tlo_ptr + ray, mask=live, other=0.0)
+    else:
+        t_lo = zero + tlo_value
+    if THI_ARRAY:
+        t_hi = tl.load(thi_ptr + ray, mask=live, other=0.0)
+    else:
+        t_hi = zero + thi_value
+    alive = live & _valid(ox, oy, oz, dx, dy, dz) & (t_lo <= t_hi)
+    return ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive
+
+
+@_jit
+def _store_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, ray, mask, t, row, u, v):
+    """The Hits of rays ``ray`` in the lanes of ``mask`` (row: the hit's row of the
+    triangle layout, -1 on a miss)."""
+    hit = row >= 0
+    tri = tl.load(tris + row * 12 + 3, mask=mask & hit, other=-1)
+    tl.store(t_ptr + ray, tl.where(hit, t, float("inf")), mask=mask)
+    tl.store(id_ptr + ray, tri.to(tl.int64), mask=mask)
+    tl.store(u_ptr + ray, tl.where(hit, u, 0.0), mask=mask)
+    tl.store(v_ptr + ray, tl.where(hit, v, 0.0), mask=mask)
+
+
+@_jit
 def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, root, tris,
                   root_ref, stack_ptr, t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
                   BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr,
@@ -514,32 +580,81 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, r
                   WHILE: tl.constexpr, TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
     slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = slot < n_rays
-    ox = tl.load(o_ptr + slot * 3 + 0, mask=live, other=0.0)
-    oy = tl.load(o_ptr + slot * 3 + 1, mask=live, other=0.0)
-    oz = tl.load(o_ptr + slot * 3 + 2, mask=live, other=0.0)
-    dx = tl.load(d_ptr + slot * 3 + 0, mask=live, other=1.0)
-    dy = tl.load(d_ptr + slot * 3 + 1, mask=live, other=1.0)
-    dz = tl.load(d_ptr + slot * 3 + 2, mask=live, other=1.0)
-    zero = tl.zeros(ox.shape, tl.float32)
-    if TLO_ARRAY:
-        t_lo = tl.load(tlo_ptr + slot, mask=live, other=0.0)
-    else:
-        t_lo = zero + tlo_value
-    if THI_ARRAY:
-        t_hi = tl.load(thi_ptr + slot, mask=live, other=0.0)
-    else:
-        t_hi = zero + thi_value
-    # Rays that cannot hit (NaN/inf, zero direction, t_max < t_min or NaN) never walk.
-    alive = live & _valid(ox, oy, oz, dx, dy, dz) & (t_lo <= t_hi)
+    ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive = _load_rays(
+        o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, slot, live, TLO_ARRAY, THI_ARRAY)
     t, row, u, v = _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
                           ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT, UNIFORM,
                           VEC, SANITIZE, REGS, TRIS, SPECULATE, WHILE)
-    hit = row >= 0
-    tri = tl.load(tris + row * 12 + 3, mask=hit, other=-1)
-    tl.store(t_ptr + slot, tl.where(hit, t, float("inf")), mask=live)
-    tl.store(id_ptr + slot, tri.to(tl.int64), mask=live)
-    tl.store(u_ptr + slot, tl.where(hit, u, 0.0), mask=live)
-    tl.store(v_ptr + slot, tl.where(hit, v, 0.0), mask=live)
+    _store_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, slot, live, t, row, u, v)
+
+
+@_jit
+def _refill_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, root, tris,
+                   root_ref, stack_ptr, counter, t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
+                   BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr,
+                   VEC: tl.constexpr, SANITIZE: tl.constexpr, REGS: tl.constexpr,
+                   TRIS: tl.constexpr, SPECULATE: tl.constexpr, REFILL: tl.constexpr,
+                   TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
+    """The while-while walk in persistent programs that replace finished rays (Aila &
+    Laine's dynamic ray fetch): a program runs rounds of ``_while_round``; after each, the
+    lanes whose ray is done write its hit, and once at least REFILL lanes are free they
+    take the next rays from a global counter (one atomic per program: the free lanes'
+    ranks from a prefix sum). A lane's stack is its own for the program's lifetime, as in
+    ``_trace_kernel``; ``ray`` = -1: the lane holds no ray."""
+    slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    zero_i = tl.zeros([BLOCK], tl.int32)
+    zero_f = tl.zeros([BLOCK], tl.float32)
+    if REGS == LOCAL_STACK:
+        slot = _local_stack(zero_i)
+    ray = zero_i - 1
+    ox, oy, oz, dx, dy, dz = zero_f, zero_f, zero_f, zero_f, zero_f, zero_f
+    ix, iy, iz, t_lo = zero_f, zero_f, zero_f, zero_f
+    neg_x, neg_y, neg_z, alive = ray >= 0, ray >= 0, ray >= 0, ray >= 0
+    node, cur, sp, s0, s1, s2, s3 = zero_i + NONE, zero_i - 1, zero_i, zero_i, zero_i, zero_i, zero_i
+    best_t, best_row, best_tri, best_u, best_v = zero_f, zero_i - 1, zero_i, zero_f, zero_f
+    more = n_rays > 0  # rays left to take
+    busy = more.to(tl.int32)
+    while busy != 0:
+        free = ray < 0
+        n_free = tl.sum(free.to(tl.int32), 0)
+        if more & (n_free >= REFILL):
+            first = tl.atomic_add(counter, n_free)
+            fresh = first + tl.cumsum(free.to(tl.int32), 0) - 1
+            take = free & (fresh < n_rays)
+            more = first + n_free < n_rays
+            ray = tl.where(take, fresh, ray)
+            (nox, noy, noz, ndx, ndy, ndz, nlo, nhi, nalive) = _load_rays(
+                o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, fresh, take, TLO_ARRAY,
+                THI_ARRAY)
+            nix, niy, niz, nnx, nny, nnz, nalive, nnode, ncur = _start(
+                root, root_ref, nox, noy, noz, ndx, ndy, ndz, nlo, nhi, nalive, EXIT, VEC,
+                SANITIZE)
+            ox, oy, oz = tl.where(take, nox, ox), tl.where(take, noy, oy), tl.where(take, noz, oz)
+            dx, dy, dz = tl.where(take, ndx, dx), tl.where(take, ndy, dy), tl.where(take, ndz, dz)
+            ix, iy, iz = tl.where(take, nix, ix), tl.where(take, niy, iy), tl.where(take, niz, iz)
+            neg_x = tl.where(take, nnx, neg_x)
+            neg_y = tl.where(take, nny, neg_y)
+            neg_z = tl.where(take, nnz, neg_z)
+            t_lo = tl.where(take, nlo, t_lo)
+            alive = tl.where(take, nalive, alive)
+            node = tl.where(take, nnode, node)
+            cur = tl.where(take, ncur, cur)
+            sp = tl.where(take, 0, sp)
+            best_t = tl.where(take, nhi, best_t)
+            best_row = tl.where(take, -1, best_row)
+            best_tri = tl.where(take, 2147483647, best_tri)
+            best_u = tl.where(take, 0.0, best_u)
+            best_v = tl.where(take, 0.0, best_v)
+        (alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row, best_tri, best_u,
+         best_v) = _while_round(
+            pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz, neg_x,
+            neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row,
+            best_tri, best_u, best_v, ANY_HIT, EXIT, VEC, SANITIZE, REGS, TRIS, SPECULATE)
+        done = (ray >= 0) & ~alive
+        _store_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, ray, done, best_t, best_row, best_u,
+                    best_v)
+        ray = tl.where(done, -1, ray)
+        busy = tl.reduce((ray >= 0).to(tl.int32), 0, _or) | more.to(tl.int32)
 
 
 @_jit
@@ -717,6 +832,30 @@ def _check_walk(stack_regs: int, tris_per_step: int, loop: str = DEFAULT_LOOP) -
         raise ValueError(f"tris_per_step: expected 1 or 2, got {tris_per_step!r}")
 
 
+def _check_refill(refill, programs, block: int, loop: str) -> None:
+    if refill is None:
+        if programs is not None:
+            raise ValueError(f"programs: expected None without refill, got {programs!r}")
+        return
+    if isinstance(refill, bool) or not isinstance(refill, int) or not 1 <= refill <= block:
+        raise ValueError(f"refill: expected None or free lanes from 1 to block ({block}), "
+                         f"got {refill!r}")
+    if loop != "while":
+        raise ValueError(f"refill: the persistent walk runs the while-while loop, got "
+                         f"loop={loop!r}")
+    if programs is not None and (isinstance(programs, bool) or not isinstance(programs, int)
+                                 or programs < 1):
+        raise ValueError(f"programs: expected None or an int >= 1, got {programs!r}")
+
+
+def _default_programs(device: torch.device) -> int:
+    """Persistent programs that fill the GPU: 32 per SM (the resident-block limit of Hopper
+    and Ampere; more would only start once the rays are gone). Interpreted: 4."""
+    if device.type != "cuda":
+        return 4
+    return 32 * torch.cuda.get_device_properties(device).multi_processor_count
+
+
 def _check_launch(block: int, num_warps: int) -> None:
     for name, x in (("block", block), ("num_warps", num_warps)):
         if isinstance(x, bool) or not isinstance(x, int) or x < 1 or x & (x - 1):
@@ -803,7 +942,8 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
                       stack_regs: int = DEFAULT_STACK_REGS,
                       tris_per_step: int = DEFAULT_TRIS_PER_STEP,
                       speculate: bool = DEFAULT_SPECULATE, loop: str = DEFAULT_LOOP,
-                      stack: str | None = DEFAULT_STACK, return_info: bool = False):
+                      stack: str | None = DEFAULT_STACK, refill: int | None = DEFAULT_REFILL,
+                      programs: int | None = None, return_info: bool = False):
     """Closest (or any) hit of each ray by the Triton BVH walk (one ray per lane).
 
     bvh: ``build_flat_bvh(...)`` on the rays' device; origins, directions: (N, 3) float
@@ -817,8 +957,13 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     one (``_while_while``, the CUDA C kernel's shape; the default); stack: ``"global"``,
     each lane's entries in a scratch buffer, or ``"local"``, in the lane's local memory
     like CUDA C's (compiled only: the interpreter uses the buffer; needs ``stack_regs=0``);
-    None (default): ``"local"``, or ``"global"`` with ``stack_regs=4``. The defaults are
-    the fastest launch measured on an H200 for primary and diffuse rays alike.
+    None (default): ``"local"``, or ``"global"`` with ``stack_regs=4``; refill: None, one
+    program per ``block`` rays, or a number of lanes: persistent programs that take new
+    rays from a global counter whenever at least that many of their lanes are free (Aila &
+    Laine's dynamic ray fetch; ``block``: whole batches only; needs ``loop="while"``);
+    programs: with ``refill``, the programs launched (default: 32 per SM, what fills a
+    Hopper or Ampere GPU with one-warp programs). The defaults are the fastest launch
+    measured on an H200 for primary and diffuse rays alike.
     Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
     """
     _require_triton()
@@ -832,6 +977,7 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
         raise ValueError(f"stack: expected 'global', 'local' or None, got {stack!r}")
     if stack == "local" and stack_regs:
         raise ValueError(f"stack_regs: expected 0 with stack='local', got {stack_regs!r}")
+    _check_refill(refill, programs, block, loop)
     n, device = o.shape[0], o.device
     _device_check(device)
     pairs, root, _tris_f, tris, root_ref = _bvh_args(bvh, device)
@@ -842,9 +988,23 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     out_u = torch.empty(n, dtype=torch.float32, device=device)
     out_v = torch.empty(n, dtype=torch.float32, device=device)
     handle = None
-    if n:
-        compiled = not interpreting()
-        local = stack == "local" and compiled  # the interpreter has no local memory
+    compiled = not interpreting()
+    local = stack == "local" and compiled  # the interpreter has no local memory
+    if n and refill is not None:
+        # Persistent programs: the counter hands out the rays (one zeroed int32).
+        grid = min(-(-n // block), programs or _default_programs(device))
+        buffer, lanes = _stack(grid * block, block, device, bvh, local)
+        counter = torch.zeros(1, dtype=torch.int32, device=device)
+        with _ieee_quiet():
+            handle = _refill_kernel[(grid,)](
+                o, d, o if t_lo is None else t_lo, lo_value, o if t_hi is None else t_hi,
+                hi_value, pairs, root, tris, root_ref, buffer, counter,
+                out_t, out_id, out_u, out_v, n, lanes,
+                BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE, VEC=compiled,
+                SANITIZE=not compiled, REGS=-1 if local else stack_regs, TRIS=tris_per_step,
+                SPECULATE=bool(speculate), REFILL=refill, TLO_ARRAY=t_lo is not None,
+                THI_ARRAY=t_hi is not None, num_warps=num_warps)
+    elif n:
         buffer, lanes = _stack(n, block, device, bvh, local)
         with _ieee_quiet():
             handle = _trace_kernel[(lanes // block,)](
