@@ -68,7 +68,7 @@ UNIFORM = [True, False]  # skip stages no lane needs / run every stage masked
 # with the stack's top in registers first, then one knob changed at a time.
 TRITON_LAUNCHES = [
     {"block": b, "num_warps": w, "uniform_branches": u, "stack_regs": r, "tris_per_step": k,
-     "speculate": sp, "loop": lp, "stack": st, "refill": None}
+     "speculate": sp, "loop": lp, "stack": st, "refill": 0}
     for b, w, u, r, k, sp, lp, st in [
         (32, 1, True, 4, 1, False, "if", "global"), (32, 1, True, 0, 1, False, "if", "global"),
         (32, 1, True, 4, 2, False, "if", "global"), (32, 1, True, 4, 1, True, "if", "global"),

@@ -90,11 +90,12 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
                                                   stack_regs=key[2], speculate=key[3],
                                                   any_hit=True).to("cpu")
                         for key in loops}
-    # Persistent programs that take new rays as lanes free up: one program, so that every
-    # lane is refilled (whole batches, a quarter of the lanes free, any free lane).
-    out["refill"] = {(refill, any_hit): tt.trace_flat_triton(deep, *args, refill=refill,
-                                                             programs=1, any_hit=any_hit).to("cpu")
-                     for refill in (32, 8, 1) for any_hit in (False, True)}
+    # Persistent programs that take new rays as lanes free up (the default walk): one
+    # program, so that every lane is refilled (whole batches, a quarter of the lanes free,
+    # any free lane), and none (refill=0: a program per block of rays).
+    out["refill"] = {(refill, any_hit): tt.trace_flat_triton(
+        deep, *args, refill=refill, programs=1 if refill else None, any_hit=any_hit).to("cpu")
+        for refill in (32, 8, 1, 0) for any_hit in (False, True)}
     v, f, o, d = axis_parallel_case()
     out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
                                        o.to(device), d.to(device)).to("cpu")
@@ -144,7 +145,7 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
         check_hits(case, out["loops_any"][loop, stack, regs, spec], f"{what} any hit",
                    any_hit=True, ref=ref)
     for (refill, any_hit), hits in out["refill"].items():
-        what = f"{label}: refill={refill}, one program"
+        what = f"{label}: refill={refill}" + (", one program" if refill else "")
         if any_hit:
             check_hits(case, hits, f"{what}, any hit", any_hit=True, ref=ref)
             continue
@@ -259,8 +260,9 @@ def test_bad_arguments_raise_clear_errors():
                          ({"stack_regs": 2}, "stack_regs"), ({"tris_per_step": 3}, "tris_per"),
                          ({"loop": "do"}, "loop"), ({"stack": "shared"}, "stack"),
                          ({"stack": "local", "stack_regs": 4}, "stack_regs"),
-                         ({"refill": 0}, "refill"), ({"refill": 33}, "refill"),
-                         ({"refill": 8, "loop": "if"}, "refill"), ({"programs": 4}, "programs"),
+                         ({"refill": -1}, "refill"), ({"refill": 33}, "refill"),
+                         ({"refill": 8, "loop": "if"}, "refill"),
+                         ({"refill": 0, "programs": 4}, "programs"),
                          ({"refill": 8, "programs": 0}, "programs"),
                          ({"t_min": torch.zeros(7)}, "t_min")]:
         args = {"bvh": bvh, "origins": o, "directions": d, **kwargs}
