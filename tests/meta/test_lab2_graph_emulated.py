@@ -60,6 +60,8 @@ def emulated(monkeypatch):
     monkeypatch.setattr(lab, "_StepGraph", EagerGraph)
     monkeypatch.setattr(lab, "_GRAPH_DEVICES", ("cuda", "cpu"))
     monkeypatch.setattr(lab, "_GRAPHS", collections.OrderedDict())
+    # Compactions at these few rays too (on a GPU they start from 65,536 rays).
+    monkeypatch.setattr(lab, "_GRAPH_COMPACT_FROM", 0)
     # No compile here: the path's buffers are what is tested, not inductor.
     monkeypatch.setattr(lab, "_compiled_fast_steps", lambda mode: lab._fast_steps_in_place)
 
@@ -120,3 +122,22 @@ def test_cached_graphs_are_reused(emulated):
     got, _ = lab.bvh_closest_hit_fast(half, mesh, bvh, walk=walk, compile="reduce-overhead")
     assert_equal(got.triangle, want.triangle, where="ray", name="half the rays, graph path")
     assert_equal(got.t, want.t, where="ray", name="half the rays' t, graph path")
+
+
+def test_graphs_compact_only_from_the_floor(emulated, monkeypatch):
+    mesh, bvh, camera = _suzanne(40)
+    walk = pack_bvh(bvh, mesh)
+    rays = primary_rays(camera)
+    want, count = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, check_every=4)
+    started = int(((count["steps"] + count["tests"]) > 0).sum())  # rays entering the root box
+    for floor, compacts in ((started, True), (started + 1, False)):
+        monkeypatch.setattr(lab, "_GRAPH_COMPACT_FROM", floor)
+        monkeypatch.setattr(lab, "_GRAPHS", collections.OrderedDict())
+        made = EagerGraph.made
+        got, _ = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, check_every=4,
+                                          compile="reduce-overhead")
+        assert (EagerGraph.made - made >= 2) == compacts, (
+            f"{started} rays started, compactions from {floor} rays: expected "
+            f"{'a compaction' if compacts else 'none'}, made {EagerGraph.made - made} graphs")
+        assert_equal(got.triangle, want.triangle, where="ray",
+                     name=f"compactions from {floor} rays: triangles against eager")
