@@ -32,7 +32,7 @@ Stages no lane needs are skipped (``uniform_branches``, on by default): before T
 INTERSECT the program votes over its lanes (``redux.sync``) and branches around the stage
 when none needs it, as a warp does when none of its threads takes a branch. The kernel
 itself leaves out rays that cannot hit and takes numbers for ``t_min``/``t_max`` as
-numbers, so a call is one launch.
+numbers, so a call is one launch (and, with ``refill``, a fill of its ray counter).
 
 What the knobs measured on an H200 (bench/results/nvidia-h200/lab3_packed/: 1M rays on the
 bunny, one warp per program): skipping stages 5.7 -> 4.9 G primary rays/s without it;
@@ -51,6 +51,17 @@ kernel runs at 62.5%. Measured again with the best launch of each tracer timed i
 alternating rounds (bench/results/nvidia-h200/lab3_head_to_head/): 71% primary (8.2 G
 against 11.5 G rays/s), 72% diffuse (2.3 G against 3.2 G), the same launch best for both
 (while-while, speculative, local stack: now the defaults).
+
+Refilling free lanes (``refill``, the default with the while-while loop). A program whose
+lanes finish at different times runs on with most of them idle: on diffuse rays, a warp
+waits for its slowest ray. With ``refill=k`` the kernel launches persistent programs (32
+per SM) that take new rays from a global counter whenever ``k`` of their lanes are free
+(Aila & Laine's dynamic ray fetch: a prefix sum over the free lanes gives each its ray, one
+atomic add per program). Measured on an H200 (bench/results/nvidia-h200/lab3_refill/):
+diffuse rays 2.3 -> 3.0 G rays/s, 94% of the CUDA C kernel's 3.2 G in alternating rounds;
+primary rays, whose lanes finish together anyway, lose ~5% (coherence traded for
+occupancy of the lanes): ~68% of CUDA C there. ``k`` from 1 to 8 measured the same on
+diffuse rays; 8 the best of them on primary rays.
 
 The stack. Triton has no per-lane arrays with dynamic indices, so by default
 (``stack="global"``) each lane's stack is a column of a scratch buffer in global memory,
@@ -104,7 +115,8 @@ DEFAULT_BLOCK = 32
 DEFAULT_NUM_WARPS = 1
 DEFAULT_UNIFORM = True
 # The defaults are the launch measured fastest on primary and on diffuse rays
-# (bench/results/nvidia-h200/lab3_head_to_head/): while-while, speculative, local stack.
+# (bench/results/nvidia-h200/lab3_head_to_head/): while-while, speculative, local stack;
+# then refilling free lanes (bench/results/nvidia-h200/lab3_refill/: +30% diffuse).
 DEFAULT_STACK_REGS = 0
 DEFAULT_TRIS_PER_STEP = 1
 DEFAULT_SPECULATE = True
@@ -983,8 +995,9 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     n, device = o.shape[0], o.device
     _device_check(device)
     pairs, root, _tris_f, tris, root_ref = _bvh_args(bvh, device)
-    # One launch and nothing else: the kernel itself leaves out the rays that cannot hit
-    # (NaN/inf, zero direction, t_max < t_min), and numbers for t_min/t_max stay numbers.
+    # One launch (and the refill counter's fill): the kernel itself leaves out the rays
+    # that cannot hit (NaN/inf, zero direction, t_max < t_min), and numbers for
+    # t_min/t_max stay numbers.
     out_t = torch.empty(n, dtype=torch.float32, device=device)
     out_id = torch.empty(n, dtype=torch.int64, device=device)
     out_u = torch.empty(n, dtype=torch.float32, device=device)
