@@ -210,6 +210,13 @@ EQUIVALENT = {
     "lab2_accel:bvh_closest_hit_fast:cmp_LtE_GtE:0":
         "compacts when many rays run instead of few: when to compact changes only the "
         "order in which unfinished rays are stepped, not their hits or counters",
+    "lab2_accel:bvh_closest_hit_fast:cmp_GtE_Gt:0":
+        "compacts only from one ray more than the floor: when to compact changes only the "
+        "order in which unfinished rays are stepped, not their hits or counters",
+    "lab2_accel:bvh_closest_hit_fast:cmp_GtE_LtE:0":
+        "compacts only below the floor (on the CPU: never): when to compact changes only "
+        "the order in which unfinished rays are stepped, not their hits or counters "
+        "(tests/meta/test_lab2_graph_emulated.py checks the floor itself)",
     "lab2_accel:bvh_closest_hit_fast:const_int:23":
         "compacts at a ninth instead of an eighth (CUDA graphs): when to compact changes "
         "only the order in which unfinished rays are stepped, not their hits or counters",
