@@ -587,6 +587,10 @@ class SandboxedLab:
             return wire.decode(value, make_ref=lambda i, t: RemoteObject(self, i, t),
                                limit=self._worker.reply_bytes)
         except wire.TooLarge as exc:
+            # The worker checks what it sends, so only a reply written past that check (a
+            # hostile submission) decodes too large: its server may be ending right now, so
+            # the next call starts a fresh one instead of racing its exit.
+            self._worker.stop()
             raise ReplyTooLarge(f"{where}: {exc}, more than a result may hold") from None
 
     def _positional(self, key):
