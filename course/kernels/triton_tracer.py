@@ -60,7 +60,7 @@ per SM) that take new rays from a global counter whenever ``k`` of their lanes a
 atomic add per program). Measured on an H200 (bench/results/nvidia-h200/lab3_refill/):
 diffuse rays 2.3 -> 3.0 G rays/s, 94% of the CUDA C kernel's 3.2 G in alternating rounds;
 primary rays, whose lanes finish together anyway, lose ~5% (coherence traded for
-occupancy of the lanes): ~68% of CUDA C there. ``k`` from 1 to 8 measured the same on
+occupancy of the lanes): ~67% of CUDA C there. ``k`` from 1 to 8 measured the same on
 diffuse rays; 8 the best of them on primary rays.
 
 The stack. Triton has no per-lane arrays with dynamic indices, so by default

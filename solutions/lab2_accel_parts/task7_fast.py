@@ -20,8 +20,9 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     ``"default"`` and, on a GPU, replays the ``k`` steps of a look from one CUDA graph,
     captured once per (padded) number of rays and kept for later calls with the same
     ``walk`` (packed here: a graph of one step, replayed ``k`` times, not kept); compact:
-    at a look, drop finished rays if at most half (an eighth with graphs, and only
-    from 65,536 rays up) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree once and trace it many times (default: packed here, for the octants of these rays);
+    at a look, drop finished rays if at most half (an eighth with graphs, and only from
+    65,536 rays up) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree once
+    and trace it many times (default: packed here, for the octants of these rays);
     fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
     could stay in registers across them, but the compile time grows with them (2 CPU
     cores: 21 s for 1 step, 2 minutes for 8) and 8 ran slower than 1 on the CPU and on an
@@ -148,9 +149,9 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
 
 _GRAPH_COMPACT_FROM = 1 << 16
 """With graphs, the fewest rays worth compacting. A GPU runs fewer rays than it holds
-(an H200: 270K threads) in one wave, so a step over 20K rays costs what a step over 500
-does (~2.5 us in a graph): below this, a compaction (~250 us of host time) saves the device
-nothing (bench/results/nvidia-h200/lab2_floor/)."""
+(an H200: 270K threads) in one wave, so a step over 18K rays costs what a step over 500
+does (~2.5 us in a graph): below this, a compaction (hundreds of us of host time) saves
+the device nothing (bench/results/nvidia-h200/lab2_floor/)."""
 
 
 def _compact_from(graphs: bool) -> int:
