@@ -143,7 +143,7 @@ def hit_errors(scene, origins, directions, hits, sample: int) -> dict:
 
 def triton_row(info) -> dict:
     occ = info.occupancy()
-    return {"regs": info.n_regs, "spills": info.n_spills, "local_bytes": None,
+    return {"regs": info.n_regs, "spills": info.n_spills, "local_bytes": info.local_bytes,
             "threads_per_block": 32 * info.num_warps,
             "occupancy_model": None if occ is None else occ.occupancy,
             "occupancy_cuda": None}

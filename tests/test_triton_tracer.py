@@ -199,8 +199,13 @@ def test_compiled_kernels_follow_the_contract():
     for info in out["info"].values():
         assert isinstance(info.n_regs, int) and info.n_regs > 0, f"{info.name}: {info.n_regs}"
         assert isinstance(info.n_spills, int) and info.n_spills >= 0
+        assert isinstance(info.local_bytes, int) and info.local_bytes >= 4 * info.n_spills
+        if info.name in ("closest_hit", "any_hit"):  # the default walk: the local stack
+            assert info.local_bytes >= 4 * 64, (
+                f"{info.name}: {info.local_bytes} B of local memory, less than its stack")
         occ = info.occupancy()
         print(f"{info.name}: {info.n_regs} registers, {info.n_spills} spills, "
+              f"{info.local_bytes} B local, "
               f"occupancy {occ.occupancy:.0%} ({occ.limiter})")
 
 

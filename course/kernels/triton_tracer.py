@@ -900,8 +900,13 @@ def _stack(n: int, block: int, device, bvh: FlatBVH,
 
 @dataclass(frozen=True)
 class TracerKernelInfo:
-    """Resources of one compiled tracer kernel: registers, spills, static shared memory
-    (None under the interpreter), the launch's warps and lanes per program."""
+    """Resources of one compiled tracer kernel: registers, spills (32-bit words), static
+    shared memory and local memory per thread in bytes (None under the interpreter), the
+    launch's warps and lanes per program.
+
+    Triton reports a kernel's whole local memory as its spills (local bytes / 4), so a
+    kernel with ``stack="local"`` would count its 64-entry stack as 64 spills: ``n_spills``
+    here is what is left beyond that stack, ``local_bytes`` all of it."""
 
     name: str
     n_regs: int | None
@@ -909,6 +914,7 @@ class TracerKernelInfo:
     shared_bytes: int | None
     num_warps: int
     block: int
+    local_bytes: int | None = None
 
     def occupancy(self, arch=None):
         """``course.measure.occupancy.occupancy`` of this launch (Hopper preset by default: H100
@@ -921,7 +927,10 @@ class TracerKernelInfo:
                          self.shared_bytes or 0)
 
 
-def _info(name: str, handle, num_warps: int, block: int) -> TracerKernelInfo:
+def _info(name: str, handle, num_warps: int, block: int,
+          stack_words: int = 0) -> TracerKernelInfo:
+    """The kernel info of a launch's ``handle``; stack_words: the words of local memory
+    the kernel declares itself (its local stack), not spills."""
     def field(obj, key):
         if obj is None:
             return None
@@ -931,8 +940,11 @@ def _info(name: str, handle, num_warps: int, block: int) -> TracerKernelInfo:
         init = getattr(handle, "_init_handles", None)  # binaries load lazily in recent Tritons
         if callable(init):
             init()
-    return TracerKernelInfo(name, field(handle, "n_regs"), field(handle, "n_spills"),
-                            field(field(handle, "metadata"), "shared"), num_warps, block)
+    words = field(handle, "n_spills")  # Triton: local memory bytes / 4
+    return TracerKernelInfo(name, field(handle, "n_regs"),
+                            None if words is None else max(0, words - stack_words),
+                            field(field(handle, "metadata"), "shared"), num_warps, block,
+                            None if words is None else 4 * words)
 
 
 def _bvh_args(bvh: FlatBVH, device):
@@ -1034,7 +1046,7 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
     if return_info:
         name = "any_hit" if any_hit else "closest_hit"
-        return hits, _info(name, handle, num_warps, block)
+        return hits, _info(name, handle, num_warps, block, STACK_DEPTH if local else 0)
     return hits
 
 
