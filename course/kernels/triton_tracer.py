@@ -101,7 +101,14 @@ from course.kernels.flat_bvh import (
     check_rays,
     flat_bvh_for,
 )
-from course.kernels.triton_intersect import _ieee_quiet, _jit, _require_triton, tl, triton
+from course.kernels.triton_intersect import (
+    _ieee_quiet,
+    _jit,
+    _require_triton,
+    _store_hits,
+    tl,
+    triton,
+)
 
 __all__ = [
     "TracerKernelInfo",
@@ -572,15 +579,11 @@ def _load_rays(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, ray, live,
 
 
 @_jit
-def _store_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, ray, mask, t, row, u, v):
+def _store_row_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, ray, mask, t, row, u, v):
     """The Hits of rays ``ray`` in the lanes of ``mask`` (row: the hit's row of the
-    triangle layout, -1 on a miss)."""
-    hit = row >= 0
-    tri = tl.load(tris + row * 12 + 3, mask=mask & hit, other=-1)
-    tl.store(t_ptr + ray, tl.where(hit, t, float("inf")), mask=mask)
-    tl.store(id_ptr + ray, tri.to(tl.int64), mask=mask)
-    tl.store(u_ptr + ray, tl.where(hit, u, 0.0), mask=mask)
-    tl.store(v_ptr + ray, tl.where(hit, v, 0.0), mask=mask)
+    triangle layout, -1 on a miss; the original index is the row's ``v0.w``)."""
+    tri = tl.load(tris + row * 12 + 3, mask=mask & (row >= 0), other=-1)
+    _store_hits(t_ptr, id_ptr, u_ptr, v_ptr, ray, mask, t, tri, u, v)
 
 
 @_jit
@@ -597,7 +600,7 @@ def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, r
     t, row, u, v = _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
                           ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT, UNIFORM,
                           VEC, SANITIZE, REGS, TRIS, SPECULATE, WHILE)
-    _store_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, slot, live, t, row, u, v)
+    _store_row_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, slot, live, t, row, u, v)
 
 
 @_jit
@@ -663,7 +666,7 @@ def _refill_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, 
             neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row,
             best_tri, best_u, best_v, ANY_HIT, EXIT, VEC, SANITIZE, REGS, TRIS, SPECULATE)
         done = (ray >= 0) & ~alive
-        _store_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, ray, done, best_t, best_row, best_u,
+        _store_row_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, ray, done, best_t, best_row, best_u,
                     best_v)
         ray = tl.where(done, -1, ray)
         busy = tl.reduce((ray >= 0).to(tl.int32), 0, _or) | more.to(tl.int32)
