@@ -347,6 +347,30 @@ def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
 
 
 @_jit
+def _test_leaves(tris, ox, oy, oz, dx, dy, dz, t_lo, alive, cur, best_t, best_row, best_tri,
+                 best_u, best_v, ANY_HIT: tl.constexpr, VEC: tl.constexpr,
+                 TRIS: tl.constexpr, UNIFORM: tl.constexpr):
+    """INTERSECT: up to TRIS rows of each lane's pending leaf (``_intersect``); with
+    UNIFORM, a test no lane needs is skipped (a vote). Any hit ends a lane's walk. Returns
+    ``(alive, cur, best_t, best_row, best_tri, best_u, best_v)``."""
+    for _k in tl.static_range(TRIS):
+        test = alive & (cur >= 0)
+        hit = test & (cur < -1)  # cur >= -1 always: no hit where the test is skipped
+        if UNIFORM:
+            if tl.max(test.to(tl.int32), axis=0) > 0:
+                best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
+                    tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
+                    best_t, best_row, best_tri, best_u, best_v, VEC)
+        else:
+            best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
+                tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
+                best_t, best_row, best_tri, best_u, best_v, VEC)
+        if ANY_HIT:
+            alive = alive & ~hit
+    return alive, cur, best_t, best_row, best_tri, best_u, best_v
+
+
+@_jit
 def _start_waiting(alive, node, cur, SPECULATE: tl.constexpr):
     """Speculative traversal: a leaf waiting in ``node`` becomes the pending leaf once the
     current one is done."""
@@ -427,13 +451,9 @@ def _while_round(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, i
     # INTERSECT while some lane has leaf work (a parked leaf follows its predecessor).
     testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
     while testing != 0:
-        for _k in tl.static_range(TRIS):
-            test = alive & (cur >= 0)
-            best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
-                tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-                best_t, best_row, best_tri, best_u, best_v, VEC)
-            if ANY_HIT:
-                alive = alive & ~hit
+        alive, cur, best_t, best_row, best_tri, best_u, best_v = _test_leaves(
+            tris, ox, oy, oz, dx, dy, dz, t_lo, alive, cur, best_t, best_row, best_tri,
+            best_u, best_v, ANY_HIT, VEC, TRIS, False)
         node, cur = _start_waiting(alive, node, cur, SPECULATE)
         testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
     # POP: lanes left with no node go on from their stack (or finish).
@@ -521,20 +541,9 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
                 pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
                 t_lo, best_t, visit, node, sp, cur, s0, s1, s2, s3, EXIT, VEC, SANITIZE, REGS)
         # 2. INTERSECT up to TRIS triangles of the pending leaf
-        for _k in tl.static_range(TRIS):
-            test = alive & (cur >= 0)
-            hit = test & (zero_i != 0)
-            if UNIFORM:
-                if tl.max(test.to(tl.int32), axis=0) > 0:
-                    best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
-                        tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-                        best_t, best_row, best_tri, best_u, best_v, VEC)
-            else:
-                best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
-                    tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-                    best_t, best_row, best_tri, best_u, best_v, VEC)
-            if ANY_HIT:
-                alive = alive & ~hit
+        alive, cur, best_t, best_row, best_tri, best_u, best_v = _test_leaves(
+            tris, ox, oy, oz, dx, dy, dz, t_lo, alive, cur, best_t, best_row, best_tri,
+            best_u, best_v, ANY_HIT, VEC, TRIS, UNIFORM)
         # 3. POP: a lane with no node and no leaf work pops its stack (or finishes)
         node, cur = _start_waiting(alive, node, cur, SPECULATE)
         alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
