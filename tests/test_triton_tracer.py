@@ -96,6 +96,13 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
     out["refill"] = {(refill, any_hit): tt.trace_flat_triton(
         deep, *args, refill=refill, programs=1 if refill else None, any_hit=any_hit).to("cpu")
         for refill in (32, 8, 1, 0) for any_hit in (False, True)}
+    # Fewer rays than a program's lanes, and one more: the counter runs out at the first
+    # take and within the second.
+    out["refill_few"] = {n: (tt.trace_flat_triton(deep, *[a[:n] for a in args], refill=8,
+                                                  programs=1).to("cpu"),
+                             tt.trace_flat_triton(deep, *[a[:n] for a in args],
+                                                  refill=0).to("cpu"))
+                         for n in (1, 33)}
     v, f, o, d = axis_parallel_case()
     out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
                                        o.to(device), d.to(device)).to("cpu")
@@ -153,6 +160,10 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
             assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
                 f"{what} changed {field} on rays "
                 f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0].tolist()}")
+    for n, (got, want) in out["refill_few"].items():
+        for field in ("t", "triangle", "u", "v"):
+            assert torch.equal(getattr(got, field), getattr(want, field)), (
+                f"{label}: refill=8 on {n} ray(s) changed {field}")
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device="cpu")
         want = render_reference(scene, o, d)
