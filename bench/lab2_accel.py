@@ -312,10 +312,9 @@ def run_fast_knobs(mode, device, table, log, headline=False):
             (hits, counters), warm_s = seconds(lab.bvh_closest_hit_fast, rays, mesh, bvh,
                                                device=device, **knobs)  # warm up (and compile)
             kernels = inductor_metrics.generated_kernel_count - kernels
-            # A graph traversal takes milliseconds: a median of 20, where 3 of them moved by
-            # a fifth between runs.
-            repeats = max(mode["repeats"], 20) if compile_mode == "reduce-overhead" else \
-                mode["repeats"]
+            repeats = mode["repeats"]
+            if compile_mode == "reduce-overhead":  # milliseconds a call: a median of 20,
+                repeats = max(repeats, 20)         # where 3 moved by a fifth between runs
             timing = time_fn(lab.bvh_closest_hit_fast, rays, mesh, bvh, repeats=repeats,
                              warmup=1, device=device, **knobs)
         except RuntimeError as error:

@@ -101,7 +101,8 @@ def idle_report(trace_path: Path, gap_us: float = 5.0, shown: int = 12) -> str:
     long = sorted((g for g in gaps if g[0] > gap_us), reverse=True)
     by_op: dict = {}
     for length, at in long:
-        by_op[running(at)] = by_op.get(running(at), 0.0) + length
+        op = running(at)
+        by_op[op] = by_op.get(op, 0.0) + length
     lines = [(f"device busy {busy / 1e3:.2f} ms of {wall / 1e3:.2f} ms from its first event "
               f"to its last; {len(long)} gaps over {gap_us:g} us, "
               f"{sum(g for g, _ in long) / 1e3:.2f} ms in all; the host was in (total gap ms):")]
