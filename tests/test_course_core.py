@@ -20,7 +20,14 @@ from course.core.image import from_srgb8, save_png, show, srgb_decode, srgb_enco
 from course.core.scenes import QuadLight, list_scenes, load_mesh, load_scene
 from course.core.types import Hits, Mesh, Rays, closest
 from course.measure import bench
-from course.measure.bench import ResultTable, device_name, pareto_front, pareto_plot, time_fn
+from course.measure.bench import (
+    ResultTable,
+    device_name,
+    pareto_front,
+    pareto_plot,
+    time_fn,
+    time_replayed,
+)
 
 
 @pytest.fixture(autouse=True)
@@ -355,6 +362,30 @@ def test_time_fn_on_cpu():
         time_fn(lambda: None, repeats=0)
     with pytest.raises(ValueError, match="warmup"):
         time_fn(lambda: None, warmup=-1)
+
+
+def test_time_replayed_falls_back_to_time_fn_on_cpu():
+    calls = []
+    timing = time_replayed(lambda x: calls.append(x.sum()), torch.ones(10), repeats=4, warmup=1)
+    assert len(calls) == 5 and timing.method == "perf_counter" and timing.repeats == 4
+    with pytest.raises(ValueError, match="calls"):
+        time_replayed(lambda: None, calls=0)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_time_replayed_times_the_kernels_of_a_captured_graph():
+    x = torch.randn(2048, 2048, device="cuda")
+    calls = []
+
+    def work(a):
+        calls.append(1)
+        return a @ a
+
+    timing = time_replayed(work, x, calls=4, repeats=5, warmup=2)
+    # Python runs for the warm-up and the capture only: replays do not call it.
+    assert len(calls) == 2 + 4 and timing.method == "cuda-graph"
+    # A 2048^3 matmul is ~17 GFLOP: more than 1 us on any GPU, less than 1 s.
+    assert 1e-6 < timing.min <= timing.median <= timing.max < 1.0
 
 
 def test_time_fn_infers_device_from_dataclass_arguments():

@@ -159,20 +159,41 @@ def _or(a, b):
 
 
 @_jit
-def _load4(ptr, offset, mask, VEC: tl.constexpr):
-    """Words ``offset .. offset + 3`` of a 32-bit array per lane (offset a multiple of 4):
-    compiled, one 16-byte load (``ld.global.nc.v4``, masked-off lanes read row 0, which
-    every array has); interpreted, four masked loads. Returns four int32 (bit patterns)."""
+def _row(ptr, row, width: tl.constexpr):
+    """The address of row ``row`` of a table of ``width``-word rows (32-bit words), of row
+    0 (which every table has) where ``row`` is negative (a lane with no row to read): one
+    address per row, whose words ``_load4`` then reads at constant offsets, as CUDA C's
+    ``p[0], p[1]`` do (an address per load costs ~6 instructions of 64-bit arithmetic; a
+    row known to be >= 0 needs no sign extension)."""
+    return ptr + tl.maximum(row, 0).to(tl.int64) * width
+
+
+@_jit
+def _load4(row, WORD: tl.constexpr, VEC: tl.constexpr):
+    """Words ``WORD .. WORD + 3`` (WORD: 0, 4, 8 or 12) of the row at ``row`` (``_row``):
+    compiled, one 16-byte load (``ld.global.nc.v4``, the offset in the instruction);
+    interpreted, four loads. Returns four int32 (bit patterns)."""
     if VEC:
-        return tl.inline_asm_elementwise(
-            "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4];", "=r,=r,=r,=r,l",
-            [ptr + tl.where(mask, offset, 0)], dtype=(tl.int32, tl.int32, tl.int32, tl.int32),
-            is_pure=True, pack=1)
+        if WORD == 0:
+            return tl.inline_asm_elementwise(
+                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4];", "=r,=r,=r,=r,l", [row],
+                dtype=(tl.int32, tl.int32, tl.int32, tl.int32), is_pure=True, pack=1)
+        elif WORD == 4:
+            return tl.inline_asm_elementwise(
+                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4+16];", "=r,=r,=r,=r,l", [row],
+                dtype=(tl.int32, tl.int32, tl.int32, tl.int32), is_pure=True, pack=1)
+        elif WORD == 8:
+            return tl.inline_asm_elementwise(
+                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4+32];", "=r,=r,=r,=r,l", [row],
+                dtype=(tl.int32, tl.int32, tl.int32, tl.int32), is_pure=True, pack=1)
+        else:
+            tl.static_assert(WORD == 12, "_load4: WORD must be 0, 4, 8 or 12")
+            return tl.inline_asm_elementwise(
+                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4+48];", "=r,=r,=r,=r,l", [row],
+                dtype=(tl.int32, tl.int32, tl.int32, tl.int32), is_pure=True, pack=1)
     else:
-        return (tl.load(ptr + offset, mask=mask, other=0),
-                tl.load(ptr + offset + 1, mask=mask, other=0),
-                tl.load(ptr + offset + 2, mask=mask, other=0),
-                tl.load(ptr + offset + 3, mask=mask, other=0))
+        return (tl.load(row + WORD), tl.load(row + WORD + 1), tl.load(row + WORD + 2),
+                tl.load(row + WORD + 3))
 
 
 @_jit
@@ -292,11 +313,11 @@ def _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y,
     """TRAVERSE for the lanes in ``visit``: one row of ``pairs`` (both children's boxes and
     links, four 16-byte loads); go to the nearer hit child, push the farther. Returns the
     lanes' new ``(node, sp, cur, s0, s1, s2, s3)``; node = cur = -1: pop next."""
-    base = node * 16
-    ax0, ax1, bx0, bx1 = _load4(pairs, base, visit, VEC)
-    ay0, ay1, by0, by1 = _load4(pairs, base + 4, visit, VEC)
-    az0, az1, bz0, bz1 = _load4(pairs, base + 8, visit, VEC)
-    ref_a, ref_b, _ca, _cb = _load4(pairs, base + 12, visit, VEC)
+    row = _row(pairs, node, 16)  # lanes not in `visit` mask their results
+    ax0, ax1, bx0, bx1 = _load4(row, 0, VEC)
+    ay0, ay1, by0, by1 = _load4(row, 4, VEC)
+    az0, az1, bz0, bz1 = _load4(row, 8, VEC)
+    ref_a, ref_b, _ca, _cb = _load4(row, 12, VEC)
     ta, ha = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, _f(ax0), _f(ax1), _f(ay0),
                    _f(ay1), _f(az0), _f(az1), t_lo, best_t, EXIT, SANITIZE)
     tb, hb = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, _f(bx0), _f(bx1), _f(by0),
@@ -318,10 +339,10 @@ def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
     """INTERSECT for the lanes in ``test``: Möller–Trumbore against row ``cur`` (three
     16-byte loads); keeps the nearest hit (ties: lower original index). Returns the updated
     best, the hit mask and the next row (-1 after the row flagged last in its leaf)."""
-    base = cur * 12
-    v0x, v0y, v0z, tri = _load4(tris, base, test, VEC)
-    e1x, e1y, e1z, _w = _load4(tris, base + 4, test, VEC)
-    e2x, e2y, e2z, last = _load4(tris, base + 8, test, VEC)
+    row = _row(tris, cur, 12)  # lanes not in `test` mask their results
+    v0x, v0y, v0z, tri = _load4(row, 0, VEC)
+    e1x, e1y, e1z, _w = _load4(row, 4, VEC)
+    e2x, e2y, e2z, last = _load4(row, 8, VEC)
     v0x, v0y, v0z = _f(v0x), _f(v0y), _f(v0z)
     e1x, e1y, e1z = _f(e1x), _f(e1y), _f(e1z)
     e2x, e2y, e2z = _f(e2x), _f(e2y), _f(e2z)
@@ -339,8 +360,15 @@ def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
     qz = sx * e1y - sy * e1x
     v = (dx * qx + dy * qy + dz * qz) * inv
     t = (e2x * qx + e2y * qy + e2z * qz) * inv
-    hit = (test & (det != 0.0) & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t >= t_lo)
-           & (t <= best_t) & ((t < best_t) | (tri < best_tri)))
+    # u >= 0, v >= 0, u + v <= 1 as one test, exactly: 1 - s rounds to a value of the
+    # sign of the exact 1 - s (s = 1 + 2^-23 is the float after 1), and the NaN-propagating
+    # min fails the test for a NaN u or v as the comparisons do. It also stands for det != 0:
+    # det = +-0 makes 1/det infinite, so u and v are +-inf or NaN and fail it. Written as
+    # the separate comparisons, the compiler packs the flags into bits and unpacks them
+    # (~10 more instructions per test; bench/results/nvidia-h200/lab3_rows/).
+    inside = tl.minimum(tl.minimum(u, v, propagate_nan=tl.PropagateNan.ALL), 1.0 - (u + v),
+                        propagate_nan=tl.PropagateNan.ALL) >= 0.0
+    hit = test & inside & (t >= t_lo) & (t <= best_t) & ((t < best_t) | (tri < best_tri))
     nxt = tl.where(test, tl.where(last != 0, -1, cur + 1), cur)
     return (tl.where(hit, t, best_t), tl.where(hit, cur, best_row), tl.where(hit, tri, best_tri),
             tl.where(hit, u, best_u), tl.where(hit, v, best_v), hit, nxt)

@@ -38,7 +38,7 @@ class Timing:
     mean: float
     repeats: int
     device: str
-    method: str  # "cuda-events" or "perf_counter"
+    method: str  # "cuda-events", "cuda-graph" or "perf_counter"
 
     def __str__(self) -> str:
         return (f"{self.median * 1e3:.3f} ms (median of {self.repeats}, "
@@ -93,6 +93,50 @@ def _time_cuda(fn, args, kwargs, repeats: int, device: torch.device) -> list[flo
             end.record()
     torch.cuda.synchronize(device)
     return [start.elapsed_time(end) / 1e3 for start, end in zip(starts, ends)]
+
+
+def time_replayed(fn: Callable, *args, calls: int = 10, repeats: int = 20, warmup: int = 3,
+                  **kwargs) -> Timing:
+    """The device time of ``fn(*args, **kwargs)`` alone: on CUDA, ``calls`` calls captured
+    in one CUDA graph, replayed ``repeats`` times between events (seconds per call, method
+    ``"cuda-graph"``); on the CPU, :func:`time_fn`.
+
+    :func:`time_fn` times a call from the host's side: when its Python (argument checks, a
+    launcher binding arguments) takes longer than the device's work, the events measure
+    the host. A replayed graph runs the same kernels with no host in between, so this is
+    what the kernels cost, the figure to compare kernels by; both together say how much a
+    call's host time adds. ``fn`` must be capturable: no host sync, no CPU tensors read
+    (its warm-up calls, on a side stream, compile what it compiles).
+    """
+    if calls < 1 or repeats < 1:
+        raise ValueError(f"calls, repeats: expected at least 1 each, got {calls}, {repeats}")
+    device = default_device(_tensor_device([*args, *kwargs.values()]))
+    if device.type != "cuda":
+        return time_fn(fn, *args, repeats=repeats, warmup=warmup, device=device, **kwargs)
+    with torch.cuda.device(device):
+        side = torch.cuda.Stream()
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side):
+            for _ in range(max(1, warmup)):
+                fn(*args, **kwargs)
+        torch.cuda.current_stream().wait_stream(side)
+        graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(graph):
+            for _ in range(calls):
+                fn(*args, **kwargs)
+        graph.replay()  # the first replay uploads the graph
+        torch.cuda.synchronize(device)
+        seconds = []
+        for _ in range(repeats):
+            start, end = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
+            start.record()
+            graph.replay()
+            end.record()
+            end.synchronize()
+            seconds.append(start.elapsed_time(end) / 1e3 / calls)
+    return Timing(median=statistics.median(seconds), min=min(seconds), max=max(seconds),
+                  mean=statistics.fmean(seconds), repeats=repeats, device=str(device),
+                  method="cuda-graph")
 
 
 def _time_cpu(fn, args, kwargs, repeats: int) -> list[float]:
