@@ -219,7 +219,7 @@ class Mesh(_Tensors):
         super().validate()
         if self.faces.shape[0] == 0:
             raise ValueError("faces: expected at least one face, got shape (0, 3) (empty mesh)")
-        lo, hi = self.faces.min().item(), self.faces.max().item()
+        lo, hi = torch.stack(torch.aminmax(self.faces)).tolist()  # one host sync, not two
         if lo < 0 or hi >= self.num_vertices:
             raise ValueError(f"faces: expected indices in [0, {self.num_vertices}) "
                              f"(V={self.num_vertices} vertices), got values in [{lo}, {hi}]")

@@ -72,41 +72,37 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
                        "max-autotune-no-cudagraphs"):
         raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
-    o, d, inv = rays.origins, rays.directions, 1 / rays.directions
-    octant = ray_octants(d)  # the array whose order is near-first for the ray
     packed_here = walk is None  # fresh tables: no later call can reuse graphs that read them
     if packed_here:  # only the octants these rays go in
-        walk = pack_bvh(bvh, mesh, torch.unique(octant).tolist())
+        walk = pack_bvh(bvh, mesh, torch.unique(ray_octants(rays.directions)).tolist())
     else:
         check_walk(walk, mesh, rays)
     n, device, dtype = len(rays), rays.device, rays.dtype
-    _, _, hit_root = slab_test(o, inv, walk["lo"], walk["hi"], rays.t_min, rays.t_max)
+    graphs = compile == "reduce-overhead" and device.type in _GRAPH_DEVICES
+    cache = graphs and not packed_here
+    # Every ray packed in one float and one int tensor (rows: see _STATE_ROWS), and which
+    # rays enter the root's box; with graphs kept across calls, replayed from the graph of
+    # this number of rays (~40 small ops of host time in one launch).
+    inputs = (rays.origins, rays.directions, rays.t_min, rays.t_max)
+    roots = (walk["base"], walk["lo"], walk["hi"])
+    floats, ints, hit_root = (_start_graph(inputs, roots).run(inputs) if cache
+                              else _start(*inputs, *roots))
     # The outputs as two (3, n) tensors, floats (t, u, v) and int32 (triangle, steps,
     # tests): a compaction writes its rays' results back in two ops, and the walk's
     # tensors come from one float and one int tensor in two gathers (_gather, _pack).
-    out_f = torch.zeros(3, n, dtype=dtype, device=device)
-    out_f[0] = math.inf
-    out_i = torch.zeros(3, n, dtype=torch.int32, device=device)
-    out_i[0] = -1
+    out_f = floats[_COLUMNS:].clone()  # t = inf, u = v = 0
+    out_i = ints[_TRIANGLE_ROW:].clone()  # triangle -1, no steps, no tests
     ray = hit_root.nonzero()[:, 0]  # the rest miss everything: they never start
     if not len(ray):
         return _hits(out_f, out_i)
-    # Every ray packed in one float and one int tensor (rows: see _STATE_ROWS); the walk's
-    # tensors are gathered from them, the started rays only, as at a compaction.
-    ints = torch.zeros(7, n, dtype=torch.int32, device=device)
-    ints[0] = walk["base"][octant]
-    ints[4] = -1  # _TRIANGLE_ROW
-    floats = torch.cat((o.T, d.T, inv.T, rays.t_min[None], rays.t_max[None], out_f))
     m = walk["nodes"]
     tables = (walk["boxes"], walk["links"], walk["slots"], walk["tri"])
-    graphs = compile == "reduce-overhead" and device.type in _GRAPH_DEVICES
     steps = (_fast_steps if compile is False else _compiled_fast_steps(
         "in place" if graphs else compile))
     # k steps as calls of `fuse` steps each (eager: one call of k); extra steps of finished
     # rays change nothing, so the counters never depend on the knobs.
     fuse = check_every if compile is False else min(fuse_steps, check_every)
     calls = -(-check_every // fuse)
-    cache = graphs and not packed_here
     # Padded with finished rays to a graph size: the graphs of a size are captured once and
     # kept for every later traversal.
     fixed, state = _gather(floats, ints, ray, _graph_size(len(ray)) if cache else len(ray), m)
@@ -164,6 +160,57 @@ def _hits(out_f, out_i):
     """``(Hits, counters)`` from the packed outputs."""
     return (Hits(t=out_f[0], triangle=out_i[0].long(), u=out_f[1], v=out_f[2]),
             {"steps": out_i[1].long(), "tests": out_i[2].long()})
+
+
+def _start(origins, directions, t_min, t_max, base, lo, hi):
+    """A traversal's set-up, no host sync: ``(floats, ints, hit_root)``, the rays packed as
+    at a compaction (floats (14, n): the ray columns, then t = inf, u = v = 0; ints (7, n)
+    int32: the octant's row, then the state, triangle -1) and which rays enter the root's
+    box ((n,) bool). base, lo, hi: the walk's octant rows and root box."""
+    n, device = len(origins), origins.device
+    inv = 1 / directions
+    _, _, hit_root = slab_test(origins, inv, lo, hi, t_min, t_max)
+    ints = torch.zeros(7, n, dtype=torch.int32, device=device)
+    ints[0] = base[ray_octants(directions)]
+    ints[_TRIANGLE_ROW] = -1
+    hits = torch.zeros(3, n, dtype=origins.dtype, device=device)
+    hits[0] = math.inf
+    floats = torch.cat((origins.T, directions.T, inv.T, t_min[None], t_max[None], hits))
+    return floats, ints, hit_root
+
+
+class _StartGraph:
+    """:func:`_start` for ``n`` rays captured in a CUDA graph, kept with the step graphs
+    and replayed by every later traversal of as many rays with the same walk: the rays are
+    copied into its buffers (one multi-tensor copy), and its outputs are read before the
+    next traversal replays it (gathered into the walk's own tensors)."""
+
+    def __init__(self, inputs, tables):
+        self.inputs = [x.clone() for x in inputs]
+        self.tables = tables
+        _start(*self.inputs, *tables)  # warm-up outside the capture (the allocator)
+        self.graph = torch.cuda.CUDAGraph()
+        side = torch.cuda.Stream()
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side):
+            self.graph.capture_begin()
+            self.outputs = _start(*self.inputs, *tables)
+            self.graph.capture_end()
+        torch.cuda.current_stream().wait_stream(side)
+
+    def run(self, inputs):
+        """The outputs of :func:`_start` on ``inputs`` (origins, directions, t_min, t_max)."""
+        torch._foreach_copy_(self.inputs, list(inputs))
+        self.graph.replay()
+        return self.outputs
+
+
+def _start_graph(inputs, tables):
+    """The cached :class:`_StartGraph` for these rays' shapes and these tables (the step
+    graphs' cache, :func:`_cached`)."""
+    key = ("start", len(inputs[0]), inputs[0].dtype, inputs[0].device,
+           tuple(t.data_ptr() for t in tables))
+    return _cached(key, tables, lambda: _StartGraph(inputs, tables))
 
 
 _GRAPH_DEVICES = ("cuda",)  # where "reduce-overhead" replays CUDA graphs
@@ -288,16 +335,22 @@ _MAX_GRAPHS = 32
 
 
 def _step_graph(steps, fixed, state, tables, m: int, fuse: int, any_hit: bool, calls: int):
-    """The cached :class:`_StepGraph` for these tables and this size (least recently used
-    ones dropped beyond ``_MAX_GRAPHS``). The key holds the tables' addresses and the entry
-    the tables themselves, so a cached graph never reads freed memory."""
+    """The cached :class:`_StepGraph` for these tables and this size (:func:`_cached`)."""
     key = (len(fixed[1]), fixed[0].dtype, fixed[0].device, m, fuse, any_hit, calls,
            tuple(t.data_ptr() for t in tables))
+    return _cached(key, tables,
+                   lambda: _StepGraph(steps, fixed, state, (tables, m, fuse, any_hit), calls))
+
+
+def _cached(key, tables, make):
+    """The graph cached under ``key``, or ``make()``'s, kept (least recently used ones
+    dropped beyond ``_MAX_GRAPHS``). The key holds the tables' addresses and the entry the
+    tables themselves, so a cached graph never reads freed memory."""
     entry = _GRAPHS.get(key)
     if entry is not None and all(a is b for a, b in zip(entry[0], tables)):
         _GRAPHS.move_to_end(key)
         return entry[1]
-    graph = _StepGraph(steps, fixed, state, (tables, m, fuse, any_hit), calls)
+    graph = make()
     _GRAPHS[key] = (tables, graph)
     while len(_GRAPHS) > _MAX_GRAPHS:
         _GRAPHS.popitem(last=False)

@@ -163,16 +163,13 @@ EQUIVALENT = {
     "lab2_accel:build_two_level_grid:drop_clamp:0":
         "a sub-grid exists only for a cell with n_small > min_triangles >= 0, so n_sub >= 1 "
         "for every sub-grid: the clamp never binds",
-    "lab2_accel:bvh_closest_hit_fast:bool_And_Or:1":
-        "decides only whether rays are padded with finished rays to graph sizes and graphs "
-        "kept: padding rows never run and are cut off before the results are written",
     "lab2_accel:bvh_closest_hit_fast:const_int:0":
         "the default check_every only sets how many steps run between host looks; extra "
         "steps of finished rays change nothing (a timing knob)",
-    "lab2_accel:bvh_closest_hit_fast:const_int:18":
+    "lab2_accel:bvh_closest_hit_fast:const_int:8":
         "the loop bound m + F + 1 already covers a ray's box tests and slots; a looser bound "
         "only allows more looks, and the loop breaks when no ray runs",
-    "lab2_accel:bvh_closest_hit_fast:const_int:20":
+    "lab2_accel:bvh_closest_hit_fast:const_int:10":
         "replays a cached graph twice per look (CUDA graphs only): extra steps of finished "
         "rays change nothing, unfinished ones only get further before the next look",
     # bvh_closest_hit_fast's knobs and bookkeeping (rtcourse mutants --generated --only
@@ -189,16 +186,13 @@ EQUIVALENT = {
         "not promise; every accepted value gives the same hits",
     "lab2_accel:bvh_closest_hit_fast:const_int:5":
         "the largest fuse_steps accepted (64 or 65): a sanity limit, a timing knob",
-    "lab2_accel:bvh_closest_hit_fast:const_int:13":
-        "an 8th row of the packed int tensor is gathered but never read: the packed tensors "
-        "are rebuilt from the state (7 rows) at every compaction and write-back",
     "lab2_accel:bvh_closest_hit_fast:bool_And_Or:2":
         "copies the gathered rows into tensors of their own on the eager path too: the same "
         "values, one copy more",
-    "lab2_accel:bvh_closest_hit_fast:const_int:17":
+    "lab2_accel:bvh_closest_hit_fast:const_int:7":
         "range(1, m + F + 1, k) runs at least m + F steps, as many as a ray can need (one per "
         "node box and one per leaf slot)",
-    "lab2_accel:bvh_closest_hit_fast:const_int:19":
+    "lab2_accel:bvh_closest_hit_fast:const_int:9":
         "a graph of two calls per replay (CUDA graphs only): extra steps of finished rays "
         "change nothing, unfinished ones only get further before the next look",
     "lab2_accel:bvh_closest_hit_fast:cmp_Lt_LtE:0":
@@ -217,10 +211,10 @@ EQUIVALENT = {
         "compacts only below the floor (on the CPU: never): when to compact changes only "
         "the order in which unfinished rays are stepped, not their hits or counters "
         "(tests/meta/test_lab2_graph_emulated.py checks the floor itself)",
-    "lab2_accel:bvh_closest_hit_fast:const_int:23":
+    "lab2_accel:bvh_closest_hit_fast:const_int:13":
         "compacts at a ninth instead of an eighth (CUDA graphs): when to compact changes "
         "only the order in which unfinished rays are stepped, not their hits or counters",
-    "lab2_accel:bvh_closest_hit_fast:const_int:24":
+    "lab2_accel:bvh_closest_hit_fast:const_int:14":
         "compacts at a third instead of half: when to compact changes only the order in "
         "which unfinished rays are stepped, not their hits or counters",
     "lab2_accel:grid_closest_hit:cmp_Gt_GtE:0":

@@ -55,9 +55,29 @@ class EagerGraph(lab._StepGraph):
         self.graph = _Replay(replay)
 
 
+class EagerStartGraph(lab._StartGraph):
+    """``_StartGraph`` with its buffers and its ``run``, the capture replaced by an eager
+    ``_start`` writing into the same output tensors at each "replay"."""
+
+    made = 0
+
+    def __init__(self, inputs, tables):
+        EagerStartGraph.made += 1
+        self.inputs = [x.clone() for x in inputs]
+        self.tables = tables
+        self.outputs = lab._start(*self.inputs, *tables)
+
+        def replay():
+            for mine, new in zip(self.outputs, lab._start(*self.inputs, *tables)):
+                mine.copy_(new)
+
+        self.graph = _Replay(replay)
+
+
 @pytest.fixture
 def emulated(monkeypatch):
     monkeypatch.setattr(lab, "_StepGraph", EagerGraph)
+    monkeypatch.setattr(lab, "_StartGraph", EagerStartGraph)
     monkeypatch.setattr(lab, "_GRAPH_DEVICES", ("cuda", "cpu"))
     monkeypatch.setattr(lab, "_GRAPHS", collections.OrderedDict())
     # Compactions at these few rays too (on a GPU they start from 65,536 rays).
@@ -110,9 +130,9 @@ def test_cached_graphs_are_reused(emulated):
     walk = pack_bvh(bvh, mesh)
     rays = primary_rays(camera)
     first = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, compile="reduce-overhead")
-    made, cached = EagerGraph.made, len(lab._GRAPHS)
+    made, started, cached = EagerGraph.made, EagerStartGraph.made, len(lab._GRAPHS)
     again = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, compile="reduce-overhead")
-    assert EagerGraph.made == made and len(lab._GRAPHS) == cached, (
+    assert (EagerGraph.made, EagerStartGraph.made, len(lab._GRAPHS)) == (made, started, cached), (
         "a second traversal of the same rays made new graphs")
     for a, b in ((first[0].triangle, again[0].triangle), (first[1]["steps"], again[1]["steps"])):
         assert_equal(b, a, where="ray", name="second traversal against the first")
@@ -122,6 +142,19 @@ def test_cached_graphs_are_reused(emulated):
     got, _ = lab.bvh_closest_hit_fast(half, mesh, bvh, walk=walk, compile="reduce-overhead")
     assert_equal(got.triangle, want.triangle, where="ray", name="half the rays, graph path")
     assert_equal(got.t, want.t, where="ray", name="half the rays' t, graph path")
+    # The start graph's buffers are the same for every traversal of as many rays: results
+    # handed out before must not change when the next traversal replays it.
+    moved = dataclasses.replace(camera, eye=tuple(t + 1.5 * (e - t) for e, t in
+                                                  zip(camera.eye, camera.target)))
+    other = primary_rays(moved)
+    started = EagerStartGraph.made
+    later, _ = lab.bvh_closest_hit_fast(other, mesh, bvh, walk=walk, compile="reduce-overhead")
+    assert EagerStartGraph.made == started, "as many rays again: the start graph is kept"
+    assert not torch.equal(later.t, again[0].t), "the other camera should see other hits"
+    assert_equal(again[0].triangle, first[0].triangle, where="ray",
+                 name="earlier results after another traversal replayed the start graph")
+    assert_equal(again[0].t, first[0].t, where="ray",
+                 name="earlier t after another traversal replayed the start graph")
 
 
 def test_graphs_compact_only_from_the_floor(emulated, monkeypatch):
