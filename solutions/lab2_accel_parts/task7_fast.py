@@ -77,7 +77,7 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
         walk = pack_bvh(bvh, mesh, torch.unique(ray_octants(rays.directions)).tolist())
     else:
         check_walk(walk, mesh, rays)
-    n, device, dtype = len(rays), rays.device, rays.dtype
+    device = rays.device
     graphs = compile == "reduce-overhead" and device.type in _GRAPH_DEVICES
     cache = graphs and not packed_here
     # Every ray packed in one float and one int tensor (rows: see _STATE_ROWS), and which
