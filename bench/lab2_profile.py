@@ -7,8 +7,8 @@ Traces the bunny's primary rays once to compile and warm up, then once under
 host (its idle gaps, by the host operation running then; the trace itself in
 ``trace.json``), and the rays that still run after every look at them (how much of the
 work compaction can save). Then where the host
-time goes (``host.txt``): the wall time of warm traversals without any profiler, and one
-under ``cProfile`` (Python's own profiler: every Python function with the host time spent
+time goes (``host.txt``): the wall time of warm traversals without any profiler, before
+the profilers ran in the process and after, and one under ``cProfile`` (Python's own profiler: every Python function with the host time spent
 in it, a sync counted where the host waits), the functions sorted by cumulative time.
 """
 
@@ -49,6 +49,9 @@ def main(argv=None):
     _, counters = lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)  # compile, warm up
     lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)
     torch.cuda.synchronize()
+    # Warm traversals before any profiler runs in this process (the device's activity
+    # tracing, once started, can stay attached and slow every later launch).
+    before = wall_time(lambda: lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs), len(rays))
     with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU,
                                             torch.profiler.ProfilerActivity.CUDA]) as prof:
         lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)
@@ -68,6 +71,7 @@ def main(argv=None):
     print(text)
     (Path(args.out) / "profile.txt").write_text(f"{' '.join(sys.argv)}\n\n{text}\n")
     host = host_time(lambda: lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs), len(rays))
+    host = f"before the profilers ran: {before}\nafter them: {host}"
     print(host)
     (Path(args.out) / "host.txt").write_text(f"{' '.join(sys.argv)}\n\n{host}\n")
 
@@ -117,17 +121,8 @@ def host_time(trace, n_rays: int, repeats: int = 10) -> str:
     import cProfile
     import io
     import pstats
-    import statistics
-    import time
 
-    walls = []
-    for _ in range(repeats):
-        torch.cuda.synchronize()
-        start = time.perf_counter()
-        trace()
-        torch.cuda.synchronize()
-        walls.append(time.perf_counter() - start)
-    wall = statistics.median(walls)
+    walls = _walls(trace, repeats)
     profiler = cProfile.Profile()
     torch.cuda.synchronize()
     profiler.enable()
@@ -140,10 +135,35 @@ def host_time(trace, n_rays: int, repeats: int = 10) -> str:
     # any machine.
     text = listing.getvalue().replace(f"{REPO}/", "").replace(
         f"{Path(torch.__file__).parent.parent}/", "<site-packages>/")
-    return (f"warm traversal, no profiler: median {wall * 1e3:.2f} ms of {repeats} "
-            f"({n_rays / wall / 1e6:.0f} M rays/s); min {min(walls) * 1e3:.2f} ms\n\n"
-            f"one traversal under cProfile (host time per Python function; a sync is "
+    return (f"{_wall_text(walls, n_rays)}\n\none traversal under cProfile (host time per Python function; a sync is "
             f"time spent waiting in the call that reads the device):\n{text}")
+
+
+def _walls(trace, repeats: int) -> list:
+    """Seconds of ``repeats`` warm traversals, each synced."""
+    import time
+
+    walls = []
+    for _ in range(repeats):
+        torch.cuda.synchronize()
+        start = time.perf_counter()
+        trace()
+        torch.cuda.synchronize()
+        walls.append(time.perf_counter() - start)
+    return walls
+
+
+def _wall_text(walls: list, n_rays: int) -> str:
+    import statistics
+
+    wall = statistics.median(walls)
+    return (f"warm traversal, no profiler: median {wall * 1e3:.2f} ms of {len(walls)} "
+            f"({n_rays / wall / 1e6:.0f} M rays/s); min {min(walls) * 1e3:.2f} ms")
+
+
+def wall_time(trace, n_rays: int, repeats: int = 10) -> str:
+    """Wall time of ``repeats`` warm traversals (each synced), as text."""
+    return _wall_text(_walls(trace, repeats), n_rays)
 
 
 if __name__ == "__main__":

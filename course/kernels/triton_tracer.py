@@ -52,7 +52,18 @@ alternating rounds (bench/results/nvidia-h200/lab3_head_to_head/): 71% primary (
 against 11.5 G rays/s), 72% diffuse (2.3 G against 3.2 G), the same launch best for both
 (while-while, speculative, local stack: now the defaults).
 
-Refilling free lanes (``refill``, the default with the while-while loop). A program whose
+Then the instructions (bench/results/nvidia-h200/lab3_rows/, the SASS of both kernels
+side by side): a TRAVERSE iteration of this walk was 118 instructions where the CUDA C
+kernel's is ~70, an INTERSECT one 110 against ~63. Two things made the difference. Each
+16-byte load computed its own 64-bit address from a masked offset (~6 instructions
+each), where CUDA C computes one per row and reads its words at constant offsets: here
+too now (``_row``, ``_load4``). And the triangle's ``u >= 0 & v >= 0 & u + v <= 1 & det
+!= 0`` was compiled into flags packed into bits and unpacked (~10 instructions): one
+NaN-propagating min tests the same now. 97 and 85 instructions per iteration: 9.8 G
+primary rays/s, 84% of CUDA C's 11.8 G in alternating rounds (target 80% met), 2.8 G
+diffuse (87%) with the defaults.
+
+Refilling free lanes (``refill``, off by default). A program whose
 lanes finish at different times runs on with most of them idle: on diffuse rays, a warp
 waits for its slowest ray. With ``refill=k`` the kernel launches persistent programs (32
 per SM) that take new rays from a global counter whenever ``k`` of their lanes are free
@@ -61,7 +72,11 @@ atomic add per program). Measured on an H200 (bench/results/nvidia-h200/lab3_ref
 diffuse rays 2.3 -> 3.0 G rays/s, 94% of the CUDA C kernel's 3.2 G in alternating rounds;
 primary rays, whose lanes finish together anyway, lose ~5% (coherence traded for
 occupancy of the lanes): ~67% of CUDA C there. ``k`` from 1 to 8 measured the same on
-diffuse rays; 8 the best of them on primary rays.
+diffuse rays; 8 the best of them on primary rays. With the leaner loops
+(bench/results/nvidia-h200/lab3_rows/): ``refill=8`` 3.26 G diffuse (101% of CUDA C)
+but 8.9 G primary (75%), against 2.8 G and 9.8 G without: so refill is off by default,
+and ``refill=8`` is the launch for incoherent rays (bounces, shadow rays of a path
+tracer).
 
 The stack. Triton has no per-lane arrays with dynamic indices, so by default
 (``stack="global"``) each lane's stack is a column of a scratch buffer in global memory,
@@ -122,14 +137,15 @@ DEFAULT_BLOCK = 32
 DEFAULT_NUM_WARPS = 1
 DEFAULT_UNIFORM = True
 # The defaults are the launch measured fastest on primary and on diffuse rays
-# (bench/results/nvidia-h200/lab3_head_to_head/): while-while, speculative, local stack;
-# then refilling free lanes (bench/results/nvidia-h200/lab3_refill/: +30% diffuse).
+# (bench/results/nvidia-h200/lab3_head_to_head/): while-while, speculative, local stack.
+# Refilling free lanes is off: +15% diffuse but -10% primary
+# (bench/results/nvidia-h200/lab3_rows/); pass refill=8 for incoherent rays.
 DEFAULT_STACK_REGS = 0
 DEFAULT_TRIS_PER_STEP = 1
 DEFAULT_SPECULATE = True
 DEFAULT_LOOP = "while"
 DEFAULT_STACK = None  # "local", or "global" when stack_regs keeps entries in registers
-DEFAULT_REFILL = 8  # free lanes at which a persistent program takes new rays (while-while)
+DEFAULT_REFILL = 0  # free lanes at which a persistent program takes new rays (0: off)
 LOOPS = ("if", "while")
 STACKS = ("global", "local")
 # The uber kernel's walk, as measured for its frames (bench/results/nvidia-h200/lab3_packed/).
@@ -1026,10 +1042,11 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     lanes: persistent programs that take new rays from a global counter whenever at least
     that many of their lanes are free (Aila & Laine's dynamic ray fetch; ``block``: whole
     batches only; needs ``loop="while"``); 0: one program per ``block`` rays; None
-    (default): 8 with the while-while loop, 0 with the if-if loop; programs: with refill,
-    the programs launched (default: 32 per SM, what fills a Hopper or Ampere GPU with
-    one-warp programs). The defaults are the fastest launch measured on an H200 (refill
-    +30% on diffuse rays, -5% on primary ones, whose lanes finish together anyway).
+    (default): ``DEFAULT_REFILL`` (0) with the while-while loop, 0 with the if-if loop;
+    programs: with refill, the programs launched (default: 32 per SM, what fills a Hopper
+    or Ampere GPU with one-warp programs). The defaults are the fastest launch measured on
+    an H200 on primary and on diffuse rays together; ``refill=8`` is +15% on diffuse rays
+    and -10% on primary ones, whose lanes finish together anyway.
     Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
     """
     _require_triton()
