@@ -11,8 +11,9 @@ On a GPU, in one run:
   thread per ray, local-memory stack, at several block sizes, with and without its register
   cap) and by the Triton kernel (course.kernels.triton_tracer, one ray per lane) at several launch
   shapes, with and without skipping the stages of a step that no lane needs; targets:
-  CUDA C >= 4.8 G primary rays/s, Triton >= 80% of CUDA C (best launch of each, then
-  those two timed again in alternating rounds, the ratio taken within each round). Each
+  CUDA C >= 4.8 G primary rays/s, Triton >= 80% of CUDA C (best launch of each; then the
+  best CUDA C launch and the Triton walk's defaults timed again in alternating rounds, the
+  ratio taken within each round). Each
   row has two speeds: per call timed from the host (``grays_per_s``, CUDA events around
   each call) and the kernels' alone (``grays_device``: the calls captured in a CUDA graph
   and replayed); they differ where a call's Python outlasts its kernel, as a Triton
@@ -245,7 +246,7 @@ def _keep_fastest(fastest: dict, impl: str, grays: float, fn, kw: dict) -> None:
 
 
 def head_to_head(table, kind, fastest, bvh, rays_o, rays_d, rounds: int, repeats: int):
-    """The best CUDA C and the best Triton launch timed alternately, ``rounds`` times
+    """``fastest``'s CUDA C and Triton launches timed alternately, ``rounds`` times
     ``repeats`` calls each: the clocks and the neighbours on the GPU drift within a run (rows
     of the same code differ by up to 2x), so the ratio is taken within each round and its
     median reported, with the spread. Each round times the kernels alone (a CUDA graph of
@@ -435,10 +436,13 @@ def main(argv=None) -> None:
             print(f"{kind}: best Triton / best CUDA C = {ratio:.0%} (best rows, kernels' device time; target >= "
                   f"{TRITON_TARGET:.0%}: {'met' if ratio >= TRITON_TARGET else 'NOT met'})")
             ro, rd = sets[kind]
-            mid, low, high = head_to_head(table, kind, best, bvh, ro, rd, rounds=HEAD_ROUNDS,
+            # Head to head: the best CUDA C launch against the Triton walk's defaults (what
+            # a caller gets without knobs), so one launch has to meet the target on both sets.
+            pair = {"CUDA C": best["CUDA C"], "Triton": (None, triton_tracer.trace_flat_triton, {})}
+            mid, low, high = head_to_head(table, kind, pair, bvh, ro, rd, rounds=HEAD_ROUNDS,
                                           repeats=HEAD_REPEATS)
             table.metadata[f"head_to_head_{kind}"] = {"median": mid, "min": low, "max": high}
-            print(f"{kind}: head to head, Triton / CUDA C = {mid:.0%} (median of "
+            print(f"{kind}: head to head, Triton (defaults) / CUDA C = {mid:.0%} (median of "
                   f"{HEAD_ROUNDS} rounds, {low:.0%}-{high:.0%}; target >= {TRITON_TARGET:.0%}: "
                   f"{'met' if mid >= TRITON_TARGET else 'NOT met'})", flush=True)
     json_path = table.to_json(out / "lab3_gpu.json")
