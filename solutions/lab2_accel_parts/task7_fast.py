@@ -59,7 +59,8 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
       (with finished ones) to a few sizes, so the graphs of a size are captured once and
       replayed by every later traversal of that size: a warm traversal pays no capture and
       no compiled call, and a look is one graph launch and one read of the number of rays
-      still running (counted in the graph).
+      still running (counted in the graph). The call's set-up (the root-box test and the
+      packing of the rays, ~40 small ops) is one more graph of that number of rays.
 
     The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
     in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
