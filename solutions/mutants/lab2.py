@@ -127,11 +127,11 @@ MUTANTS = [
            tests="fast_bvh",
            why="any-hit mode keeps searching after the first hit: a shadow ray costs as much "
                "as a closest-hit ray"),
-    Mutant(name="fast_far_child_first", module=M, function="bvh_closest_hit_fast",
-           find="octant = ray_octants(d)", replace="octant = ray_octants(-d)",
-           tests="fast_bvh",
-           why="walks the array of the opposite octant, far child first: correct hits, but "
-               "the near side's hit never culls the far side"),
+    Mutant(name="fast_far_child_first", module=M, function="_start",
+           find="ints[0] = base[ray_octants(directions)]",
+           replace="ints[0] = base[7 - ray_octants(directions)]", tests="fast_bvh",
+           why="walks the array of the opposite octant, far child first: correct hits (where "
+               "that octant is packed), but the near side's hit never culls the far side"),
     Mutant(name="fast_tie_to_highest_index", module=M, function="_fast_step",
            find="((t == best_t) & (index < best_tri))",
            replace="((t == best_t) & (index > best_tri))", tests="fast_bvh",
