@@ -8,8 +8,9 @@ host (its idle gaps, by the host operation running then; the trace itself in
 ``trace.json``), and the rays that still run after every look at them (how much of the
 work compaction can save). Then where the host
 time goes (``host.txt``): the wall time of warm traversals without any profiler, before
-the profilers ran in the process and after, and one under ``cProfile`` (Python's own profiler: every Python function with the host time spent
-in it, a sync counted where the host waits), the functions sorted by cumulative time.
+the profilers ran in the process and after, and one under ``cProfile`` (Python's own
+profiler: every Python function with the host time spent in it, a sync counted where the
+host waits), the functions sorted by cumulative time.
 """
 
 from __future__ import annotations
@@ -135,7 +136,8 @@ def host_time(trace, n_rays: int, repeats: int = 10) -> str:
     # any machine.
     text = listing.getvalue().replace(f"{REPO}/", "").replace(
         f"{Path(torch.__file__).parent.parent}/", "<site-packages>/")
-    return (f"{_wall_text(walls, n_rays)}\n\none traversal under cProfile (host time per Python function; a sync is "
+    return (f"{_wall_text(walls, n_rays)}\n\n"
+            f"one traversal under cProfile (host time per Python function; a sync is "
             f"time spent waiting in the call that reads the device):\n{text}")
 
 

@@ -74,9 +74,9 @@ def compile_walk(arch: int, refill: bool) -> str:
              "stride": "i32", "pairs": "*i32", "tris": "*i32", "stack_ptr": "*i32",
              "counter": "*i32", "id_ptr": "*i64"}
     signature = {n: types.get(n, "*fp32") for n in names}
-    constants = dict(BLOCK=tt.DEFAULT_BLOCK, ANY_HIT=False, EXIT=EXIT_SCALE, VEC=True,
-                     SANITIZE=False, REGS=-1, TRIS=tt.DEFAULT_TRIS_PER_STEP,
-                     SPECULATE=tt.DEFAULT_SPECULATE, TLO_ARRAY=False, THI_ARRAY=False)
+    constants = {"BLOCK": tt.DEFAULT_BLOCK, "ANY_HIT": False, "EXIT": EXIT_SCALE, "VEC": True,
+                 "SANITIZE": False, "REGS": tt.LOCAL_STACK, "TRIS": tt.DEFAULT_TRIS_PER_STEP,
+                 "SPECULATE": tt.DEFAULT_SPECULATE, "TLO_ARRAY": False, "THI_ARRAY": False}
     if refill:
         constants["REFILL"] = 8
         kernel = tt._refill_kernel
