@@ -53,15 +53,17 @@ against 11.5 G rays/s), 72% diffuse (2.3 G against 3.2 G), the same launch best 
 (while-while, speculative, local stack: now the defaults).
 
 Then the instructions (bench/results/nvidia-h200/lab3_rows/, the SASS of both kernels
-side by side): a TRAVERSE iteration of this walk was 118 instructions where the CUDA C
-kernel's is ~70, an INTERSECT one 110 against ~63. Two things made the difference. Each
+side by side, ``bench/sass_loops.py``): a TRAVERSE iteration of this walk was 118
+instructions where the CUDA C kernel's is 83 (both arms of its branches counted), an
+INTERSECT one 110 against 64. Two things made the difference. Each
 16-byte load computed its own 64-bit address from a masked offset (~6 instructions
 each), where CUDA C computes one per row and reads its words at constant offsets: here
 too now (``_row``, ``_load4``). And the triangle's ``u >= 0 & v >= 0 & u + v <= 1 & det
 != 0`` was compiled into flags packed into bits and unpacked (~10 instructions): one
-NaN-propagating min tests the same now. 97 and 85 instructions per iteration: 9.8 G
-primary rays/s, 84% of CUDA C's 11.8 G in alternating rounds (target 80% met), 2.8 G
-diffuse (87%) with the defaults.
+NaN-propagating min tests the same now. 97 and 85 instructions per iteration: with the
+defaults 9.8 G primary rays/s, 84% of CUDA C's 11.7 G in alternating rounds (target 80%
+met), and 2.8 G diffuse, 88% of 3.2 G (the kernels timed alone; per call, a 1M-ray call's
+Python, ~100-200 us, outlasts its 107 us kernel).
 
 Refilling free lanes (``refill``, off by default). A program whose
 lanes finish at different times runs on with most of them idle: on diffuse rays, a warp
