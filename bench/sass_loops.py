@@ -10,12 +10,14 @@ and the round around them. ``--sass`` reads a disassembly made elsewhere instead
 ``cuobjdump -sass`` of the CUDA C tracer's extension on a GPU machine), one report per
 function in it. Counts are static: a loop's instructions, each branch arm included; what
 a warp executes per iteration is at most that. Writes ``sass_loops.txt`` (and the
-disassemblies) to ``--out`` when given.
+disassemblies) to ``--out`` when given; ``--json`` prints the loops of each listing as
+JSON instead of the text (tests/test_sass_loops.py reads it).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import subprocess
@@ -67,22 +69,20 @@ def compile_walk(arch: int, refill: bool) -> str:
     from course.kernels import triton_tracer as tt
     from course.kernels.flat_bvh import EXIT_SCALE
 
-    names = ["o_ptr", "d_ptr", "tlo_ptr", "tlo_value", "thi_ptr", "thi_value", "pairs", "root",
-             "tris", "root_ref", "stack_ptr"] + (["counter"] if refill else []) + [
-             "t_ptr", "id_ptr", "u_ptr", "v_ptr", "n_rays", "stride"]
+    kernel = tt._refill_kernel if refill else tt._trace_kernel
+    # The kernel's own arguments, typed by name (every other one is a float32 pointer).
     types = {"tlo_value": "fp32", "thi_value": "fp32", "root_ref": "i32", "n_rays": "i32",
              "stride": "i32", "pairs": "*i32", "tris": "*i32", "stack_ptr": "*i32",
              "counter": "*i32", "id_ptr": "*i64"}
-    signature = {n: types.get(n, "*fp32") for n in names}
+    signature = {p.name: types.get(p.name, "*fp32") for p in kernel.params
+                 if not p.is_constexpr}
     constants = {"BLOCK": tt.DEFAULT_BLOCK, "ANY_HIT": False, "EXIT": EXIT_SCALE, "VEC": True,
                  "SANITIZE": False, "REGS": tt.LOCAL_STACK, "TRIS": tt.DEFAULT_TRIS_PER_STEP,
                  "SPECULATE": tt.DEFAULT_SPECULATE, "TLO_ARRAY": False, "THI_ARRAY": False}
     if refill:
         constants["REFILL"] = 8
-        kernel = tt._refill_kernel
     else:
         constants.update(UNIFORM=tt.DEFAULT_UNIFORM, WHILE=tt.DEFAULT_LOOP == "while")
-        kernel = tt._trace_kernel
     signature.update({c: "constexpr" for c in constants})
     compiled = triton.compile(ASTSource(fn=kernel, signature=signature, constexprs=constants),
                               target=GPUTarget("cuda", arch, 32),
@@ -108,6 +108,7 @@ def main(argv=None) -> None:
     parser.add_argument("--sass", type=Path, nargs="*", default=[],
                         help="disassemblies to read instead of compiling")
     parser.add_argument("--out", type=Path)
+    parser.add_argument("--json", action="store_true", help="print the loops as JSON")
     args = parser.parse_args(argv)
     texts, dumps = [], {}
     if args.sass:
@@ -125,7 +126,12 @@ def main(argv=None) -> None:
                                 f"{'refill kernel (refill=8)' if refill else 'the defaults'}:",
                                 sass))
     text = "\n".join(texts)
-    print(text)
+    if args.json:
+        found = {name: loops(sass) for name, sass in dumps.items()}
+        found.update({str(path): loops(path.read_text()) for path in args.sass})
+        print(json.dumps(found))
+    else:
+        print(text)
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "sass_loops.txt").write_text(
