@@ -188,7 +188,6 @@ class _StartGraph:
 
     def __init__(self, inputs, tables):
         self.inputs = [x.clone() for x in inputs]
-        self.tables = tables
         _start(*self.inputs, *tables)  # warm-up outside the capture (the allocator)
         self.graph = torch.cuda.CUDAGraph()
         side = torch.cuda.Stream()

@@ -64,7 +64,6 @@ class EagerStartGraph(lab._StartGraph):
     def __init__(self, inputs, tables):
         EagerStartGraph.made += 1
         self.inputs = [x.clone() for x in inputs]
-        self.tables = tables
         self.outputs = lab._start(*self.inputs, *tables)
 
         def replay():
