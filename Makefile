@@ -3,6 +3,8 @@
 #   make test   create .venv, install, run the test suite (graders, references, course)
 # and one opens the lecture notebooks:
 #   make lab    create .venv, install, start JupyterLab on slides/ (LAB_ARGS: its options)
+# For the course's maintainers (CI runs it before the tests):
+#   make lint   ruff check, ruff format --check, and labs/ as solutions/ generate it
 #
 # torch: on a machine without an NVIDIA GPU torch is installed first, on its own, as
 # TORCH_SPEC from TORCH_INDEX (pip's own index when empty). On macOS and Windows that is
@@ -21,7 +23,7 @@ HAS_GPU := $(shell command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/
 # Jupyter refuses to start as root (a container, WSL's default user) without this flag.
 AS_ROOT := $(if $(filter 0,$(shell id -u 2>/dev/null)),--allow-root)
 
-.PHONY: demo test lab grade release clean
+.PHONY: demo test lab lint grade release clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -40,6 +42,11 @@ test: $(VENV)/.installed
 
 lab: $(VENV)/.installed
 	$(VENV)/bin/jupyter lab $(AS_ROOT) $(LAB_ARGS) slides
+
+lint: $(VENV)/.installed
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(if $(wildcard solutions),$(VENV)/bin/rtcourse skeletons --check)
 
 grade: $(VENV)/.installed
 	$(VENV)/bin/rtcourse grade --impl labs --json results.json

@@ -1,61 +1,143 @@
-"""Skeletons (``labs/``) against references (``solutions/``): the code a skeleton provides
-inside a function it leaves unwritten (argument checks, given helpers) is the reference's
-own, statement for statement, so a student starts from the same calls, with the same
-results kept (``_, s = check_inputs(...)``, not a bare ``check_inputs(...)``)."""
+"""The skeletons in ``labs/`` are generated from the marked references in ``solutions/``
+(``course.tools.skeletons``): the committed ones are exactly what the references generate,
+a hand edit is caught, and the markers mean what the module says."""
 
 from __future__ import annotations
 
-import ast
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from course.core.files import module_files
+from course.tools.skeletons import MarkerError, differences, skeleton_source, write
 
 ROOT = Path(__file__).resolve().parents[2]
-SKELETONS = sorted((ROOT / "labs").glob("lab*_*.py"))
-_SIMPLE = (ast.Expr, ast.Assign, ast.AnnAssign, ast.AugAssign)
 
 
-def _functions(path: Path) -> dict[str, ast.AST]:
-    """Top-level functions and methods of a lab file (and of its parts, if any)."""
-    found = {}
-    for node in (n for f in module_files(path)
-                 for n in ast.parse(f.read_text(), filename=str(f)).body):
-        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-            found[node.name] = node
-        elif isinstance(node, ast.ClassDef):
-            found.update({f"{node.name}.{m.name}": m for m in node.body
-                          if isinstance(m, (ast.FunctionDef, ast.AsyncFunctionDef))})
-    return found
+def test_committed_skeletons_are_generated():
+    problems = differences(ROOT / "solutions", ROOT / "labs")
+    assert not problems, "\n".join(problems + ["run `rtcourse skeletons` after editing a "
+                                               "reference"])
 
 
-def _statements(fn) -> list[str]:
-    """The simple statements of ``fn``'s body (docstring left out), at any depth."""
-    body = fn.body[1:] if ast.get_docstring(fn) else fn.body
-    return [ast.unparse(s) for stmt in body for s in ast.walk(stmt) if isinstance(s, _SIMPLE)]
+def _course_copy(tmp_path) -> Path:
+    copy = tmp_path / "course"
+    shutil.copytree(ROOT / "solutions", copy / "solutions",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(ROOT / "labs", copy / "labs", ignore=shutil.ignore_patterns("__pycache__"))
+    (copy / "tests").mkdir()
+    (copy / "pyproject.toml").write_text("")
+    return copy
 
 
-def _unwritten(fn) -> bool:
-    return any(isinstance(n, ast.Raise) and n.exc is not None
-               and "NotImplementedError" in ast.unparse(n.exc) for n in ast.walk(fn))
+def _check(folder: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "course.tools.cli", "skeletons", "--check"],
+                          cwd=folder, capture_output=True, text=True, timeout=120)
 
 
-@pytest.mark.parametrize("skeleton", SKELETONS, ids=[p.stem for p in SKELETONS])
-def test_provided_code_is_the_references(skeleton):
-    reference = _functions(ROOT / "solutions" / skeleton.name)
-    mine = _functions(skeleton)
-    public = {n for n in mine if not n.startswith("_")}
-    theirs_public = {n for n in reference if not n.startswith("_")}
-    assert public == theirs_public, (
-        f"{skeleton.name}: public functions only in the skeleton "
-        f"{sorted(public - theirs_public)}, only in the reference "
-        f"{sorted(theirs_public - public)}")
-    for name, fn in mine.items():
-        if not _unwritten(fn) or name not in reference:
-            continue
-        theirs = set(_statements(reference[name]))
-        extra = [line for line in _statements(fn) if line not in theirs]
-        assert not extra, (f"{skeleton.name}: {name} provides {extra[0]!r}, which the "
-                           f"reference does not do (a provided call must be the reference's, "
-                           f"with the same results kept)")
+def test_check_names_a_hand_edit(tmp_path):
+    copy = _course_copy(tmp_path)
+    assert _check(copy).returncode == 0
+    skeleton = sorted((copy / "labs").glob("lab4_*.py"))[0]
+    lines = skeleton.read_text().splitlines(keepends=True)
+    number = next(i for i, line in enumerate(lines) if "raise NotImplementedError" in line)
+    lines[number] = lines[number].replace("raise NotImplementedError", "return None  #")
+    skeleton.write_text("".join(lines))
+    proc = _check(copy)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert f"labs/{skeleton.name}:{number + 1}:" in proc.stdout, proc.stdout
+    write(copy / "solutions", copy / "labs")  # regenerating repairs it
+    assert _check(copy).returncode == 0
+
+
+def test_check_names_a_stray_and_a_missing_file(tmp_path):
+    copy = _course_copy(tmp_path)
+    (copy / "labs" / "lab9_extra.py").write_text("x = 1\n")
+    removed = sorted((copy / "labs").glob("lab1_*.py"))[0]
+    removed.unlink()
+    out = _check(copy).stdout
+    assert "labs/lab9_extra.py: no reference" in out, out
+    assert f"labs/{removed.name}: missing" in out, out
+
+
+REFERENCE = '''"""A lab."""
+
+import math
+
+
+# BEGIN SOLUTION
+def _helper(x):
+    return x * 2
+# END SOLUTION
+
+
+def double(x):
+    """Twice x."""
+    if x is None:
+        raise ValueError("x: expected a number")
+    # BEGIN SOLUTION (task 1)
+    y = _helper(x)
+    return y
+    # END SOLUTION
+
+
+class Loop:
+    def step(self, i):
+        """One step."""
+        # BEGIN SOLUTION (task 2)
+        return math.sqrt(i)
+        # END SOLUTION
+'''
+
+SKELETON = '''"""A lab."""
+
+import math
+
+
+def double(x):
+    """Twice x."""
+    if x is None:
+        raise ValueError("x: expected a number")
+    raise NotImplementedError("not implemented yet: double (task 1)")
+
+
+class Loop:
+    def step(self, i):
+        """One step."""
+        raise NotImplementedError("not implemented yet: Loop.step (task 2)")
+'''
+
+
+def test_regions_become_stubs_or_disappear():
+    assert skeleton_source(REFERENCE) == SKELETON
+
+
+def test_a_file_without_markers_is_copied():
+    assert skeleton_source("x = 1\n\n\ny = 2\n") == "x = 1\n\n\ny = 2\n"
+
+
+@pytest.mark.parametrize(("text", "says"), [
+    ("# BEGIN SOLUTION\nx = 1\n", "1: BEGIN SOLUTION without an END SOLUTION"),
+    ("x = 1\n# END SOLUTION\n", "2: END SOLUTION without a BEGIN SOLUTION"),
+    ("# BEGIN SOLUTION\n# BEGIN SOLUTION\n# END SOLUTION\n", "2: BEGIN SOLUTION inside"),
+    ('def f():\n    # BEGIN SOLUTION ("x")\n    return 1\n    # END SOLUTION\n',
+     "may not hold a double quote"),
+    ("if True:\n# BEGIN SOLUTION\n    x = 1\n# END SOLUTION\n", "does not parse"),
+])
+def test_bad_markers_are_named(text, says):
+    with pytest.raises(MarkerError, match=r"lab\.py"):
+        skeleton_source(text, "lab.py")
+    with pytest.raises(MarkerError) as info:
+        skeleton_source(text, "lab.py")
+    assert says in str(info.value)
+
+
+def test_every_stub_names_its_task():
+    """What a student runs into first: each stub says which function and which task."""
+    for path in sorted((ROOT / "labs").rglob("lab*.py")) + sorted(
+            (ROOT / "labs").glob("lab*_*/*.py")):
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            if "raise NotImplementedError(" in line:
+                assert "(task " in line, f"{path.relative_to(ROOT)}:{number}: {line.strip()}"
