@@ -38,7 +38,7 @@ demo: $(VENV)/.installed
 	$(VENV)/bin/rtcourse demo
 
 test: $(VENV)/.installed
-	$(PY) -m pytest -q -p no:cacheprovider
+	$(PY) -m pytest -q -rs -p no:cacheprovider
 
 lab: $(VENV)/.installed
 	$(VENV)/bin/jupyter lab $(AS_ROOT) $(LAB_ARGS) slides

@@ -29,6 +29,7 @@ import html
 import os
 import re
 import shutil
+import tempfile
 import time
 from pathlib import Path
 
@@ -120,16 +121,23 @@ def error_cells(notebook) -> int:
 
 def execute(notebook, folder: Path, timeout: float = 600) -> str | None:
     """Run ``notebook`` in place in ``folder``; return why it stopped early, or None."""
+    from jupyter_client import KernelManager
     from nbclient import NotebookClient
 
     env = dict(os.environ)
     env.setdefault("RTCOURSE_SMALL", "1")
-    client = NotebookClient(notebook, timeout=timeout, kernel_name="python3",
-                            allow_errors=True, resources={"metadata": {"path": str(folder)}})
-    try:
-        client.execute(env=env)
-    except Exception as exc:  # noqa: BLE001  (a cell timeout, a dead kernel: render what ran)
-        return f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc) else ''}"
+    with tempfile.TemporaryDirectory(prefix="rtk") as sockets:
+        # The kernel talks over local (Unix) sockets where there are some: over TCP it
+        # warns once per notebook that the channel is unencrypted, although nothing but
+        # this process connects to it.
+        ipc = {"transport": "ipc", "ip": os.path.join(sockets, "k")} if os.name == "posix" else {}
+        client = NotebookClient(notebook, km=KernelManager(kernel_name="python3", **ipc),
+                                timeout=timeout, allow_errors=True,
+                                resources={"metadata": {"path": str(folder)}})
+        try:
+            client.execute(env=env)
+        except Exception as exc:  # noqa: BLE001  (a cell timeout, a dead kernel: render what ran)
+            return f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc) else ''}"
     return None
 
 
