@@ -48,8 +48,16 @@ PAGE_URLS = {  # nbconvert's CDN addresses, replaced by the copies in STATIC
 }
 # nbconvert's page templates, less the Mermaid module it imports from a CDN.
 _TEMPLATE = "rtcourse_offline.html.j2"
+# On a slide, a code line of the course's 100 columns fits at 14 px and scrolls if it does not;
+# an output keeps its lines (JupyterLab's wrapping splits a number across two lines).
+_CSS = """<style type="text/css">
+.reveal { --jp-code-font-size: 14px; --jp-cell-prompt-width: 64px; }
+.jp-InputArea-editor pre, .jp-RenderedText pre { overflow-x: auto; }
+.jp-RenderedText pre { white-space: pre; word-break: normal; overflow-wrap: normal; }
+</style>"""
 _TEMPLATE_TEXT = ("{%- extends 'index.html.j2' -%}\n"
-                  "{% block html_head_js_mermaidjs %}{% endblock html_head_js_mermaidjs %}\n")
+                  "{% block html_head_js_mermaidjs %}{% endblock html_head_js_mermaidjs %}\n"
+                  "{% block html_head_css %}" + _CSS + "{% endblock html_head_css %}\n")
 
 
 def notebooks(root) -> list[Path]:

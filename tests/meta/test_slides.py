@@ -60,6 +60,9 @@ def test_rtcourse_slides_executes_and_renders(tmp_path):
         assert f'href="{name}.slides.html"' in index and f'href="{name}.html"' in index
     slides = (out / "01_toy.slides.html").read_text()
     assert "reveal" in slides and slides.count('<section') >= 2
+    # A long code line scrolls inside its slide; an output line is never wrapped mid-number.
+    assert ".jp-RenderedText pre { white-space: pre;" in slides
+    assert ".jp-InputArea-editor pre, .jp-RenderedText pre { overflow-x: auto; }" in slides
     notes = (out / "01_toy.html").read_text()
     assert "SMALL=1" in notes, "notebooks run with RTCOURSE_SMALL=1 by default"
     assert "data:image/png;base64," in notes, "the figure is produced by the code and embedded"
