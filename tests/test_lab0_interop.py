@@ -710,7 +710,7 @@ def probe_render_in_place(lab, device):
     with replaced(lab, {"pack_rgba8": given_pack_rgba8}):
         result = lab.render_rotating_triangle(2, fb)
     return {"returns_out": isinstance(result, torch.Tensor) and result.data_ptr() == fb.data_ptr(),
-            "all_written": not bool((fb == -1).any())}
+            "frame": fb.cpu()}
 
 
 @pytest.mark.task(4)
@@ -718,7 +718,12 @@ def probe_render_in_place(lab, device):
 def test_render_rotating_triangle_writes_in_place(impl, device):
     report = impl.probe(probe_render_in_place, device)
     assert report["returns_out"], "render_rotating_triangle must return out itself, not a copy"
-    assert report["all_written"], "render_rotating_triangle left pixels of out unwritten"
+    frame = report["frame"]
+    unwritten = (frame == -1).nonzero()
+    assert not len(unwritten), (f"render_rotating_triangle left {len(unwritten)} pixels of out "
+                                f"unwritten, the first at (row, col) {unwritten[0].tolist()}")
+    # Writing in place earns its point only with the right frame in place.
+    check_triangle_frame(frame, 2, "render_rotating_triangle(2, out): the frame in out")
 
 
 def probe_frame_loop(lab, device, width, height, steps, keep=None):
