@@ -12,6 +12,7 @@ import math
 import os
 import re
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -194,16 +195,29 @@ def replaced(lab, functions: dict):
     one task's function this way with given stand-ins for the other tasks' functions it
     calls, so a mistake there does not cost this task's points. ``lab`` is what a probe
     receives: the module, or a wrapper that checks each call (the module's own code calls
-    its globals, so they are replaced in the module itself). Yields the module."""
+    its globals, so they are replaced in the module itself). Yields the module.
+
+    A lab kept as a package calls another module's function through the name it imported
+    (``from .grid import build_grid`` in ``two_level.py``): each of the package's modules
+    holds its own global of that name. So the name is replaced in the package and in every
+    module of it whose global of that name is the lab's function (the same object; a
+    module's own different function of that name is left alone), and all are restored."""
     module = sys.modules.get(getattr(lab, "__name__", None), lab)
-    saved = {name: getattr(module, name) for name in functions}
+    prefix = getattr(module, "__name__", "") + "."
+    modules = [module, *(m for key, m in list(sys.modules.items())
+                         if key.startswith(prefix) and m is not None)]
+    saved = []  # (module, name, its own value), to put back
     try:
         for name, fn in functions.items():
-            setattr(module, name, fn)
+            own = getattr(module, name)
+            for m in modules:
+                if m is module or getattr(m, name, None) is own:
+                    saved.append((m, name, getattr(m, name)))
+                    setattr(m, name, fn)
         yield module
     finally:
-        for name, fn in saved.items():
-            setattr(module, name, fn)
+        for m, name, value in reversed(saved):
+            setattr(m, name, value)
 
 
 OLD_INTERPRETER_REASON = ("Triton's interpreter before 3.9 cannot run these kernels (loop "
@@ -264,20 +278,49 @@ class ImageMismatch(AssertionError):
         self.pictures = [str(p) for p in pictures]
 
 
+_RUN = f"run-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"  # this process's run folder
+
+
 def failure_dir() -> Path:
-    """Where failing image tests write their pictures: ``$RTCOURSE_FAILURE_DIR``, else
-    ``rtcourse-failures`` in the system's temporary folder."""
+    """Where failing image tests of this run write their pictures: a folder of its own per
+    run (``run-<date>-<time>-<pid>``), so pictures of earlier runs never mix in, under
+    ``$RTCOURSE_FAILURE_DIR``, else ``out/failures`` of the course folder the tests run in,
+    else ``rtcourse-failures`` in the system's temporary folder."""
     import tempfile
 
-    folder = os.environ.get("RTCOURSE_FAILURE_DIR")
-    return Path(folder) if folder else Path(tempfile.gettempdir()) / "rtcourse-failures"
+    base = os.environ.get("RTCOURSE_FAILURE_DIR")
+    if not base:
+        here = Path.cwd()
+        course = next((f for f in (here, *here.parents) if (f / "tests").is_dir()
+                       and (f / "pyproject.toml").is_file()), None)
+        base = course / "out" / "failures" if course else Path(
+            tempfile.gettempdir()) / "rtcourse-failures"
+    return Path(base) / _RUN
+
+
+def _folder_name(text: str, fallback: str) -> str:
+    """``text`` as one folder name: whole where it fits, else its start and a hash (file
+    systems take 255 bytes)."""
+    import hashlib
+
+    name = re.sub(r"[^A-Za-z0-9_.\[\]-]+", "_", text).strip("_") or fallback
+    if len(name) > 200:
+        name = f"{name[:180]}-{hashlib.sha1(name.encode()).hexdigest()[:12]}"
+    return name
+
+
+def _shown(path: Path) -> str:
+    """``path`` as a student types it: relative to the folder the tests run in, if inside."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def _current_test() -> str:
     """The running test's id (pytest sets PYTEST_CURRENT_TEST), as a folder name."""
     test = os.environ.get("PYTEST_CURRENT_TEST", "image").rsplit(" (", 1)[0]
-    test = test.split("::", 1)[-1]
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", test).strip("_")[:120] or "image"
+    return _folder_name(test.split("::", 1)[-1], "image")
 
 
 def _grid(x: torch.Tensor, image_shape) -> torch.Tensor:
@@ -348,12 +391,32 @@ def write_pictures(actual, expected, bad, *, folder, kind: str = "color",
     diff = pictures["expected"] // 3
     diff[b.numpy()] = (255, 32, 32)
     pictures["difference"] = diff
+    legends = {"expected": "expected", "got": "got (your result)",
+               "difference": "red: out of tolerance"}
     paths = []
     for title, rgb in pictures.items():
         path = folder / f"{title}.png"
-        Image.fromarray(np.ascontiguousarray(rgb)).save(path, format="PNG")
+        _legible(Image.fromarray(np.ascontiguousarray(rgb)), legends[title]).save(
+            path, format="PNG")
         paths.append(path)
     return paths
+
+
+PICTURE_SIDE = 256  # pixels: the shortest a failure picture's longer side is drawn
+
+
+def _legible(image, legend: str):
+    """``image`` scaled by a whole factor (nearest: every pixel stays a sharp square) until
+    its longer side is at least :data:`PICTURE_SIDE`, over a strip naming what it shows."""
+    from PIL import Image, ImageDraw
+
+    scale = max(1, -(-PICTURE_SIDE // max(image.size)))
+    big = image.resize((image.width * scale, image.height * scale), Image.NEAREST)
+    strip = 18
+    out = Image.new("RGB", (big.width, big.height + strip), (255, 255, 255))
+    out.paste(big, (0, 0))
+    ImageDraw.Draw(out).text((4, big.height + 3), legend, fill=(0, 0, 0))
+    return out
 
 
 def assert_image_close(actual, expected, *, name: str, atol: float = 0.0, rtol: float = 0.0,
@@ -400,11 +463,11 @@ def image_mismatch(message: str, actual, expected, bad, *, name: str, kind: str 
     the three pictures (``bad``: the pixels to mark, same leading shape) and names their
     folder after ``message``."""
     target = Path(folder) if folder is not None else failure_dir() / _current_test() / \
-        (re.sub(r"[^A-Za-z0-9_.-]+", "_", name)[:60].strip("_") or "image")
+        _folder_name(name, "image")
     try:
         paths = write_pictures(actual, expected, bad, folder=target, kind=kind,
                                image_shape=image_shape)
     except (OSError, ValueError, RuntimeError) as why:  # the message matters more
         return ImageMismatch(f"{message}\n  (could not write the pictures: {why})")
     return ImageMismatch(f"{message}\n  pictures: expected.png, got.png, difference.png in "
-                         f"{target}", paths)
+                         f"{_shown(target)}", paths)

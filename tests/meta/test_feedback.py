@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from course.core.files import lab_source
 from course.grading.catalog import function_tasks, lab_catalog, lab_file_rank, skeleton_stubs
 from course.grading.feedback import MAX_LINES, short_feedback
 from course.grading.results import OUTPUT_LIMIT, ScoreKeeper
@@ -258,7 +259,7 @@ def test_every_not_implemented_belongs_to_a_listed_task():
     labs = lab_catalog(lab_test_files(ROOT))
     readme = labs_readme(ROOT, hidden_root=ROOT)
     for number, lab in labs.items():
-        skeleton = ROOT / "labs" / f"{lab.module}.py"
+        skeleton = lab_source(ROOT / "labs", lab.module)  # a file, or a package folder
         owners = function_tasks(lab, skeleton)
         assert set(owners) == {s.name for s in skeleton_stubs(skeleton)}
         section = readme.split(f"## Lab {number}", 1)[1].split("\n## ", 1)[0]
@@ -315,7 +316,17 @@ def test_image_mismatch_writes_three_pictures_and_html(tmp_path, monkeypatch):
     from PIL import Image
 
     diff = Image.open(exc.pictures[2]).convert("RGB")
-    assert diff.size == (16, 12) and diff.getpixel((6, 5)) == (255, 32, 32)
+    # Scaled by 16 (nearest) to 256 pixels wide, over an 18-pixel strip naming the picture.
+    assert diff.size == (256, 192 + 18) and diff.getpixel((6 * 16 + 8, 5 * 16 + 8)) == (
+        255, 32, 32)
+    assert diff.getpixel((6 * 16, 5 * 16)) == diff.getpixel((6 * 16 + 15, 5 * 16 + 15))
+    # One folder per run under the chosen folder; a long test name is not clipped.
+    run = Path(exc.pictures[0]).parents[2]
+    assert run.parent == tmp_path and run.name.startswith("run-"), exc.pictures[0]
+    long_name = "render(" + "x" * 90 + ")"
+    with pytest.raises(ImageMismatch) as info:
+        assert_image_close(got, expected, name=long_name, atol=1e-3)
+    assert Path(info.value.pictures[0]).parent.name == long_name.replace("(", "_").rstrip(")")
     ids = torch.arange(20).reshape(4, 5)
     with pytest.raises(ImageMismatch):  # an id buffer, compared exactly, as (N,) rays
         assert_image_close(ids.flatten().flip(0), ids.flatten(), name="ids", exact=True,
