@@ -88,7 +88,16 @@ def project_requirements() -> list[str]:
     except ModuleNotFoundError:  # Python 3.10: the copy pip ships
         from pip._vendor import tomli as tomllib
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    return list(project["dependencies"]) + list(project["optional-dependencies"]["dev"])
+    extras = project["optional-dependencies"]
+
+    def expand(requirements):  # "gpu-raytracing-course[notebooks]": that extra's own list
+        for line in requirements:
+            if line.startswith(project["name"] + "["):
+                yield from expand(extras[line.split("[", 1)[1].split("]", 1)[0]])
+            else:
+                yield line
+
+    return list(project["dependencies"]) + list(expand(extras["dev"]))
 
 
 def _resolve_command(target: Target, requirements: list[str], report: Path, scratch: Path,
