@@ -44,7 +44,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from course.core.files import joined_source
+from course.core.files import copy_module, lab_source
 from course.grading.catalog import lab_catalog
 from course.grading.runner import lab_test_files
 from course.measure.bench import ResultTable
@@ -126,8 +126,8 @@ def measure_lab(lab: int, module: str, work: Path, interval: float, cpus: str) -
         archive.extractall(source)
     submission, results = folder / "submission", folder / "results"
     submission.mkdir()
-    # One file, as a student hands it in (a reference kept in parts, joined).
-    (submission / f"{module}.py").write_text(joined_source(ROOT / "solutions" / f"{module}.py"))
+    # As a student hands it in: the lab's file, or every file of its package.
+    copy_module(lab_source(ROOT / "solutions", module), submission)
     env = dict(os.environ, CUDA_VISIBLE_DEVICES="", RTCOURSE_SUBMISSION_DIR=str(submission),
                RTCOURSE_RESULTS_DIR=str(results), RTCOURSE_PYTHON=sys.executable)
     for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "MALLOC_ARENA_MAX",
@@ -207,6 +207,10 @@ def main():
                         help="in-process vs sandboxed, the whole suite, instead")
     parser.add_argument("--repeats", type=int, default=2, help="with --isolation")
     args = parser.parse_args()
+    if not (ROOT / "solutions").is_dir():  # the student handout
+        raise SystemExit("grading_cost: it grades the reference solutions with the Gradescope "
+                         "autograder (rtcourse gradescope), and this folder has no solutions/; "
+                         "run it in the course repository")
     results = ROOT / "bench" / "results" / "cpu-2cores"
     if args.isolation:
         return isolation(args.repeats, Path(args.out or results / "grading_isolation.json"))

@@ -50,11 +50,19 @@ sys.path.insert(0, str(REPO))  # run from a checkout without installing
 from course.core.device import default_device, set_cpu_threads
 from course.core.types import Hits, Mesh, Rays
 from course.kernels import triton_intersect as ti
-from course.measure.bench import ResultTable, device_name, load_lab, pareto_plot, time_fn
+from course.measure.bench import (
+    ResultTable,
+    add_impl_option,
+    device_name,
+    load_lab,
+    pareto_plot,
+    time_fn,
+)
 from course.measure.occupancy import PRESETS, occupancy
 
-# The kernels measured: the references by default, a student's with RTCOURSE_IMPL=labs.
-LAB = load_lab("lab1_intersect", os.environ.get("RTCOURSE_IMPL"))
+# The kernels measured: the references in the course repository, the student's labs/ in the
+# handout (RTCOURSE_IMPL, or --impl, picks another); main() reloads them for --impl.
+LAB = load_lab("lab1_intersect", os.environ.get("RTCOURSE_IMPL"), root=REPO)
 VARIANTS, closest_hit, moller_trumbore = LAB.VARIANTS, LAB.closest_hit, LAB.moller_trumbore
 
 DTYPES = {"fp16": torch.float16, "bf16": torch.bfloat16, "fp32": torch.float32,
@@ -494,7 +502,11 @@ def main(argv: list[str] | None = None) -> None:
                         help="print only the float32 pass-through table of the lab's docstring")
     parser.add_argument("--out", type=Path, help="output folder "
                         "(default: bench/results/<device_name>/lab1)")
+    add_impl_option(parser)
     args = parser.parse_args(argv)
+    global LAB, closest_hit, moller_trumbore
+    LAB = load_lab("lab1_intersect", args.impl, root=REPO)
+    closest_hit, moller_trumbore = LAB.closest_hit, LAB.moller_trumbore
 
     threads = set_cpu_threads(args.threads)
     device = default_device(args.device)
@@ -526,15 +538,20 @@ def main(argv: list[str] | None = None) -> None:
         else shlex.join(["python", "bench/lab1_intersect.py", *argv]),
         triton=_triton_version(), scenes=source, sizes=cfg, cpu_threads=threads,
         load_average=list(os.getloadavg()), crack_rays=len(crack_scene(ico, 0.0, torch.float64)[0]),
-        icosphere_faces=ico.num_faces, reference="closest_hit(variant='watertight'), float64")
+        icosphere_faces=ico.num_faces, reference="closest_hit(variant='watertight'), float64",
+        lab_file=str(LAB.__file__))
     print(f"{table.metadata['device']}: {cfg}, scenes from {source}", flush=True)
 
     started = time.perf_counter()
     def reference(r: Rays, m: Mesh) -> Hits:
         return closest_hit(r, m, variant="watertight", memory_budget_bytes=cfg["memory"])
 
-    ref = reference(rays.to(device), soup.to(device))
-    ref_cracks = crack_rates(reference, ico, torch.float64, device)
+    try:
+        ref = reference(rays.to(device), soup.to(device))
+        ref_cracks = crack_rates(reference, ico, torch.float64, device)
+    except NotImplementedError as exc:  # the handout: every row compares with closest_hit
+        raise SystemExit(f"lab1_intersect: every row is compared with the lab's own "
+                         f"closest_hit in float64; write it first ({exc})") from None
     print(f"reference: {ref.hit.double().mean().item():.1%} of the rays hit, "
           f"reference cracks {ref_cracks} ({time.perf_counter() - started:.1f} s)", flush=True)
 

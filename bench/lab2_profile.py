@@ -1,6 +1,6 @@
 """Profile one sync-free BVH traversal (Lab 2) on CUDA: where its device time goes.
 
-    python bench/lab2_profile.py --size 1024 --compile reduce-overhead --out DIR
+    python bench/lab2_profile.py --size 1024 --compile reduce-overhead --out DIR [--impl labs]
 
 Traces the bunny's primary rays once to compile and warm up, then once under
 ``torch.profiler``: writes the kernel table (``profile.txt``), where the device waits for the
@@ -23,12 +23,12 @@ from pathlib import Path
 import torch
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))  # `solutions` is not an installed package
+sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
 from course.core.camera import primary_rays
 from course.core.scenes import load_scene
 from course.given.lab2 import pack_bvh
-from solutions import lab2_accel as lab
+from course.measure.bench import add_impl_option, load_lab
 
 
 def main(argv=None):
@@ -38,7 +38,12 @@ def main(argv=None):
     parser.add_argument("--check-every", type=int, default=16)
     parser.add_argument("--no-compact", action="store_true")
     parser.add_argument("--out", default=".")
+    add_impl_option(parser)
     args = parser.parse_args(argv)
+    if not torch.cuda.is_available():
+        raise SystemExit("lab2_profile: it profiles the traversal on CUDA, and this machine "
+                         "has no CUDA device (bench/lab2_accel.py measures it on the CPU)")
+    lab = load_lab("lab2_accel", args.impl, root=REPO)
     scene = load_scene("bunny", device="cuda")
     mesh = scene.mesh
     bvh = lab.build_sah_bvh(mesh)

@@ -37,15 +37,15 @@ read as one little-endian word).
 
 from __future__ import annotations
 
-import collections  # noqa: F401  (a deque makes a good FIFO of in-flight frames)
+import collections  # a deque makes a good FIFO of in-flight frames
 import math
-import time  # noqa: F401  (for run_frame_loop)
+import time  # for run_frame_loop
 
 import numpy as np
 import torch
 
-from course.core.image import srgb_encode  # noqa: F401  (for linear_to_srgb8)
-from course.measure.bench import time_fn  # noqa: F401  (for measure_copy_bandwidth)
+from course.core.image import srgb_encode  # for linear_to_srgb8
+from course.measure.bench import time_fn  # for measure_copy_bandwidth
 
 BACKGROUND_RGBA = (16, 16, 24, 255)  # the frame loop's clear colour, 8-bit sRGB
 
@@ -98,7 +98,7 @@ def pack_rgba8(rgba: torch.Tensor) -> torch.Tensor:
     - (Curious: on a little-endian machine ``rgba.view(torch.int32)`` gives the same bits
       without any arithmetic. Why does it need a contiguous input?)
     """
-    raise NotImplementedError("not implemented yet: pack_rgba8 (R | G<<8 | B<<16 | A<<24 as int32)")
+    raise NotImplementedError("not implemented yet: pack_rgba8 (task 1)")
 
 
 def unpack_rgba8(packed: torch.Tensor) -> torch.Tensor:
@@ -117,7 +117,7 @@ def unpack_rgba8(packed: torch.Tensor) -> torch.Tensor:
     - Broadcasting ``packed.unsqueeze(-1) >> shifts`` with shifts = [0, 8, 16, 24] does all
       four channels at once.
     """
-    raise NotImplementedError("not implemented yet: unpack_rgba8 ((word >> 8k) & 0xFF)")
+    raise NotImplementedError("not implemented yet: unpack_rgba8 (task 1)")
 
 
 def linear_to_srgb8(img: torch.Tensor) -> torch.Tensor:
@@ -140,7 +140,7 @@ def linear_to_srgb8(img: torch.Tensor) -> torch.Tensor:
       outside [0, 255] or NaN is not defined behaviour you can rely on.
     - ``floor(v + 0.5)`` is not ``torch.round(v)``: round() sends halves to the even code.
     """
-    raise NotImplementedError("not implemented yet: linear_to_srgb8 (clamp, encode, round)")
+    raise NotImplementedError("not implemented yet: linear_to_srgb8 (task 1)")
 
 
 # --------------------------------------------------------------------------------------
@@ -163,7 +163,7 @@ def framebuffer_to_numpy(fb: torch.Tensor) -> np.ndarray:
 
     Hint: ``Tensor.numpy()`` shares memory; ``np.array(t)`` and ``.copy()`` do not.
     """
-    raise NotImplementedError("not implemented yet: framebuffer_to_numpy (a view, no copy)")
+    raise NotImplementedError("not implemented yet: framebuffer_to_numpy (task 2)")
 
 
 def numpy_to_framebuffer(arr: np.ndarray) -> torch.Tensor:
@@ -174,7 +174,7 @@ def numpy_to_framebuffer(arr: np.ndarray) -> torch.Tensor:
 
     Hint: ``torch.from_numpy`` shares memory; ``torch.tensor(arr)`` copies.
     """
-    raise NotImplementedError("not implemented yet: numpy_to_framebuffer (a view, no copy)")
+    raise NotImplementedError("not implemented yet: numpy_to_framebuffer (task 2)")
 
 
 def share_dlpack(fb: torch.Tensor) -> torch.Tensor:
@@ -190,7 +190,7 @@ def share_dlpack(fb: torch.Tensor) -> torch.Tensor:
     Hint: ``torch.from_dlpack(fb)`` calls ``fb.__dlpack__(stream=...)``; on CUDA the
     producer orders the consumer's stream after work already queued on ``fb``.
     """
-    raise NotImplementedError("not implemented yet: share_dlpack (torch.from_dlpack)")
+    raise NotImplementedError("not implemented yet: share_dlpack (task 2)")
 
 
 def cuda_array_interface(fb: torch.Tensor) -> dict:
@@ -206,7 +206,7 @@ def cuda_array_interface(fb: torch.Tensor) -> dict:
 
     Hint: ``torch.cuda.current_stream(fb.device).cuda_stream`` is 0 for the default stream.
     """
-    raise NotImplementedError("not implemented yet: cuda_array_interface (a v3 dict)")
+    raise NotImplementedError("not implemented yet: cuda_array_interface (task 2)")
 
 
 # --------------------------------------------------------------------------------------
@@ -241,8 +241,7 @@ class FrameDownloader:
         Hint: keep a FIFO (``collections.deque``) of the slots in flight and the index of
         the next slot to write.
         """
-        raise NotImplementedError("not implemented yet: FrameDownloader.__init__ "
-                                  "(staging buffers, stream, FIFO)")
+        raise NotImplementedError("not implemented yet: FrameDownloader.__init__ (task 3)")
 
     def submit(self, frame: torch.Tensor) -> None:
         """Start copying ``frame: (H, W) int32`` on ``device`` into the next staging buffer.
@@ -260,8 +259,7 @@ class FrameDownloader:
         yet received): the copy would overwrite a frame nobody has seen. ValueError naming
         ``frame`` for a wrong shape, dtype, device or a non-contiguous tensor.
         """
-        raise NotImplementedError("not implemented yet: FrameDownloader.submit "
-                                  "(event, side stream, non_blocking copy)")
+        raise NotImplementedError("not implemented yet: FrameDownloader.submit (task 3)")
 
     def receive(self) -> torch.Tensor:
         """The oldest submitted frame (first in, first out), once its copy finished.
@@ -272,8 +270,7 @@ class FrameDownloader:
 
         Errors: RuntimeError when no frame is in flight.
         """
-        raise NotImplementedError("not implemented yet: FrameDownloader.receive "
-                                  "(wait for the oldest copy, return its buffer)")
+        raise NotImplementedError("not implemented yet: FrameDownloader.receive (task 3)")
 
 
 def measure_copy_bandwidth(nbytes: int, pinned: bool, device, repeats: int = 5) -> float:
@@ -291,7 +288,7 @@ def measure_copy_bandwidth(nbytes: int, pinned: bool, device, repeats: int = 5) 
       Timing in seconds per call (CUDA events on the GPU); use its ``median``.
     - ``dst.copy_(src, non_blocking=True)`` is asynchronous only into pinned memory.
     """
-    raise NotImplementedError("not implemented yet: measure_copy_bandwidth (time a copy)")
+    raise NotImplementedError("not implemented yet: measure_copy_bandwidth (task 3)")
 
 
 def run_frame_loop(render, n_frames: int, shape, device, overlap: bool = True,
@@ -317,7 +314,7 @@ def run_frame_loop(render, n_frames: int, shape, device, overlap: bool = True,
     Hint: with two framebuffers, framebuffer i % 2 was last read by frame i-2's copy, which
     you already received (waited for) — so rendering into it is safe.
     """
-    raise NotImplementedError("not implemented yet: run_frame_loop (render/submit/receive)")
+    raise NotImplementedError("not implemented yet: run_frame_loop (task 3)")
 
 
 # --------------------------------------------------------------------------------------
@@ -365,8 +362,7 @@ def render_rotating_triangle(frame_index: int, out: torch.Tensor, *, period: int
     - ``torch.where`` picks triangle or background colour; ``pack_rgba8`` packs; finish
       with ``out.copy_(...)`` (writing into ``out`` is the point: no new framebuffer).
     """
-    raise NotImplementedError("not implemented yet: render_rotating_triangle "
-                              "(edge functions over the pixel grid, written into out)")
+    raise NotImplementedError("not implemented yet: render_rotating_triangle (task 4)")
 
 
 class FrameLoop:
@@ -384,11 +380,9 @@ class FrameLoop:
 
         Errors: ValueError naming ``width`` / ``height`` unless each is a positive int.
         """
-        raise NotImplementedError("not implemented yet: FrameLoop.__init__ "
-                                  "(allocate the framebuffer once)")
+        raise NotImplementedError("not implemented yet: FrameLoop.__init__ (task 4)")
 
     def step(self) -> torch.Tensor:
         """Render the current frame into the framebuffer, advance the frame index, and
         return the framebuffer (the same tensor every time: check ``data_ptr()``)."""
-        raise NotImplementedError("not implemented yet: FrameLoop.step "
-                                  "(render into the same framebuffer, advance)")
+        raise NotImplementedError("not implemented yet: FrameLoop.step (task 4)")

@@ -1,17 +1,15 @@
 """Lab 1: ray/primitive intersection.
 
 Fill in every function that raises ``NotImplementedError`` (the tasks below); the helpers
-marked "provided" are given. Run the grader for this lab with
-``pytest tests/test_lab1_intersect.py`` (add ``-k moller_trumbore`` for one task and
-``-s`` to see the crack rates your variants print). The tests call your kernels on the CPU
-and, where present, on CUDA: write device- and dtype-agnostic tensor code.
-
-Every kernel here is batched: its tensor arguments broadcast against each other over
-their leading dimensions, so rays ``(N, 1, 3)`` against triangles ``(1, M, 3)`` give
-``(N, M)`` results, and rays ``(N, 3)`` against triangles ``(N, 3)`` give one test per
-ray. Each kernel computes in the dtype of its inputs (float16, bfloat16, float32 or
-float64: the speed/accuracy knob) on their device, with no Python loop over rays or
-triangles.
+imported from ``course.core.raymath`` and ``course.given.lab1`` are given. Run the grader
+for this lab with ``pytest tests/test_lab1_intersect.py`` (add ``-k moller_trumbore`` for
+one task and ``-s`` to see the crack rates your variants print). The tests call your
+kernels on the CPU and, where present, on CUDA. Every kernel here is batched: its tensor
+arguments broadcast against each other over their leading dimensions, so rays ``(N, 1, 3)``
+against triangles ``(1, M, 3)`` give ``(N, M)`` results, and rays ``(N, 3)`` against
+triangles ``(N, 3)`` give one test per ray. Each kernel computes in the dtype of its inputs
+(float16, bfloat16, float32 or float64: the speed/accuracy knob) on their device, with no
+Python loop over rays or triangles.
 
 Conventions shared by all kernels
 ---------------------------------
@@ -26,8 +24,9 @@ Conventions shared by all kernels
 * Degenerate input is a case, not an error: zero-area triangles, rays parallel to a
   triangle, zero direction components and NaN/inf coordinates give misses, never NaN
   outputs. A ray nearly parallel to a triangle (grazing) never reports a hit that the exact
-  test clearly rules out, however far away it crosses the triangle's plane. Malformed input (wrong shape, integer dtype, mixed dtypes or devices) raises
-  ``ValueError``/``TypeError`` naming the argument.
+  test clearly rules out, however far away it crosses the triangle's plane. Malformed input
+  (wrong shape, integer dtype, mixed dtypes or devices) raises ``ValueError``/``TypeError``
+  naming the argument.
 
 Tasks (points)
 --------------
@@ -40,46 +39,11 @@ Tasks (points)
 7. ``op_counts``, ``register_estimate``, ``occupancy_for``   the lecture's
    operation, register and occupancy accounting, measured on your kernels       (2)
 
-What each variant survives (measured by the grader's stress tests and the bench)
-------------------------------------------------------------------------------
-float32 unless stated. A **crack** is a ray aimed at a vertex or at a point of a shared edge of
-a closed mesh whose first hit is not one of the triangles sharing it: it hit nothing, or it
-slipped through to a triangle behind (the far side of the mesh).
-
-==========================  =========  ===========  =========  ==========  =====================
-case                        simple     MT           woop       watertight  why
-==========================  =========  ===========  =========  ==========  =====================
-shared edges and vertices   cracks     cracks       cracks     none        only watertight
-of a closed mesh            (table     (table       (table     (to 1e6)    computes a shared
-                            below)     below)       below)                 edge bit for bit
-                                                                           alike for both sides
-ray nearly parallel to the  miss       miss         miss       miss        simple: far away the
-plane (cos 1e-3 .. 1e-7),                                                  sub-areas round to 0
-crossing it far away                                                       and pass >= 0; it
-                                                                           rejects p where
-                                                                           their rounding,
-                                                                           ~eps |v - p|^2 |n|,
-                                                                           reaches n . n
-triangle of side 2e-4       hit        hit          hit (u, v  hit         an absolute det
-                                                    to 5e-2)               epsilon (1e-6)
-                                                                           rejects it
-scene scaled by 1e-6, 1e6   hit        hit          hit        hit         range: simple, MT
-                                                                           ~1e-12..1e12
-                                                                           (|n|^2, |d||e1||e2|);
-                                                                           the others > 1e16
-ray parallel to / in plane  miss       miss         miss       miss        det == 0 exactly
-zero-area, repeated corner  miss       miss         miss       miss        watertight must test
-                                                                           e1 x e2 == 0 itself
-NaN/inf origin, direction   miss       miss         miss       miss        NaN fails compares
-exact inside/outside for    no         no           no         yes         double fallback:
-axis-parallel rays                                                         exact edge signs
-float16 / bfloat16          loose      loose        loose      loose       3 / 2 digits: only
-                                                                           well-shaped
-                                                                           triangles
-==========================  =========  ===========  =========  ==========  =====================
-
-Cracks, as ``python bench/lab1_intersect.py --device cpu --crack-table`` measures them (the
-grader's construction; ``pytest -s`` prints the same rates for your kernels):
+Each kernel's docstring states its contract (all four miss parallel, zero-area, NaN/inf and
+far-crossing grazing cases; half precision suits only well-shaped triangles). Only
+``watertight`` never **cracks**: a ray aimed at a vertex or a shared edge of a closed mesh
+hits a triangle sharing it, not nothing or one behind. The grader's construction, as
+``python bench/lab1_intersect.py --device cpu --crack-table`` measures it:
 
 Pass-throughs (fp32, icosphere level 2: 1122 rays aimed at its 162 vertices
 and at 1/2 and 1/4 of its edges, from outside / from the centre; the sphere moved by the offset):
@@ -107,19 +71,11 @@ offset    intersect_simple    moller_trumbore     woop_unit           watertight
 The mesh after rounding, offsets 0, 1e5, 1e6, 1e7: distinct vertices 162, 162, 162, 18;
 zero-area triangles 0, 0, 0, 90%.
 
-Near the origin the three tests that evaluate a shared edge from their own data crack at
-5-17% of the aimed rays. Far away Möller–Trumbore happens to survive (the translated
-vertices sit on a coarse float grid, which makes its differences exact: luck, not a
-guarantee); Woop's transform cancels ``|x| / |edge|`` digits, so it cracks more and misplaces
-the hits it finds; simple rounds its hit point ``p``. At 1e7 the float32 spacing (1) is the
-sphere's radius: its 162 vertices collapse onto 18 grid points and 90% of its triangles have
-zero area, so every test, watertight included, misses most aimed points (watertight's
-contract is about the triangles that remain).
-
-``ray_box`` is conservative (never misses a box the exact test hits, Ize 2013) and
-NaN-safe for rays starting on a slab plane; ``ray_sphere`` keeps full relative accuracy
-for small spheres far away (Ray Tracing Gems, chapter 7), where the textbook quadratic
-loses every digit of the discriminant.
+Near the origin the three tests that evaluate a shared edge from their own data crack; far
+away Möller–Trumbore survives by luck (the vertices sit on a coarse float grid) and Woop's
+transform loses ``|x| / |edge|`` digits. At 1e7 the float32 spacing is the sphere's radius:
+the mesh collapses, and even watertight misses most aimed points (its contract is about the
+triangles that remain).
 """
 
 from __future__ import annotations
@@ -128,7 +84,7 @@ import math
 
 import torch
 
-from course.core.raymath import (  # noqa: F401  (given helpers, re-exported for the tasks)
+from course.core.raymath import (
     check_inputs,
     check_triangle_inputs,
     cross,
@@ -137,14 +93,13 @@ from course.core.raymath import (  # noqa: F401  (given helpers, re-exported for
     masked_result,
 )
 from course.core.types import Hits, Mesh, Rays
-
-VARIANTS = ("intersect_simple", "moller_trumbore", "woop_unit", "watertight")
-"""The triangle kernels of this lab, by name (``closest_hit(..., variant=...)``)."""
-
-
-# Provided helpers (not tasks): cross, dot, gamma, check_inputs, check_triangle_inputs and
-# masked_result come from course.core.raymath.
-
+from course.given.lab1 import (
+    BYTES_PER_PAIR,
+    VARIANTS,  # noqa: F401  (the kernels' names, for callers of closest_hit)
+    accounting_inputs,
+    affine_row,
+    check_closest_hit_inputs,
+)
 
 # ---------------------------------------------------------------------------------------
 # Task 1: the simple test
@@ -230,18 +185,13 @@ def woop_precompute(v0, v1, v2):
     degenerate triangle (``e1 x e2 == 0``) gets the zero transform, which every ray misses
     (``t = -0 / 0`` is NaN).
 
-    Hints: do the arithmetic on ``v0.double()`` etc. and ``.to(v0.dtype)`` at
-    the end; ``rows @ v0[..., None]`` applies three rows at once; ``torch.where`` picks
-    the zero transform for degenerate triangles.
+    Hints: do the arithmetic on ``v0.double()`` etc. and ``.to(v0.dtype)`` at the end;
+    ``rows @ v0[..., None]`` applies three rows at once; ``torch.where`` picks the zero
+    transform for degenerate triangles.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_inputs({"v0": (v0, (3,)), "v1": (v1, (3,)), "v2": (v2, (3,))})
     raise NotImplementedError("not implemented yet: woop_precompute (task 3)")
-
-
-def _affine_row(row, origins, directions):
-    """``(r . o + c, r . d)`` for one row ``[r | c]`` of a transform."""
-    return dot(row[..., :3], origins) + row[..., 3], dot(row[..., :3], directions)
 
 
 def woop_unit(origins, directions, transform, t_min=0.0, t_max=math.inf):
@@ -258,12 +208,11 @@ def woop_unit(origins, directions, transform, t_min=0.0, t_max=math.inf):
     Accuracy: the transform's offsets are about ``|v0| / |edge|``; far from the origin
     ``r . o + c`` cancels those digits, so the test degrades like ``eps |x| / |edge|``.
 
-    Hints: ``transform[..., 2, :]`` is the z row; the provided ``_affine_row``
-    gives ``(r . o + c, r . d)`` for one row.
+    Hints: ``transform[..., 2, :]`` is the z row; the given ``affine_row`` gives
+    ``(r . o + c, r . d)`` for one row.
     """
-    # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    # Returns (shape, {name: tensor}) with the scalars in the kernel's dtype.
-    _, s = check_inputs(  # noqa: RUF059  (s: for your code)
+    # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
+    _, s = check_inputs(
         {"origins": (origins, (3,)), "directions": (directions, (3,)),
          "transform": (transform, (3, 4))}, {"t_min": t_min, "t_max": t_max})
     raise NotImplementedError("not implemented yet: woop_unit (task 3)")
@@ -345,17 +294,15 @@ def ray_box(origins, inv_directions, box_min, box_max, t_min=0.0, t_max=math.inf
     * A ray starting *on* a slab plane with ``d = 0`` gives ``0 * inf = NaN``: that slab
       says nothing, so the reduction over the slabs drops NaN (``fmax``/``fmin``).
     * Conservative: ``t_far`` is scaled by ``1 + 2 gamma(3)`` (Ize 2013, "Robust BVH Ray
-      Traversal"), so rounding never turns a hit into a miss (a wider margin of a few
-      ``gamma(3)`` is as good: ``t_far`` is graded to about 1e-5, and a ray that misses the
-      box by less than that may be reported either way); an empty box
-      (``min > max`` on any axis, a flat box ``min == max`` is not empty) and a ray with
-      NaN/inf components never hit.
+      Traversal"), so rounding never turns a hit into a miss (a few ``gamma(3)`` is as good:
+      ``t_far`` is graded to about 1e-5, and a ray missing the box by less may go either
+      way); an empty box (``min > max`` on any axis; a flat box ``min == max`` is not empty)
+      and a ray with NaN/inf components never hit.
 
     Hints: ``torch.minimum``/``maximum`` keep NaN, ``torch.fmin``/``fmax`` drop it.
     """
-    # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    # Returns (shape, {name: tensor}) with the scalars in the kernel's dtype.
-    _, s = check_inputs(  # noqa: RUF059  (s: for your code)
+    # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
+    _, s = check_inputs(
         {"origins": (origins, (3,)), "inv_directions": (inv_directions, (3,)),
          "box_min": (box_min, (3,)), "box_max": (box_max, (3,))},
         {"t_min": t_min, "t_max": t_max})
@@ -381,9 +328,8 @@ def ray_sphere(origins, directions, center, radius, t_min=0.0, t_max=math.inf):
 
     Hints: ``torch.copysign(x, b)`` is ``sign(b) |x|`` with a sign for zero.
     """
-    # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    # Returns (shape, {name: tensor}) with the scalars in the kernel's dtype.
-    _, s = check_inputs(  # noqa: RUF059  (s: for your code)
+    # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
+    _, s = check_inputs(
         {"origins": (origins, (3,)), "directions": (directions, (3,)), "center": (center, (3,))},
         {"radius": radius, "t_min": t_min, "t_max": t_max})
     raise NotImplementedError("not implemented yet: ray_sphere (task 5)")
@@ -391,31 +337,6 @@ def ray_sphere(origins, directions, center, radius, t_min=0.0, t_max=math.inf):
 
 # ---------------------------------------------------------------------------------------
 # Task 6: closest hit by brute force
-
-BYTES_PER_PAIR = 64
-"""Element sizes a triangle kernel keeps alive per (ray, triangle) pair, at most: the
-chunk size is ``memory_budget_bytes // (BYTES_PER_PAIR * element size)`` pairs."""
-
-
-def check_closest_hit_inputs(rays, mesh, variant, memory_budget_bytes):
-    """Provided: validate :func:`closest_hit`'s arguments (ValueError/TypeError naming the
-    argument). Objects that crossed a process boundary are re-validated too."""
-    if not isinstance(rays, Rays):
-        raise TypeError(f"rays: expected course.core.types.Rays, got {type(rays).__name__}")
-    if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
-    rays.validate()
-    mesh.validate()
-    if mesh.dtype != rays.dtype:
-        raise TypeError(f"mesh: expected vertices of dtype {rays.dtype} like rays, "
-                        f"got {mesh.dtype}")
-    if mesh.device != rays.device:
-        raise ValueError(f"mesh: expected a mesh on {rays.device} like rays, got {mesh.device}")
-    if variant not in VARIANTS:
-        raise ValueError(f"variant: expected one of {', '.join(VARIANTS)}, got {variant!r}")
-    if not isinstance(memory_budget_bytes, int) or memory_budget_bytes <= 0:
-        raise ValueError(f"memory_budget_bytes: expected a positive int, "
-                         f"got {memory_budget_bytes!r}")
 
 
 def closest_hit(rays: Rays, mesh: Mesh, variant: str = "moller_trumbore",
@@ -426,19 +347,17 @@ def closest_hit(rays: Rays, mesh: Mesh, variant: str = "moller_trumbore",
     triangle kernel of this lab (see ``VARIANTS``). Returns ``Hits`` (N,): ``t`` (inf
     where missed), ``triangle`` (-1 where missed), ``u, v`` (0 where missed).
 
-    Memory: a kernel call on ``n`` rays x ``m`` triangles makes temporaries of ``n m``
-    pairs, so the work goes in tiles of at most
-    ``P = memory_budget_bytes // (BYTES_PER_PAIR * element size)`` pairs:
-    ``m = min(F, P)`` triangles and ``max(1, P // m)`` rays per tile (all triangles at
-    once when they fit, else chunks of triangles for one ray at a time). Each tile is
-    reduced to its nearest hit per ray; its local triangle index plus the tile's offset
-    replaces the running best only when strictly nearer, so ties in ``t`` go to the
-    lowest triangle index whatever the tiling.
+    Memory: a kernel call on ``n`` rays x ``m`` triangles makes temporaries of ``n m`` pairs,
+    so the work goes in tiles of at most ``P = memory_budget_bytes // (BYTES_PER_PAIR *
+    element size)`` pairs: ``m = min(F, P)`` triangles and ``max(1, P // m)`` rays per tile
+    (all triangles at once when they fit, else chunks of triangles for one ray at a time).
+    Each tile is reduced to its nearest hit per ray; its local triangle index plus the
+    tile's offset replaces the running best only when strictly nearer, so ties in ``t`` go
+    to the lowest triangle index whatever the tiling.
 
-    Hints: ``globals()[variant]`` is the kernel; ``mesh.triangles()`` gives
-    (F, 3, 3) corners; ``Hits.miss(n, dtype, device)`` is the starting value; for the
-    lowest index among equal t, take the min over ``torch.where(t == t_min_row, index,
-    large)``.
+    Hints: ``globals()[variant]`` is the kernel; ``mesh.triangles()`` gives (F, 3, 3)
+    corners; ``Hits.miss(n, dtype, device)`` is the starting value; for the lowest index
+    among equal t, take the min over ``torch.where(t == t_min_row, index, large)``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_closest_hit_inputs(rays, mesh, variant, memory_budget_bytes)
@@ -447,25 +366,6 @@ def closest_hit(rays: Rays, mesh: Mesh, variant: str = "moller_trumbore",
 
 # ---------------------------------------------------------------------------------------
 # Task 7: operation counts, registers, occupancy
-
-
-def accounting_inputs(variant: str) -> tuple:
-    """Provided: the one lane the accounting measures, as arguments for ``variant``.
-
-    One ray (origin (0.25, 0.2, -1), direction (0.1, 0.05, 1)) against one triangle
-    ((0,0,0), (1,0,0), (0,1,0)), float32 on the CPU, each of shape (1, 3): a single lane
-    that hits, so no early exit is taken. ``woop_unit`` gets the precomputed transform
-    (the lecture counts the per-triangle precomputation as free).
-    """
-    if variant not in VARIANTS:
-        raise ValueError(f"variant: expected one of {', '.join(VARIANTS)}, got {variant!r}")
-    o = torch.tensor([[0.25, 0.2, -1.0]])
-    d = torch.tensor([[0.1, 0.05, 1.0]])
-    v0, v1, v2 = torch.tensor([[0.0, 0.0, 0.0]]), torch.tensor([[1.0, 0.0, 0.0]]), \
-        torch.tensor([[0.0, 1.0, 0.0]])
-    if variant == "woop_unit":
-        return o, d, woop_precompute(v0, v1, v2)
-    return o, d, v0, v1, v2
 
 
 def op_counts(variant: str) -> dict:

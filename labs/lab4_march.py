@@ -49,38 +49,19 @@ Tasks (points)
    3D DDA, and empty-space skipping over macro cells                             (3)
 5. ``sphere_trace``: signed-distance scenes, with over-relaxation                 (3)
 
-Accuracy (measured by ``bench/lab4_march.py`` and asserted by the grader)
----------------------------------------------------------------------------
-==========================  ====================================  ===========================
-kernel                      contract                              why
-==========================  ====================================  ===========================
-march_box, "riemann"        first order: error halves when the    each step counts its sample
-                            steps double                          as if nothing in front of it
-                                                                  within the step absorbed
-march_box, "exact"          exact (to rounding) for media that    per step ``(1 - e^{-s D})/s``
-                            are constant over each step (any      is the exact integral; a
-                            step count, even 1); second order     smooth medium still varies
-                            for smooth media                      inside a step (midpoint rule)
-voxel_walk                  optical depth = the exact sum over    one segment per voxel, its
-                            the voxels crossed, to float          ends computed from integer
-                            rounding; independent of any step     indices (never accumulated)
-                            count; a box at 1e5 keeps float32's   and relative to the box, not
-                            relative accuracy                     from absolute coordinates
-sphere_trace                hit when ``|f| <= epsilon t |d|``:    an absolute epsilon is
-                            the error of ``t`` relative to the    either unreachable far away
-                            distance, for scenes near and far     (float spacing) or too coarse
-                                                                  near the camera
-==========================  ====================================  ===========================
+Accuracy (asserted by the grader)
+---------------------------------
+* ``march_box``, "riemann": first order, the error halves when the steps double (each
+  step counts its sample as if nothing in front of it within the step absorbed).
+* ``march_box``, "exact": exact to rounding for media constant over each step (any step
+  count, even 1); second order for smooth media (midpoint rule).
+* ``voxel_walk``: the optical depth is the exact sum over the voxels crossed, to float
+  rounding, with no step count; a box at 1e5 keeps float32's relative accuracy.
+* ``sphere_trace``: a hit when ``|f| <= epsilon t |d|``, the error of ``t`` relative to
+  the distance, for scenes near and far.
 
-Measured (``bench/lab4_march.py``, float32, one run on a 2-core CPU): on the linear ramp
-the max relative error of the radiance at 8 / 32 / 128 steps is 8.2e-2 / 2.1e-2 / 5.1e-3
-for "riemann" (order 1.00) and 2.7e-3 / 1.7e-4 / 1.1e-5 for "exact" (order 2.0); on the
-homogeneous box "exact" stays at rounding, 2e-7 .. 2e-6, for 1 .. 128 steps. Early
-termination at ``T < 0.01`` in a dense box takes 15 of 128 samples and loses 0.9% of the
-light. The voxel walk through two blobs in a 24^3 grid steps through 32.6 voxels per
-ray; with macro cells of 4 voxels 9.9 steps and 2.4 density reads, the same optical depth.
-Sphere tracing (epsilon 1e-4, 256 steps) needs 27.5 sdf evaluations per ray, 23.4 with
-over-relaxation 1.5.
+Errors, samples per ray and speeds measured by ``bench/lab4_march.py``:
+``bench/results/cpu-2cores/lab4/lab4_march.md`` (GPUs: ``bench/results/<gpu>/lab4/``).
 """
 
 from __future__ import annotations
@@ -117,6 +98,7 @@ from course.given.lab4 import (  # noqa: F401  (given helpers)
     sdf_union,
     unit_light,
 )
+from course.given.lab4_fields import field_values
 
 # ---------------------------------------------------------------------------------------
 # Provided helpers (not tasks): input checks, field evaluation, SDF primitives. Each task
@@ -125,23 +107,12 @@ from course.given.lab4 import (  # noqa: F401  (given helpers)
 
 def evaluate(field, name: str, points: torch.Tensor, local: torch.Tensor,
              channels: bool = False) -> torch.Tensor:
-    """A field's values at N points: ``field(points)`` for a callable (world points),
-    ``sample_grid(field, local)`` for a grid (box coordinates in [0, 1]^3).
-    Returns (N,), or also (N, C) when ``channels``, in the points' dtype."""
+    """A field's values at N points: ``field(points)`` for a callable (world points, checked
+    by ``field_values``), ``sample_grid(field, local)`` for a grid (box coordinates in
+    [0, 1]^3). Returns (N,), or also (N, C) when ``channels``, in the points' dtype."""
     if isinstance(field, torch.Tensor):
         return sample_grid(field, local)
-    values = field(points)
-    if not isinstance(values, torch.Tensor) or values.shape[:1] != points.shape[:1] \
-            or values.ndim > (2 if channels else 1):
-        got = tuple(values.shape) if isinstance(values, torch.Tensor) else type(values).__name__
-        want = "(N,) or (N, C)" if channels else "(N,)"
-        raise ValueError(f"{name}: the callable must return a tensor of shape {want} for "
-                         f"points of shape {tuple(points.shape)}, got {got}")
-    if name == "density" and bool((values < 0).any()):
-        raise ValueError(f"density: the callable returned {int((values < 0).sum())} negative "
-                         f"values (an extinction coefficient is >= 0; the transmittance would "
-                         f"exceed 1)")
-    return values.to(points.dtype)
+    return field_values(field, name, points, channels)
 
 
 # ---------------------------------------------------------------------------------------
@@ -257,9 +228,10 @@ def segment_integral(sigma, length, integrator="exact"):
 
     sigma: extinction >= 0 (may be +inf); length: the step's world length >= 0 (finite);
     numbers or float tensors that broadcast (a negative value raises ValueError naming it:
-    the transmittance would exceed 1; the provided check does it). Returns ``(weight, transmittance)`` of the
-    broadcast shape: a source ``q`` constant over the step adds ``T_before * q * weight``
-    to the radiance, and then ``T`` is multiplied by ``transmittance = exp(-sigma length)``.
+    the transmittance would exceed 1; the provided check does it). Returns ``(weight,
+    transmittance)`` of the broadcast shape: a source ``q`` constant over the step adds
+    ``T_before * q * weight`` to the radiance, and then ``T`` is multiplied by
+    ``transmittance = exp(-sigma length)``.
 
     ``"exact"``: ``weight = int_0^D e^{-sigma x} dx = (1 - e^{-sigma D}) / sigma``, the
     energy-conserving integral (Hillaire 2015), exact for a medium constant over the step.
@@ -325,8 +297,7 @@ def shadow_transmittance(points, light_direction, box_min, box_max, density, ste
     ray misses the box); ``exp`` at the end.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    points, light, box_min, box_max = check_shadow_inputs(  # noqa: RUF059
-        points, light_direction, box_min,
+    points, light, box_min, box_max = check_shadow_inputs(points, light_direction, box_min,
                                                           box_max, density, steps)
     raise NotImplementedError("not implemented yet: shadow_transmittance (task 3)")
 
@@ -359,7 +330,7 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
     pass it to ``march_box`` as the emission; multiply by ``factor`` last ((C,) for colour).
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    origins, directions, box_min, box_max, light, factor = check_scatter_inputs(  # noqa: RUF059
+    origins, directions, box_min, box_max, light, factor = check_scatter_inputs(
         origins, directions, box_min, box_max, density, albedo, light_direction,
         light_irradiance, g, steps, shadow_steps, integrator, min_transmittance)
     raise NotImplementedError("not implemented yet: march_single_scatter (task 3)")
@@ -439,9 +410,9 @@ def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1
     origins, directions: (N, 3); sdf: callable ``points (N, 3) -> (N,)``, a signed distance
     (negative inside; a lower bound of the distance is enough); t_max: finite number > 0,
     rays that get beyond it miss (inf raises ValueError: the relative hit test accepts any
-    distance ``|f|`` once ``t >= |f| / epsilon``); max_steps: int >= 1, sdf evaluations per ray at most;
-    epsilon: number in (0, 1), the hit tolerance *relative to the distance*; relaxation:
-    omega in [1, 2).
+    distance ``|f|`` once ``t >= |f| / epsilon``); max_steps: int >= 1, sdf evaluations per
+    ray at most; epsilon: number in (0, 1), the hit tolerance *relative to the distance*;
+    relaxation: omega in [1, 2).
     Returns a dict: ``t`` (N,) (the hit's ray parameter, inf unless HIT), ``status`` (N,)
     int64 (``MISS``, ``HIT`` or ``UNSURE``) and ``steps`` (N,) int64 (sdf evaluations).
 

@@ -1,11 +1,15 @@
-"""Lab 1: ray/primitive intersection (reference solution).
+"""Lab 1: ray/primitive intersection.
 
-Every kernel here is batched: its tensor arguments broadcast against each other over
-their leading dimensions, so rays ``(N, 1, 3)`` against triangles ``(1, M, 3)`` give
-``(N, M)`` results, and rays ``(N, 3)`` against triangles ``(N, 3)`` give one test per
-ray. Each kernel computes in the dtype of its inputs (float16, bfloat16, float32 or
-float64: the speed/accuracy knob) on their device, with no Python loop over rays or
-triangles.
+Fill in every function that raises ``NotImplementedError`` (the tasks below); the helpers
+imported from ``course.core.raymath`` and ``course.given.lab1`` are given. Run the grader
+for this lab with ``pytest tests/test_lab1_intersect.py`` (add ``-k moller_trumbore`` for
+one task and ``-s`` to see the crack rates your variants print). The tests call your
+kernels on the CPU and, where present, on CUDA. Every kernel here is batched: its tensor
+arguments broadcast against each other over their leading dimensions, so rays ``(N, 1, 3)``
+against triangles ``(1, M, 3)`` give ``(N, M)`` results, and rays ``(N, 3)`` against
+triangles ``(N, 3)`` give one test per ray. Each kernel computes in the dtype of its inputs
+(float16, bfloat16, float32 or float64: the speed/accuracy knob) on their device, with no
+Python loop over rays or triangles.
 
 Conventions shared by all kernels
 ---------------------------------
@@ -20,8 +24,9 @@ Conventions shared by all kernels
 * Degenerate input is a case, not an error: zero-area triangles, rays parallel to a
   triangle, zero direction components and NaN/inf coordinates give misses, never NaN
   outputs. A ray nearly parallel to a triangle (grazing) never reports a hit that the exact
-  test clearly rules out, however far away it crosses the triangle's plane. Malformed input (wrong shape, integer dtype, mixed dtypes or devices) raises
-  ``ValueError``/``TypeError`` naming the argument.
+  test clearly rules out, however far away it crosses the triangle's plane. Malformed input
+  (wrong shape, integer dtype, mixed dtypes or devices) raises ``ValueError``/``TypeError``
+  naming the argument.
 
 Tasks (points)
 --------------
@@ -34,46 +39,11 @@ Tasks (points)
 7. ``op_counts``, ``register_estimate``, ``occupancy_for``   the lecture's
    operation, register and occupancy accounting, measured on your kernels       (2)
 
-What each variant survives (measured by the grader's stress tests and the bench)
-------------------------------------------------------------------------------
-float32 unless stated. A **crack** is a ray aimed at a vertex or at a point of a shared edge of
-a closed mesh whose first hit is not one of the triangles sharing it: it hit nothing, or it
-slipped through to a triangle behind (the far side of the mesh).
-
-==========================  =========  ===========  =========  ==========  =====================
-case                        simple     MT           woop       watertight  why
-==========================  =========  ===========  =========  ==========  =====================
-shared edges and vertices   cracks     cracks       cracks     none        only watertight
-of a closed mesh            (table     (table       (table     (to 1e6)    computes a shared
-                            below)     below)       below)                 edge bit for bit
-                                                                           alike for both sides
-ray nearly parallel to the  miss       miss         miss       miss        simple: far away the
-plane (cos 1e-3 .. 1e-7),                                                  sub-areas round to 0
-crossing it far away                                                       and pass >= 0; it
-                                                                           rejects p where
-                                                                           their rounding,
-                                                                           ~eps |v - p|^2 |n|,
-                                                                           reaches n . n
-triangle of side 2e-4       hit        hit          hit (u, v  hit         an absolute det
-                                                    to 5e-2)               epsilon (1e-6)
-                                                                           rejects it
-scene scaled by 1e-6, 1e6   hit        hit          hit        hit         range: simple, MT
-                                                                           ~1e-12..1e12
-                                                                           (|n|^2, |d||e1||e2|);
-                                                                           the others > 1e16
-ray parallel to / in plane  miss       miss         miss       miss        det == 0 exactly
-zero-area, repeated corner  miss       miss         miss       miss        watertight must test
-                                                                           e1 x e2 == 0 itself
-NaN/inf origin, direction   miss       miss         miss       miss        NaN fails compares
-exact inside/outside for    no         no           no         yes         double fallback:
-axis-parallel rays                                                         exact edge signs
-float16 / bfloat16          loose      loose        loose      loose       3 / 2 digits: only
-                                                                           well-shaped
-                                                                           triangles
-==========================  =========  ===========  =========  ==========  =====================
-
-Cracks, as ``python bench/lab1_intersect.py --device cpu --crack-table`` measures them (the
-grader's construction; ``pytest -s`` prints the same rates for your kernels):
+Each kernel's docstring states its contract (all four miss parallel, zero-area, NaN/inf and
+far-crossing grazing cases; half precision suits only well-shaped triangles). Only
+``watertight`` never **cracks**: a ray aimed at a vertex or a shared edge of a closed mesh
+hits a triangle sharing it, not nothing or one behind. The grader's construction, as
+``python bench/lab1_intersect.py --device cpu --crack-table`` measures it:
 
 Pass-throughs (fp32, icosphere level 2: 1122 rays aimed at its 162 vertices
 and at 1/2 and 1/4 of its edges, from outside / from the centre; the sphere moved by the offset):
@@ -101,19 +71,11 @@ offset    intersect_simple    moller_trumbore     woop_unit           watertight
 The mesh after rounding, offsets 0, 1e5, 1e6, 1e7: distinct vertices 162, 162, 162, 18;
 zero-area triangles 0, 0, 0, 90%.
 
-Near the origin the three tests that evaluate a shared edge from their own data crack at
-5-17% of the aimed rays. Far away Möller–Trumbore happens to survive (the translated
-vertices sit on a coarse float grid, which makes its differences exact: luck, not a
-guarantee); Woop's transform cancels ``|x| / |edge|`` digits, so it cracks more and misplaces
-the hits it finds; simple rounds its hit point ``p``. At 1e7 the float32 spacing (1) is the
-sphere's radius: its 162 vertices collapse onto 18 grid points and 90% of its triangles have
-zero area, so every test, watertight included, misses most aimed points (watertight's
-contract is about the triangles that remain).
-
-``ray_box`` is conservative (never misses a box the exact test hits, Ize 2013) and
-NaN-safe for rays starting on a slab plane; ``ray_sphere`` keeps full relative accuracy
-for small spheres far away (Ray Tracing Gems, chapter 7), where the textbook quadratic
-loses every digit of the discriminant.
+Near the origin the three tests that evaluate a shared edge from their own data crack; far
+away Möller–Trumbore survives by luck (the vertices sit on a coarse float grid) and Woop's
+transform loses ``|x| / |edge|`` digits. At 1e7 the float32 spacing is the sphere's radius:
+the mesh collapses, and even watertight misses most aimed points (its contract is about the
+triangles that remain).
 """
 
 from __future__ import annotations
@@ -131,16 +93,13 @@ from course.core.raymath import (
     masked_result,
 )
 from course.core.types import Hits, Mesh, Rays
-
-VARIANTS = ("intersect_simple", "moller_trumbore", "woop_unit", "watertight")
-"""The triangle kernels of this lab, by name (``closest_hit(..., variant=...)``)."""
-
-
-AREA_ERROR = 256.0
-
-# Provided helpers (not tasks): cross, dot, gamma, check_inputs, check_triangle_inputs and
-# masked_result come from course.core.raymath.
-
+from course.given.lab1 import (
+    BYTES_PER_PAIR,
+    VARIANTS,  # noqa: F401  (the kernels' names, for callers of closest_hit)
+    accounting_inputs,
+    affine_row,
+    check_closest_hit_inputs,
+)
 
 # ---------------------------------------------------------------------------------------
 # Task 1: the simple test
@@ -172,8 +131,13 @@ def intersect_simple(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf)
 
     Accuracy: not watertight (neighbouring triangles round ``p`` and their areas
     differently), and ``p`` carries the error of ``t`` into the inside test.
+
+    Hints: ``cross`` and ``dot`` are provided; build the hit mask from the
+    comparisons and finish with ``masked_result(hit, t, u, v)``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     t_min, t_max = check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max)
+    # BEGIN SOLUTION (task 1)
     e1, e2 = v1 - v0, v2 - v0
     n = cross(e1, e2)
     # Per triangle, for step 4: its size and the rounding scale of its areas.
@@ -186,15 +150,14 @@ def intersect_simple(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf)
     a0 = dot(cross(v1 - p, v2 - p), n)
     a1 = dot(cross(v2 - p, v0 - p), n)
     a2 = dot(cross(v0 - p, v1 - p), n)
-    # Far from the triangle the areas are differences of products of size |v - p|^2 that
-    # rounding cannot resolve (all three may round to exactly 0 and pass >= 0): accept only
-    # where that rounding error, ~eps |v - p|^2 |n|, stays below the full area n . n.
+    # Step 4: the areas' rounding error, ~eps |v - p|^2 |n|, must stay below n . n.
     reach = (v0 - p).abs().amax(-1) + size
     resolved = noise * reach * reach <= nn
     inv_area = 1 / nn
     hit = ((denom != 0) & resolved & (a0 >= 0) & (a1 >= 0) & (a2 >= 0) & (t >= t_min)
            & (t <= t_max))
     return masked_result(hit, t, a1 * inv_area, a2 * inv_area)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -216,8 +179,12 @@ def moller_trumbore(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
     with the triangle's area) and accepts garbage for huge ones.
 
     Accuracy: not watertight (each triangle computes the shared edge from its own ``v0``).
+
+    Hints: ``torch.finfo(dtype).eps``; ``x.abs().amax(-1)`` is a max-norm.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     t_min, t_max = check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max)
+    # BEGIN SOLUTION (task 2)
     e1, e2 = v1 - v0, v2 - v0
     p = cross(directions, e2)
     det = dot(e1, p)
@@ -233,6 +200,7 @@ def moller_trumbore(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
     inside = (u >= 0) & (v >= 0) & (u + v <= 1)
     hit = not_parallel & inside & (t >= t_min) & (t <= t_max)
     return masked_result(hit, t, u, v)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -252,8 +220,14 @@ def woop_precompute(v0, v1, v2):
     Computed in float64 and rounded once (it runs once per triangle, offline). A
     degenerate triangle (``e1 x e2 == 0``) gets the zero transform, which every ray misses
     (``t = -0 / 0`` is NaN).
+
+    Hints: do the arithmetic on ``v0.double()`` etc. and ``.to(v0.dtype)`` at the end;
+    ``rows @ v0[..., None]`` applies three rows at once; ``torch.where`` picks the zero
+    transform for degenerate triangles.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_inputs({"v0": (v0, (3,)), "v1": (v1, (3,)), "v2": (v2, (3,))})
+    # BEGIN SOLUTION (task 3)
     a, b, c = v0.double(), v1.double(), v2.double()
     e1, e2 = b - a, c - a
     n = cross(e1, e2)
@@ -265,11 +239,7 @@ def woop_precompute(v0, v1, v2):
     good = (area2 > 0) & torch.isfinite(transform).flatten(-2).all(-1, keepdim=True)
     transform = torch.where(good[..., None], transform, torch.zeros_like(transform))
     return transform.to(v0.dtype)
-
-
-def _affine_row(row, origins, directions):
-    """``(r . o + c, r . d)`` for one row ``[r | c]`` of a transform."""
-    return dot(row[..., :3], origins) + row[..., 3], dot(row[..., :3], directions)
+    # END SOLUTION
 
 
 def woop_unit(origins, directions, transform, t_min=0.0, t_max=math.inf):
@@ -285,20 +255,26 @@ def woop_unit(origins, directions, transform, t_min=0.0, t_max=math.inf):
 
     Accuracy: the transform's offsets are about ``|v0| / |edge|``; far from the origin
     ``r . o + c`` cancels those digits, so the test degrades like ``eps |x| / |edge|``.
+
+    Hints: ``transform[..., 2, :]`` is the z row; the given ``affine_row`` gives
+    ``(r . o + c, r . d)`` for one row.
     """
+    # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
     _, s = check_inputs(
         {"origins": (origins, (3,)), "directions": (directions, (3,)),
          "transform": (transform, (3, 4))}, {"t_min": t_min, "t_max": t_max})
-    oz, dz = _affine_row(transform[..., 2, :], origins, directions)
+    # BEGIN SOLUTION (task 3)
+    oz, dz = affine_row(transform[..., 2, :], origins, directions)
     t = -oz / dz
     hit = (t >= s["t_min"]) & (t <= s["t_max"])
-    ox, dx = _affine_row(transform[..., 0, :], origins, directions)
+    ox, dx = affine_row(transform[..., 0, :], origins, directions)
     u = ox + t * dx
     hit &= (u >= 0) & (u <= 1)
-    oy, dy = _affine_row(transform[..., 1, :], origins, directions)
+    oy, dy = affine_row(transform[..., 1, :], origins, directions)
     v = oy + t * dy
     hit &= (v >= 0) & (u + v <= 1)
     return masked_result(hit, t, u, v)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -329,8 +305,15 @@ def watertight(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
     with opposite signs, bit for bit, so a ray through a shared edge or vertex of a closed
     mesh hits at least one of the triangles sharing it. (Holds in eager PyTorch, where
     every product is rounded; a compiler that fuses ``a*b - c*d`` into an FMA breaks it.)
+
+    Hints: ``torch.argmax(d.abs(), dim=-1, keepdim=True)`` and
+    ``torch.take_along_dim(x, k, dim=-1)`` pick per-ray components with broadcasting;
+    for the fallback, index the lanes that need it with a boolean mask, compute in
+    ``float64``, cast back and write them into (a full-shape copy of) U, V, W.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     t_min, t_max = check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max)
+    # BEGIN SOLUTION (task 4)
     dtype = directions.dtype
     # 1. Per-ray axes and shear.
     kz = directions.abs().argmax(dim=-1, keepdim=True)
@@ -369,8 +352,7 @@ def watertight(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
     positive = (U > 0) | (V > 0) | (W > 0)
     det = U + V + W
     ray_ok = torch.isfinite(sz) & (sz != 0)
-    # A zero-area triangle (e1 x e2 == 0, a per-triangle property a tracer checks once) can
-    # get a sliver of rounding-noise area in the sheared frame, and a meaningless T / det.
+    # A zero-area triangle can get a sliver of noise area in the sheared frame.
     flat = (cross(v1 - v0, v2 - v0) == 0).all(-1)
     hit = ~(negative & positive) & (det != 0) & torch.isfinite(det) & ray_ok & ~flat
     # 5. Distance, compared without dividing: t_min <= T / det <= t_max.
@@ -381,6 +363,7 @@ def watertight(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
     hit &= (T_abs >= t_min * det_abs) & (T_abs <= t_max * det_abs)
     inv_det = 1 / torch.where(hit, det, torch.ones_like(det))
     return masked_result(hit, T * inv_det, V * inv_det, W * inv_det)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -394,8 +377,11 @@ def safe_reciprocal(directions):
     function is that nothing replaces zeros by a small epsilon (which would turn an
     axis-parallel ray into a slightly tilted one) or drops the sign of ``-0.0``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_inputs({"directions": (directions, (3,))})
+    # BEGIN SOLUTION (task 5)
     return torch.reciprocal(directions)
+    # END SOLUTION
 
 
 def ray_box(origins, inv_directions, box_min, box_max, t_min=0.0, t_max=math.inf):
@@ -419,16 +405,19 @@ def ray_box(origins, inv_directions, box_min, box_max, t_min=0.0, t_max=math.inf
     * A ray starting *on* a slab plane with ``d = 0`` gives ``0 * inf = NaN``: that slab
       says nothing, so the reduction over the slabs drops NaN (``fmax``/``fmin``).
     * Conservative: ``t_far`` is scaled by ``1 + 2 gamma(3)`` (Ize 2013, "Robust BVH Ray
-      Traversal"), so rounding never turns a hit into a miss (a wider margin of a few
-      ``gamma(3)`` is as good: ``t_far`` is graded to about 1e-5, and a ray that misses the
-      box by less than that may be reported either way); an empty box
-      (``min > max`` on any axis, a flat box ``min == max`` is not empty) and a ray with
-      NaN/inf components never hit.
+      Traversal"), so rounding never turns a hit into a miss (a few ``gamma(3)`` is as good:
+      ``t_far`` is graded to about 1e-5, and a ray missing the box by less may go either
+      way); an empty box (``min > max`` on any axis; a flat box ``min == max`` is not empty)
+      and a ray with NaN/inf components never hit.
+
+    Hints: ``torch.minimum``/``maximum`` keep NaN, ``torch.fmin``/``fmax`` drop it.
     """
+    # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
     _, s = check_inputs(
         {"origins": (origins, (3,)), "inv_directions": (inv_directions, (3,)),
          "box_min": (box_min, (3,)), "box_max": (box_max, (3,))},
         {"t_min": t_min, "t_max": t_max})
+    # BEGIN SOLUTION (task 5)
     t0 = (box_min - origins) * inv_directions
     t1 = (box_max - origins) * inv_directions
     lo = torch.minimum(t0, t1)
@@ -437,8 +426,8 @@ def ray_box(origins, inv_directions, box_min, box_max, t_min=0.0, t_max=math.inf
     t_far = torch.fmin(s["t_max"], torch.fmin(torch.fmin(hi[..., 0], hi[..., 1]), hi[..., 2]))
     valid = (torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1)
              & (box_min <= box_max).all(-1))
-    # t_near = inf: a zero direction component outside its slab (the slab lies at infinity).
     return t_near, t_far, (t_near <= t_far) & (t_near < math.inf) & valid
+    # END SOLUTION
 
 
 def ray_sphere(origins, directions, center, radius, t_min=0.0, t_max=math.inf):
@@ -457,10 +446,14 @@ def ray_sphere(origins, directions, center, radius, t_min=0.0, t_max=math.inf):
     The nearer root in ``[t_min, t_max]`` wins, else the farther (a ray starting inside the
     sphere, or spawned on it with ``t_min > 0``, finds the far side). NaN/inf origins or
     directions, a zero direction and a negative radius give ``inf``, never NaN.
+
+    Hints: ``torch.copysign(x, b)`` is ``sign(b) |x|`` with a sign for zero.
     """
+    # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
     _, s = check_inputs(
         {"origins": (origins, (3,)), "directions": (directions, (3,)), "center": (center, (3,))},
         {"radius": radius, "t_min": t_min, "t_max": t_max})
+    # BEGIN SOLUTION (task 5)
     r, t_min, t_max = s["radius"], s["t_min"], s["t_max"]
     f = origins - center
     a = dot(directions, directions)
@@ -476,35 +469,11 @@ def ray_sphere(origins, directions, center, radius, t_min=0.0, t_max=math.inf):
     near_ok = (near >= t_min) & (near <= t_max) & (r >= 0)
     far_ok = (far >= t_min) & (far <= t_max) & (r >= 0)
     return torch.where(near_ok, near, torch.where(far_ok, far, inf))
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
 # Task 6: closest hit by brute force
-
-BYTES_PER_PAIR = 64
-"""Element sizes a triangle kernel keeps alive per (ray, triangle) pair, at most: the
-chunk size is ``memory_budget_bytes // (BYTES_PER_PAIR * element size)`` pairs."""
-
-
-def check_closest_hit_inputs(rays, mesh, variant, memory_budget_bytes):
-    """Provided: validate :func:`closest_hit`'s arguments (ValueError/TypeError naming the
-    argument). Objects that crossed a process boundary are re-validated too."""
-    if not isinstance(rays, Rays):
-        raise TypeError(f"rays: expected course.core.types.Rays, got {type(rays).__name__}")
-    if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
-    rays.validate()
-    mesh.validate()
-    if mesh.dtype != rays.dtype:
-        raise TypeError(f"mesh: expected vertices of dtype {rays.dtype} like rays, "
-                        f"got {mesh.dtype}")
-    if mesh.device != rays.device:
-        raise ValueError(f"mesh: expected a mesh on {rays.device} like rays, got {mesh.device}")
-    if variant not in VARIANTS:
-        raise ValueError(f"variant: expected one of {', '.join(VARIANTS)}, got {variant!r}")
-    if not isinstance(memory_budget_bytes, int) or memory_budget_bytes <= 0:
-        raise ValueError(f"memory_budget_bytes: expected a positive int, "
-                         f"got {memory_budget_bytes!r}")
 
 
 def closest_hit(rays: Rays, mesh: Mesh, variant: str = "moller_trumbore",
@@ -515,16 +484,21 @@ def closest_hit(rays: Rays, mesh: Mesh, variant: str = "moller_trumbore",
     triangle kernel of this lab (see ``VARIANTS``). Returns ``Hits`` (N,): ``t`` (inf
     where missed), ``triangle`` (-1 where missed), ``u, v`` (0 where missed).
 
-    Memory: a kernel call on ``n`` rays x ``m`` triangles makes temporaries of ``n m``
-    pairs, so the work goes in tiles of at most
-    ``P = memory_budget_bytes // (BYTES_PER_PAIR * element size)`` pairs:
-    ``m = min(F, P)`` triangles and ``max(1, P // m)`` rays per tile (all triangles at
-    once when they fit, else chunks of triangles for one ray at a time). Each tile is
-    reduced to its nearest hit per ray; its local triangle index plus the tile's offset
-    replaces the running best only when strictly nearer, so ties in ``t`` go to the
-    lowest triangle index whatever the tiling.
+    Memory: a kernel call on ``n`` rays x ``m`` triangles makes temporaries of ``n m`` pairs,
+    so the work goes in tiles of at most ``P = memory_budget_bytes // (BYTES_PER_PAIR *
+    element size)`` pairs: ``m = min(F, P)`` triangles and ``max(1, P // m)`` rays per tile
+    (all triangles at once when they fit, else chunks of triangles for one ray at a time).
+    Each tile is reduced to its nearest hit per ray; its local triangle index plus the
+    tile's offset replaces the running best only when strictly nearer, so ties in ``t`` go
+    to the lowest triangle index whatever the tiling.
+
+    Hints: ``globals()[variant]`` is the kernel; ``mesh.triangles()`` gives (F, 3, 3)
+    corners; ``Hits.miss(n, dtype, device)`` is the starting value; for the lowest index
+    among equal t, take the min over ``torch.where(t == t_min_row, index, large)``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_closest_hit_inputs(rays, mesh, variant, memory_budget_bytes)
+    # BEGIN SOLUTION (task 6)
     n, m = len(rays), mesh.num_faces
     pairs = max(1, memory_budget_bytes // (BYTES_PER_PAIR * rays.origins.element_size()))
     tri_chunk = min(m, pairs)
@@ -560,29 +534,11 @@ def closest_hit(rays: Rays, mesh: Mesh, variant: str = "moller_trumbore",
             u_best[rs] = torch.where(take, u.gather(1, first)[:, 0], u_best[rs])
             v_best[rs] = torch.where(take, v.gather(1, first)[:, 0], v_best[rs])
     return Hits(t=t_best, triangle=tri_best, u=u_best, v=v_best)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
 # Task 7: operation counts, registers, occupancy
-
-
-def accounting_inputs(variant: str) -> tuple:
-    """Provided: the one lane the accounting measures, as arguments for ``variant``.
-
-    One ray (origin (0.25, 0.2, -1), direction (0.1, 0.05, 1)) against one triangle
-    ((0,0,0), (1,0,0), (0,1,0)), float32 on the CPU, each of shape (1, 3): a single lane
-    that hits, so no early exit is taken. ``woop_unit`` gets the precomputed transform
-    (the lecture counts the per-triangle precomputation as free).
-    """
-    if variant not in VARIANTS:
-        raise ValueError(f"variant: expected one of {', '.join(VARIANTS)}, got {variant!r}")
-    o = torch.tensor([[0.25, 0.2, -1.0]])
-    d = torch.tensor([[0.1, 0.05, 1.0]])
-    v0, v1, v2 = torch.tensor([[0.0, 0.0, 0.0]]), torch.tensor([[1.0, 0.0, 0.0]]), \
-        torch.tensor([[0.0, 1.0, 0.0]])
-    if variant == "woop_unit":
-        return o, d, woop_precompute(v0, v1, v2)
-    return o, d, v0, v1, v2
 
 
 def op_counts(variant: str) -> dict:
@@ -594,9 +550,12 @@ def op_counts(variant: str) -> dict:
     the lecture's lower bound ``4 * (N_mul + |N_add - N_mul|)`` with ``N_mul`` read as the
     number of mul/add pairs a mad can fuse, ``min(mul, add)``. A name not in ``VARIANTS``
     raises ValueError naming ``variant`` (``accounting_inputs`` does: call it first).
-    """
-    from course.measure.accounting import count_ops
 
+    Hints: ``from course.measure.accounting import count_ops``;
+    ``count_ops(fn, *args, lanes=1)`` returns an ``OpCounts`` with the fields named above.
+    """
+    # BEGIN SOLUTION (task 7)
+    from course.measure.accounting import count_ops
     args = accounting_inputs(variant)  # validates the name first
     counts = count_ops(globals()[variant], *args, lanes=1)
     result = {key: getattr(counts, key) for key in
@@ -604,6 +563,7 @@ def op_counts(variant: str) -> dict:
     pairs = min(counts.mul, counts.add)
     result["cycles_bound"] = 4 * (pairs + abs(counts.add - counts.mul))
     return result
+    # END SOLUTION
 
 
 def register_estimate(variant: str) -> int:
@@ -612,20 +572,28 @@ def register_estimate(variant: str) -> int:
     ``course.measure.accounting.live_values`` on ``accounting_inputs(variant)`` (one lane); its
     ``peak_last_use`` (every value dies at its last use, as a register allocator frees it),
     rounded up. A name not in ``VARIANTS`` raises ValueError naming ``variant``.
-    """
-    from course.measure.accounting import live_values
 
+    Hints: ``from course.measure.accounting import live_values``; ``math.ceil``.
+    """
+    # BEGIN SOLUTION (task 7)
+    from course.measure.accounting import live_values
     args = accounting_inputs(variant)  # validates the name first
     live = live_values(globals()[variant], *args, lanes=1)
     return math.ceil(live.peak_last_use)
+    # END SOLUTION
 
 
 def occupancy_for(variant: str, arch: str = "g80", block_size: int = 64):
     """Occupancy of a kernel running ``variant`` with ``register_estimate(variant)``
     registers per thread on ``arch`` (a name in ``course.measure.occupancy.PRESETS``) with
-    ``block_size`` threads per block: a ``course.measure.occupancy.Occupancy``."""
-    from course.measure.occupancy import PRESETS, occupancy
+    ``block_size`` threads per block: a ``course.measure.occupancy.Occupancy``.
 
+    Hints: ``from course.measure.occupancy import PRESETS, occupancy``; unknown arch
+    names raise ValueError naming ``arch``.
+    """
+    # BEGIN SOLUTION (task 7)
+    from course.measure.occupancy import PRESETS, occupancy
     if arch not in PRESETS:
         raise ValueError(f"arch: expected one of {', '.join(PRESETS)}, got {arch!r}")
     return occupancy(PRESETS[arch], register_estimate(variant), block_size)
+    # END SOLUTION

@@ -1,4 +1,10 @@
-"""Lab 4: ray marching (reference solution).
+"""Lab 4: ray marching.
+
+Fill in every function that raises ``NotImplementedError`` (the tasks below); the helpers
+marked "provided" are given. Run the grader for this lab with
+``pytest tests/test_lab4_march.py`` (add ``-k march_box`` for one function). The tests call
+your kernels on the CPU and, where present, on CUDA: write device- and dtype-agnostic
+tensor code, and compare your numbers with the analytic references in the docstrings.
 
 A participating medium inside an axis-aligned box, seen along rays: how much light does a
 ray collect, and how much of the background still shines through? Every kernel here works
@@ -43,47 +49,28 @@ Tasks (points)
    3D DDA, and empty-space skipping over macro cells                             (3)
 5. ``sphere_trace``: signed-distance scenes, with over-relaxation                 (3)
 
-Accuracy (measured by ``bench/lab4_march.py`` and asserted by the grader)
----------------------------------------------------------------------------
-==========================  ====================================  ===========================
-kernel                      contract                              why
-==========================  ====================================  ===========================
-march_box, "riemann"        first order: error halves when the    each step counts its sample
-                            steps double                          as if nothing in front of it
-                                                                  within the step absorbed
-march_box, "exact"          exact (to rounding) for media that    per step ``(1 - e^{-s D})/s``
-                            are constant over each step (any      is the exact integral; a
-                            step count, even 1); second order     smooth medium still varies
-                            for smooth media                      inside a step (midpoint rule)
-voxel_walk                  optical depth = the exact sum over    one segment per voxel, its
-                            the voxels crossed, to float          ends computed from integer
-                            rounding; independent of any step     indices (never accumulated)
-                            count; a box at 1e5 keeps float32's   and relative to the box, not
-                            relative accuracy                     from absolute coordinates
-sphere_trace                hit when ``|f| <= epsilon t |d|``:    an absolute epsilon is
-                            the error of ``t`` relative to the    either unreachable far away
-                            distance, for scenes near and far     (float spacing) or too coarse
-                                                                  near the camera
-==========================  ====================================  ===========================
+Accuracy (asserted by the grader)
+---------------------------------
+* ``march_box``, "riemann": first order, the error halves when the steps double (each
+  step counts its sample as if nothing in front of it within the step absorbed).
+* ``march_box``, "exact": exact to rounding for media constant over each step (any step
+  count, even 1); second order for smooth media (midpoint rule).
+* ``voxel_walk``: the optical depth is the exact sum over the voxels crossed, to float
+  rounding, with no step count; a box at 1e5 keeps float32's relative accuracy.
+* ``sphere_trace``: a hit when ``|f| <= epsilon t |d|``, the error of ``t`` relative to
+  the distance, for scenes near and far.
 
-Measured (``bench/lab4_march.py``, float32, one run on a 2-core CPU): on the linear ramp
-the max relative error of the radiance at 8 / 32 / 128 steps is 8.2e-2 / 2.1e-2 / 5.1e-3
-for "riemann" (order 1.00) and 2.7e-3 / 1.7e-4 / 1.1e-5 for "exact" (order 2.0); on the
-homogeneous box "exact" stays at rounding, 2e-7 .. 2e-6, for 1 .. 128 steps. Early
-termination at ``T < 0.01`` in a dense box takes 15 of 128 samples and loses 0.9% of the
-light. The voxel walk through two blobs in a 24^3 grid steps through 32.6 voxels per
-ray; with macro cells of 4 voxels 9.9 steps and 2.4 density reads, the same optical depth.
-Sphere tracing (epsilon 1e-4, 256 steps) needs 27.5 sdf evaluations per ray, 23.4 with
-over-relaxation 1.5.
+Errors, samples per ray and speeds measured by ``bench/lab4_march.py``:
+``bench/results/cpu-2cores/lab4/lab4_march.md`` (GPUs: ``bench/results/<gpu>/lab4/``).
 """
 
 from __future__ import annotations
 
-import math
+import math  # noqa: F401  (math.pi, math.inf: you will need them)
 
 import torch
 
-from course.core.raymath import dot
+from course.core.raymath import check_inputs, dot  # noqa: F401  (dot: given, for the tasks)
 from course.given.lab4 import (  # noqa: F401  (given helpers)
     HIT,
     INTEGRATORS,
@@ -111,6 +98,7 @@ from course.given.lab4 import (  # noqa: F401  (given helpers)
     sdf_union,
     unit_light,
 )
+from course.given.lab4_fields import field_values
 
 # ---------------------------------------------------------------------------------------
 # Provided helpers (not tasks): input checks, field evaluation, SDF primitives. Each task
@@ -119,23 +107,12 @@ from course.given.lab4 import (  # noqa: F401  (given helpers)
 
 def evaluate(field, name: str, points: torch.Tensor, local: torch.Tensor,
              channels: bool = False) -> torch.Tensor:
-    """A field's values at N points: ``field(points)`` for a callable (world points),
-    ``sample_grid(field, local)`` for a grid (box coordinates in [0, 1]^3).
-    Returns (N,), or also (N, C) when ``channels``, in the points' dtype."""
+    """A field's values at N points: ``field(points)`` for a callable (world points, checked
+    by ``field_values``), ``sample_grid(field, local)`` for a grid (box coordinates in
+    [0, 1]^3). Returns (N,), or also (N, C) when ``channels``, in the points' dtype."""
     if isinstance(field, torch.Tensor):
         return sample_grid(field, local)
-    values = field(points)
-    if not isinstance(values, torch.Tensor) or values.shape[:1] != points.shape[:1] \
-            or values.ndim > (2 if channels else 1):
-        got = tuple(values.shape) if isinstance(values, torch.Tensor) else type(values).__name__
-        want = "(N,) or (N, C)" if channels else "(N,)"
-        raise ValueError(f"{name}: the callable must return a tensor of shape {want} for "
-                         f"points of shape {tuple(points.shape)}, got {got}")
-    if name == "density" and bool((values < 0).any()):
-        raise ValueError(f"density: the callable returned {int((values < 0).sum())} negative "
-                         f"values (an extinction coefficient is >= 0; the transmittance would "
-                         f"exceed 1)")
-    return values.to(points.dtype)
+    return field_values(field, name, points, channels)
 
 
 # ---------------------------------------------------------------------------------------
@@ -157,9 +134,15 @@ def ray_box_interval(origins, directions, box_min, box_max):
     drops NaN (``torch.fmax``/``fmin``). Rays with NaN/inf components or ``d = 0`` miss.
     The differences ``box - o`` come first, so a box far from the world origin keeps the
     relative accuracy of its size.
+
+    Hints: ``torch.reciprocal`` keeps the sign of zero; reduce over the three slabs
+    with ``torch.fmax``/``torch.fmin`` (they ignore NaN) and clip ``t_near`` at 0; build the
+    validity mask with ``torch.isfinite``; return ``torch.where(hit, t, 0)``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max = check_ray_box_inputs(origins, directions,
                                                                  box_min, box_max)
+    # BEGIN SOLUTION (task 1)
     inv = torch.reciprocal(directions)
     t0 = (box_min - origins) * inv
     t1 = (box_max - origins) * inv
@@ -171,6 +154,7 @@ def ray_box_interval(origins, directions, box_min, box_max):
              & (directions != 0).any(-1))
     hit = valid & (t_near <= t_far) & torch.isfinite(t_far)
     return torch.where(hit, t_near, zero), torch.where(hit, t_far, zero), hit
+    # END SOLUTION
 
 
 def sample_grid(grid, uvw):
@@ -189,8 +173,16 @@ def sample_grid(grid, uvw):
     Watch the axis order: x indexes the grid's *first* axis. ``grid_sample`` would want
     the grid as ``(1, C, Z, Y, X)`` (depth first) and coordinates ``2 uvw - 1`` in (x, y, z)
     order.
+
+    Hints: ``u = uvw * (X, Y, Z) - 0.5`` is the continuous index (voxel centres at the
+    integers); clamp it to ``[0, n - 1]``; ``i0 = floor(u)`` clamped to ``[0, n - 2]`` (mind
+    ``n = 1``), ``f = u - i0``, ``i1 = min(i0 + 1, n - 1)``. Gather the 8 corners from
+    ``grid.reshape(-1, ...)`` at ``(ix * Y + iy) * Z + iz`` and weight each by ``f`` or
+    ``1 - f`` per axis. Compare with ``grid_sample`` yourself as the docstring describes.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_grid_inputs(grid, uvw)
+    # BEGIN SOLUTION (task 1)
     sizes = torch.tensor(grid.shape[:3], device=grid.device)
     finite = torch.isfinite(uvw).all(-1)
     # Continuous index: voxel centres at the integers 0 .. n-1.
@@ -209,6 +201,7 @@ def sample_grid(grid, uvw):
     if grid.ndim == 4:
         return torch.where(finite[..., None], (weight[..., None] * values).sum(-2), 0)
     return torch.where(finite, (weight * values).sum(-1), 0)
+    # END SOLUTION
 
 
 def march_box(origins, directions, box_min, box_max, density, emission=None, steps=64, *,
@@ -242,10 +235,19 @@ def march_box(origins, directions, box_min, box_max, density, emission=None, ste
     a callable with negative values raises ValueError naming ``density`` (the provided check
     and ``evaluate`` do it). Rays that miss (and NaN/inf rays) sample nothing:
     radiance 0, transmittance 1, samples 0. ``steps = 0`` is an empty march.
+
+    Hints: ``ray_box_interval`` gives the span. Keep ``rel = o - box_min`` (0 for
+    missed rays) and sample at ``offset = rel + t d``: ``local = offset / size`` for grids,
+    ``box_min + offset`` for callables; the provided ``evaluate(field, name, points, local,
+    channels)`` does the rest (it calls your ``sample_grid``). Mask inactive rays with
+    ``torch.where`` *before* ``segment_integral``. The radiance is (N,) or (N, C) as the
+    emission's values are; with no emission (or no step) return zeros of that shape.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max = check_march_inputs(
         origins, directions, box_min, box_max, density, emission, steps, integrator,
         min_transmittance)
+    # BEGIN SOLUTION (task 1)
     n = origins.shape[0]
     like = {"dtype": origins.dtype, "device": origins.device}
     t_near, t_far, hit = ray_box_interval(origins, directions, box_min, box_max)
@@ -288,6 +290,7 @@ def march_box(origins, directions, box_min, box_max, density, emission=None, ste
             emission, "emission", box_min + centre * size, centre, channels=True).shape[1:]
         radiance = torch.zeros(n, *channels, **like)
     return {"radiance": radiance, "transmittance": transmittance, "samples": samples}
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -299,9 +302,10 @@ def segment_integral(sigma, length, integrator="exact"):
 
     sigma: extinction >= 0 (may be +inf); length: the step's world length >= 0 (finite);
     numbers or float tensors that broadcast (a negative value raises ValueError naming it:
-    the transmittance would exceed 1; the provided check does it). Returns ``(weight, transmittance)`` of the
-    broadcast shape: a source ``q`` constant over the step adds ``T_before * q * weight``
-    to the radiance, and then ``T`` is multiplied by ``transmittance = exp(-sigma length)``.
+    the transmittance would exceed 1; the provided check does it). Returns ``(weight,
+    transmittance)`` of the broadcast shape: a source ``q`` constant over the step adds
+    ``T_before * q * weight`` to the radiance, and then ``T`` is multiplied by
+    ``transmittance = exp(-sigma length)``.
 
     ``"exact"``: ``weight = int_0^D e^{-sigma x} dx = (1 - e^{-sigma D}) / sigma``, the
     energy-conserving integral (Hillaire 2015), exact for a medium constant over the step.
@@ -313,14 +317,20 @@ def segment_integral(sigma, length, integrator="exact"):
     ``"riemann"``: ``weight = D``, the naive sum, which ignores the absorption inside the
     step: it overestimates by ``sigma D / (1 - e^{-sigma D})`` (first order in the step)
     and emits more than a black body could (``q = c sigma`` gives ``L > c``).
+
+    Hints: ``x = sigma * length`` (but 0 where ``length == 0``); ``torch.expm1``;
+    ``torch.where(x > 0, ..., 1)`` keeps the 0 / 0 of the unused branch out of the result.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     sigma, length = check_segment_inputs(sigma, length, integrator)
+    # BEGIN SOLUTION (task 2)
     x = torch.where(length == 0, 0, sigma * length)  # inf * 0 is no step, not NaN
     transmittance = torch.exp(-x)
     if integrator == "riemann":
         return length.expand_as(x), transmittance
     ratio = torch.where(x > 0, -torch.expm1(-x) / x, 1)
     return length * ratio, transmittance
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -344,12 +354,18 @@ def henyey_greenstein(cos_theta, g):
     non-negative terms, ``(1 - g)^2 + 2 g (1 - cos)`` for g >= 0 and
     ``(1 + g)^2 - 2 g (1 + cos)`` for g < 0, so it does not cancel at the peak when
     |g| -> 1 (there ``1 + g^2 - 2 g`` loses every digit).
+
+    Hints: compute both denominators and pick with ``torch.where(g >= 0, ...)``;
+    ``(1 - g) * (1 + g)`` for the numerator; ``base * base.sqrt()`` is ``base^(3/2)``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     g = check_phase_inputs(cos_theta, g)
+    # BEGIN SOLUTION (task 3)
     cos_theta = cos_theta.clamp(-1, 1)
     base = torch.where(g >= 0, (1 - g) ** 2 + 2 * g * (1 - cos_theta),
                        (1 + g) ** 2 - 2 * g * (1 + cos_theta))
     return (1 - g) * (1 + g) / (4 * math.pi * base * base.sqrt())
+    # END SOLUTION
 
 
 def shadow_transmittance(points, light_direction, box_min, box_max, density, steps=16):
@@ -361,9 +377,15 @@ def shadow_transmittance(points, light_direction, box_min, box_max, density, ste
     steps over the part of the ray ``p + t l`` (unit ``l``, ``t >= 0``) inside the box:
     exact for a homogeneous medium with one step, second order for a smooth one. Points
     whose light ray misses the box, NaN points and ``steps = 0`` give 1 (unshadowed).
+
+    Hints: ``ray_box_interval`` from the points along the (already unit, from the
+    provided check) light direction; loop over the steps summing ``sigma * dt`` (0 where the
+    ray misses the box); ``exp`` at the end.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     points, light, box_min, box_max = check_shadow_inputs(points, light_direction, box_min,
                                                           box_max, density, steps)
+    # BEGIN SOLUTION (task 3)
     light = light.expand_as(points)
     t_near, t_far, hit = ray_box_interval(points, light, box_min, box_max)
     rel = torch.where(hit[:, None], points - box_min, 0)
@@ -376,6 +398,7 @@ def shadow_transmittance(points, light_direction, box_min, box_max, density, ste
                          torch.where(size > 0, offset / size, 0.5))
         depth = depth + torch.where(hit, sigma, 0) * dt
     return torch.exp(-depth)
+    # END SOLUTION
 
 
 def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
@@ -399,10 +422,17 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
     exact integrator a step adds ``T albedo p E T_light (1 - e^{-sigma ds})`` (Hillaire's
     formula). The phase depends only on the ray for a directional light. Cost per ray:
     ``steps * (shadow_steps + 2)`` density evaluations.
+
+    Hints: the phase is one value per ray, from ``dot(unit d, light)`` (``dot`` is
+    imported from ``course.core.raymath``; ``torch.nan_to_num`` it for degenerate rays). Write
+    ``source(points)`` inside this function (a closure over the phase, the light, ...) and
+    pass it to ``march_box`` as the emission; multiply by ``factor`` last ((C,) for colour).
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max, light, factor = check_scatter_inputs(
         origins, directions, box_min, box_max, density, albedo, light_direction,
         light_irradiance, g, steps, shadow_steps, integrator, min_transmittance)
+    # BEGIN SOLUTION (task 3)
     unit = directions / directions.norm(dim=-1, keepdim=True)
     phase = henyey_greenstein(torch.nan_to_num(dot(unit, light)), g)  # (N,)
     size = torch.where(box_max > box_min, box_max - box_min, 1)
@@ -417,6 +447,7 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
 
     return march_box(origins, directions, box_min, box_max, density, source, steps,
                      integrator=integrator, min_transmittance=min_transmittance)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -431,8 +462,13 @@ def build_occupancy(density, macro_cell=1, emission=None):
     Returns (ceil(X/m), ceil(Y/m), ceil(Z/m)) bool: True where some voxel of the macro
     cell has ``density > 0`` or non-zero emission (a max over m^3 blocks; the last block
     of an axis may be partial).
+
+    Hints: ``torch.nn.functional.max_pool3d`` on a float copy of the mask, shaped
+    (1, 1, X, Y, Z), with ``kernel_size = stride = macro_cell`` and ``ceil_mode=True``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_occupancy_inputs(density, macro_cell, emission)
+    # BEGIN SOLUTION (task 4)
     busy = density > 0
     if emission is not None:
         nonzero = emission != 0
@@ -440,6 +476,7 @@ def build_occupancy(density, macro_cell=1, emission=None):
     pooled = torch.nn.functional.max_pool3d(busy[None, None].float(), macro_cell,
                                             stride=macro_cell, ceil_mode=True)
     return pooled[0, 0] > 0
+    # END SOLUTION
 
 
 def voxel_walk(origins, directions, box_min, box_max, density, emission=None, occupancy=None,
@@ -470,9 +507,18 @@ def voxel_walk(origins, directions, box_min, box_max, density, emission=None, oc
     voxel on the plane's positive side, ``floor((o - box_min) / voxel)``; where the ray
     crosses several planes at one ``t`` (an edge or a corner), it steps one axis at a time
     with zero-length segments in between.
+
+    Hints: per-ray state ``cell`` (N, 3) int64, ``t`` (N,) and ``active`` (N,) bool;
+    ``step = torch.sign(d).long()``. In each iteration: the block ``[block_lo, block_hi]``
+    (the voxel, or its macro cell when ``occupancy`` says it is empty), the plane ahead on
+    each axis (``block_hi + 1`` or ``block_lo``), its ``t`` (inf where ``step == 0``), the
+    exit ``t`` and axis (``amin``/``argmin``), the segment, then the move. Only
+    ``torch.where`` updates: no Python loop over rays.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max = check_voxel_inputs(
         origins, directions, box_min, box_max, density, emission, occupancy, macro_cell)
+    # BEGIN SOLUTION (task 4)
     n = origins.shape[0]
     like = {"dtype": origins.dtype, "device": origins.device}
     sizes = torch.tensor(density.shape, device=origins.device)
@@ -544,6 +590,7 @@ def voxel_walk(origins, directions, box_min, box_max, density, emission=None, oc
         t = torch.where(active, t_exit, t)
     return {"optical_depth": depth, "transmittance": torch.exp(-depth), "radiance": radiance,
             "steps": steps_taken, "samples": samples}
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -557,9 +604,9 @@ def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1
     origins, directions: (N, 3); sdf: callable ``points (N, 3) -> (N,)``, a signed distance
     (negative inside; a lower bound of the distance is enough); t_max: finite number > 0,
     rays that get beyond it miss (inf raises ValueError: the relative hit test accepts any
-    distance ``|f|`` once ``t >= |f| / epsilon``); max_steps: int >= 1, sdf evaluations per ray at most;
-    epsilon: number in (0, 1), the hit tolerance *relative to the distance*; relaxation:
-    omega in [1, 2).
+    distance ``|f|`` once ``t >= |f| / epsilon``); max_steps: int >= 1, sdf evaluations per
+    ray at most; epsilon: number in (0, 1), the hit tolerance *relative to the distance*;
+    relaxation: omega in [1, 2).
     Returns a dict: ``t`` (N,) (the hit's ray parameter, inf unless HIT), ``status`` (N,)
     int64 (``MISS``, ``HIT`` or ``UNSURE``) and ``steps`` (N,) int64 (sdf evaluations).
 
@@ -573,9 +620,16 @@ def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1
     and continues with omega = 1. A ray past ``t_max`` misses; one still undecided after
     ``max_steps`` evaluations (grazing a surface, where the steps shrink) is ``UNSURE``,
     never a hit. NaN/inf rays, zero directions and NaN distances are misses.
+
+    Hints: per-ray state ``t``, ``status``, ``steps``, ``omega``, and for the
+    over-relaxation check the previous ``|f|`` and the previous step's world length. Update
+    everything with ``torch.where`` on an ``active`` mask; stop the loop early when no ray
+    is active.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions = check_trace_inputs(origins, directions, sdf, t_max, max_steps,
                                              epsilon, relaxation)
+    # BEGIN SOLUTION (task 5)
     n = origins.shape[0]
     like = {"dtype": origins.dtype, "device": origins.device}
     length = directions.norm(dim=-1)
@@ -616,3 +670,4 @@ def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1
     status = torch.where(active, torch.where(t > t_max, MISS, UNSURE), status)
     t = torch.where(status == HIT, t, math.inf)
     return {"t": t, "status": status, "steps": steps}
+    # END SOLUTION

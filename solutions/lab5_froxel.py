@@ -1,4 +1,10 @@
-"""Lab 5: the Frostbite froxel pipeline (reference solution).
+"""Lab 5: the Frostbite froxel pipeline.
+
+Fill in every function that raises ``NotImplementedError`` (the tasks below); the helpers
+imported from ``course.given.lab5`` are given. Run the grader for this lab with
+``pytest tests/test_lab5_froxel.py`` (add ``-k slice_depths`` for one function). The tests call
+your kernels on the CPU and, where present, on CUDA: write device- and dtype-agnostic
+tensor code (loops over slices, lights or frames are fine; no loops over froxels or pixels).
 
 Hillaire, "Physically Based and Unified Volumetric Rendering in Frostbite" (SIGGRAPH 2015),
 stage by stage: a clip-space volume of froxels (frustum voxels) aligned with screen tiles,
@@ -51,36 +57,30 @@ Accuracy (asserted by the grader, measured by ``bench/lab5_froxel.py``)
   tile spans 8 pixels (the phase function, the path length per view depth and the edges
   of fog volumes and shadows are interpolated across it), a slice 43% of its depth at 16
   slices over 0.1 .. 30 m. Against the brute-force reference the grader allows 4-5% of the
-  largest radiance (homogeneous fog, height fog; measured 1-2%), 10% at the silhouette of
+  largest radiance (homogeneous fog, height fog), 10% at the silhouette of
   a textured fog volume and 20% at the edges of a sun shadow in fog (a tile of blur).
 * Volumetric shadows cover what the scene requires: the media's bounds within the view
   (``volume_bounds``) at a resolution chosen from the media's size
-  (``auto_volume_resolution``), and every light's path, point lights' too. Against a
-  float64 quadrature of single scattering in a homogeneous box of fog (sigma_s 0.5,
-  sigma_a 0.1, g 0.5; 64 x 36 pixels, the defaults), mean radiance: a point light inside
-  the fog -0.5% (+125% without its attenuation), the sun through the fog +0.8% (+186%
-  without volumetric shadows). The froxel grid itself is chosen from the scene
-  (``scene_grid``): a fog volume seen from outside spans few fixed 8-pixel tiles and few
-  of 64 slices over 0.1 .. 100 m, and its silhouette, interpolated between tile centres,
-  loses or gains light (a 2 m box 5 m away at 64 x 36 pixels: +20% on that fixed grid;
-  a 4 m box 8 tiles across: -6%). By default the tiles shrink until every fog volume spans
-  12 of them and the slices cover the media's depths only: the 2 m box gets tile 1 and
-  -0.3%, the 4 m box tile 4 and +0.5%; scenes with unbounded fog keep 8 px and 0.1 .. 100 m.
-* Measured on the bench's street scene (float32, 2-core CPU, one torch thread): mean error
-  0.9% at 8 px x 32 slices, 0.6% at 4 px x 128; without volumetric shadows 8.3%; point
-  lights inside the fog put a 1/d^2 peak inside single froxels, so more slices can raise
-  the worst pixel (8 px x 128: mean 2.7%). Temporal integration with the sun only: 0.81%
-  after 1 frame, 0.75% after 32 (static camera); with the camera sliding 4 cm per frame the
-  repeated trilinear reprojection blurs the history: 2.9% after 32 frames.
+  (``auto_volume_resolution``), and every light's path, point lights' too. The froxel grid
+  itself is chosen from the scene (``scene_grid``): a fog volume seen from outside would
+  span few fixed 8-pixel tiles and few of 64 slices over 0.1 .. 100 m, and its silhouette,
+  interpolated between tile centres, would lose or gain light; by default the tiles shrink
+  until every fog volume spans 12 of them and the slices cover the media's depths only
+  (scenes with unbounded fog keep 8 px and 0.1 .. 100 m).
+
+Errors against the brute-force reference and a float64 quadrature (per tile size, slice
+count, volume resolution, with and without volumetric shadows or temporal integration),
+measured by ``bench/lab5_froxel.py``: ``bench/results/cpu-2cores/lab5/`` (GPUs:
+``bench/results/<gpu>/lab5/``).
 """
 
 from __future__ import annotations
 
-import math
+import math  # noqa: F401  (math.log, math.pi: you will need them)
 
 import torch
 
-from course.core.raymath import check_inputs
+from course.core.raymath import check_inputs  # noqa: F401  (given: validates (..., 3) inputs)
 from course.given.lab5 import (  # noqa: F401  (given helpers)
     BLEND,
     INTEGRATIONS,
@@ -135,12 +135,14 @@ def slice_depths(near, far, slices, dtype=torch.float32, device="cpu"):
     ``z_slices = far`` exactly. Computed in float64, rounded once. ``0 < near < far <
     inf`` and ``slices >= 1`` (``check_depths``), else ValueError naming the argument.
     """
+    # BEGIN SOLUTION (task 1)
     check_depths(near, far, slices)
     check_dtype(dtype)
     k = torch.arange(slices + 1, dtype=torch.float64, device=device)
     z = near * torch.exp(k / slices * math.log(far / near))
     z[0], z[-1] = near, far
     return z.to(dtype)
+    # END SOLUTION
 
 
 def depth_to_slice(depth, near, far, slices):
@@ -149,11 +151,14 @@ def depth_to_slice(depth, near, far, slices):
     float32/float64); ``-inf`` at depth 0, below 0 in front of ``near``, above ``slices``
     beyond ``far``, ``+inf`` at ``+inf``. ``log(depth) - log(near)`` keeps a tiny ``near``
     (1e-6) as accurate as any other."""
+    # BEGIN SOLUTION (task 1)
     check_depths(near, far, slices)
     check_volume(depth, "depth", depth.shape if isinstance(depth, torch.Tensor) else ())
     return (torch.log(depth) - math.log(near)) * (slices / math.log(far / near))
+    # END SOLUTION
 
 
+# BEGIN SOLUTION
 def _camera(grid, dtype, device):
     eye, right, up, fwd, (hw, hh) = grid.axes(torch.float64, device)
     return (eye.to(dtype), right.to(dtype), up.to(dtype), fwd.to(dtype), hw, hh)
@@ -165,12 +170,14 @@ def _view_dirs(grid, x, y, dtype, device):
     ndc_x = 2 * x * grid.tile / grid.camera.width - 1
     ndc_y = 1 - 2 * y * grid.tile / grid.camera.height
     return fwd + (ndc_x * hw)[..., None] * right + (ndc_y * hh)[..., None] * up
+# END SOLUTION
 
 
 def froxel_to_world(grid, coords):
     """World points of froxel coordinates ``coords`` (..., 3) ``(x, y, z)``: the point at
     the view depth of slice coordinate ``z`` on the ray through pixel
     ``(column, row) = (x, y) * tile``. Returns (..., 3) of ``coords``' dtype."""
+    # BEGIN SOLUTION (task 1)
     check_grid(grid)
     check_inputs({"coords": (coords, (3,))})
     check_dtype(coords.dtype, "coords")
@@ -179,11 +186,13 @@ def froxel_to_world(grid, coords):
                                                     / grid.slices))
     dirs = _view_dirs(grid, coords[..., 0], coords[..., 1], coords.dtype, coords.device)
     return eye + depth[..., None] * dirs
+    # END SOLUTION
 
 
 def world_to_froxel(grid, points):
     """Froxel coordinates (..., 3) of world ``points`` (..., 3): the inverse of
     :func:`froxel_to_world`. Points at or behind the eye's plane (view depth <= 0) get NaN."""
+    # BEGIN SOLUTION (task 1)
     check_grid(grid)
     check_inputs({"points": (points, (3,))})
     check_dtype(points.dtype, "points")
@@ -197,13 +206,14 @@ def world_to_froxel(grid, points):
     y = (1 - ndc_y) * grid.camera.height / (2 * grid.tile)
     z = depth_to_slice(safe, grid.near, grid.far, grid.slices)
     return torch.stack([x, y, z], -1)
-
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
 # Task 2: the V-buffer
 
 
+# BEGIN SOLUTION
 def _fog_volume_weight(vol, points):
     """Density multiplier (N,) of a local fog volume at world points (N, 3)."""
     dtype, device = points.dtype, points.device
@@ -221,6 +231,7 @@ def _fog_volume_weight(vol, points):
         coords = (local + 1) / 2 * torch.tensor(tex.shape, dtype=dtype, device=device)
         weight = weight * sample_texture(tex, coords)
     return weight
+# END SOLUTION
 
 
 def media_at(scene, points):
@@ -232,6 +243,7 @@ def media_at(scene, points):
     RGB), 0 where nothing scatters. Height fog: density ``exp(-falloff (y - base))``;
     fog volumes: 1 inside the shape times the density texture, 0 outside.
     """
+    # BEGIN SOLUTION (task 2)
     check_scene(scene)
     check_inputs({"points": (points, (3,))})
     check_dtype(points.dtype, "points")
@@ -258,6 +270,7 @@ def media_at(scene, points):
     weight = scattering.mean(-1)
     g = torch.where(weight > 0, g_weighted / torch.where(weight > 0, weight, 1.0), 0.0)
     return {"scattering": scattering, "extinction": extinction, "emissive": emissive, "g": g}
+    # END SOLUTION
 
 
 def voxelize(scene, grid, jitter=0.5, dtype=torch.float32, device="cpu"):
@@ -268,6 +281,7 @@ def voxelize(scene, grid, jitter=0.5, dtype=torch.float32, device="cpu"):
     Returns a dict of ``scattering`` (S, ny, nx, 3), ``extinction`` (S, ny, nx),
     ``emissive`` (S, ny, nx, 3), ``g`` (S, ny, nx) of ``dtype`` on ``device``.
     """
+    # BEGIN SOLUTION (task 2)
     check_scene(scene)
     check_grid(grid)
     jitter = check_jitter(jitter)
@@ -275,11 +289,11 @@ def voxelize(scene, grid, jitter=0.5, dtype=torch.float32, device="cpu"):
     coords = froxel_sample_coords(grid, jitter, dtype, device)
     media = media_at(scene, froxel_to_world(grid, coords).reshape(-1, 3))
     return {k: v.reshape(*grid.shape, *v.shape[1:]) for k, v in media.items()}
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
 # Task 3: lighting
-
 
 
 def henyey_greenstein(cos_theta, g):
@@ -291,10 +305,12 @@ def henyey_greenstein(cos_theta, g):
     ``cos_theta`` outside [-1, 1] (a dot product of unit vectors a rounding step past
     +-1) is clamped to [-1, 1]: the value is always finite and positive.
     """
+    # BEGIN SOLUTION (task 3)
     g = check_phase_inputs(cos_theta, g)
     cos_theta = cos_theta.clamp(-1, 1)
     denom = (1 + g * g - 2 * g * cos_theta).clamp(min=0)
     return (1 - g * g) / (4 * math.pi * denom * denom.sqrt())
+    # END SOLUTION
 
 
 def schlick_phase(cos_theta, g):
@@ -303,11 +319,12 @@ def schlick_phase(cos_theta, g):
     at g = 0.9986: without the clamp a forward peak becomes a delta and then negative).
     Normalised over the sphere for every ``g`` in (-1, 1); ``cos_theta`` is clamped to
     [-1, 1] like :func:`henyey_greenstein`'s."""
+    # BEGIN SOLUTION (task 3)
     g = check_phase_inputs(cos_theta, g)
     cos_theta = cos_theta.clamp(-1, 1)
     k = (1.55 * g - 0.55 * g ** 3).clamp(-SCHLICK_K_MAX, SCHLICK_K_MAX)
     return (1 - k * k) / (4 * math.pi * (1 - k * cos_theta).square())
-
+    # END SOLUTION
 
 
 def cull_lights(grid, lights, device="cpu"):
@@ -322,6 +339,7 @@ def cull_lights(grid, lights, device="cpu"):
     in float32: about 1e-7 of the light's distance from the eye), may go either way: the
     light gives nothing at its range. Directional lights are listed everywhere.
     """
+    # BEGIN SOLUTION (task 3)
     check_grid(grid)
     lights = check_lights(lights)
     eye, right, up, fwd, hw, hh = _camera(grid, torch.float64, device)
@@ -347,6 +365,7 @@ def cull_lights(grid, lights, device="cpu"):
         depth = bool(pz >= grid.near - r) and bool(pz <= grid.far + r)
         result[n] = rows[:, None] & cols[None, :] & depth
     return result
+    # END SOLUTION
 
 
 def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float32,
@@ -358,6 +377,7 @@ def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float
     The frame's plane lies beyond every occluder and the sphere toward the sun, so every
     shadow caster is in front of it. Texel ``(i, j)`` traces one ray from its centre.
     """
+    # BEGIN SOLUTION (task 3)
     check_scene(scene)
     if not isinstance(light, DirectionalLight):
         raise TypeError(f"light: expected a DirectionalLight, got {type(light).__name__}")
@@ -383,12 +403,14 @@ def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float
                       scene.occluders)
     return LightVolume("ortho", tuple(origin.tolist()), axes, float(radius), 0.0, math.inf,
                        depth.reshape(resolution, resolution))
+    # END SOLUTION
 
 
 def shadow_lookup(shadow_map, points):
     """Sun visibility (N,) in {0, 1} of world ``points`` (N, 3): 0 where the nearest texel's
     occluder lies in front of the point by more than a bias of two texels (which keeps the
     occluders' own lit faces from shadowing themselves); 1 outside the map."""
+    # BEGIN SOLUTION (task 3)
     if not isinstance(shadow_map, LightVolume) or shadow_map.data.ndim != 2:
         raise TypeError("shadow_map: expected a LightVolume with (R, R) data from "
                         "build_shadow_map")
@@ -403,8 +425,10 @@ def shadow_lookup(shadow_map, points):
     occluder = shadow_map.data.to(points.dtype)[ii, jj]
     bias = 4 * shadow_map.extent / res
     return (~inside | (depth <= occluder + bias)).to(points.dtype)
+    # END SOLUTION
 
 
+# BEGIN SOLUTION
 def _light_radiance(light, points, dtype):
     """Irradiance (N, 3) arriving at ``points`` from ``light`` and unit directions (N, 3)
     toward it (no shadows)."""
@@ -425,6 +449,7 @@ def _light_radiance(light, points, dtype):
         s = ((cos_axis - lo) / (hi - lo)).clamp(0, 1)
         falloff = falloff * s * s * (3 - 2 * s)
     return falloff[:, None] * color, to_light
+# END SOLUTION
 
 
 def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_shadows=True,
@@ -456,6 +481,7 @@ def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_sh
     (froxel-light pairs evaluated), ``volume_bounds`` (the extinction volume's ``(lo, hi)``,
     None when none was built) and ``volume_resolution`` (0 when none was built).
     """
+    # BEGIN SOLUTION (task 3)
     check_scene(scene)
     check_grid(grid)
     jitter = check_jitter(jitter)
@@ -532,6 +558,7 @@ def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_sh
     flat = source.reshape(-1, 3)
     flat[idx] += sigma_s.reshape(-1, 3)[idx] * radiance
     return source, report
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -542,6 +569,7 @@ def extinction_volume(scene, lo, hi, resolution, dtype=torch.float32, device="cp
     """Extinction (R, R, R) at the voxel centres of the box ``lo .. hi`` (3 numbers each),
     R = ``resolution``, x the first axis: :func:`media_at` sampled on a world-aligned grid
     around the camera, the input of every light's transmittance volume."""
+    # BEGIN SOLUTION (task 4)
     check_scene(scene)
     check_dtype(dtype)
     if isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 2:
@@ -554,8 +582,10 @@ def extinction_volume(scene, lo, hi, resolution, dtype=torch.float32, device="cp
     grid = torch.stack(torch.meshgrid(t, t, t, indexing="ij"), -1)
     points = lo_t + grid.reshape(-1, 3) * (hi_t - lo_t)
     return media_at(scene, points)["extinction"].reshape(resolution, resolution, resolution)
+    # END SOLUTION
 
 
+# BEGIN SOLUTION
 def _sample_extinction(extinction, lo, hi, points):
     """Trilinear extinction at world points (..., 3); 0 outside the box."""
     lo_t = torch.tensor(lo, dtype=points.dtype, device=points.device)
@@ -564,6 +594,7 @@ def _sample_extinction(extinction, lo, hi, points):
     inside = ((local >= 0) & (local <= 1)).all(-1)
     sizes = torch.tensor(extinction.shape, dtype=points.dtype, device=points.device)
     return torch.where(inside, sample_texture(extinction, local * sizes), 0)
+# END SOLUTION
 
 
 def light_transmittance(extinction, lo, hi, points, position, steps=LIGHT_STEPS):
@@ -578,6 +609,7 @@ def light_transmittance(extinction, lo, hi, points, position, steps=LIGHT_STEPS)
     A segment lying in the plane of one of the box's faces (a tie between inside and
     outside) may count as either.
     """
+    # BEGIN SOLUTION (task 4)
     check_volume(extinction, "extinction", extinction.shape if isinstance(
         extinction, torch.Tensor) and extinction.ndim == 3 else (1, 1, 1))
     check_inputs({"points": (points, (3,))})
@@ -598,6 +630,7 @@ def light_transmittance(extinction, lo, hi, points, position, steps=LIGHT_STEPS)
         q = points + (t0 + (m + 0.5) / steps * span)[:, None] * rel
         depth = depth + _sample_extinction(extinction, lo, hi, q)
     return torch.exp(-depth * (span * rel.norm(dim=-1) / steps))
+    # END SOLUTION
 
 
 def transmittance_volume(extinction, lo, hi, light, resolution=32, steps=None):
@@ -612,6 +645,7 @@ def transmittance_volume(extinction, lo, hi, light, resolution=32, steps=None):
     ``data[i, j, k] = exp(-sum_{m<k} sigma_t(mid_m) step)``. A point light gets no volume
     (TypeError naming ``light``): :func:`light_transmittance` marches its paths.
     """
+    # BEGIN SOLUTION (task 4)
     check_volume(extinction, "extinction", extinction.shape if isinstance(
         extinction, torch.Tensor) and extinction.ndim == 3 else (1, 1, 1))
     if not isinstance(light, (DirectionalLight, SpotLight)):
@@ -651,12 +685,14 @@ def transmittance_volume(extinction, lo, hi, light, resolution=32, steps=None):
                        torch.cumsum(sigma * step, -1)], -1)
     return LightVolume(kind, tuple(origin.tolist()), axes, float(extent), float(near),
                        float(far), torch.exp(-depth))
+    # END SOLUTION
 
 
 def sample_light_volume(volume, points):
     """Transmittance (N,) toward the light at world ``points`` (N, 3): trilinear in the
     volume's texels and depth samples (clamped at its ends); 1 outside the map laterally
     and behind a spot light."""
+    # BEGIN SOLUTION (task 4)
     if not isinstance(volume, LightVolume) or volume.data.ndim != 3:
         raise TypeError("volume: expected a LightVolume with (R, R, K) data from "
                         "transmittance_volume")
@@ -669,6 +705,7 @@ def sample_light_volume(volume, points):
                          -1)
     t = sample_texture(volume.data.to(points.dtype), torch.where(inside[:, None], coords, 0))
     return torch.where(inside, t, 1.0)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -679,13 +716,15 @@ def reproject(history, prev_grid, grid):
     """The previous frame's volume seen from the current froxels: ``(values, valid)``.
 
     history: (S, ny, nx) or (S, ny, nx, C) on ``prev_grid``; ``grid``: the current frame's
-    grid (same shape, another camera). Each current froxel's centre (jitter 0.5: the tile's centre, the slice's middle depth) is moved to
-    world space and into ``prev_grid``'s froxel coordinates; ``values`` are the history
-    sampled trilinearly there (shape of ``history``; its voxels sit at the froxel centres
-    ``froxel_sample_coords(prev_grid, 0.5)``, clamped at the border), ``valid`` (S, ny, nx) bool is True
-    only where that point lies inside the previous froxel volume (``0 <= x <= nx``, ``0 <= y
-    <= ny``, ``0 <= z <= slices``): history from outside the previous frustum is dropped.
+    grid (same shape, another camera). Each current froxel's centre (jitter 0.5: the tile's
+    centre, the slice's middle depth) is moved to world space and into ``prev_grid``'s
+    froxel coordinates; ``values`` are the history sampled trilinearly there (shape of
+    ``history``; its voxels sit at the froxel centres ``froxel_sample_coords(prev_grid,
+    0.5)``, clamped at the border), ``valid`` (S, ny, nx) bool is True only where that
+    point lies inside the previous froxel volume (``0 <= x <= nx``, ``0 <= y <= ny``,
+    ``0 <= z <= slices``): history from outside the previous frustum is dropped.
     """
+    # BEGIN SOLUTION (task 5)
     check_grid(grid)
     if not isinstance(prev_grid, FroxelGrid):
         raise TypeError(f"prev_grid: expected a FroxelGrid, got {type(prev_grid).__name__}")
@@ -707,12 +746,14 @@ def reproject(history, prev_grid, grid):
                                  dtype=prev.dtype, device=prev.device)
     zyx = torch.where(valid[..., None], lookup.flip(-1), 0)
     return sample_texture(history, zyx), valid
+    # END SOLUTION
 
 
 def temporal_blend(current, history, valid, alpha=BLEND):
     """Exponential moving average: ``history + alpha (current - history)`` where ``valid``
     (broadcast over a trailing colour axis), ``current`` elsewhere. current, history:
     (S, ny, nx) or (S, ny, nx, C) of one dtype; valid: (S, ny, nx) bool; alpha in (0, 1]."""
+    # BEGIN SOLUTION (task 5)
     check_volume(current, "current", current.shape if isinstance(current, torch.Tensor)
                  else ())
     check_volume(history, "history", current.shape, current.dtype, current.device)
@@ -723,6 +764,7 @@ def temporal_blend(current, history, valid, alpha=BLEND):
         raise ValueError(f"alpha: expected a number in (0, 1], got {alpha!r}")
     mask = valid if current.ndim == 3 else valid[..., None]
     return torch.where(mask, history + alpha * (current - history), current)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -742,6 +784,7 @@ def slice_integral(source, extinction, length):
     factor is ``inf``: ``(0, 1)``, as ``sigma_t = inf`` over ``D = 0``.
     Returns tensors of the broadcast shape (integral with C).
     """
+    # BEGIN SOLUTION (task 6)
     for name, x in (("source", source), ("extinction", extinction), ("length", length)):
         if not isinstance(x, torch.Tensor) or not x.is_floating_point():
             raise TypeError(f"{name}: expected a float tensor, got "
@@ -761,6 +804,7 @@ def slice_integral(source, extinction, length):
     if source.ndim == factor.ndim + 1:
         factor = factor[..., None]
     return source * factor, torch.exp(-tau)
+    # END SOLUTION
 
 
 def integrate_froxels(source, extinction, grid, method="energy"):
@@ -777,6 +821,7 @@ def integrate_froxels(source, extinction, grid, method="energy"):
     extinction raises ValueError naming ``extinction`` with either method (it would give a
     transmittance above 1).
     """
+    # BEGIN SOLUTION (task 6)
     check_grid(grid)
     check_choice(method, "method", INTEGRATIONS)
     check_volume(source, "source", (*grid.shape, 3))
@@ -802,6 +847,7 @@ def integrate_froxels(source, extinction, grid, method="energy"):
         piece = source * lengths[..., None]
     radiance = torch.cumsum(in_front[..., None] * piece, 0)
     return radiance, torch.exp(-behind)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -822,6 +868,7 @@ def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out
     (H, W, 3) of the depths' dtype (else TypeError) and device (``check_images``); NaN/inf
     colours pass through as ``opaque * T + L`` would make them.
     """
+    # BEGIN SOLUTION (task 7)
     check_grid(grid)
     dtype = check_images(grid.camera, depth_image, opaque_image)
     device = depth_image.device
@@ -845,6 +892,7 @@ def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out
         return result
     out.copy_(result)
     return out
+    # END SOLUTION
 
 
 def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slices=SLICES,
@@ -856,8 +904,9 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slice
     voxelize -> light_froxels -> (temporal: reproject + temporal_blend of the lit source
     and the extinction) -> integrate_froxels -> apply_froxels, on a
     ``scene_grid(scene, camera, tile, slices, near, far)`` (None: the tile size and depth
-    range the scene's media need, see there), in the dtype and on the device of the images. With ``temporal`` the froxels sample at ``frame_jitter(frame)`` (material and
-    lighting alike), and ``history`` (the previous report's ``"history"``, or None) is
+    range the scene's media need, see there), in the dtype and on the device of the images.
+    With ``temporal`` the froxels sample at ``frame_jitter(frame)`` (material and lighting
+    alike), and ``history`` (the previous report's ``"history"``, or None) is
     reprojected and blended with weight ``BLEND`` for the new frame.
 
     The images as :func:`apply_froxels` takes them (checked even without media); bad
@@ -870,6 +919,7 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slice
     ``history_valid`` (fraction of froxels that kept history) and ``history`` (a dict
     ``{"grid", "source", "extinction", "frame"}`` for the next frame).
     """
+    # BEGIN SOLUTION (task 8)
     check_scene(scene)
     grid = scene_grid(scene, camera, tile, slices, near, far)
     check_images(camera, depth_image, opaque_image)
@@ -906,3 +956,4 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slice
                              "frame": frame}
     inscatter, transmittance = integrate_froxels(source, extinction, grid, integration)
     return apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image), report
+    # END SOLUTION

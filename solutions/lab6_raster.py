@@ -1,4 +1,4 @@
-"""Lab 6: a compute rasterizer (reference solution).
+"""Lab 6: a compute rasterizer.
 
 The lecture's last part: instead of shooting a ray per pixel, project every triangle to the
 screen, loop over the pixels of its bounding box, test them with edge functions and resolve
@@ -20,23 +20,22 @@ call your functions on the CPU and, where present, on CUDA: write device- and dt
 tensor code, with no Python loop over triangles or pixels (a loop over chunks of triangles
 sized by a memory budget is fine).
 
-What the grader asserts (and the reference measures)
-----------------------------------------------------
+What the grader asserts
+-----------------------
 * Edges through pixel centres (grids, fans) and a jittered mesh covering the screen: every
   pixel covered exactly once; each triangle's pixels equal an exact integer top-left rule.
 * Suzanne (968 triangles) rasterized vs float64 ray tracing through the same pixel centres:
-  at least 99.5% of the ids equal (the reference: 0 pixels differ at 96x64 and 256x256, also
-  1e5 from the origin and with 24-bit depth), every other pixel within rounding of an edge.
-* Perspective-correct barycentrics within 2e-4 (float32) of the exact ray/plane point;
-  screen-space weights are off by ~0.1 on a receding plane.
+  at least 99.5% of the ids equal, every other pixel within rounding of an edge.
+* Perspective-correct barycentrics within 2e-4 (float32) of the exact ray/plane point.
 * The same visibility buffer bit for bit whatever the triangle order and the chunking, and
   on the CPU and CUDA.
-* Two planes 1 cm apart, near plane 0.01, the far one first (it wins exact ties;
-  ``bench/lab6_raster.py``): with 24-bit window depth it shows through on 1% of the pixels
-  at 30 units and 99.6% at 100; with 32-bit float view depth on none up to 300.
+
+Disagreement with ray tracing, z-fighting of 24-bit window depth against 32-bit view depth
+and throughput, measured by ``bench/lab6_raster.py``: ``bench/results/cpu-2cores/lab6/``
+(GPUs: ``bench/results/<gpu>/lab6/``).
 
 Conventions (those of ``course.core.camera``)
-----------------------------------------
+---------------------------------------------
 * Clip space is OpenGL's: a point is visible when ``-w <= x, y, z <= w``; the near plane is
   ``z = -w``, which for ``course.core.camera.perspective`` is the plane ``w = near`` (eye-space
   ``z = -near``); ``w`` is the distance in front of the eye along the view axis.
@@ -77,13 +76,13 @@ any closest-hit tracer (Lab 1's ``closest_hit``, a BVH of Lab 2) fits.
 
 from __future__ import annotations
 
-import math
+import math  # noqa: F401  (math.inf, math.isfinite, ...)
 
 import torch
 
-from course.core.camera import Camera, primary_rays
+from course.core.camera import Camera, primary_rays  # noqa: F401  (task 5)
 from course.core.types import Mesh
-from course.given.lab6 import (  # given code, shared by skeleton and reference
+from course.given.lab6 import (  # noqa: F401  (given code, for the tasks to use)
     BYTES_PER_FRAGMENT,
     EMPTY,
     ID_BITS,
@@ -115,14 +114,20 @@ def to_clip_space(vertices, mvp):
     (one transform per vertex, so the cost is negligible). Written out element-wise
     (``m[r, 0] * x + m[r, 1] * y + m[r, 2] * z + m[r, 3]``) rather than as a matmul, whose
     summation order differs between BLAS libraries: the CPU and CUDA agree bit for bit.
+
+    Hints: ``m[r, 0] * x`` with a 0-d tensor ``m[r, 0]`` broadcasts over all vertices;
+    ``torch.stack(rows, dim=-1)`` assembles the four coordinates.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_tensor(vertices, "vertices", (None, 3))
     check_tensor(mvp, "mvp", (4, 4), like=vertices)
+    # BEGIN SOLUTION (task 1)
     v = vertices.to(torch.float64)
     m = mvp.to(torch.float64)
     x, y, z = v.unbind(-1)
     rows = [m[r, 0] * x + m[r, 1] * y + m[r, 2] * z + m[r, 3] for r in range(4)]
     return torch.stack(rows, dim=-1).to(vertices.dtype)
+    # END SOLUTION
 
 
 def clip_triangles(clip):
@@ -157,8 +162,19 @@ def clip_triangles(clip):
     The near plane must be clipped: a corner behind the eye has ``w < 0`` and its
     perspective divide flips it to the other side of the screen. The other five planes
     need no clipping: the bounding box is clamped to the screen (a "guard band").
+
+    Hints: work on all F triangles at once and select at the end. ``d.gather(1, order)``
+    and ``clip.gather(1, order[..., None].expand(F, 3, 4))`` rotate the corners;
+    ``torch.nn.functional.one_hot(order, 3)`` gives each rotated corner's weight row; the
+    provided ``crossing`` makes the cut points. Build two candidate triangles per input,
+    ``(F, 2, 3, 4)``, and a validity mask ``(F, 2)`` (the first is valid when kept, the second
+    only for the quad case; neither when one of them has a corner at ``w <= 0``); indexing
+    with the mask keeps the input order. ``torch.where`` picks per case; NaNs computed for
+    the cases that do not use them are harmless.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_tensor(clip, "clip", (None, 3, 4))
+    # BEGIN SOLUTION (task 1)
     F = clip.shape[0]
     x, y, z, w = clip.unbind(-1)  # (F, 3) each
     finite = torch.isfinite(clip).all(-1).all(-1)
@@ -194,6 +210,7 @@ def clip_triangles(clip):
     valid &= ~behind.any(1, keepdim=True)
     source = torch.arange(F, device=clip.device)[:, None].expand(F, 2)
     return tris[valid], source[valid], weights[valid]
+    # END SOLUTION
 
 
 def to_screen(clipped, width: int, height: int):
@@ -204,13 +221,18 @@ def to_screen(clipped, width: int, height: int):
     dtype: ``x = (x_c / w + 1) * width / 2``, ``y = (1 - y_c / w) * height / 2`` (row 0 at
     the top, pixel centres at ``+0.5``), ``z_ndc = z_c / w`` in [-1, 1] from the near to the
     far plane, and ``1/w``, which varies linearly across the screen (task 4 needs it).
+
+    Hints: ``clipped.unbind(-1)`` gives x, y, z, w of shape (K, 3).
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_tensor(clipped, "clipped", (None, 3, 4))
     check_size(width, height)
+    # BEGIN SOLUTION (task 1)
     x, y, z, w = clipped.unbind(-1)
     sx = (x / w + 1) * (width / 2)
     sy = (1 - y / w) * (height / 2)
     return torch.stack([sx, sy, z / w, 1 / w], dim=-1)
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -234,7 +256,12 @@ def edge_functions(tri, px, py):
     smaller endpoint (by x, then y) and negated when that is b, so the two triangles sharing
     an edge compute exactly opposite values (``E_ba = -E_ab`` bit for bit): a pixel centre
     can never be inside both or neither because of rounding, only by the fill rule.
+
+    Hints: ``tri[..., [1, 2, 0], :2]`` and ``tri[..., [2, 0, 1], :2]`` are the start and end
+    corners of the three edges; ``px[..., None]`` broadcasts a point against them;
+    ``torch.where`` picks the reference endpoint and the sign.
     """
+    # BEGIN SOLUTION (task 2)
     a = tri[..., [1, 2, 0], :2]
     b = tri[..., [2, 0, 1], :2]
     ax, ay, bx, by = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
@@ -244,6 +271,7 @@ def edge_functions(tri, px, py):
     sx, sy = torch.where(swap, ax, bx), torch.where(swap, ay, by)
     value = (px - rx) * (sy - ry) - (py - ry) * (sx - rx)
     return torch.where(swap, -value, value)
+    # END SOLUTION
 
 
 def bounding_boxes(screen, width: int, height: int):
@@ -259,9 +287,15 @@ def bounding_boxes(screen, width: int, height: int):
     Clamping is what makes huge triangles cheap: a triangle 1e6 pixels across costs at
     most ``width * height`` fragments. (Clamp the floats before converting: ``1e30`` or
     NaN do not fit an int64.)
+
+    Hints: ``xy.amin(1)``, ``xy.amax(1)``; clamp the floats to ``[-1, size + 1]``, then
+    ``torch.ceil``/``torch.floor`` and ``.to(torch.int64)``; ``torch.minimum``/``maximum``
+    with a ``tensor([width, height])`` clamp both axes at once.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_screen(screen)
     check_size(width, height)
+    # BEGIN SOLUTION (task 2)
     xy = screen[..., :2]
     finite = torch.isfinite(xy).all(-1).all(-1)
     xy = torch.where(finite[:, None, None], xy, torch.zeros_like(xy))
@@ -275,6 +309,7 @@ def bounding_boxes(screen, width: int, height: int):
     end = torch.maximum(torch.minimum(end, size), begin)
     boxes = torch.cat([begin, end], dim=1)
     return torch.where(finite[:, None], boxes, torch.zeros_like(boxes))
+    # END SOLUTION
 
 
 def _top_left(xy, positive):
@@ -282,13 +317,17 @@ def _top_left(xy, positive):
     top or left edge of its triangle. For positive area (counter-clockwise on screen, y
     down): left edges run downwards (``b_y > a_y``), top edges are horizontal and run to
     the left (``b_x < a_x``). For negative area the edges run the other way round.
+
+    Write this helper for ``coverage``.
     """
+    # BEGIN SOLUTION (task 2)
     a = xy[:, [1, 2, 0]]
     b = xy[:, [2, 0, 1]]
     ax, ay, bx, by = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
     forward = (by > ay) | ((by == ay) & (bx < ax))
     backward = (ay > by) | ((ay == by) & (ax < bx))
     return torch.where(positive[:, None], forward, backward)
+    # END SOLUTION
 
 
 def coverage(screen, width: int, height: int, cull_backfaces: bool = False):
@@ -311,9 +350,15 @@ def coverage(screen, width: int, height: int, cull_backfaces: bool = False):
        on a top or left edge (see ``_top_left``). A centre exactly on an edge shared by two
        triangles is thus covered by exactly one of them (with ``e >= 0`` by both: double
        blending and double counting; with ``e > 0`` by neither: cracks).
+
+    Hints: ``edge_functions(xy, v0[:, 0], v0[:, 1])[:, 0]`` is the area of every triangle;
+    ``torch.repeat_interleave(torch.arange(K), counts)`` and ``torch.cumsum`` enumerate the
+    boxes; ``rank % box_width`` and ``rank // box_width`` give column and row.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_screen(screen)
     check_size(width, height)
+    # BEGIN SOLUTION (task 2)
     xy = screen[..., :2]
     K = xy.shape[0]
     v0 = xy[:, 0]
@@ -339,6 +384,7 @@ def coverage(screen, width: int, height: int, cull_backfaces: bool = False):
     inside = ((e > 0) | ((e == 0) & top_left)).all(-1)
     bary = e / (e[:, 0] + e[:, 1] + e[:, 2])[:, None]
     return triangle[inside], (rows * width + cols)[inside], bary[inside]
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -362,11 +408,16 @@ def pack_depth_id(depth, triangle, depth_bits: int = 32):
     * 24 bits: a unorm24 depth buffer: ``round(clamp(depth, 0, 1) * (2**24 - 1))`` (computed
       in float64), for depths in [0, 1] (window z). Fewer bits: nearby surfaces quantise to
       equal keys and the id, not the depth, decides (z-fighting).
+
+    Hints: ``x.view(torch.int32)`` reinterprets float32 bits; ``torch.where(depth > 0, depth,
+    0)`` turns -0.0 (and NaN) into +0.0, so deal with NaN first (``torch.isnan``).
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_tensor(depth, "depth", (None,))
     check_tensor(triangle, "triangle", (depth.shape[0],), kind="int64", like=depth)
     if depth_bits not in (24, 32):
         raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
+    # BEGIN SOLUTION (task 3)
     if triangle.numel() and (int(triangle.min()) < 0 or int(triangle.max()) > ID_MASK):
         raise ValueError(f"triangle: expected ids in [0, 2**{ID_BITS}), got values in "
                          f"[{int(triangle.min())}, {int(triangle.max())}]")
@@ -379,13 +430,19 @@ def pack_depth_id(depth, triangle, depth_bits: int = 32):
         quantised = torch.round(depth.to(torch.float64).clamp(max=1.0) * (2**24 - 1)).to(
             torch.int64)
     return (quantised << ID_BITS) | triangle
+    # END SOLUTION
 
 
 def triangle_ids(keys):
     """The triangle id in each key: (...) int64 -> (...) int64, -1 where ``EMPTY``.
+
+    Hints: ``keys & ID_MASK``; ``torch.where``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_tensor(keys, "keys", any_shape(keys), kind="int64")
+    # BEGIN SOLUTION (task 3)
     return torch.where(keys == EMPTY, -1, keys & ID_MASK)
+    # END SOLUTION
 
 
 def depth_test(pixel, key, out):
@@ -399,15 +456,21 @@ def depth_test(pixel, key, out):
     batched form of one ``atomicMin(&buffer[pixel], key)`` per GPU thread; a plain
     read-compare-write (``out[pixel] = minimum(out[pixel], key)``) is a race: among
     fragments of one pixel the last writer wins, not the nearest.
+
+    Hints: ``Tensor.scatter_reduce_`` with ``reduce="amin"`` (``include_self=True``, the default,
+    keeps what ``out`` already holds).
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_tensor(out, "out", (None,), kind="int64")
     check_tensor(pixel, "pixel", (None,), kind="int64", like=out)
     check_tensor(key, "key", (pixel.shape[0],), kind="int64", like=out)
+    # BEGIN SOLUTION (task 3)
     if pixel.numel() and (int(pixel.min()) < 0 or int(pixel.max()) >= out.shape[0]):
         raise ValueError(f"pixel: expected indices in [0, {out.shape[0]}), got values in "
                          f"[{int(pixel.min())}, {int(pixel.max())}]")
     out.scatter_reduce_(0, pixel, key, reduce="amin")
     return out
+    # END SOLUTION
 
 
 def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
@@ -428,7 +491,12 @@ def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
     beyond the far plane, ``z_ndc > 1``, are dropped), ``pack_depth_id`` with the chunk's
     offset added to the ids, ``depth_test``. The atomic minimum makes the result independent
     of the chunking and of the triangle order: bit for bit the same keys.
+
+    Hints: plan the chunks on the host: ``ends = torch.cumsum(sizes, 0).cpu()`` and
+    ``torch.searchsorted(ends, before + per_chunk, right=True)`` find where a chunk ends; a
+    Python loop over chunks (not triangles) is fine. ``fragment_depth`` is provided.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_screen(screen)
     if screen.shape[2] != 4:
         raise ValueError(f"screen: expected shape (K, 3, 4) (x, y, z_ndc, 1/w), "
@@ -440,6 +508,7 @@ def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
             or memory_budget_bytes <= 0:
         raise ValueError(f"memory_budget_bytes: expected a positive int, "
                          f"got {memory_budget_bytes!r}")
+    # BEGIN SOLUTION (task 3)
     if out is None:
         out = torch.empty(width * height, dtype=torch.int64, device=screen.device)
     check_tensor(out, "out", (width * height,), kind="int64", like=screen)
@@ -459,6 +528,7 @@ def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
         depth_test(pixel[in_range], keys, out)
         first = last
     return out
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -475,9 +545,13 @@ def perspective_correct(bary, inv_w):
     triangle. Attributes divided by w (and 1/w itself) are linear in screen space; dividing
     the interpolated ``a/w`` by the interpolated ``1/w`` recovers the attribute. Plain
     screen-space weights bend textures and normals on surfaces that recede from the eye.
+
+    Hints: three multiplies, a sum over the last axis, one division.
     """
+    # BEGIN SOLUTION (task 4)
     q = bary * inv_w
     return q / (q[..., 0] + q[..., 1] + q[..., 2])[..., None]
+    # END SOLUTION
 
 
 def resolve_pixels(keys, screen, source, weights, width: int, height: int):
@@ -493,12 +567,18 @@ def resolve_pixels(keys, screen, source, weights, width: int, height: int):
     ``k``, its ``edge_functions`` at the pixel centre normalised by their sum (screen-space
     barycentrics), ``perspective_correct`` with its corners' 1/w, then the clip weights:
     ``bary_source = sum_j mu_j weights[k, j]``.
+
+    Hints: do it for all ``H*W`` pixels at once: gather triangle ``k`` (0 for empty pixels)
+    and mask the results with ``torch.where`` at the end; ``pixel % width`` and
+    ``pixel // width`` give the column and row.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_size(width, height)
     check_tensor(keys, "keys", (width * height,), kind="int64")
     check_tensor(screen, "screen", (None, 3, 4), like=keys)
     check_tensor(source, "source", (screen.shape[0],), kind="int64", like=keys)
     check_tensor(weights, "weights", (screen.shape[0], 3, 3), like=keys)
+    # BEGIN SOLUTION (task 4)
     covered = keys != EMPTY
     k = torch.where(covered, keys & ID_MASK, 0)
     if screen.shape[0] == 0:  # nothing was rasterized: no triangle to gather from
@@ -516,6 +596,7 @@ def resolve_pixels(keys, screen, source, weights, width: int, height: int):
     bary = torch.where(covered[:, None], bary, torch.zeros_like(bary))
     face = torch.where(covered, source[k], -1)
     return face.reshape(height, width), bary.reshape(height, width, 3)
+    # END SOLUTION
 
 
 def rasterize_mesh(mesh: Mesh, camera: Camera, *, depth_bits: int = 32,
@@ -526,12 +607,17 @@ def rasterize_mesh(mesh: Mesh, camera: Camera, *, depth_bits: int = 32,
     ``to_clip_space`` with ``camera.view_projection()``, ``clip_triangles``, ``to_screen``,
     ``rasterize``, ``resolve_pixels``. face is -1 where nothing is visible; bary are the
     perspective-correct barycentrics of the pixel centre in that face.
+
+    Hints: ``camera.view_projection(torch.float64).to(mesh.device)``; ``clip[mesh.faces]``
+    gathers the corners of every face.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     if not isinstance(camera, Camera):
         raise TypeError(f"camera: expected course.core.camera.Camera, got {type(camera).__name__}")
     mesh.validate()
+    # BEGIN SOLUTION (task 4)
     mvp = camera.view_projection(torch.float64).to(mesh.device)
     clip = to_clip_space(mesh.vertices, mvp)
     clipped, source, weights = clip_triangles(clip[mesh.faces])
@@ -539,6 +625,7 @@ def rasterize_mesh(mesh: Mesh, camera: Camera, *, depth_bits: int = 32,
     keys = rasterize(screen, camera.width, camera.height, depth_bits=depth_bits,
                      cull_backfaces=cull_backfaces, memory_budget_bytes=memory_budget_bytes)
     return resolve_pixels(keys, screen, source, weights, camera.width, camera.height)
+    # END SOLUTION
 
 
 def interpolate(values, faces, face, bary):
@@ -547,17 +634,22 @@ def interpolate(values, faces, face, bary):
     values: (V, C) float (normals, UVs, colours), faces: (F, 3) int64, face: (...) int64
     face per pixel (-1: empty), bary: (..., 3) float. Returns (..., C) in ``values``' dtype,
     0 where ``face == -1``.
+
+    Hints: ``values[faces[face]]`` is (..., 3, C) (use face 0 for empty pixels, then mask).
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_tensor(values, "values", (None, None))
     check_tensor(faces, "faces", (None, 3), kind="int64", like=values)
     check_tensor(face, "face", any_shape(face), kind="int64", like=values)
     check_tensor(bary, "bary", (*face.shape, 3), like=values)
+    # BEGIN SOLUTION (task 4)
     hit = face >= 0
     corners = values[faces[torch.where(hit, face, 0)]]  # (..., 3, C)
     b = bary.to(values.dtype)
     result = (b[..., 0, None] * corners[..., 0, :] + b[..., 1, None] * corners[..., 1, :]
               + b[..., 2, None] * corners[..., 2, :])
     return torch.where(hit[..., None], result, torch.zeros_like(result))
+    # END SOLUTION
 
 
 def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
@@ -572,12 +664,17 @@ def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
 
     The interpolated normal must be normalised again: a blend of unit vectors is shorter
     than 1 (by up to a few percent on a coarse mesh), which darkens the middle of each face.
+
+    Hints: the provided ``face_normals`` and ``normalized``; ``index_add_`` over
+    ``mesh.faces.reshape(-1)`` sums face normals into their vertices; ``interpolate``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
     check_tensor(face, "face", (None, None), kind="int64", like=mesh.vertices)
     check_tensor(bary, "bary", (*face.shape, 3), like=mesh.vertices)
     check_tensor(light_direction, "light_direction", (3,), like=mesh.vertices)
+    # BEGIN SOLUTION (task 4)
     light = normalized(light_direction.to(mesh.dtype))
     normals = face_normals(mesh)
     if smooth:
@@ -588,6 +685,7 @@ def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
         n = normalized(normals)[torch.where(face >= 0, face, 0)]
     cosine = (n * light).sum(-1).clamp(min=0)
     return torch.where(face >= 0, cosine, torch.zeros_like(cosine))
+    # END SOLUTION
 
 
 # ---------------------------------------------------------------------------------------
@@ -600,22 +698,34 @@ def traced_visibility(trace, camera: Camera, device=None, dtype=torch.float32):
 
     trace: ``trace(origins, directions, t_min, t_max) -> hits`` (see the module docstring);
     camera: the view; device, dtype: of the rays (``course.core.camera.primary_rays``).
+
+    Hints: ``course.core.camera.primary_rays(camera, device, dtype)``; the provided ``traced_hits``
+    calls the tracer and checks its answer.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not callable(trace):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
     if not isinstance(camera, Camera):
         raise TypeError(f"camera: expected course.core.camera.Camera, got {type(camera).__name__}")
+    # BEGIN SOLUTION (task 5)
     rays = primary_rays(camera, device=device, dtype=dtype)
     _, triangle = traced_hits(trace, rays.origins, rays.directions, rays.t_min, rays.t_max)
     return triangle.reshape(camera.height, camera.width)
+    # END SOLUTION
 
 
 def world_positions(mesh: Mesh, face, bary):
     """(H, W, 3) world-space points ``sum_i bary_i * v_i`` of the visible faces (0 where
-    ``face == -1``): the G-buffer's positions, reconstructed from the visibility buffer."""
+    ``face == -1``): the G-buffer's positions, reconstructed from the visibility buffer.
+
+    Hints: ``interpolate``.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
+    # BEGIN SOLUTION (task 5)
     return interpolate(mesh.vertices, mesh.faces, face, bary)
+    # END SOLUTION
 
 
 def shadow_epsilon(mesh: Mesh) -> float:
@@ -627,19 +737,30 @@ def shadow_epsilon(mesh: Mesh) -> float:
     coordinates; a shadow ray starting there must not hit its own triangle (shadow acne),
     and far from the origin the ulps grow with the coordinates. Too large an offset lets
     light leak through thin occluders in contact: scale, not a constant.
+
+    Hints: compute in float64; ``torch.finfo(mesh.dtype).eps``; ignore non-finite vertices.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
+    # BEGIN SOLUTION (task 5)
     v = mesh.vertices.to(torch.float64)
     v = v[torch.isfinite(v).all(-1)]
     if v.numel() == 0:
         return 0.0
     extent = float((v.amax(0) - v.amin(0)).norm())
     return 1e-4 * extent + 8 * torch.finfo(mesh.dtype).eps * float(v.abs().max())
+    # END SOLUTION
 
 
 def _shadow_rays(trace, mesh: Mesh, points, hit, light):
-    """(N,) bool: which of the points (N, 3) marked ``hit`` see something toward ``light``."""
+    """(N,) bool: which of the points (N, 3) marked ``hit`` see something toward ``light``.
+
+    Write this helper for ``hybrid_shadows`` and ``traced_shadows``: shadow rays from the
+    points with ``hit``, ``t_min = shadow_epsilon(mesh)``, ``t_max = inf``, through
+    ``traced_hits``.
+    """
+    # BEGIN SOLUTION (task 5)
     origins = points[hit]
     directions = light.expand_as(origins).contiguous()
     n = origins.shape[0]
@@ -649,6 +770,7 @@ def _shadow_rays(trace, mesh: Mesh, points, hit, light):
     shadowed = torch.zeros(hit.shape, dtype=torch.bool, device=points.device)
     shadowed[hit] = blocker >= 0
     return shadowed
+    # END SOLUTION
 
 
 def hybrid_shadows(trace, mesh: Mesh, face, bary, light_direction):
@@ -660,25 +782,35 @@ def hybrid_shadows(trace, mesh: Mesh, face, bary, light_direction):
     output; light_direction: (3,) toward the light. Primary visibility costs one raster pass
     instead of one ray per pixel; positions come from ``world_positions``; shadow rays start
     at ``t_min = shadow_epsilon(mesh)`` (unit directions) with ``t_max = inf``.
+
+    Hints: ``world_positions``, then ``_shadow_rays`` on the flattened pixels.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not callable(trace):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
-    light = sun_direction(light_direction, mesh.vertices)
+    light = sun_direction(light_direction, mesh.vertices)  # unit, toward the light
+    # BEGIN SOLUTION (task 5)
     points = world_positions(mesh, face, bary)
     return _shadow_rays(trace, mesh, points.reshape(-1, 3), face.reshape(-1) >= 0,
                         light).reshape(face.shape)
+    # END SOLUTION
 
 
 def traced_shadows(trace, mesh: Mesh, camera: Camera, light_direction):
     """The fully ray-traced counterpart of ``hybrid_shadows``: ``(face (H, W) int64,
     shadowed (H, W) bool)``, the primary rays of ``camera`` traced too (hit points
     ``o + t d``), shadow rays as in ``hybrid_shadows``. Rays in the mesh's dtype and device.
+
+    Hints: ``primary_rays``, ``traced_hits``, hit points ``o + t d`` (use t = 0 for misses to
+    avoid ``inf * 0``), then ``_shadow_rays``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     if not callable(trace):
         raise TypeError(f"trace: expected a callable, got {type(trace).__name__}")
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected course.core.types.Mesh, got {type(mesh).__name__}")
-    light = sun_direction(light_direction, mesh.vertices)
+    light = sun_direction(light_direction, mesh.vertices)  # unit, toward the light
+    # BEGIN SOLUTION (task 5)
     rays = primary_rays(camera, device=mesh.device, dtype=mesh.dtype)
     t, triangle = traced_hits(trace, rays.origins, rays.directions, rays.t_min, rays.t_max)
     hit = triangle >= 0
@@ -686,3 +818,4 @@ def traced_shadows(trace, mesh: Mesh, camera: Camera, light_direction):
     shadowed = _shadow_rays(trace, mesh, points, hit, light)
     shape = (camera.height, camera.width)
     return triangle.reshape(shape), shadowed.reshape(shape)
+    # END SOLUTION

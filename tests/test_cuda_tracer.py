@@ -1,8 +1,8 @@
 """course.kernels.cuda_tracer: the CUDA C BVH tracer, compiled at run time with nvcc.
 
 Without a CUDA device and toolkit only the "clear reason" behaviour is tested; on a GPU the
-kernels are held to course.kernels.flat_bvh's contract by the float64 rules of tests/test_flat_bvh.py
-and their attributes are read back.
+kernels are held to course.kernels.flat_bvh's contract by the float64 rules of
+tests/test_flat_bvh.py and their attributes are read back.
 """
 
 from __future__ import annotations

@@ -197,7 +197,8 @@ def check_hits(case: dict, hits, label: str, any_hit: bool = False, ref: dict | 
         nearer = t_k[hit] > t_solid[hit] + tol[hit] + t_err
         assert not nearer.any(), (
             f"{label}: ray {int(hit[nearer][0])} reports t = {float(t_k[hit][nearer][0]):.9g}, "
-            f"but triangle {int(torch.where(ref['solid'], ref['t'], math.inf)[hit[nearer][0]].argmin())} "
+            f"but triangle "
+            f"{int(torch.where(ref['solid'], ref['t'], math.inf)[hit[nearer][0]].argmin())} "
             f"is hit solidly nearer, at t = {float(t_solid[hit][nearer][0]):.9g}: the walk "
             f"culled a box it should have entered")
 

@@ -35,6 +35,7 @@ from types import SimpleNamespace
 import pytest
 import torch
 
+from course.core.raymath import normalize as unit
 from course.grading.testing import (
     assert_close,
     assert_equal,
@@ -242,10 +243,6 @@ def ref_interval(o, d, lo, hi):
 def phi(x):
     """(1 - e^{-x}) / x with phi(0) = 1, in float64."""
     return torch.where(x > 0, -torch.expm1(-x) / x.clamp(min=1e-300), torch.ones_like(x))
-
-
-def unit(v):
-    return v / v.norm(dim=-1, keepdim=True)
 
 
 def box_rays(n: int, seed: int, lo, hi, dtype=F64):

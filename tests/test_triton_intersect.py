@@ -29,6 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as a script: make `import course` work from a checkout
     sys.path.insert(0, str(REPO))
 
+from course.core.raymath import normalize as _unit
 from course.grading.testing import run_in_triton_interpreter
 
 HAVE_TRITON = importlib.util.find_spec("triton") is not None
@@ -56,10 +57,6 @@ T_RTOL = 1e-5      # relative error of t allowed for every well-conditioned pair
 # --------------------------------------------------------------------------------------
 # Scenes (float32 geometry; the reference recomputes it in float64)
 # --------------------------------------------------------------------------------------
-
-def _unit(x: torch.Tensor) -> torch.Tensor:
-    return x / x.norm(dim=-1, keepdim=True)
-
 
 def soup_case(n_rays: int = 70, n_tris: int = 50, seed: int = 0) -> dict:
     """Triangles of mixed sizes in the unit cube; half the rays aim at triangle interiors

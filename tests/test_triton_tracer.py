@@ -148,7 +148,7 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
                 f"{what} changed {field} on rays "
-                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0].tolist()}")
+                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0]}")
         check_hits(case, out["loops_any"][loop, stack, regs, spec], f"{what} any hit",
                    any_hit=True, ref=ref)
     for (refill, any_hit), hits in out["refill"].items():
@@ -159,7 +159,7 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
                 f"{what} changed {field} on rays "
-                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0].tolist()}")
+                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0]}")
     for n, (got, want) in out["refill_few"].items():
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(got, field), getattr(want, field)), (

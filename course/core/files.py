@@ -1,26 +1,23 @@
-"""Finding the course folder, importing a Python file by its path, and the files of a
-module kept in parts.
+"""Finding the course folder, importing a Python file or package by its path, and the files
+of a lab kept as a package.
 
 Below everything that loads a lab, a grader or a showcase by file (the benches, the gallery,
 the grader): none of them depends on another for it.
 
-A module in parts (a long reference solution: ``solutions/lab2_accel.py``) is one file that
-the graders load by path, and the folder ``<its name>_parts/`` beside it, whose files it runs
-in its own namespace (:func:`run_parts`). Whatever reads such a module's source, rather than
-importing it, finds its files with :func:`module_files` and the file of one of its
-functions with :func:`defining_file`; :func:`copy_module` writes a (changed) copy of it,
-:func:`joined_source` its text as one file (what a student hands in).
+A lab module ``labN_topic`` is one file ``labN_topic.py`` or a package folder
+``labN_topic/`` (``solutions/lab2_accel/``: an ``__init__.py`` that re-exports what its
+modules define). :func:`lab_source` finds either in a folder, :func:`import_file` imports
+either by its path. Whatever reads a lab's source rather than importing it finds its files
+with :func:`module_files` and the file of one of its functions with :func:`defining_file`;
+:func:`copy_module` writes a (changed) copy of it.
 """
 
 from __future__ import annotations
 
 import ast
 import importlib.util
-import re
 import sys
 from pathlib import Path
-
-PARTS = "_parts"  # solutions/lab2_accel.py keeps its parts in solutions/lab2_accel_parts/
 
 
 def repo_root(command: str = "rtcourse") -> Path:
@@ -34,41 +31,68 @@ def repo_root(command: str = "rtcourse") -> Path:
                      f"pyproject.toml in {here} or above it)")
 
 
+def lab_source(folder, name: str) -> Path | None:
+    """The source of the module ``name`` in ``folder``: the file ``name.py``, else the
+    package folder ``name/`` (one holding ``__init__.py``); None when neither is there."""
+    folder = Path(folder)
+    file, package = folder / f"{name}.py", folder / name
+    if file.is_file():
+        return file
+    if (package / "__init__.py").is_file():
+        return package
+    return None
+
+
+def _package(path: Path) -> Path | None:
+    """The package folder ``path`` names (the folder or its ``__init__.py``), else None."""
+    if path.is_dir():
+        return path
+    if path.name == "__init__.py":
+        return path.parent
+    return None
+
+
+def _drop(name: str) -> None:
+    """Forget the module ``name`` and its submodules (``name.grid``, ...)."""
+    for key in [k for k in sys.modules if k == name or k.startswith(name + ".")]:
+        sys.modules.pop(key, None)
+
+
 def import_file(path, name=None):
-    """Import a Python file as a module (cached by path)."""
-    path = str(Path(path).resolve())
-    name = name or "rtcourse_file_" + Path(path).stem
+    """Import a Python file, or a package by its folder, as the module ``name`` (cached by
+    path). A package's modules import each other relatively (``from .grid import ...``) and
+    become ``name.grid`` and so on; importing another path under the same name, or an
+    import that fails, leaves none of the old or half-made submodules behind."""
+    path = Path(path).resolve()
+    package = _package(path)
+    init = package / "__init__.py" if package else path
+    name = name or "rtcourse_file_" + (package.name if package else path.stem)
     module = sys.modules.get(name)
-    if module is not None and getattr(module, "__file__", None) == path:
+    if module is not None and getattr(module, "__file__", None) == str(init):
         return module
-    spec = importlib.util.spec_from_file_location(name, path)
+    _drop(name)
+    spec = importlib.util.spec_from_file_location(
+        name, init, submodule_search_locations=[str(package)] if package else None)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)
     except BaseException:
-        sys.modules.pop(name, None)
+        _drop(name)
         raise
     return module
 
 
-def _run_order(path: Path):
-    """Part files run in name order, numbers by value (``task2_`` before ``task10_``)."""
-    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", path.name)]
-
-
-def module_parts(path) -> list[Path]:
-    """The part files of the module file ``path`` (the ``*.py`` files of the folder
-    ``<stem>_parts`` beside it), in the order the module runs them; ``[]`` for a module
-    in one file."""
-    path = Path(path)
-    folder = path.with_name(path.stem + PARTS)
-    return sorted((p for p in folder.glob("*.py") if p.is_file()), key=_run_order)
-
-
 def module_files(path) -> list[Path]:
-    """Every source file of the module file ``path``: the file itself, then its parts."""
-    return [Path(path), *module_parts(path)]
+    """Every source file of the module ``path``: the file itself, or a package's ``.py``
+    files (its ``__init__.py`` first, then the others by path)."""
+    path = Path(path)
+    package = _package(path)
+    if package is None:
+        return [path]
+    files = sorted(p for p in package.rglob("*.py")
+                   if p.is_file() and "__pycache__" not in p.relative_to(package).parts)
+    return sorted(files, key=lambda p: p.relative_to(package) != Path("__init__.py"))
 
 
 def _top_level_names(path: Path) -> set[str]:
@@ -78,8 +102,8 @@ def _top_level_names(path: Path) -> set[str]:
 
 
 def defining_file(path, name: str) -> Path:
-    """The file of the module ``path`` (the file itself or one of its parts) whose top
-    level defines the function or class ``name`` (``Class.method``: its class's file)."""
+    """The file of the module ``path`` (the file itself, or one of a package's files) whose
+    top level defines the function or class ``name`` (``Class.method``: its class's file)."""
     top = name.split(".")[0]
     files = [f for f in module_files(path) if top in _top_level_names(f)]
     if len(files) != 1:
@@ -89,62 +113,27 @@ def defining_file(path, name: str) -> Path:
     return files[0]
 
 
-def run_parts(namespace: dict) -> None:
-    """Run the parts of the module whose globals are ``namespace`` (the module calls
-    ``run_parts(globals())``) in that namespace, in order: together they are one module,
-    whose functions see each other (and whatever replaces one of them) through its
-    globals. Each part is compiled with its own file name, so tracebacks and
-    ``inspect.getsource`` of a function show the part's lines."""
-    path = Path(namespace["__file__"]).resolve()
-    parts = module_parts(path)
-    if not parts:  # a module copied without its parts would define nothing: say so
-        raise ImportError(f"{path}: its parts ({path.stem}{PARTS}/*.py beside it) are missing; "
-                          f"copy the module with them (course.core.files.copy_module)")
-    for part in parts:
-        code = compile(part.read_bytes(), str(part), "exec", dont_inherit=True)
-        exec(code, namespace)  # noqa: S102  (a module's own part)
-
-
-_FUTURE = "from __future__ import annotations\n"
-_CALL = ("from course.core.files import run_parts as _run_parts\n",
-         "_run_parts(globals())\n", "del _run_parts\n")
-
-
-def joined_source(path) -> str:
-    """The module file ``path`` and its parts as the text of one module file, as a student
-    hands a lab in (a Gradescope submission is one file per lab): the parts' texts, less
-    their ``from __future__`` line (the module's own), in place of its ``run_parts`` call."""
+def relative_name(path, file) -> str:
+    """``file``'s name as :func:`copy_module` keys it: relative to the folder holding the
+    module ``path`` (``lab1_intersect.py``, ``lab2_accel/grid.py``)."""
     path = Path(path)
-    text, parts = path.read_text(), module_parts(path)
-    if not parts:
-        return text
-    lines = text.splitlines(keepends=True)
-    if not all(lines.count(line) == 1 for line in _CALL) or _FUTURE not in lines:
-        raise ValueError(f"{path}: expected {_FUTURE.strip()!r} and the lines "
-                         f"{[line.strip() for line in _CALL]} once each")
-    joined = []
-    for line in lines:
-        if line == _CALL[1]:
-            for part in parts:
-                body = [x for x in part.read_text().splitlines(keepends=True) if x != _FUTURE]
-                joined += ["\n\n"] * (part != parts[0]) + body
-        elif line not in _CALL:
-            joined.append(line)
-    return "".join(joined)
+    base = (_package(path) or path).parent
+    return Path(file).relative_to(base).as_posix()
 
 
 def copy_module(path, folder, texts=None) -> Path:
-    """Copy the module file ``path`` and its parts into ``folder`` (in the same layout);
-    ``texts`` maps a file's name relative to the module's folder (``lab2_accel.py``,
-    ``lab2_accel_parts/task1_grid.py``) to the text written instead of that file's.
-    Returns the module's copy."""
+    """Copy the module ``path`` (a file, or a package with all its files) into ``folder``;
+    ``texts`` maps a file's :func:`relative_name` (``lab2_accel.py``,
+    ``lab2_accel/grid.py``) to the text written instead of that file's (a mutant). Returns
+    the copy's path: the file, or the package folder."""
     path, folder = Path(path), Path(folder)
+    package = _package(path)
     texts = dict(texts or {})
     for source in module_files(path):
-        name = source.relative_to(path.parent).as_posix()
+        name = relative_name(path, source)
         target = folder / name
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_text(texts.pop(name) if name in texts else source.read_text())
     if texts:
         raise ValueError(f"copy_module: {sorted(texts)} are not files of {path}")
-    return folder / path.name
+    return folder / (package.name if package else path.name)

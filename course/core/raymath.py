@@ -1,4 +1,4 @@
-"""Small vector helpers and input checks shared by the ray-primitive kernels.
+"""Small vector functions and input checks shared by the ray-primitive kernels.
 
 Given code, not exercises: the labs import these so that every kernel validates its
 inputs the same way and reports bad ones with the argument's name.
@@ -10,17 +10,37 @@ import math
 
 import torch
 
-
-def cross(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Cross product over the last axis, written out (6 mul, 3 sub per vector)."""
-    ax, ay, az = a.unbind(-1)
-    bx, by, bz = b.unbind(-1)
-    return torch.stack((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx), dim=-1)
+from course.core.types import Mesh
 
 
-def dot(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Dot product over the last axis, written out (3 mul, 2 add): ``(..., 3) -> (...)``."""
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+def columns(v) -> tuple:
+    """``(..., 3)`` tensor -> its three ``(...)`` columns ``(x, y, z)`` (views); a tuple of
+    three columns is returned as it is."""
+    return tuple(v.unbind(-1)) if isinstance(v, torch.Tensor) else tuple(v)
+
+
+def cross(a, b):
+    """Cross product, written out (6 mul, 3 sub per vector): ``(..., 3), (..., 3) ->
+    (..., 3)``; on tuples of three columns (see :func:`columns`), a tuple of three columns
+    (elementwise ops that ``torch.compile`` fuses into the caller's kernel)."""
+    (ax, ay, az), (bx, by, bz) = columns(a), columns(b)
+    out = (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
+    return torch.stack(out, dim=-1) if isinstance(a, torch.Tensor) else out
+
+
+def dot(a, b) -> torch.Tensor:
+    """Dot product, written out (3 mul, 2 add): ``(..., 3), (..., 3) -> (...)``, or on
+    tuples of three columns (see :func:`columns`)."""
+    if isinstance(a, torch.Tensor):
+        return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def normalize(v: torch.Tensor) -> torch.Tensor:
+    """``v / |v|`` over the last axis: ``(..., 3) -> (..., 3)``; a zero vector stays zero
+    (never NaN)."""
+    length = v.norm(dim=-1, keepdim=True)
+    return v / torch.where(length > 0, length, torch.ones_like(length))
 
 
 def gamma(n: int, dtype: torch.dtype) -> float:
@@ -107,3 +127,27 @@ def masked_result(hit, t, u, v):
     inf = torch.full((), math.inf, dtype=t.dtype, device=t.device)
     zero = torch.zeros((), dtype=t.dtype, device=t.device)
     return torch.where(hit, t, inf), torch.where(hit, u, zero), torch.where(hit, v, zero)
+
+
+def check_mesh(mesh, finite: bool = False, dtypes=None, name: str = "mesh") -> None:
+    """``mesh`` must be a valid ``course.core.types.Mesh`` (TypeError/ValueError naming
+    ``name``, or the field ``Mesh.validate`` names).
+
+    finite: also require finite vertices (every structure builder does: a NaN or inf corner
+    has no bounds to sort by); the ValueError gives the count and the first such vertex.
+    dtypes: the vertex dtypes accepted (None: any floating-point dtype).
+    """
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"{name}: expected course.core.types.Mesh, got {type(mesh).__name__}")
+    mesh.validate()
+    if dtypes is not None and mesh.dtype not in dtypes:
+        allowed = " or ".join(str(d).removeprefix("torch.") for d in dtypes)
+        raise TypeError(f"{name}: expected {allowed} vertices, got {mesh.dtype}")
+    if finite:
+        bad = ~torch.isfinite(mesh.vertices).all(-1)
+        if bool(bad.any()):
+            first = int(bad.nonzero()[0, 0])
+            raise ValueError(
+                f"{name}: expected finite vertices to build a structure over, got "
+                f"{int(bad.sum())} of {len(bad)} with NaN or inf coordinates (first: vertex "
+                f"{first} = {mesh.vertices[first].tolist()}); repair or drop those triangles")

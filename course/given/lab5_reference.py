@@ -23,18 +23,10 @@ import math
 
 import torch
 
-from course.given.lab5 import (
-    MIN_LIGHT_DISTANCE,
-    SCHLICK_K_MAX,
-    ConstantFog,
-    DirectionalLight,
-    FroxelGrid,
-    HeightFog,
-    SpotLight,
-    ray_boxes,
-    sample_texture,
-    volume_bounds,
-)
+from course.given.lab5_checks import SCHLICK_K_MAX
+from course.given.lab5_grid import FroxelGrid, ray_boxes, sample_texture
+from course.given.lab5_scene import ConstantFog, DirectionalLight, HeightFog, SpotLight
+from course.given.lab5_volumes import MIN_LIGHT_DISTANCE, volume_bounds
 
 F64 = torch.float64
 
@@ -135,8 +127,8 @@ def reference_render(scene, camera, depth_image, opaque_image, *, near=0.1, far=
     depth_image (H, W) view depths (+inf: sky), opaque_image (H, W, 3); pixels: None (all,
     row-major) or a (P,) int64 tensor of flat pixel indices ``row * W + col``. ``tile`` and
     ``slices`` only name the grid whose ``volume_bounds`` limit the volumetric shadows (they
-    do not depend on them); ``chunk`` pixels are marched at once. Returns a dict of ``image`` (P, 3) = ``opaque T + L``,
-    ``inscatter`` (P, 3) and ``transmittance`` (P,), float64.
+    do not depend on them); ``chunk`` pixels are marched at once. Returns a dict of ``image``
+    (P, 3) = ``opaque T + L``, ``inscatter`` (P, 3) and ``transmittance`` (P,), float64.
     """
     grid = FroxelGrid(camera, tile, slices, near, far)
     eye, right, up, fwd, (hw, hh) = grid.axes()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import torch
 
+from course.core.raymath import normalize as normalized  # Provided: unit vectors, 0 stays 0
 from course.core.types import Mesh
 
 EMPTY = torch.iinfo(torch.int64).max
@@ -105,12 +106,6 @@ def face_normals(mesh: Mesh):
     the area)."""
     tri = mesh.triangles()
     return torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-
-
-def normalized(v):
-    """Provided: unit vectors along the last axis (zero vectors stay zero)."""
-    length = v.norm(dim=-1, keepdim=True)
-    return v / torch.where(length > 0, length, torch.ones_like(length))
 
 
 def traced_hits(trace, origins, directions, t_min, t_max):

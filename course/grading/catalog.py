@@ -17,6 +17,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from course.core.files import module_files
+from course.core.labs import lab_number
+
 
 @dataclass
 class GradedTest:
@@ -127,10 +130,9 @@ def read_grader(path) -> LabInfo:
     tree = ast.parse(path.read_text(), filename=str(path))
     constants = {**_imported_constants(tree, path), **_constants(tree)}
     module = constants.get("LAB_MODULE")
-    match = re.match(r"lab(\d+)_", module or "")
-    if not match:
+    if lab_number(module) is None:
         raise ValueError(f"{path}: LAB_MODULE must name a module labN_topic, got {module!r}")
-    info = LabInfo(number=int(match.group(1)), module=module,
+    info = LabInfo(number=lab_number(module), module=module,
                    tasks=dict(constants.get("TASKS", {})), files=[path])
     base = _module_marks(tree, constants)
 
@@ -208,16 +210,21 @@ def lab_catalog(test_files) -> dict[int, LabInfo]:
     return dict(sorted(labs.items()))
 
 
+def _module_body(lab_file) -> list[ast.stmt]:
+    """The top-level statements of a lab: of its file, or of every file of its package."""
+    return [node for f in module_files(lab_file) for node in ast.parse(f.read_text()).body]
+
+
 def skeleton_functions(lab_file) -> list[str]:
-    """Public functions and classes of a skeleton that still raise NotImplementedError
-    somewhere: what a student writes (a class counts once, by its name)."""
-    tree = ast.parse(Path(lab_file).read_text())
+    """Public functions and classes of a skeleton (a file, or a package's files) that still
+    raise NotImplementedError somewhere: what a student writes (a class counts once, by its
+    name)."""
 
     def unfinished(node) -> bool:
         return any(isinstance(n, ast.Raise) and "NotImplementedError" in ast.unparse(n)
                    for n in ast.walk(node))
 
-    return [node.name for node in tree.body
+    return [node.name for node in _module_body(lab_file)
             if isinstance(node, (ast.FunctionDef, ast.ClassDef))
             and not node.name.startswith("_") and unfinished(node)]
 
@@ -257,9 +264,9 @@ class Stub:
 
 
 def skeleton_stubs(lab_file) -> list[Stub]:
-    """Every ``NotImplementedError`` a skeleton raises, with the function (public or
-    private, method or function) it belongs to."""
-    tree = ast.parse(Path(lab_file).read_text())
+    """Every ``NotImplementedError`` a skeleton (a file, or a package's files) raises, with
+    the function (public or private, method or function) it belongs to; ``line`` is in the
+    file that raises it."""
     stubs = []
 
     def scan(node, owner: str, qualname: str):
@@ -270,7 +277,7 @@ def skeleton_stubs(lab_file) -> list[Stub]:
                                 if isinstance(c, ast.Constant) and isinstance(c.value, str))
                 stubs.append(Stub(owner, qualname, parse_not_implemented(text)[1], n.lineno))
 
-    for node in tree.body:
+    for node in _module_body(lab_file):
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             scan(node, node.name, node.name)
         elif isinstance(node, ast.ClassDef):
@@ -306,7 +313,7 @@ class TaskInfo:
 def lab_tasks(lab: LabInfo, lab_file) -> list[TaskInfo]:
     """The tasks of ``lab`` with the functions each asks for and what its tests need from
     other tasks (read from the skeleton ``lab_file`` and the graders)."""
-    owners = function_tasks(lab, lab_file) if Path(lab_file).is_file() else {}
+    owners = function_tasks(lab, lab_file) if Path(lab_file).exists() else {}
     tasks = []
     for number, title in sorted(lab.tasks.items()):
         mine = [f for f, t in owners.items() if t == number]

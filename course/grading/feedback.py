@@ -10,14 +10,16 @@ grading plugin shows it in place of pytest's traceback (``-v`` brings the long o
 from __future__ import annotations
 
 import re
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
 from course.grading.catalog import parse_not_implemented
 
-MAX_LINES = 15
+MAX_LINES = 15  # lines of a failure's text, a long line counted once however it wraps
 _MESSAGE_LINES = 10
-_LINE_WIDTH = 400
+_WRAP = 100  # columns: a long line is wrapped here, never cut (a hint ends where it ends)
+_LINE_WIDTH = 4000  # a line longer than this is a dump, not a hint: only this is clipped
 HINT = "(the full traceback with the test's source and tensors: add -v)"
 
 # A frame of a traceback printed by Python (the worker's traceback travels as text).
@@ -37,6 +39,16 @@ def _clip(line: str) -> str:
     return line if len(line) <= _LINE_WIDTH else line[:_LINE_WIDTH - 3] + "..."
 
 
+def _wrap(line: str) -> str:
+    """``line`` wrapped at :data:`_WRAP` columns (whole words; continuation lines indented
+    under the first), as one string: the caller counts it as one line."""
+    if len(line) <= _WRAP:
+        return line
+    indent = line[:len(line) - len(line.lstrip())]
+    return "\n".join(textwrap.wrap(line, _WRAP, subsequent_indent=indent + "  ",
+                                    break_long_words=False, break_on_hyphens=False))
+
+
 def _message_lines(text: str) -> list[str]:
     """The teaching part of an exception's text: without the worker's traceback and
     without the tensor dumps pytest's assertion rewriting adds (``+  where ...``)."""
@@ -47,7 +59,7 @@ def _message_lines(text: str) -> list[str]:
             continue
         if i and (stripped.startswith("+") or "tensor([" in line or "array([" in line):
             continue  # pytest's "+  where x = tensor([...])" explanations
-        lines.append(_clip(line.rstrip()))
+        lines.append(_wrap(_clip(line.rstrip())))
     if len(lines) > _MESSAGE_LINES:
         more = len(lines) - _MESSAGE_LINES + 1
         lines = lines[:_MESSAGE_LINES - 1] + [f"... ({more} more lines with -v)"]
@@ -136,4 +148,4 @@ def short_feedback(*, exc: BaseException, frames, test_file, folder, task, task_
         lines.append(f"checked at {Path(test_file).parent.name}/{Path(test_file).name}:"
                      f"{grader[-1][1]}")
     lines.append(HINT)
-    return Feedback("\n".join(lines[:MAX_LINES]))
+    return Feedback("\n".join(lines[:MAX_LINES - 1] + lines[-1:]))

@@ -82,13 +82,13 @@ def apply_mutant(mutant: Mutant, source: str) -> str:
 def grade_mutant(mutant: Mutant, root, workdir, timeout: float = 600) -> dict:
     """Grade the mutated solution on its tests; return the results dictionary. The
     mistake goes into the file that defines ``mutant.function`` (the module, or one of
-    its parts: the others are copied unchanged)."""
-    from course.core.files import copy_module, defining_file
+    its package's files: the others are copied unchanged)."""
+    from course.core.files import copy_module, defining_file, lab_source, relative_name
 
     root, workdir = Path(root), Path(workdir)
-    solution = root / "solutions" / f"{mutant.module}.py"
+    solution = lab_source(root / "solutions", mutant.module)
     path = defining_file(solution, mutant.function)
-    name = path.relative_to(solution.parent).as_posix()
+    name = relative_name(solution, path)
     copy_module(solution, workdir, {name: apply_mutant(mutant, path.read_text())})
     out = workdir / "results.json"
     # The mutant is our own code: grade it in-process in the child for speed.
@@ -114,16 +114,16 @@ def catch_mutants(mutants: list[Mutant], root, *, workers: int = 2,
     ``deadline`` seconds counts as caught (the real grader's time limit fails it). The 129
     shipped mutants take ~1 minute on 2 cores this way, ~6 minutes with :func:`grade_mutant`
     (a fresh process each, every selected test scored)."""
-    from course.core.files import defining_file
+    from course.core.files import defining_file, lab_source, relative_name
     from course.grading.mutate import run_specs
 
     root = Path(root)
     specs = []
     for mutant in mutants:
-        solution = root / "solutions" / f"{mutant.module}.py"
+        solution = lab_source(root / "solutions", mutant.module)
         path = defining_file(solution, mutant.function)
         specs.append({"id": mutant.name, "module": mutant.module, "tests": [f"({mutant.tests})"],
-                      "file": path.relative_to(solution.parent).as_posix(),
+                      "file": relative_name(solution, path),
                       "source": apply_mutant(mutant, path.read_text())})
     outcomes = run_specs(root, specs, workers=max(1, workers), deadline=deadline)
     return {spec["id"]: outcome for spec, outcome in zip(specs, outcomes)}

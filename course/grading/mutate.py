@@ -37,15 +37,13 @@ import math
 import os
 import random
 import re
-import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from course.core.device import allowed_cpus
-from course.core.files import copy_module, module_files
+from course.core.files import copy_module, lab_source, module_files, relative_name
 from course.grading.catalog import functions_of, lab_catalog, skeleton_functions
 from course.grading.runner import lab_test_files
 
@@ -63,7 +61,8 @@ class Generated:
     end: int
     original: str
     replacement: str
-    file: str  # the module's file defining ``function``: itself or a part, as copy_module names it
+    file: str  # the file defining ``function`` (the module, or a file of its package), as
+    # copy_module names it: lab1_intersect.py, lab2_accel/grid.py
 
     @property
     def lab(self) -> int:
@@ -196,7 +195,7 @@ def _functions(tree, names):
 
 def generate(module: str, source: str, functions, file: str | None = None) -> list[Generated]:
     """Every mutation of the named top-level functions/classes of one module's file ``file``
-    (``module.py`` by default; or one of its parts) whose text is ``source``."""
+    (``module.py`` by default; or one of its package's files) whose text is ``source``."""
     tree = ast.parse(source)
     parents = {child: parent for parent in ast.walk(tree) for child in ast.iter_child_nodes(parent)}
     starts = _offsets(source)
@@ -255,15 +254,16 @@ def plan(root, labs=None) -> list[LabPlan]:
     catalog = lab_catalog(lab_test_files(root, labs))
     plans = []
     for number, info in catalog.items():
-        skeleton = root / "labs" / f"{info.module}.py"
-        solution = root / "solutions" / f"{info.module}.py"
-        if not (skeleton.is_file() and solution.is_file()):
+        skeleton = lab_source(root / "labs", info.module)  # a file, or a package folder
+        solution = lab_source(root / "solutions", info.module)
+        if skeleton is None or solution is None:
             continue
-        sources = {f.relative_to(solution.parent).as_posix(): f.read_text()
-                   for f in module_files(solution)}  # the module, then its parts (if any)
+        sources = {relative_name(solution, f): f.read_text()
+                   for f in module_files(solution)}  # the module, or its package's files
         tree = ast.Module([n for text in sources.values() for n in ast.parse(text).body], [])
-        skeleton_tree = ast.parse(skeleton.read_text())
-        written = {n.name for n in skeleton_tree.body
+        skeleton_body = [n for f in module_files(skeleton)
+                         for n in ast.parse(f.read_text()).body]
+        written = {n.name for n in skeleton_body
                    if isinstance(n, (ast.FunctionDef, ast.ClassDef))
                    and any(isinstance(r, ast.Raise) and "NotImplementedError" in ast.unparse(r)
                            for r in ast.walk(n))}
@@ -344,7 +344,8 @@ def _grade_one(root: Path, spec: dict, scratch: Path) -> dict:
 
     folder = scratch / spec["id"].replace(":", "__")
     folder.mkdir(parents=True, exist_ok=True)
-    copy_module(root / "solutions" / f"{spec['module']}.py", folder, {spec["file"]: spec["source"]})
+    copy_module(lab_source(root / "solutions", spec["module"]), folder,
+                {spec["file"]: spec["source"]})
     keyword = " or ".join(spec["tests"])
     files = [str(f) for f in lab_test_files(root, [spec["module"].split("_")[0][3:]])]
     outcome = _Outcome()
@@ -365,59 +366,16 @@ def _grade_one(root: Path, spec: dict, scratch: Path) -> dict:
 
 def worker_main(root: str, jobs: str, results: str, scratch: str):
     """``python -m course.grading.mutate ROOT JOBS RESULTS SCRATCH``: grade each job (one JSON
-    spec a line), appending one JSON line of outcome per job, flushed as it goes."""
-    root_path, scratch_path = Path(root), Path(scratch)
-    specs = [json.loads(line) for line in Path(jobs).read_text().splitlines() if line.strip()]
-    with open(results, "a") as out:
-        for spec in specs:
-            out.write(json.dumps({"id": spec["id"], "started": True}) + "\n")
-            out.flush()
-            out.write(json.dumps(_grade_one(root_path, spec, scratch_path)) + "\n")
-            out.flush()
+    spec a line), appending one JSON line of outcome per job, flushed as it goes
+    (:func:`course.grading.warm.serve`)."""
+    from course.grading.warm import serve
+
+    serve(jobs, results, lambda spec: _grade_one(Path(root), spec, Path(scratch)))
 
 
-def _run_queue(root: Path, specs: list[dict], deadline: float, scratch: Path,
-               tick=lambda n: None) -> list[dict]:
-    """One worker process over ``specs``; restarted after a mutant that hangs. ``tick(n)``
-    is told of every ``n`` mutants finished."""
-    done: dict[str, dict] = {}
-    remaining = list(specs)
-    env = dict(os.environ, CUDA_VISIBLE_DEVICES="", OMP_NUM_THREADS="1")
-    while remaining:
-        with tempfile.TemporaryDirectory(dir=scratch) as tmp:
-            jobs, results = Path(tmp, "jobs.jsonl"), Path(tmp, "results.jsonl")
-            jobs.write_text("".join(json.dumps(s) + "\n" for s in remaining))
-            results.touch()
-            proc = subprocess.Popen([sys.executable, "-m", "course.grading.mutate", str(root),
-                                     str(jobs), str(results), tmp], cwd=root, env=env,
-                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            current, since = None, time.monotonic()
-            while proc.poll() is None:
-                time.sleep(0.5)
-                lines = [json.loads(x) for x in results.read_text().splitlines() if x.strip()]
-                before = len(done)
-                for row in lines:
-                    if "killed" in row:
-                        done[row["id"]] = row
-                tick(len(done) - before)
-                started = [r["id"] for r in lines if r.get("started") and r["id"] not in done]
-                if started and started[-1] != current:
-                    current, since = started[-1], time.monotonic()
-                if current and time.monotonic() - since > deadline:
-                    proc.kill()
-                    proc.wait()
-                    done[current] = {"id": current, "killed": True, "ran": 0,
-                                     "by": [f"timed out after {deadline:.0f} s"]}
-            for row in (json.loads(x) for x in results.read_text().splitlines() if x.strip()):
-                if "killed" in row:
-                    done[row["id"]] = row
-            crashed = [s for s in remaining if s["id"] not in done]
-            if crashed and proc.returncode != -9:
-                # the worker died on this mutant (e.g. a crash at import): caught
-                done[crashed[0]["id"]] = {"id": crashed[0]["id"], "killed": True, "ran": 0,
-                                          "by": [f"worker exited {proc.returncode}"]}
-        remaining = [s for s in remaining if s["id"] not in done]
-    return [done[s["id"]] for s in specs]
+def _lost(mutant_id: str, why: str) -> dict:
+    """A mutant whose worker hung or died on it: caught (the real grader fails it)."""
+    return {"id": mutant_id, "killed": True, "ran": 0, "by": [why]}
 
 
 def run(root, mutants: list[Generated], plans: list[LabPlan], *, workers: int = 1,
@@ -438,19 +396,18 @@ def run_specs(root, specs: list[dict], *, workers: int = 1, deadline: float = 30
     ``error`` when the run proves nothing), in ``workers`` warm worker processes. A spec is
     ``{"id", "module": "labN_name", "tests": [-k expressions, or-ed], "file": the mutated
     file as copy_module names it, "source": its mutated text}``."""
-    root = Path(root)
-    shards = [specs[i::workers] for i in range(workers)]
-    from concurrent.futures import ThreadPoolExecutor
-
     from tqdm import tqdm
 
-    with tempfile.TemporaryDirectory(prefix="rtcourse-mutate-") as scratch, tqdm(
-            total=len(specs), unit="mutant", disable=not (progress and sys.stderr.isatty()),
-    ) as bar, ThreadPoolExecutor(max_workers=workers) as pool:
-        parts = list(pool.map(lambda s: _run_queue(root, s, deadline, Path(scratch), bar.update),
-                              [s for s in shards if s]))
-    by_id = {row["id"]: row for part in parts for row in part}
-    return [by_id[s["id"]] for s in specs]
+    from course.grading.warm import run_pool
+
+    root = Path(root)
+    env = dict(os.environ, CUDA_VISIBLE_DEVICES="", OMP_NUM_THREADS="1")
+    with tqdm(total=len(specs), unit="mutant",
+              disable=not (progress and sys.stderr.isatty())) as bar:
+        return run_pool(specs, lambda jobs, results, tmp: [
+            sys.executable, "-m", "course.grading.mutate", str(root), jobs, results, tmp],
+            workers=workers, cwd=root, env=env, deadline=deadline, lost=_lost, shared=False,
+            tick=bar.update, scratch_prefix="rtcourse-mutate-")
 
 
 def score_table(mutants: list[Generated], outcomes: list[dict], reviewed: dict[str, str]):

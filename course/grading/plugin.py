@@ -32,7 +32,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from course.core.files import import_file
+from course.core.files import import_file, lab_source, module_files
+from course.core.labs import default_impl, implementation_folder
+from course.core.labs import lab_number as module_lab_number
 from course.grading.catalog import function_tasks, near_misses, read_grader
 from course.grading.feedback import IMPORT_FAILED, Feedback, short_feedback
 from course.grading.sandbox import LocalLab, SandboxedLab, Worker
@@ -93,9 +95,7 @@ def parse_task(spec: str) -> tuple[int | None, int]:
 
 
 def lab_number(item) -> int | None:
-    match = re.match(r"lab(\d+)_", getattr(getattr(item, "module", None), "LAB_MODULE", "")
-                     or "")
-    return int(match.group(1)) if match else None
+    return module_lab_number(getattr(getattr(item, "module", None), "LAB_MODULE", ""))
 
 
 def awards_task(item, specs) -> bool:
@@ -156,28 +156,19 @@ def pytest_generate_tests(metafunc):
         metafunc.parametrize("device", devices)
 
 
-def default_impl(root: Path) -> str:
-    """``solutions`` in the course repository, ``labs`` in the student handout."""
-    return "solutions" if (root / "solutions").is_dir() else "labs"
-
-
 def resolve_impl(config) -> tuple[Path, bool]:
     """The folder holding the lab files, and whether it is trusted."""
     root = Path(config.rootpath)
     impl = config.getoption("--impl") or default_impl(root)
-    if impl in ("solutions", "labs"):
-        folder = root / impl
-    else:
-        folder = Path(impl).expanduser().resolve()
-        if (folder / "labs").is_dir() and not any(folder.glob("lab*_*.py")):
-            folder = folder / "labs"  # a copy of the whole handout
+    folder = implementation_folder(root, impl, must_exist=False)  # a missing file says it
     trusted = impl == "solutions" or config.getoption("--trusted")
     return folder, trusted
 
 
 def missing_file(folder: Path, name: str) -> str:
-    """The one line for a lab file that is not in the submission."""
-    text = f"no {name}.py in {folder}: the submission must contain the file {name}.py"
+    """The one line for a lab file (or package folder) that is not in the submission."""
+    text = (f"no {name}.py in {folder}: the submission must contain the file {name}.py (or "
+            f"the folder {name}/ of a lab kept as a package)")
     close = near_misses(folder, name)
     if close:
         text += (f" (found {', '.join(repr(p.name) for p in close)}: rename it to "
@@ -186,14 +177,17 @@ def missing_file(folder: Path, name: str) -> str:
 
 
 def syntax_problem(path: Path, name: str) -> str | None:
-    """A lab file that cannot even be compiled, in one line (compiling runs none of it)."""
-    try:
-        compile(path.read_bytes(), str(path), "exec", dont_inherit=True)
-    except SyntaxError as exc:
-        return (f"{name}.py failed to import: {type(exc).__name__}: {exc.msg} "
-                f"({name}.py, line {exc.lineno})")
-    except (ValueError, RecursionError, MemoryError) as exc:
-        return f"{name}.py failed to import: {type(exc).__name__}: {exc}"
+    """A lab file, or a file of a lab package, that cannot even be compiled, in one line
+    naming the file (compiling runs none of it)."""
+    for file in module_files(path):
+        shown = f"{name}.py" if file == path else f"{name}/{file.relative_to(path).as_posix()}"
+        try:
+            compile(file.read_bytes(), str(file), "exec", dont_inherit=True)
+        except SyntaxError as exc:
+            return (f"{shown} failed to import: {type(exc).__name__}: {exc.msg} "
+                    f"({shown}, line {exc.lineno})")
+        except (ValueError, RecursionError, MemoryError) as exc:
+            return f"{shown} failed to import: {type(exc).__name__}: {exc}"
     return None
 
 
@@ -211,8 +205,8 @@ class _Labs:
         if name in self.problems:
             pytest.fail(self.problems[name], pytrace=False)
         if name not in self.loaded:
-            path = self.folder / f"{name}.py"
-            if not path.is_file():
+            path = lab_source(self.folder, name)  # name.py, or the package folder name/
+            if path is None:
                 self.problems[name] = missing_file(self.folder, name)
             elif not self.trusted:
                 problem = syntax_problem(path, name)
@@ -257,7 +251,7 @@ def pytest_collection_finish(session):
         return
     names = {getattr(item.module, "LAB_MODULE", None) for item in session.items
              if hasattr(item, "module") and "impl" in getattr(item, "fixturenames", ())}
-    present = sorted(n for n in names if n and (labs.folder / f"{n}.py").is_file())
+    present = sorted(n for n in names if n and lab_source(labs.folder, n) is not None)
     for name in present:
         try:
             labs.get(name)._worker.launch()
@@ -267,9 +261,14 @@ def pytest_collection_finish(session):
 
 
 def _import_problem_text(name: str, exc: BaseException, path: Path) -> str:
-    """One line for a trusted lab file that raised while importing: the error and its line."""
-    frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename == str(path)]
-    where = f" ({name}.py, line {frames[-1].lineno})" if frames else ""
+    """One line for a trusted lab that raised while importing: the error and its line (the
+    file of a lab package that raised)."""
+    files = {str(f): f for f in module_files(path)}
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename in files]
+    shown = f"{name}.py"
+    if frames and files[frames[-1].filename] != path:
+        shown = f"{name}/{files[frames[-1].filename].relative_to(path).as_posix()}"
+    where = f" ({shown}, line {frames[-1].lineno})" if frames else ""
     return f"{name}.py failed to import: {type(exc).__name__}: {exc}{where}"
 
 
@@ -325,9 +324,9 @@ def long_feedback(config) -> bool:
 @cache
 def _function_tasks(test_file: str, root: str, module: str) -> dict:
     """What the lab's skeleton asks for, per task (empty where it cannot be read)."""
-    skeleton = Path(root) / "labs" / f"{module}.py"
+    skeleton = lab_source(Path(root) / "labs", module)
     try:
-        return function_tasks(read_grader(test_file), skeleton) if skeleton.is_file() else {}
+        return function_tasks(read_grader(test_file), skeleton) if skeleton else {}
     except (OSError, SyntaxError, ValueError):
         return {}
 

@@ -15,13 +15,13 @@ import html
 import io
 import json
 import os
-import re
 import tempfile
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from course.core.labs import lab_number
 from course.grading.feedback import HINT
 
 OUTPUT_LIMIT = 1024  # characters of text per test in results.json
@@ -49,8 +49,7 @@ class TestResult:
 
 
 def _lab_number(module_name: str):
-    match = re.match(r"lab(\d+)_", module_name or "")
-    return int(match.group(1)) if match else None
+    return lab_number(module_name)
 
 
 def _cap(text: str, limit: int) -> str:
@@ -216,15 +215,16 @@ class ScoreKeeper:
             lines += [f"  {text}" for text in self.problems.values()]
             lines += [f"  grader not loaded: {text}" for text in self.collect_errors]
             lines.append("")
-        lines += [f"{'lab':>3}  {'task':>4}  {'title':<34} {'passed':>9}  {'score':>13}"]
+        width = max([len("title"), *(len(row[4]) for row in rows.values())])  # never clipped
+        lines += [f"{'lab':>3}  {'task':>4}  {'title':<{width}} {'passed':>9}  {'score':>13}"]
         by_lab = defaultdict(lambda: [0.0, 0.0])
         for (lab, task), (score, top, passed, count, title, message) in sorted(
                 rows.items(), key=lambda kv: (kv[0][0] or 0, kv[0][1] or 0)):
-            lines.append(f"{lab!s:>3}  {task!s:>4}  {title[:34]:<34} {passed:>4}/{count:<4}  "
+            lines.append(f"{lab!s:>3}  {task!s:>4}  {title:<{width}} {passed:>4}/{count:<4}  "
                          f"{score:>6.2f}/{top:<6.2f}")
             if message:
                 body = [line for line in message.splitlines() if line != HINT]
-                lines += [f"{'':11}{line}" for line in body[:6]]
+                lines += [f"{'':11}{line}" for line in body]  # bounded by feedback
             by_lab[lab][0] += score
             by_lab[lab][1] += top
         lines.append("")

@@ -7,10 +7,10 @@ task's points and the first failure message of every task that lost points. ``-v
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 from course.core.files import repo_root
+from course.core.labs import implementation_folder, lab_number
 
 
 class GradeError(SystemExit):
@@ -25,8 +25,33 @@ def lab_test_files(root: Path, labs=None) -> list[Path]:
     files += sorted((root / "tests" / "hidden").glob("test_lab*_*.py"))
     if labs:
         wanted = {int(n) for n in labs}
-        files = [f for f in files if int(re.match(r"test_lab(\d+)_", f.name).group(1)) in wanted]
+        files = [f for f in files if lab_number(f.name.removeprefix("test_")) in wanted]
     return files
+
+
+def graded_files(root: Path, folder: Path, test_files) -> str:
+    """Lines naming, for each lab kept as a package in ``folder`` (a submission), the files
+    graded as handed in and those that are the skeleton's (``root/labs``: left out of the
+    submission, or unchanged), so a student sees which of their files were graded; empty
+    when no graded lab is a package."""
+    from course.core.files import lab_source, module_files
+    from course.grading.catalog import lab_catalog
+
+    lines = []
+    for lab in lab_catalog(test_files).values():
+        mine, skeleton = lab_source(folder, lab.module), lab_source(root / "labs", lab.module)
+        if mine is None or skeleton is None or not mine.is_dir() or not skeleton.is_dir():
+            continue
+        theirs, same = [], []
+        for file in module_files(mine):
+            rel = file.relative_to(mine)
+            given = skeleton / rel
+            unchanged = given.is_file() and given.read_bytes() == file.read_bytes()
+            (same if unchanged else theirs).append(rel.as_posix())
+        lines.append(f"{lab.module}/: graded as handed in: {', '.join(theirs) or 'none'}; "
+                     f"as the skeleton gives them (left out or unchanged): "
+                     f"{', '.join(same) or 'none'}")
+    return "".join(line + "\n" for line in lines) + ("\n" if lines else "")
 
 
 def task_specs(labs, tasks) -> list[str]:
@@ -100,6 +125,9 @@ def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, t
         raise GradeError(f"rtcourse grade: nothing graded ({_selection(labs, keyword, tasks)}; "
                          f"see the error above)")
     data = keeper.to_gradescope()
+    if impl and impl not in ("solutions", "labs"):
+        folder = implementation_folder(root, impl, must_exist=False)
+        data["output"] = graded_files(root, folder, files) + data["output"]
     if code not in (0, 1):  # interrupted, internal or usage error: say so in the output
         data["output"] += f"\n(the test run ended abnormally: pytest exit code {int(code)})"
     print()

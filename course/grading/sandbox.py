@@ -38,8 +38,6 @@ grader may (the reference solutions shipped in the autograder) or touch the resu
 
 from __future__ import annotations
 
-import ast
-import inspect
 import os
 import shutil
 import signal
@@ -49,13 +47,14 @@ import sys
 import tempfile
 import time
 from multiprocessing.connection import Connection
-from pathlib import Path
 
 import torch
 
-from course.core.files import module_files
 from course.grading import wire
-from course.grading.worker import Changed, call_checked, check_written, too_large_message
+from course.grading.input_check import Changed, check_written, too_large_message
+from course.grading.input_check import LocalLab as LocalLab  # the trusted lab, re-exported
+from course.grading.proctree import memory_room, tree_bytes
+from course.grading.sources import Redactor, reference_file, reference_signatures
 
 DEFAULT_LAB_TIME_BUDGET = 100.0  # seconds per lab of what tests run past SLOW_TEST
 DEFAULT_SLOW_TEST = 10.0  # seconds of a test's submitted code that never count
@@ -93,52 +92,6 @@ def _env_float(name, default):
     return float(value) if value else default
 
 
-# ------------------------------------------------------------ what the student may see
-
-
-class Redactor:
-    """Removes every line of the hidden graders' source from text shown to students."""
-
-    def __init__(self, root=None):
-        self.lines: set[str] = set()
-        if root is None:
-            return
-        root = Path(root)
-        visible = set()
-        for path in [*root.glob("tests/test_*.py"), *root.glob("labs/*.py"),
-                     *(f for p in root.glob("solutions/*.py") for f in module_files(p))]:
-            visible |= _source_lines(path)
-        for path in root.glob("tests/hidden/*.py"):
-            self.lines |= _source_lines(path) - visible
-
-    def __call__(self, text: str) -> str:
-        if not self.lines or not text:
-            return text
-        out = []
-        for line in text.splitlines(keepends=True):
-            stripped = line.strip()
-            if any(hidden in stripped for hidden in self._candidates(stripped)):
-                out.append("[a line of a hidden test was removed]\n")
-            else:
-                out.append(line)
-        return "".join(out)
-
-    def _candidates(self, stripped):
-        if stripped in self.lines:
-            return (stripped,)
-        if len(stripped) < 16:
-            return ()
-        return [h for h in self.lines if h in stripped]
-
-
-def _source_lines(path) -> set[str]:
-    try:
-        text = Path(path).read_text(errors="replace")
-    except OSError:
-        return set()
-    return {line.strip() for line in text.splitlines() if len(line.strip()) >= 16}
-
-
 def _raise_student_error(err: dict, where: str, redact=None):
     """Re-raise a submission's exception as the closest builtin exception type,
     so ``pytest.raises(ValueError)`` works across the process boundary."""
@@ -164,48 +117,6 @@ def _raise_student_error(err: dict, where: str, redact=None):
     raise RuntimeError(f"{text}\n(raised in {where})\n{trace}")
 
 
-# ------------------------------------------------------------ the reference's signatures
-
-
-def reference_file(root, name: str) -> Path | None:
-    """The file whose signatures say which arguments are outputs: the reference
-    (course repository, Gradescope package), else the skeleton (student handout)."""
-    if root is None:
-        return None
-    for folder in ("solutions", "labs"):
-        path = Path(root) / folder / f"{name}.py"
-        if path.is_file():
-            return path
-    return None
-
-
-def reference_signatures(path) -> dict[str, list[str]] | None:
-    """Positional parameter names of every function, class (its ``__init__``) and method
-    (``Class.method``) of a lab file (and of its parts, for a reference kept in parts), read
-    from its source without running it."""
-    if path is None:
-        return None
-    body = [n for f in module_files(path) for n in ast.parse(f.read_text()).body]
-    table: dict[str, list[str]] = {}
-
-    def names(fn, drop_first):
-        params = [a.arg for a in fn.args.posonlyargs + fn.args.args]
-        return params[1:] if drop_first else params
-
-    for node in body:
-        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-            table[node.name] = names(node, False)
-        elif isinstance(node, ast.ClassDef):
-            table[node.name] = []
-            for item in node.body:
-                if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                    static = any(isinstance(d, ast.Name) and d.id == "staticmethod"
-                                 for d in item.decorator_list)
-                    key = node.name if item.name == "__init__" else f"{node.name}.{item.name}"
-                    table[key] = names(item, not static)
-    return table
-
-
 def _as_user(name: str | None):
     """(uid, gid) the submission runs as (None when unset)."""
     if not name:
@@ -220,60 +131,6 @@ def _as_user(name: str | None):
         raise RuntimeError(f"RTCOURSE_WORKER_USER={name}: only a grader running as root can "
                            f"start the worker as another user")
     return entry.pw_uid, entry.pw_gid
-
-
-def _children(pid) -> list[int]:
-    found = []
-    try:
-        tids = os.listdir(f"/proc/{pid}/task")
-    except OSError:
-        return found
-    for tid in tids:
-        try:
-            with open(f"/proc/{pid}/task/{tid}/children") as f:
-                found += [int(p) for p in f.read().split()]
-        except OSError:
-            pass
-    return found
-
-
-def _process_bytes(pid) -> int:
-    """Proportional resident size (shared pages split between their users), else RSS."""
-    try:
-        with open(f"/proc/{pid}/smaps_rollup") as f:
-            for line in f:
-                if line.startswith("Pss:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        with open(f"/proc/{pid}/statm") as f:
-            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-    except (OSError, IndexError, ValueError):
-        return 0
-
-
-def memory_room(cgroup: str = "/sys/fs/cgroup", meminfo: str = "/proc/meminfo") -> int | None:
-    """Bytes of memory still free to this process's container: its cgroup's limit less its
-    usage (cgroup v2, else v1), and at most the kernel's ``MemAvailable``; None when neither
-    is known. A grading container (Gradescope's: 768 MB) is far below the default limit."""
-    free = []
-    for limit, usage in (("memory.max", "memory.current"),
-                         ("memory/memory.limit_in_bytes", "memory/memory.usage_in_bytes")):
-        try:
-            text = Path(cgroup, limit).read_text().strip()
-            if text != "max" and int(text) < 2**60:  # v1 says "no limit" with a huge number
-                free.append(int(text) - int(Path(cgroup, usage).read_text()))
-            break
-        except (OSError, ValueError):
-            continue
-    try:
-        for line in Path(meminfo).read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                free.append(int(line.split()[1]) * 1024)
-    except (OSError, ValueError, IndexError):
-        pass
-    return max(0, min(free)) if free else None
 
 
 # The worker tree's own Python and torch, before the submission allocates anything.
@@ -423,13 +280,7 @@ class Worker:
     def _tree_bytes(self) -> int:
         """Memory of every process below the keeper: the server, a probe, and whatever
         the submission started (orphans are reparented to the keeper)."""
-        total, todo, seen = 0, _children(self.proc.pid), 0
-        while todo and seen < 4096:
-            pid = todo.pop()
-            seen += 1
-            total += _process_bytes(pid)
-            todo += _children(pid)
-        return total
+        return tree_bytes(self.proc.pid)
 
     def _ready(self, conn) -> bool:
         try:
@@ -673,49 +524,3 @@ class RemoteObject:
 
     def __repr__(self):
         return f"<{self._type} in the sandboxed worker>"
-
-
-class LocalLab:
-    """A trusted lab module, called in-process with the same checks as the sandbox."""
-
-    def __init__(self, name: str, module):
-        self._name = name
-        self._module = module
-
-    def _start_clock(self, time_limit=None):
-        pass
-
-    def __getattr__(self, name):
-        if name.startswith("_"):
-            raise AttributeError(name)
-        value = getattr(self._module, name)
-        if callable(value) and not isinstance(value, type):
-            return _checked(value, f"{self._name}.{name}")
-        return value
-
-    def probe(self, fn, *args, **kwargs):
-        return fn(self._module, *args, **kwargs)
-
-    def __repr__(self):
-        return f"<lab {self._name} from {self._module.__file__}>"
-
-
-def _positional_names(fn):
-    try:
-        return [p.name for p in inspect.signature(fn).parameters.values()
-                if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
-    except (TypeError, ValueError):
-        return []
-
-
-def _checked(fn, where):
-    def call(*args, **kwargs):
-        result, changed, error = call_checked(fn, args, kwargs)
-        check_written(changed, where, _positional_names(fn))
-        if error is not None:
-            raise error
-        return result
-
-    call.__name__ = getattr(fn, "__name__", "call")
-    call.__doc__ = fn.__doc__
-    return call

@@ -19,8 +19,9 @@ the pristine one. It forks
 The keeper is a child subreaper: whatever the submission starts, even a grandchild that
 left its session, is reparented to it and killed when the server ends or the grader
 stops the worker (or dies: the keeper's parent-death signal); then it removes its
-working folder, the grader's temporary one. Children drop to ``UID``/``GID`` when given (the grader runs as root),
-cap their address space, and die with the keeper.
+working folder, the grader's temporary one (the process tree is read and killed by
+:mod:`course.grading.proctree`). Children drop to ``UID``/``GID`` when given (the grader
+runs as root), cap their address space, and die with the keeper.
 
 Requests arrive as pickles from the trusted grader; replies go back as plain data (see
 :mod:`course.grading.wire`), never larger than ``REPLY_BYTES``. Anything the submission
@@ -33,170 +34,21 @@ test's probe among them) are not shown.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import functools
 import os
 import resource
 import shutil
 import signal
 import sys
 import tempfile
-import time
 import traceback
 from multiprocessing.connection import Connection
+
+from course.grading.input_check import _CheckedLab, call_checked, too_large_message
+from course.grading.proctree import kill_descendants
 
 _OUTPUT_LIMIT = 4000
 _PR_SET_PDEATHSIG = 1
 _PR_SET_CHILD_SUBREAPER = 36
-
-
-# ------------------------------------------------------------- shared with the grader
-
-
-def is_output_name(name) -> bool:
-    """Arguments a kernel may write into: ``out`` or ``..._out``."""
-    return isinstance(name, str) and (name == "out" or name.endswith("_out"))
-
-
-def input_mutation_message(where: str, names) -> str:
-    return (f"{where} modified its input argument(s) {', '.join(map(repr, names))}. Kernels "
-            f"must leave their inputs untouched (only an `out` argument may be written): a "
-            f"caller that reuses the input would silently get wrong results.")
-
-
-def too_large_message(where: str, nbytes: int, limit: int) -> str:
-    return (f"{where} returned {nbytes / 2**20:.0f} MB of data, more than the "
-            f"{limit / 2**20:.0f} MB a result may hold; the test fails")
-
-
-# ---------------------------------------------------------------- input-mutation check
-
-
-def _tensor_like(value):
-    import numpy as np
-    import torch
-
-    if isinstance(value, torch.Tensor):
-        return value.layout == torch.strided
-    return isinstance(value, np.ndarray)
-
-
-def _walk(value, path="", depth=0):
-    """(path, array) for every tensor or numpy array in ``value``, inside lists, tuples,
-    dicts and dataclasses too (a ``Mesh`` or ``Rays`` argument holds tensors)."""
-    if _tensor_like(value):
-        yield path, value
-        return
-    if depth >= 4:
-        return
-    if type(value) in (list, tuple) or isinstance(value, tuple):
-        for i, item in enumerate(value):
-            yield from _walk(item, f"{path}[{i}]", depth + 1)
-    elif type(value) is dict:
-        for key, item in list(value.items())[:64]:
-            yield from _walk(item, f"{path}[{key!r}]", depth + 1)
-    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
-        for f in dataclasses.fields(value):
-            yield from _walk(getattr(value, f.name, None), f"{path}.{f.name}", depth + 1)
-
-
-def _copy(a):
-    import torch
-
-    return a.detach().clone() if isinstance(a, torch.Tensor) else a.copy()
-
-
-def _same_bits(a, b) -> bool:
-    import numpy as np
-    import torch
-
-    if isinstance(a, np.ndarray):
-        return (a.shape == b.shape and a.dtype == b.dtype
-                and np.ascontiguousarray(a).tobytes() == np.ascontiguousarray(b).tobytes())
-    a = a.detach()
-    if a.shape != b.shape or a.dtype != b.dtype:
-        return False
-    if a.dtype.is_floating_point or a.dtype.is_complex:
-        # Bits, not values (NaN == NaN, -0.0 != +0.0); contiguous first: a strided view
-        # (x[..., 0]) cannot be reinterpreted as bytes.
-        return torch.equal(a.contiguous().reshape(-1).view(torch.uint8),
-                           b.contiguous().reshape(-1).view(torch.uint8))
-    return torch.equal(a, b)
-
-
-@dataclasses.dataclass
-class Changed:
-    """An argument (or a tensor inside one) whose bits a call changed."""
-
-    position: int | None  # index of a positional argument, else None
-    keyword: str | None   # name of a keyword argument, else None
-    path: str             # "" for the argument itself, ".origins" / "[2]" inside it
-    value: object         # the array after the call
-
-
-@contextlib.contextmanager
-def _unobserved():
-    """The check's own copies and comparisons, hidden from the torch modes a probe may
-    have entered (an op counter or a live-value tracker must see the kernel only)."""
-    import torch
-
-    try:
-        from torch.utils._python_dispatch import _disable_current_modes
-    except ImportError:  # an older torch: no modes to hide from
-        _disable_current_modes = contextlib.nullcontext
-    with _disable_current_modes(), torch._C.DisableTorchFunction():
-        yield
-
-
-def call_checked(fn, args, kwargs):
-    """Call ``fn``; return ``(result, changed, exception)``.
-
-    ``changed`` lists every tensor or numpy array among the arguments (nested ones too)
-    whose bits differ after the call, whether it returned or raised: a kernel that zeroes
-    its inputs and then raises is caught as well. Which of them may be written (outputs)
-    is the caller's decision, made from the reference's signature.
-    """
-    before = []
-    with _unobserved():
-        for i, arg in enumerate(args):
-            before += [(i, None, p, a, _copy(a)) for p, a in _walk(arg)]
-        for key, arg in kwargs.items():
-            before += [(None, key, p, a, _copy(a)) for p, a in _walk(arg)]
-    result, error = None, None
-    try:
-        result = fn(*args, **kwargs)
-    except BaseException as exc:  # a submission may raise anything, SystemExit too
-        error = exc
-    with _unobserved():
-        changed = [Changed(pos, key, path, a) for pos, key, path, a, old in before
-                   if not _same_bits(a, old)]
-    return result, changed, error
-
-
-def argument_name(changed: Changed, positional) -> str | None:
-    """The parameter a changed argument was passed as, by the reference's positional
-    parameter names ``positional`` (None: the reference is not known)."""
-    if changed.keyword is not None:
-        return changed.keyword
-    if positional is not None and changed.position < len(positional):
-        return positional[changed.position]
-    return None
-
-
-def check_written(changed, where, positional):
-    """Raise AssertionError if a call changed anything but its outputs; return the
-    changed outputs as ``(position, keyword, value)``."""
-    bad, outputs = [], []
-    for c in changed:
-        name = argument_name(c, positional)
-        if c.path == "" and is_output_name(name):
-            outputs.append(c)
-        else:
-            label = name or f"argument {c.position}"
-            bad.append(label + c.path)
-    if bad:
-        raise AssertionError(input_mutation_message(where, bad))
-    return outputs
 
 
 # ---------------------------------------------------------------- errors and output
@@ -325,48 +177,6 @@ def fingerprint_changes(before) -> list[str]:
     return changed
 
 
-# ---------------------------------------------------------------- checked lab (probes)
-
-
-class _CheckedLab:
-    """The lab module as a probe sees it: every call goes through the input-mutation
-    check, with the outputs named by the reference's signatures."""
-
-    def __init__(self, module, signatures, where):
-        self._module, self._signatures, self._where = module, signatures, where
-
-    def __getattr__(self, name):
-        value = getattr(self._module, name)
-        return _wrap(value, name, self._signatures, f"{self._where}.{name}")
-
-
-class _CheckedObject:
-    def __init__(self, obj, cls_name, signatures):
-        self._obj, self._cls, self._signatures = obj, cls_name, signatures
-
-    def __getattr__(self, name):
-        value = getattr(self._obj, name)
-        return _wrap(value, f"{self._cls}.{name}", self._signatures, f"{self._cls}.{name}")
-
-
-def _wrap(value, key, signatures, where):
-    if not callable(value) or type(value).__name__ == "module":
-        return value
-    positional = signatures.get(key) if signatures is not None else None
-
-    @functools.wraps(value, updated=())  # a probe may read its signature (accounting does)
-    def call(*args, **kwargs):
-        result, changed, error = call_checked(value, args, kwargs)
-        check_written(changed, where, positional)
-        if error is not None:
-            raise error
-        if isinstance(value, type):
-            return _CheckedObject(result, key, signatures)
-        return result
-
-    return call
-
-
 # ---------------------------------------------------------------- the processes
 
 
@@ -405,7 +215,9 @@ class _Labs:
 
     def get(self, name):
         if name not in self.modules:
-            path = os.path.join(self.folder, f"{name}.py")
+            from course.core.files import lab_source  # name.py, or the package name/
+
+            path = lab_source(self.folder, name) or os.path.join(self.folder, f"{name}.py")
             try:
                 self.modules[name] = (self.wire.import_file(path, "submission_" + name), None)
             except BaseException as exc:  # a submission may raise anything, SystemExit too
@@ -534,54 +346,6 @@ def _probe(request, folder, capture, wire) -> dict:
     return {"value": encoded}
 
 
-def _kill_descendants():
-    """SIGKILL every process below the keeper (orphans included: it is their subreaper)
-    and reap them."""
-    end = time.monotonic() + 10
-    while time.monotonic() < end:
-        pids = _children(os.getpid())
-        for pid in pids:
-            for p in _tree(pid):
-                try:
-                    os.kill(p, signal.SIGKILL)
-                except OSError:
-                    pass
-        while True:
-            try:
-                pid, _ = os.waitpid(-1, os.WNOHANG)
-            except ChildProcessError:
-                return
-            if pid == 0:
-                break
-        if not pids:
-            time.sleep(0.01)
-
-
-def _children(pid) -> list[int]:
-    found = []
-    try:
-        tids = os.listdir(f"/proc/{pid}/task")
-    except OSError:
-        return found
-    for tid in tids:
-        try:
-            with open(f"/proc/{pid}/task/{tid}/children") as f:
-                found += [int(p) for p in f.read().split()]
-        except OSError:
-            pass
-    return found
-
-
-def _tree(pid) -> list[int]:
-    """``pid`` and its descendants, parents first."""
-    out, todo = [], [pid]
-    while todo and len(out) < 10000:
-        p = todo.pop()
-        out.append(p)
-        todo += _children(p)
-    return out
-
-
 def _exit_like(status):
     code = os.waitstatus_to_exitcode(status)
     if code < 0:  # die of the same signal, so the grader sees it
@@ -602,7 +366,7 @@ def main(argv):
 
     def clean():
         """Everything below the keeper, then its folder (the grader's temporary one)."""
-        _kill_descendants()
+        kill_descendants()
         if os.path.basename(workdir).startswith("rtcourse-worker-"):
             shutil.rmtree(workdir, ignore_errors=True)
 

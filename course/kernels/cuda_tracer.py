@@ -248,7 +248,8 @@ std::vector<int64_t> attributes(bool any_hit, int64_t block, int64_t stack,
     const void* fn = variant<const void*>(
         any_hit, stack, min_blocks, (const void*)trace_kernel<true, 32, 0>,
         (const void*)trace_kernel<true, 64, 0>, (const void*)trace_kernel<false, 32, 0>,
-        (const void*)trace_kernel<false, 64, 0>, (const void*)trace_kernel<true, 32, MIN_BLOCKS_CAP>,
+        (const void*)trace_kernel<false, 64, 0>,
+        (const void*)trace_kernel<true, 32, MIN_BLOCKS_CAP>,
         (const void*)trace_kernel<true, 64, MIN_BLOCKS_CAP>,
         (const void*)trace_kernel<false, 32, MIN_BLOCKS_CAP>,
         (const void*)trace_kernel<false, 64, MIN_BLOCKS_CAP>);
@@ -390,8 +391,8 @@ def ptxas_report(arch: str = "sm_90") -> dict:
             r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads",
             block).groups())
         regs = int(re.search(r"Used (\d+) registers", block).group(1))
-        report[any_hit, stack, cap > 0] = {"regs": regs, "stack_frame": frame, "spill_stores": stores,
-                                  "spill_loads": loads}
+        report[any_hit, stack, cap > 0] = {"regs": regs, "stack_frame": frame,
+                                           "spill_stores": stores, "spill_loads": loads}
     return report
 
 

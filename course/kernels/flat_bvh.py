@@ -70,9 +70,10 @@ from dataclasses import dataclass
 
 import torch
 
-from course.core.raymath import gamma
-from course.core.types import Hits
-from course.given.lab2 import TreeLevels, expand_ranges, surface_area
+from course.core.raymath import check_mesh, gamma
+from course.core.types import Hits, Mesh
+from course.given.lab2_blocks import expand_ranges, surface_area
+from course.given.lab2_bvh import TreeLevels
 
 __all__ = [
     "BINS",
@@ -176,29 +177,6 @@ def _one_cpu_thread(device: torch.device):
         torch.set_num_threads(threads)
 
 
-def _check_mesh(vertices, faces) -> None:
-    if not isinstance(vertices, torch.Tensor) or not vertices.is_floating_point():
-        raise TypeError(f"vertices: expected a (V, 3) float tensor, got "
-                        f"{getattr(vertices, 'dtype', type(vertices).__name__)}")
-    if vertices.ndim != 2 or vertices.shape[1] != 3:
-        raise ValueError(f"vertices: expected shape (V, 3), got {tuple(vertices.shape)}")
-    if not isinstance(faces, torch.Tensor) or faces.dtype not in (torch.int32, torch.int64):
-        raise TypeError(f"faces: expected a (F, 3) int64 tensor, got "
-                        f"{getattr(faces, 'dtype', type(faces).__name__)}")
-    if faces.ndim != 2 or faces.shape[1] != 3 or faces.shape[0] == 0:
-        raise ValueError(f"faces: expected shape (F, 3) with F >= 1, got {tuple(faces.shape)}")
-    if faces.device != vertices.device:
-        raise ValueError(f"faces: expected device {vertices.device} like vertices, "
-                         f"got {faces.device}")
-    lo, hi = int(faces.min()), int(faces.max())
-    if lo < 0 or hi >= vertices.shape[0]:
-        raise ValueError(f"faces: expected indices in [0, {vertices.shape[0]}), "
-                         f"got values in [{lo}, {hi}]")
-    if not torch.isfinite(vertices).all():
-        raise ValueError("vertices: expected finite coordinates (NaN/inf vertices cannot be "
-                         "bounded by a box)")
-
-
 def _binned_splits(lo, hi, cen, tri, owner, k):
     """SAH over BINS bins per axis for k nodes at once.
 
@@ -242,16 +220,18 @@ def _binned_splits(lo, hi, cen, tri, owner, k):
 def build_flat_bvh(vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int = 4) -> FlatBVH:
     """Binned-SAH BVH of a triangle mesh, flattened for the GPU kernels.
 
-    vertices: (V, 3) float (finite); faces: (F, 3) int64, F >= 1; leaf_size: the largest leaf
-    (every node with more triangles is split; 4 is a good GPU default: 1-2 leaf visits fill
-    a warp's triangle tests). Built on ``vertices.device``; the result lives there too.
+    vertices: (V, 3) float (finite); faces: (F, 3) int64 (or int32), F >= 1; leaf_size: the
+    largest leaf (every node with more triangles is split; 4 is a good GPU default: 1-2 leaf
+    visits fill a warp's triangle tests). Built on ``vertices.device``; the result lives there too.
 
     Splits minimise the SAH ``A_left n_left + A_right n_right`` over 16 centroid bins per
     axis; a node whose centroids all fall into one bin (or one below MEDIAN_DEPTH) is split
     at its object median instead. Node boxes are the exact float32 bounds of their triangles.
     """
     start_time = time.perf_counter()
-    _check_mesh(vertices, faces)
+    if isinstance(faces, torch.Tensor) and faces.dtype == torch.int32:
+        faces = faces.long()
+    check_mesh(Mesh(vertices, faces), finite=True, name="vertices")
     if isinstance(leaf_size, bool) or not isinstance(leaf_size, int) or leaf_size < 1:
         raise ValueError(f"leaf_size: expected an int >= 1, got {leaf_size!r}")
     with _one_cpu_thread(vertices.device):

@@ -15,9 +15,10 @@ Design, per program (a block of ``block_rays`` rays, ``num_warps`` warps):
   scalars, which every thread of the block shares (uniform loads: they hit L1 after the
   first warp), and tests it against all rays of the block;
 * each thread holds ``block_rays / (32 num_warps)`` rays, so each triangle load feeds that
-  many tests. This, not occupancy, decides the speed (bench/lab1_intersect.py sweeps it):
-  at one ray per thread the loop is bound by its loads at 50-60% occupancy; at four, the
-  kernel needs 128 registers, runs at 25% occupancy and is ~1.6x faster;
+  many tests. This, not occupancy, decides the speed: at one ray per thread the loop is
+  bound by its loads; at four, the kernel needs 128 registers and runs at a quarter of the
+  warps, and is faster (``bench/lab1_intersect.py`` sweeps it; the figures are in
+  bench/results/<gpu>/lab1*/);
 * triangles are stored structure-of-arrays (one contiguous row per coordinate) with
   precomputed data: ``v0, e1 = v1 - v0, e2 = v2 - v0`` for Möller–Trumbore (9 floats,
   saving 6 subtractions per test) or Woop's 3x4 world-to-unit-triangle transform
@@ -25,7 +26,7 @@ Design, per program (a block of ``block_rays`` rays, ``num_warps`` warps):
 * a test does no full-precision division: the reciprocal variant computes ``1/det``
   once per pair with the GPU's fast division (``/`` in Triton is PTX ``div.full.f32``,
   within 2 ulp), the division-free variant compares ``t' / det`` as fractions and
-  divides once per ray at the end (faster, but only for scenes of moderate scale);
+  divides once per ray at the end (for scenes of moderate scale only);
 * ``u, v`` of the winner are recomputed once per ray after the loop, so the loop
   carries only ``best_t, best_id`` per ray (the lecture's register budget: ray 6,
   vertices 9, t/u/v 3, triNum 1, loop 1, tid 1, min_t/min_id 2 = 23).
@@ -82,11 +83,10 @@ __all__ = [
 # power-of-two factor up to PAD needs no bounds mask; padding triangles never hit.
 PAD = 16
 
-# Launch defaults from bench/lab1_intersect.py's sweep on an H200 (1M rays x 2K triangles):
-# what matters is rays per thread, block_rays / (32 num_warps). One ray per thread is bound
-# by the triangle loads (~330 G tests/s at 50-60% occupancy); 4 rays per thread share each
-# load 4 ways (128 registers, 25% occupancy, 500-580 G tests/s); 8 gain a few % more at
-# ~230 registers, close to spilling.
+# Launch defaults from bench/lab1_intersect.py's sweep (1M rays x 2K triangles; figures in
+# bench/results/nvidia-h200/lab1/): what matters is rays per thread, block_rays / (32
+# num_warps). One ray per thread is bound by the triangle loads; 4 rays per thread share
+# each load 4 ways (128 registers); 8 gain little more at ~230 registers, close to spilling.
 DEFAULT_BLOCK_RAYS = 256
 DEFAULT_NUM_WARPS = 2
 DEFAULT_UNROLL = 4
@@ -163,7 +163,8 @@ def unit_layout(triangles: torch.Tensor) -> TriangleLayout:
     e1, e2 = v1 - v0, v2 - v0
     n = torch.linalg.cross(e1, e2)
     n2 = (n * n).sum(-1, keepdim=True)
-    rot = torch.stack([torch.linalg.cross(e2, n), torch.linalg.cross(n, e1), n], dim=1) / n2[..., None]
+    rot = torch.stack([torch.linalg.cross(e2, n), torch.linalg.cross(n, e1), n],
+                      dim=1) / n2[..., None]
     shift = -(rot @ v0[..., None])  # (M, 3, 1): maps v0 to the origin
     rows = torch.cat([rot, shift], dim=2).reshape(-1, 12)
     never = torch.tensor([0.0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, 1], dtype=torch.float64)
@@ -465,10 +466,10 @@ def mt_closest_hit_triton(origins: torch.Tensor, directions: torch.Tensor, trian
     t_min, t_max: numbers or (N,) tensors; a hit needs ``t_min <= t <= t_max``.
     block_rays: rays per program (a power of two); num_warps: warps per program;
     unroll: triangles per loop iteration; division_free: compare fractions instead of
-    dividing each pair: ~5-8% faster, but the products ``t' |det|`` it compares must stay
-    in fp32's normal range, which (unit directions) holds for scenes scaled by about 1e-7
-    to 1e7; beyond that it reports farther hits than the nearest (it does not crash or
-    produce NaN). The reciprocal variant has no such limit.
+    dividing each pair: faster (bench/results/<gpu>/lab1*/), but the products ``t' |det|``
+    it compares must stay in fp32's normal range, which (unit directions) holds for scenes
+    scaled by about 1e-7 to 1e7; beyond that it reports farther hits than the nearest (it
+    does not crash or produce NaN). The reciprocal variant has no such limit.
     Returns ``(t, triangle, u, v)``: (N,) float32 (inf on a miss), (N,) int64 (-1),
     (N,) float32 barycentrics of v1 and v2 (0 on a miss).
     """

@@ -335,20 +335,26 @@ def _log_scale(set_scale, values: list[float]) -> None:
         set_scale("symlog", linthresh=min(positive))
 
 
-def load_lab(name: str, impl: str | None = None):
+def add_impl_option(parser) -> None:
+    """The ``--impl`` option of a bench script: which implementation of the labs it measures
+    (:func:`load_lab`'s ``impl``; the default, ``RTCOURSE_IMPL`` or else solutions/ where it
+    exists and labs/ in the student handout, is what the grader runs too)."""
+    parser.add_argument("--impl", default=os.environ.get("RTCOURSE_IMPL") or None,
+                        help="the labs measured: labs (yours), solutions (the references, "
+                             "in the course repository) or a folder of lab files (default: "
+                             "solutions where present, else labs)")
+
+
+def load_lab(name: str, impl: str | None = None, root=None):
     """A lab module for benchmarks, demos and notebooks.
 
     ``name`` is a module name (``"lab1_intersect"``) or a lab prefix (``"lab1"``);
     ``impl`` is ``solutions`` (the default where it exists), ``labs`` (the default in
-    the student handout) or a folder holding lab files. Trusted code only: this imports
-    the module into the calling process.
+    the student handout) or a folder holding lab files (see
+    :func:`course.core.labs.implementation_folder`); ``root``: the course folder (default:
+    the one the current folder lies in; a bench script passes its own). Trusted code only: this imports
+    the module into the calling process. FileNotFoundError names a missing folder or lab.
     """
-    from course.core.files import import_file, repo_root
+    from course.core.labs import load_lab as load
 
-    root = repo_root()
-    impl = impl or ("solutions" if (root / "solutions").is_dir() else "labs")
-    folder = root / impl if impl in ("solutions", "labs") else Path(impl).resolve()
-    matches = sorted(folder.glob(f"{name}.py")) or sorted(folder.glob(f"{name}_*.py"))
-    if not matches:
-        raise FileNotFoundError(f"name: no lab module {name!r} in {folder}")
-    return import_file(matches[0], f"{folder.name}_{matches[0].stem}")
+    return load(name, impl, root)

@@ -1,4 +1,4 @@
-"""``rtcourse``: demo, grade, mutants, release, gradescope, slides."""
+"""``rtcourse``: demo, grade, mutants, release, gradescope, slides, skeletons."""
 
 from __future__ import annotations
 
@@ -17,12 +17,15 @@ def _root() -> Path:
 
 def cmd_demo(args):
     from course.core.device import default_device
+    from course.core.labs import implementation_folder
     from course.tools.gallery import build_gallery
 
     root = _root()
     device = str(default_device(args.device))
-    impl = args.impl or ("solutions" if (root / "solutions").is_dir() else "labs")
-    folder = root / impl if impl in ("solutions", "labs") else Path(impl).resolve()
+    try:
+        folder = implementation_folder(root, args.impl)
+    except FileNotFoundError as exc:
+        raise SystemExit(f"rtcourse demo: {exc}") from None
     rows = build_gallery(root, folder, device, Path(args.out), args.size)
     print(f"\n{'lab':>3}  {'status':<22} {'seconds':>8}")
     for row in rows:
@@ -36,6 +39,21 @@ def cmd_grade(args):
     data = grade(args.impl, labs=args.lab, json_path=args.json, keyword=args.k,
                  trusted=args.trusted, quiet=not args.verbose, tasks=args.task)
     return 0 if data["max_score"] > 0 else 1
+
+
+def cmd_grade_class(args):
+    from course.grading.classroom import grade_class
+    from course.tools.gradescope import collect_submission
+
+    try:
+        grade_class(args.submissions, args.lab, collect=collect_submission, out=args.out,
+                    jobs=args.jobs, device=args.device, tasks=args.task, keyword=args.k,
+                    time_limit=args.time_limit)
+    except ValueError as exc:
+        raise SystemExit(f"rtcourse grade-class: {exc}") from None
+    except KeyboardInterrupt:
+        return 130
+    return 0
 
 
 def cmd_mutants(args):
@@ -61,9 +79,23 @@ def cmd_mutants(args):
     return 1 if survivors else 0
 
 
+def _notebook_stack(command: str) -> None:
+    """Stop with one line when the notebooks extra (a grading install leaves it out) is not
+    installed and ``command`` needs it."""
+    import importlib.util
+
+    missing = [m for m in ("nbformat", "nbclient", "nbconvert", "ipykernel")
+               if importlib.util.find_spec(m) is None]
+    if missing:
+        raise SystemExit(f"{command}: needs the lecture notebooks' packages ({', '.join(missing)} "
+                         f"missing): pip install -e '.[notebooks]' (make test installs them)")
+
+
 def cmd_release(args):
     from course.tools.release import release
 
+    if args.notes:
+        _notebook_stack("rtcourse release (--no-notes needs none)")
     files = release(_root(), args.out, notes=args.notes)
     print(f"wrote {len(files)} files of the student handout to {Path(args.out).resolve()}")
 
@@ -81,6 +113,7 @@ def cmd_gradescope(args):
 
 
 def cmd_slides(args):
+    _notebook_stack("rtcourse slides")
     from course.tools.slides import render_slides
 
     try:
@@ -90,6 +123,12 @@ def cmd_slides(args):
         raise SystemExit(f"rtcourse slides: {exc}") from None
     print(f"\nslides and lecture notes: {Path(args.out).resolve() / 'index.html'}")
     return 1 if any(row["errors"] for row in rows) else 0
+
+
+def cmd_skeletons(args):
+    from course.tools.skeletons import main as skeletons
+
+    return skeletons(_root(), check=args.check)
 
 
 def main(argv=None):
@@ -117,6 +156,24 @@ def main(argv=None):
     p.add_argument("-v", "--verbose", action="store_true",
                    help="also print pytest's whole log with full tracebacks")
     p.set_defaults(func=cmd_grade)
+
+    p = sub.add_parser("grade-class", help="grade a folder of a class's submissions: "
+                                           "gradebook CSV, feedback per student, JSON")
+    p.add_argument("submissions", help="a folder (or zip) with one folder or zip per student, "
+                                       "a Gradescope export, or Canvas/Moodle/Blackboard files")
+    p.add_argument("--lab", type=int, required=True, help="the lab graded")
+    p.add_argument("--jobs", "-j", type=int, default=None,
+                   help="warm grading processes (default: the usable cores)")
+    p.add_argument("--out", default=None, help="output folder (default: grades/labN); run "
+                                               "again with the same one to resume")
+    p.add_argument("--device", choices=("cpu", "auto"), default="cpu",
+                   help="cpu hides CUDA from the graders (default: grading is process "
+                        "start-up and small kernels); auto lets them use it")
+    p.add_argument("-k", default=None, help="pytest -k expression selecting tests")
+    p.add_argument("--task", action="append", metavar="K", help="grade only task K")
+    p.add_argument("--time-limit", type=float, default=None,
+                   help="seconds of student code per test (default: the grader's, 120)")
+    p.set_defaults(func=cmd_grade_class)
 
     p = sub.add_parser("mutants", help="grade every mutant; each must lose points")
     p.add_argument("--lab", type=int, action="append")
@@ -152,6 +209,12 @@ def main(argv=None):
     p.add_argument("--execute", action=argparse.BooleanOptionalAction, default=True,
                    help="run the notebooks first (RTCOURSE_SMALL=1 unless set; default)")
     p.set_defaults(func=cmd_slides)
+
+    p = sub.add_parser("skeletons", help="generate labs/ from the marked references in solutions/")
+    p.add_argument("--check", action="store_true",
+                   help="change nothing; exit 1 naming the first differing line of each "
+                        "skeleton that is not what the references generate")
+    p.set_defaults(func=cmd_skeletons)
 
     args = parser.parse_args(argv)
     _COMMAND[0] = f"rtcourse {args.command}"

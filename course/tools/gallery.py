@@ -8,7 +8,6 @@ A lab's showcase lives in ``bench/showcase/labN.py`` as
 from __future__ import annotations
 
 import html
-import re
 import time
 from pathlib import Path
 
@@ -16,6 +15,7 @@ import torch
 
 from course.core.files import import_file
 from course.core.image import save_png
+from course.core.labs import lab_number
 from course.core.progress import progress
 from course.measure.bench import load_lab
 
@@ -23,9 +23,8 @@ from course.measure.bench import load_lab
 def showcases(root: Path) -> list[tuple[int, Path]]:
     found = []
     for path in sorted((root / "bench" / "showcase").glob("lab*.py")):
-        match = re.fullmatch(r"lab(\d+)", path.stem)
-        if match:
-            found.append((int(match.group(1)), path))
+        if lab_number(path.stem) is not None:
+            found.append((lab_number(path.stem), path))
     return found
 
 

@@ -6,8 +6,10 @@ The zip holds, at its top level, what Gradescope asks for::
     run_autograder    run per submission: collect the lab files, grade them, write results
     rtcourse/         the course: course/, tests/ (with tests/hidden/), labs/, solutions/
 
-``run_autograder`` copies the student's ``labN_topic.py`` files out of the submission
-(wherever they lie in it: at the top, under ``labs/``, ...) into a fresh folder and runs
+``run_autograder`` copies the student's lab files out of the submission (wherever they lie
+in it: at the top, under ``labs/``, ...) into a fresh folder: each ``labN_topic.py``, and of
+a lab kept as a package the files handed in, laid over the skeleton package
+(:func:`collect_submission`). Then it runs
 ``rtcourse grade --impl FOLDER --json RESULTS/results.json``. The submission is never
 trusted: it runs in the sandboxed worker, and, when the autograder runs as root (as on
 Gradescope), as the unprivileged user ``rtcourse-student`` that setup.sh creates, which
@@ -35,6 +37,7 @@ import sys
 import zipfile
 from pathlib import Path
 
+from course.core.files import lab_source, module_files
 from course.grading.catalog import lab_catalog, lab_file_rank
 from course.grading.runner import lab_test_files
 from course.tools.release import course_files
@@ -172,44 +175,101 @@ def build_autograder(root, out, labs=None) -> list[str]:
 # ------------------------------------------------------------ inside the autograder
 
 
-def collect_submission(submission, dest, modules) -> dict[str, Path | None]:
-    """Copy each ``module.py`` of ``modules`` found in ``submission`` into ``dest``.
+def _ranked(candidates, filename: str, submission: Path) -> list[Path]:
+    """The files of ``candidates`` named ``filename`` or a near miss of it ("grid (1).py"),
+    best first: the exact name, then the shallowest."""
+    stem = filename[:-3]
+    ranked = [(lab_file_rank(p.name, stem), len(p.relative_to(submission).parts), str(p), p)
+              for p in candidates]
+    return [p for rank, *_, p in sorted(r for r in ranked if r[0] is not None)]
+
+
+def _copy_first(paths, target: Path) -> Path | None:
+    """Copy the first of ``paths`` that is a regular file of source size to ``target``."""
+    for path in paths:
+        if not path.is_symlink() and path.is_file() and path.stat().st_size <= _MAX_LAB_FILE:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(path, target, follow_symlinks=False)
+            return path
+    return None
+
+
+def collect_submission(submission, dest, modules, skeletons=None) -> dict[str, Path | None]:
+    """Copy the lab files of ``modules`` found in ``submission`` into ``dest``.
 
     A file may lie anywhere in the submission (students upload single files, their
-    ``labs/`` folder or the whole handout); the shallowest match wins. Only regular files
-    are copied, never links (a link could point at the grader's files).
-    Returns module -> the file copied (relative to ``submission``), or None if absent.
+    ``labs/`` folder or the whole handout); the exact name wins over a near miss an upload
+    makes of it ("lab1_intersect (1).py", "Lab1_Intersect.py"), then the shallowest, and
+    it is copied under the exact name. Only regular files are copied, never links (a link
+    could point at the grader's files).
+
+    A lab kept as a package (its skeleton in ``skeletons``, the grader's ``labs/``, is a
+    folder ``module/``) is handed in as the files of it the student edited: ``dest/module/``
+    starts as the grader's copy of the skeleton package and each of its files found in the
+    submission is laid over it, so a file left out costs only its own tasks. The files are
+    taken from the shallowest folder named for the package (``lab2_accel/``, or a near
+    miss) where the submission has one, else loose, by name, from anywhere in it (a loose
+    ``__init__.py`` is not taken: it may be any package's). A lab none of whose files is in
+    the submission is not laid down at all: it is missing, as a single-file lab is.
+
+    Returns each lab file's name as the grader sees it (``lab0_interop.py``,
+    ``lab2_accel/grid.py``) -> the file copied (relative to ``submission``), or None where
+    the submission has none.
     """
     submission, dest = Path(submission), Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     found: dict[str, Path | None] = {}
-    candidates = sorted((p for p in submission.rglob("*.py")
-                         if not any(part.startswith(".") or part == "__MACOSX"
-                                    for part in p.relative_to(submission).parts)),
-                        key=lambda p: (len(p.relative_to(submission).parts), str(p)))
+    candidates = [p for p in submission.rglob("*.py")
+                  if not any(part.startswith(".") or part == "__MACOSX"
+                             for part in p.relative_to(submission).parts)]
     for module in modules:
-        found[module] = None
-        # The exact name first, then a near miss an upload makes of it ("lab1_intersect
-        # (1).py", "Lab1_Intersect.py"), copied under the exact name.
-        ranked = sorted((p for p in candidates if lab_file_rank(p.name, module) is not None),
-                        key=lambda p: lab_file_rank(p.name, module))
-        for path in ranked:
-            if not path.is_symlink() and path.is_file() \
-                    and path.stat().st_size <= _MAX_LAB_FILE:
-                shutil.copyfile(path, dest / f"{module}.py", follow_symlinks=False)
-                found[module] = path.relative_to(submission)
-                break
+        package = lab_source(skeletons, module) if skeletons is not None else None
+        if package is None or not package.is_dir():
+            target = dest / f"{module}.py"
+            path = _copy_first(_ranked(candidates, target.name, submission), target)
+            found[target.name] = path.relative_to(submission) if path else None
+            continue
+        folders = sorted({p.parent for p in candidates
+                          if lab_file_rank(p.parent.name + ".py", module) is not None},
+                         key=lambda f: (lab_file_rank(f.name + ".py", module),
+                                        len(f.relative_to(submission).parts), str(f)))
+        files = module_files(package)
+        mine: dict[str, Path | None] = {}
+        for file in files:
+            name = file.relative_to(package).as_posix()
+            if folders:
+                pool = [p for p in candidates if p.parent == folders[0]]
+            else:
+                pool = [p for p in candidates if name != "__init__.py"]
+            paths = _ranked(pool, Path(name).name, submission)
+            chosen = next((p for p in paths if not p.is_symlink() and p.is_file()
+                           and p.stat().st_size <= _MAX_LAB_FILE), None)
+            mine[f"{module}/{name}"] = chosen
+        if any(mine.values()):
+            for file in files:
+                rel = file.relative_to(package)
+                chosen = mine[f"{module}/{rel.as_posix()}"]
+                target = dest / module / rel
+                if _copy_first([chosen] if chosen else [], target) is None:
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    shutil.copyfile(file, target)  # the skeleton's: its tasks score 0
+        found.update({name: p.relative_to(submission) if p else None
+                      for name, p in mine.items()})
     return found
 
 
 def _collect_main(submission: str, dest: str, labs=None) -> int:
     from course.core.files import repo_root
 
-    modules = [lab.module for lab in lab_catalog(lab_test_files(repo_root(), labs)).values()]
-    found = collect_submission(submission, dest, modules)
-    for module, path in found.items():
-        print(f"{module + '.py':<24} " + (f"found: {path}" if path else
-                                          "not in the submission: its lab scores 0"))
+    root = repo_root()
+    modules = [lab.module for lab in lab_catalog(lab_test_files(root, labs)).values()]
+    found = collect_submission(submission, dest, modules, root / "labs")
+    handed_in = {name.split("/")[0] for name, path in found.items() if path}
+    for name, path in found.items():
+        partial = "/" in name and name.split("/")[0] in handed_in  # a package's file
+        print(f"{name:<24} " + (f"found: {path}" if path else
+                                "not in the submission: the skeleton's is graded"
+                                if partial else "not in the submission: its lab scores 0"))
     return 0
 
 

@@ -24,16 +24,17 @@ import base64
 import functools
 import hashlib
 import json
-import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+
+from course.core.files import lab_source
+from course.core.labs import lab_file_number
 
 FIGURES = Path("slides") / "figures"  # under the course root
 INDEX = "index.json"
 _KEPT = ("image/png", "image/svg+xml", "text/html", "text/markdown", "text/latex",
          "text/plain")
-_LAB_FILE = re.compile(r"(?:^|[/\\])lab(\d+)_\w+\.py$")  # a lab's file, not its grader
 
 
 def cell_key(source: str) -> str:
@@ -111,13 +112,13 @@ def _from_not_implemented(exc: NotImplementedError, root) -> Unwritten | None:
     while tb is not None:
         frames.append(tb.tb_frame)
         tb = tb.tb_next
-    lab_frames = [f for f in frames if _LAB_FILE.search(f.f_code.co_filename)]
+    lab_frames = [f for f in frames if lab_file_number(f.f_code.co_filename) is not None]
     if not lab_frames:
         return None
     from course.grading.catalog import parse_not_implemented
 
     frame = lab_frames[-1]
-    lab = int(_LAB_FILE.search(frame.f_code.co_filename).group(1))
+    lab = lab_file_number(frame.f_code.co_filename)
     function, task = parse_not_implemented(str(exc))
     function = function or frame.f_code.co_name
     if task is None and root is not None:
@@ -137,8 +138,8 @@ def _lab_function_tasks(root: Path, lab: int) -> dict[str, int | None]:
 
     try:
         info = lab_catalog(sorted((root / "tests").glob(f"test_lab{lab}_*.py"))).get(lab)
-        lab_file = root / "labs" / f"{info.module}.py" if info else None
-        if lab_file is None or not lab_file.is_file():
+        lab_file = lab_source(root / "labs", info.module) if info else None  # file or package
+        if lab_file is None:
             return {}
         return function_tasks(info, lab_file)
     except (OSError, SyntaxError, ValueError):

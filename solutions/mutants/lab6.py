@@ -60,6 +60,7 @@ MUTANTS = [
            tests="shade",
            why="a blend of unit normals is shorter than 1: the middle of every face too dark"),
     Mutant(name="shadow_rays_without_offset", module=M, function="_shadow_rays",
-           find="shadow_epsilon(mesh)", replace="0.0", tests="hybrid_shadows",
+           find="(n,), shadow_epsilon(mesh),", replace="(n,), 0.0,",
+           tests="hybrid_shadows",
            why="shadow rays from t_min = 0 hit their own triangle half the time: shadow acne"),
 ]

@@ -437,3 +437,30 @@ def test_gradescope_accepts_a_renamed_upload(tmp_path):
                      "lab1_intersect": Path("labs/lab1_intersect.py")}
     assert (tmp_path / "work" / "lab0_interop.py").read_text() == "A = 1\n"
     assert (tmp_path / "work" / "lab1_intersect.py").read_text() == "C = 1\n"
+
+
+def test_a_long_hint_is_wrapped_never_cut():
+    hint = ("march_box (homogeneous box): radiance against q (1 - e^(-sigma D)) / sigma. " * 8
+            + "The last words of the hint.")
+    text = short_feedback(exc=AssertionError(hint), frames=[], test_file="tests/test_x.py",
+                          folder=None, task=1, task_of=lambda fn: None).text
+    lines = text.splitlines()
+    assert " ".join(" ".join(lines).split()).count("The last words of the hint.") == 1, text
+    assert all(len(line) <= 100 for line in lines), text
+    assert not any(line.endswith("...") for line in lines), text
+
+
+def test_grade_table_shows_whole_task_titles_and_whole_hints():
+    keeper = ScoreKeeper(show_progress=False)
+    title = "Exact voxel walk with empty-space skipping (3D DDA over macro cells)"
+    hint = "\n".join(f"line {i} of the hint" for i in range(9))
+    for nodeid, task, message in (("tests/test_lab4_x.py::test_a[cpu]", 4, hint),
+                                  ("tests/test_lab4_x.py::test_b[cpu]", 1, "")):
+        result = Result(nodeid=nodeid, lab=4, lab_module="lab4_march", task=task,
+                        task_title=title if task == 4 else "t", max_score=1.0,
+                        message=message)
+        result.status = "failed" if message else "passed"
+        keeper.results[nodeid] = result
+    table = keeper.table()
+    assert title in table, table
+    assert "line 8 of the hint" in table, table

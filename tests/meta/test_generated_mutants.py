@@ -110,24 +110,26 @@ def test_a_selection_that_runs_nothing_is_an_error_not_a_survivor(tmp_path):
     assert table[0]["errors"] == [mutants[0].id] and not table[0]["survived"]
 
 
-def test_a_reference_in_parts_is_mutated_in_the_part_defining_the_function(tmp_path):
+def test_a_package_reference_is_mutated_in_the_file_defining_the_function(tmp_path):
     course = _toy(tmp_path)
     solution = course / "solutions" / "lab9_toy.py"
     single = plan(course)[0].mutants
-    # The same reference kept in parts (course.core.files): double in a part of its own.
+    # The same reference kept as a package, ``double`` in a module of its own that the other
+    # imports; the skeleton stays one file (either is found).
     text = solution.read_text()
     start, end = text.index("def double"), text.index("def norms")
-    parts = course / "solutions" / "lab9_toy_parts"
-    parts.mkdir()
-    (parts / "task1_double.py").write_text("# Task 1.\n" + text[start:end].rstrip() + "\n")
-    solution.write_text(text[:start] + "from course.core.files import run_parts as _run_parts\n"
-                        "\n_run_parts(globals())\ndel _run_parts\n\n\n" + text[end:])
+    package = course / "solutions" / "lab9_toy"
+    package.mkdir()
+    (package / "twice.py").write_text('"""Task 1."""\n\n\n' + text[start:end].rstrip() + "\n")
+    (package / "__init__.py").write_text(text[:start] + "from .twice import double\n\n\n"
+                                         + text[end:])
+    solution.unlink()
     plans = plan(course)
     mutants = plans[0].mutants
     assert [(m.id, m.original, m.replacement) for m in mutants] == \
         [(m.id, m.original, m.replacement) for m in single], "the same mutants, the same ids"
-    assert {m.file for m in mutants} == {"lab9_toy_parts/task1_double.py"}
-    # A change that changes nothing survives: the graded copy is the whole module, parts too.
+    assert {m.file for m in mutants} == {"lab9_toy/twice.py"}
+    # A change that changes nothing survives: the graded copy is the whole package.
     same = dataclasses.replace(mutants[0], id="lab9_toy:double:same:0",
                                replacement=mutants[0].original)
     outcomes = run(course, [*mutants, same], plans, workers=1, deadline=120)

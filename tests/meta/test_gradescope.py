@@ -85,9 +85,10 @@ def test_package_layout(package):
         assert script in names and modes[script] & stat.S_IXUSR, f"{script}: not executable"
     assert f"rtcourse/{HIDDEN}" in names, "the hidden graders ship in the autograder"
     assert "rtcourse/solutions/lab0_interop.py" in names, "the references ship for instructors"
-    parts = [f for p in (ROOT / "solutions").glob("lab*_*.py") for f in module_files(p)[1:]]
-    assert parts and all(f"rtcourse/{f.relative_to(ROOT).as_posix()}" in names for f in parts), \
-        "a reference kept in parts ships with its parts"
+    packages = [f for folder in ("labs", "solutions") for p in (ROOT / folder).glob("lab*_*")
+                if p.is_dir() for f in module_files(p)]
+    assert packages and all(f"rtcourse/{f.relative_to(ROOT).as_posix()}" in names
+                            for f in packages), "a lab kept as a package ships with its files"
     assert "rtcourse/pyproject.toml" in names and "rtcourse/course/tools/cli.py" in names
     assert not any(n.startswith(("rtcourse/tests/meta/", "rtcourse/.git/")) for n in names)
 
@@ -178,9 +179,51 @@ def test_collect_submission_takes_lab_files_only(tmp_path):
     (sub / "lab1_intersect.py").symlink_to(ROOT / "solutions" / "lab1_intersect.py")
     (sub / "helper.py").write_text("")
     found = collect_submission(sub, tmp_path / "work", ["lab0_interop", "lab1_intersect"])
-    assert found == {"lab0_interop": Path("labs/lab0_interop.py"), "lab1_intersect": None}
+    assert found == {"lab0_interop.py": Path("labs/lab0_interop.py"), "lab1_intersect.py": None}
     assert (tmp_path / "work" / "lab0_interop.py").read_text() == "A = 1\n"
     assert sorted(p.name for p in (tmp_path / "work").iterdir()) == ["lab0_interop.py"]
+
+
+def _skeleton_package(tmp_path) -> Path:
+    labs = tmp_path / "labs"
+    (labs / "lab9_toy").mkdir(parents=True)
+    for name in ("__init__.py", "grid.py", "walk.py"):
+        (labs / "lab9_toy" / name).write_text(f"# skeleton {name}\n")
+    return labs
+
+
+def test_collect_lays_package_files_over_the_skeleton(tmp_path):
+    labs = _skeleton_package(tmp_path)
+    sub = tmp_path / "sub"
+    (sub / "handout" / "labs" / "lab9_toy").mkdir(parents=True)
+    (sub / "handout" / "labs" / "lab9_toy" / "grid.py").write_text("GRID = 1\n")
+    (sub / "grid.py").write_text("LOOSE = 1\n")  # a package folder in the upload wins
+    found = collect_submission(sub, tmp_path / "work", ["lab9_toy"], labs)
+    assert found == {"lab9_toy/__init__.py": None,
+                     "lab9_toy/grid.py": Path("handout/labs/lab9_toy/grid.py"),
+                     "lab9_toy/walk.py": None}
+    work = tmp_path / "work" / "lab9_toy"
+    assert (work / "grid.py").read_text() == "GRID = 1\n"
+    assert (work / "walk.py").read_text() == "# skeleton walk.py\n", "left out: the skeleton's"
+    assert (work / "__init__.py").read_text() == "# skeleton __init__.py\n"
+
+
+def test_collect_takes_loose_package_files_by_name(tmp_path):
+    labs = _skeleton_package(tmp_path)
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    (sub / "walk (1).py").write_text("WALK = 1\n")  # an upload's near miss
+    (sub / "__init__.py").write_text("OTHER = 1\n")  # loose: not taken
+    found = collect_submission(sub, tmp_path / "work", ["lab9_toy"], labs)
+    assert found["lab9_toy/walk.py"] == Path("walk (1).py")
+    assert found["lab9_toy/__init__.py"] is None
+    assert (tmp_path / "work" / "lab9_toy" / "walk.py").read_text() == "WALK = 1\n"
+    # None of its files handed in: the lab is missing, as a single-file lab is.
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert set(collect_submission(empty, tmp_path / "none", ["lab9_toy"], labs).values()) \
+        == {None}
+    assert not (tmp_path / "none" / "lab9_toy").exists()
 
 
 def _can_run_as(user: str) -> bool:

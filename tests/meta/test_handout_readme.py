@@ -32,7 +32,8 @@ def test_readme_lists_every_lab_task_and_points(handout):
     labs = lab_catalog(sorted((handout / "tests").glob("test_lab*_*.py")))
     assert labs, "the handout has no graders"
     for number, lab in labs.items():
-        assert f"`labs/{lab.module}.py`" in text and f"{lab.points():g} points" in text
+        assert (f"`labs/{lab.module}.py`" in text or f"`labs/{lab.module}/`" in text) \
+            and f"{lab.points():g} points" in text
         for task, title in lab.tasks.items():
             title = title.replace("|", "\\|")
             assert f"| {task} | {title} | {lab.points(task):g} |" in text, \
@@ -50,7 +51,7 @@ def test_readme_counts_hidden_points_without_shipping_them(handout):
 
 
 def _function_source(path: Path, names) -> dict[str, str]:
-    """The source of each function of ``names`` in a lab file (or in its parts)."""
+    """The source of each function of ``names`` in a lab file (or in its package's files)."""
     found = {}
     for source in (f.read_text() for f in module_files(path)):
         found.update({node.name: ast.get_source_segment(source, node)
@@ -88,3 +89,11 @@ def test_one_task_raises_the_score_by_its_points(handout, tmp_path):
     # The task that lost points shows its first failure under its row, not a log.
     assert "task 1: write `linear_to_srgb8` (not implemented yet)" in proc.stdout, proc.stdout
     assert len(proc.stdout.strip().splitlines()) <= 12, proc.stdout
+
+
+def test_handout_holds_the_generated_skeletons(handout):
+    """The release writes labs/ with the generator that writes the committed labs/."""
+    from course.tools.skeletons import differences
+
+    assert not differences(ROOT / "solutions", handout / "labs")
+    assert not (handout / "solutions").exists()

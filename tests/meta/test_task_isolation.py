@@ -113,7 +113,9 @@ def check_isolated(case: Case, data: dict) -> None:
         outputs = [t["output"] for t in data["tests"]
                    if t["number"] == f"{lab}.{e2e}" and t["score"] < t["max_score"]]
         assert outputs, f"mutant {case.mutant}: the end-to-end task passed"
-        assert any(f"the step that is wrong: {case.names}" in o for o in outputs), (
+        # A long line of feedback wraps: compare the words, not where the lines break.
+        assert any(f"the step that is wrong: {case.names}" in " ".join(o.split())
+                   for o in outputs), (
             f"mutant {case.mutant}: the end-to-end failure must name {case.names} as the "
             f"wrong step: {outputs[0][:600]}")
 

@@ -258,7 +258,8 @@ def check_screen(data: dict, out: dict, where: str) -> None:
         got = out[("screen", name)]
         F = len(f)
         assert got.shape == (2 * F, 3, 4) and got.dtype == torch.float32, \
-            f"{where}, {name}: screen is {tuple(got.shape)} {got.dtype}, expected ({2 * F}, 3, 4) float32"
+            f"{where}, {name}: screen is {tuple(got.shape)} {got.dtype}, " \
+            f"expected ({2 * F}, 3, 4) float32"
         want, _, slots = lab_pieces(lab, v, f, mvp, w, h)
         empty = torch.isnan(got).all(-1).all(-1)
         filled = (~empty).nonzero()[:, 0]
@@ -318,7 +319,8 @@ def check_ids(data: dict, out: dict, where: str) -> None:
         k = lab.triangle_ids(lab.rasterize(screen, w, h, **MESH_RUNS[run]))
         want = torch.where(k >= 0, source[k.clamp(min=0)], -1).reshape(h, w)
         assert ids.shape == (h, w) and ids.dtype == torch.int64, \
-            f"{where}, {name}, {run}: ids are {tuple(ids.shape)} {ids.dtype}, expected ({h}, {w}) int64"
+            f"{where}, {name}, {run}: ids are {tuple(ids.shape)} {ids.dtype}, " \
+            f"expected ({h}, {w}) int64"
         covered = (want >= 0) | (ids >= 0)
         assert covered.double().mean() > 0.05, f"{where}, {name}, {run}: nothing to compare"
         differ = ((ids != want) & covered).double().sum().item() / covered.sum().item()

@@ -1,10 +1,28 @@
-# Lab 2 reference, task 5: brute force and the common entry point (build, closest_hit).
-# Run by solutions/lab2_accel.py in its own namespace: its imports and the other parts'
-# functions are this file's globals (see that file's docstring).
+"""Task 5: ``brute_force_closest_hit`` and the common entry point: ``build`` (provided) and
+``closest_hit`` (dispatch, the structure ``"auto"`` picks).
+"""
+
 from __future__ import annotations
 
-# =======================================================================================
-# Task 5: the common entry point and the trade
+import torch
+
+from course.core.types import Mesh, Rays
+from course.given.lab2 import (
+    STRUCTURES,
+    as_hits,
+    check_memory_budget,
+    check_trace_inputs,
+    choose_structure,
+    intersect_pairs,
+    new_closest,
+    new_counters,
+)
+
+from .bvh_build import build_lbvh, build_sah_bvh
+from .bvh_walk import bvh_closest_hit, bvh_closest_hit_stackless
+from .grid import build_grid, grid_closest_hit
+from .kdtree import build_kdtree, kd_closest_hit
+from .two_level import build_two_level_grid, two_level_closest_hit
 
 
 def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect,
@@ -17,9 +35,14 @@ def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect,
     float32): all triangles for a chunk of rays, or chunks of triangles for one ray at a
     time. Each tile goes through ``intersect_pairs``, which keeps ties at the lowest
     triangle index.
+
+    Hints: ``intersect_pairs`` does the testing and the tie rule; a tile's pairs
+    are ``r.repeat_interleave(len(tri))`` and ``tri.repeat(len(r))``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_trace_inputs(rays, mesh, intersect)
     check_memory_budget(memory_budget_bytes)
+    # BEGIN SOLUTION (task 5)
     n, f, device = len(rays), mesh.num_faces, rays.device
     closest = new_closest(n, rays.t_min)
     counters = new_counters(n, device)
@@ -34,6 +57,7 @@ def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect,
             intersect_pairs(intersect, rays, corners, r.repeat_interleave(len(tri)),
                        tri.repeat(len(r)), closest, counters)
     return as_hits(closest), counters
+    # END SOLUTION
 
 
 def build(mesh: Mesh, kind: str, **knobs) -> dict:
@@ -68,7 +92,12 @@ def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
     anything else, or an option the structure does not take; bad ``rays``, ``mesh`` (e.g. a
     float64 mesh with float32 rays) or an ``intersect`` that is not callable raise the
     error naming them that the called function raises (its provided checks).
+
+    Hints: Check ``structure['kind']`` and the options, then call the matching function.
+    For ``"auto"``: ``choose_structure`` (provided) names the kind and knobs, ``build``
+    builds them.
     """
+    # BEGIN SOLUTION (task 5)
     if structure is None:
         return brute_force_closest_hit(rays, mesh, intersect, **options)
     if isinstance(structure, str) and structure == "auto":
@@ -94,3 +123,4 @@ def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
         traverse = bvh_closest_hit_stackless if options.get("stackless") else bvh_closest_hit
         return traverse(rays, mesh, structure, intersect)
     return kd_closest_hit(rays, mesh, structure, intersect)
+    # END SOLUTION

@@ -1,10 +1,33 @@
-# Lab 2 reference, task 6: the two-level grid (build, nested walk).
-# Run by solutions/lab2_accel.py in its own namespace: its imports and the other parts'
-# functions are this file's globals (see that file's docstring).
+"""Task 6: the two-level grid: ``build_two_level_grid``, ``two_level_closest_hit`` (nested
+DDA, mailboxing across both levels): the teapot in a stadium.
+"""
+
 from __future__ import annotations
 
-# =======================================================================================
-# Task 6: the two-level grid
+import math
+
+import torch
+
+from course.core.types import Mesh, Rays
+from course.given.lab2 import (
+    COUNTERS,
+    add_count,
+    as_hits,
+    check_mesh,
+    check_structure,
+    check_trace_inputs,
+    check_two_level_knobs,
+    expand_ranges,
+    grid_resolutions,
+    intersect_pairs,
+    new_closest,
+    new_counters,
+    pair_chunks,
+    slab_test,
+    triangle_bounds,
+)
+
+from .grid import build_grid
 
 
 def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float = 2.0,
@@ -52,9 +75,16 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
        are needed.
     4. The sub cells' lists: as in :func:`build_grid`, one (entry, sub cell) pair per
        overlap, one stable sort by global sub cell: no loop over cells or triangles.
+
+    Hints: start from your ``build_grid`` at ``top_density``; ``expand_ranges`` and a
+    ``bincount`` per top cell give the small triangles of each cell; ``scatter_reduce``
+    (amin/amax) their bounds per sub-grid; ``grid_resolutions`` (provided) sizes all
+    sub-grids at once; then the (pair, cell) expansion and stable sort of ``build_grid``.
     """
+    # Provided: validates the arguments (ValueError naming the argument).
     check_mesh(mesh, finite=True)
     check_two_level_knobs(top_density, density, min_triangles)
+    # BEGIN SOLUTION (task 6)
     top = build_grid(mesh, density=top_density)
     device = mesh.device
     lo, hi, res = top["lo"], top["hi"], top["resolution"]
@@ -120,6 +150,7 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
                sub_triangles=tri[pair[order]], sub_tri_cell_lo=c_lo[pair[order]],
                sub_tri_cell_hi=c_hi[pair[order]])
     return out
+    # END SOLUTION
 
 
 def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbox: bool = True):
@@ -150,9 +181,15 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
     crowded top cells may be tested once in each: a repeat, never a miss.
 
     Contract: the same hits as brute force with ``intersect``, whatever the resolutions.
+
+    Hints: your ``grid_closest_hit`` is the top-level walk; the nested walk is the same
+    loop over the rays of crowded cells, with per-ray boxes and resolutions (``sub_lo[s]``,
+    ``sub_resolution[s]``); keep a "previous cell was plain" flag per ray for the mailbox.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_trace_inputs(rays, mesh, intersect)
     check_structure(grid2, "grid2", "grid2", mesh)
+    # BEGIN SOLUTION (task 6)
     n, device = len(rays), rays.device
     closest = new_closest(n, rays.t_min)
     counters = new_counters(n, device, COUNTERS + ("skipped",))
@@ -202,8 +239,10 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
         ray, o, inv_r, t_end, t_in = ray[keep], o[keep], inv_r[keep], t_end[keep], t_in[keep]
         cell, prev, prev_plain, step = cell[keep], prev[keep], prev_plain[keep], step[keep]
     return as_hits(closest), counters
+    # END SOLUTION
 
 
+# BEGIN SOLUTION
 def _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray, sub, t_lo, t_hi,
                     prev_top, mailbox):
     """The nested DDA of :func:`two_level_closest_hit`: rays ``ray`` (k,) walk sub-grids
@@ -253,3 +292,4 @@ def _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray, sub
         ray, o, inv, s_out, prev_top = ray[keep], o[keep], inv[keep], s_out[keep], prev_top[keep]
         lo, res, base, width = lo[keep], res[keep], base[keep], width[keep]
         cell, prev, step = cell[keep], prev[keep], step[keep]
+# END SOLUTION

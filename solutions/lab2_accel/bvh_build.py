@@ -1,10 +1,23 @@
-# Lab 2 reference, task 2: the BVH builds (morton_codes, build_lbvh, build_sah_bvh).
-# Run by solutions/lab2_accel.py in its own namespace: its imports and the other parts'
-# functions are this file's globals (see that file's docstring).
+"""Task 2: the BVH builds: ``morton_codes``, ``build_lbvh``, ``build_sah_bvh`` (binned SAH).
+"""
+
 from __future__ import annotations
 
-# =======================================================================================
-# Task 2: BVH builds
+import math
+
+import torch
+
+from course.core.types import Mesh
+from course.given.lab2 import (
+    TreeLevels,
+    check_bins,
+    check_leaf_size,
+    check_mesh,
+    check_morton_inputs,
+    expand_ranges,
+    surface_area,
+    triangle_bounds,
+)
 
 
 def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
@@ -22,8 +35,13 @@ def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
 
     Sorting by the code puts points that are close in space close in the array, so a
     range of sorted triangles is a compact cluster: the whole idea of the LBVH.
+
+    Hints: ``torch.floor``, ``.clamp``, ``.long()``; interleave with a loop over the bits:
+    ``((q >> i) & 1) << (3 * i + shift)``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_morton_inputs(points, lo, hi, bits)
+    # BEGIN SOLUTION (task 2)
     extent = hi - lo
     scale = torch.where(extent > 0, 2.0**bits / extent, torch.zeros_like(extent))
     q = torch.floor(((points - lo) * scale).nan_to_num(0.0)).clamp(0, 2**bits - 1).long()
@@ -31,8 +49,10 @@ def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
     for axis, shift in ((0, 2), (1, 1), (2, 0)):
         code |= _spread_bits(q[:, axis]) << shift
     return code
+    # END SOLUTION
 
 
+# BEGIN SOLUTION
 # x -> the bits of x (up to 21) two zeros apart: bit i moves to bit 3i. Five shift-and-mask
 # rounds (each moves the upper half of every group), not one op per bit: 15 kernels on a
 # GPU instead of 60 per axis.
@@ -45,6 +65,7 @@ def _spread_bits(x: torch.Tensor) -> torch.Tensor:
     for shift, mask in _SPREAD:
         x = (x | (x << shift)) & mask
     return x
+# END SOLUTION
 
 
 def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
@@ -78,16 +99,23 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
     The tree's quality depends on the code's resolution only: a bad split wastes node
     visits, never correctness.
 
-    This reference builds exactly that tree without a loop over levels (a level loop waits
-    for the device at every level: 30 ms for 1.1M triangles on an H200, mostly syncs), as
-    Karras 2012 does: every one of the ``F - 1`` gaps between neighbouring sorted codes is
-    the split of exactly one node of the full tree (:func:`_lbvh_gap_ranges`), each node's
-    box is a min/max over its contiguous range of sorted triangles (a sparse table,
-    :func:`_range_boxes`), and one sort by ``(first triangle, -size)`` is the depth-first
-    order. It waits for the device three times, at any size.
+    Hints: ``TreeLevels`` (provided) records the levels: ``levels.ranges(nodes)`` gives their
+    ranges, ``levels.split(nodes, mid, depth)`` the children's ids, and
+    ``levels.finish(order, tri_lo, tri_hi)`` assembles the dict.
+    ``torch.frexp(x.double()).exponent - 1`` is the highest set bit of ``x > 0``;
+    ``torch.searchsorted`` finds the first code ``>=`` a value.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_mesh(mesh, finite=True)
     check_leaf_size(leaf_size)
+    # BEGIN SOLUTION (task 2)
+    # This builds exactly that tree without a loop over levels (a level loop waits for the
+    # device at every level: 30 ms for 1.1M triangles on an H200, mostly syncs), as Karras
+    # 2012 does: every one of the F - 1 gaps between neighbouring sorted codes is the split
+    # of exactly one node of the full tree (_lbvh_gap_ranges), each node's box is a min/max
+    # over its contiguous range of sorted triangles (a sparse table, _range_boxes), and one
+    # sort by (first triangle, -size) is the depth-first order. It waits for the device
+    # three times, at any size.
     tri_lo, tri_hi = triangle_bounds(mesh)
     centres = (tri_lo + tri_hi) / 2
     codes = morton_codes(centres, centres.amin(dim=0), centres.amax(dim=0), bits)
@@ -132,8 +160,10 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
             "right": torch.where(leaf, minus, node + 1 + left_size),
             "first": torch.where(leaf, start, 0), "count": torch.where(leaf, size, 0),
             "triangles": order}
+    # END SOLUTION
 
 
+# BEGIN SOLUTION
 def _lbvh_gap_ranges(differ: torch.Tensor, same: torch.Tensor):
     """The node of the full LBVH (down to one triangle) that splits at each gap.
 
@@ -229,6 +259,7 @@ def _range_boxes(lo: torch.Tensor, hi: torch.Tensor, start: torch.Tensor, size: 
         level = torch.minimum(level[:-2**k], level[2**k:])
     out = torch.empty_like(out).index_copy_(0, group, out)
     return out[:, :3].contiguous(), (-out[:, 3:]).contiguous()
+# END SOLUTION
 
 
 def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
@@ -252,10 +283,17 @@ def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
        the node's range of ``order``: ``argsort`` by (node, side), stable).
     4. No valid split (all centroids in one bin on every axis: coincident triangles):
        split the range in the middle instead, so the build always ends.
+
+    Hints: ``expand_ranges(start, count)`` lists each node's primitives (node, slot);
+    number the (node, axis, bin) slots ``(node * 3 + axis) * bins + bin`` for ``index_add_``
+    and ``scatter_reduce``; ``cummin``/``cummax``/``cumsum`` along the bins (and ``.flip`` for
+    the right side); ``surface_area`` is provided. ``TreeLevels`` as in :func:`build_lbvh`.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_mesh(mesh, finite=True)
     check_leaf_size(leaf_size)
     check_bins(bins)
+    # BEGIN SOLUTION (task 2)
     tri_lo, tri_hi = triangle_bounds(mesh)
     centres = (tri_lo + tri_hi) / 2
     device, dtype = mesh.device, tri_lo.dtype
@@ -316,3 +354,4 @@ def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
         nodes = levels.split(nodes, start + n_left, level)
         level += 1
     return levels.finish(order, tri_lo, tri_hi)
+    # END SOLUTION

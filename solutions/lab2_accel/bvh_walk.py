@@ -1,10 +1,23 @@
-# Lab 2 reference, task 3: BVH traversal (bvh_closest_hit, bvh_skip_indices, stackless).
-# Run by solutions/lab2_accel.py in its own namespace: its imports and the other parts'
-# functions are this file's globals (see that file's docstring).
+"""Task 3: BVH traversal: ``bvh_closest_hit`` (stack, near child first), ``bvh_skip_indices``
+and ``bvh_closest_hit_stackless``.
+"""
+
 from __future__ import annotations
 
-# =======================================================================================
-# Task 3: BVH traversal
+import torch
+
+from course.core.types import Mesh, Rays
+from course.given.lab2 import (
+    add_count,
+    as_hits,
+    check_links,
+    check_structure,
+    check_trace_inputs,
+    new_closest,
+    new_counters,
+    slab_test,
+    test_ranges,
+)
 
 
 def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
@@ -28,9 +41,16 @@ def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
 
     A ray with an empty stack is done. The stack grows (a new column) if a ray would
     overflow it; a tree of depth D never needs more than D + 1 entries.
+
+    Hints: ``slab_test``, ``expand_ranges``, ``intersect_pairs``, ``new_closest``,
+    ``new_counters`` and ``as_hits`` are provided. Push with ``stack[rows, sp[rows]] = node``
+    then ``sp[rows] += 1``; a node is pushed at most once per ray, so ``2 M + 1`` iterations
+    bound the loop.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_trace_inputs(rays, mesh, intersect)
     check_structure(bvh, "bvh", "bvh", mesh)
+    # BEGIN SOLUTION (task 3)
     n, device = len(rays), rays.device
     closest = new_closest(n, rays.t_min)
     counters = new_counters(n, device)
@@ -79,6 +99,7 @@ def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
         keep = sp > 0
         ray, stack, stack_t, sp = ray[keep], stack[keep], stack_t[keep], sp[keep]
     return as_hits(closest), counters
+    # END SOLUTION
 
 
 def bvh_skip_indices(bvh: dict) -> torch.Tensor:
@@ -93,8 +114,13 @@ def bvh_skip_indices(bvh: dict) -> torch.Tensor:
     ``skip[i] = last(i) + 1``. Compute ``last`` for all nodes at once by pointer jumping:
     start with ``last = right`` (``i`` for leaves) and repeat ``last = last[last]`` until
     nothing changes (about ``log2(depth)`` rounds): no loop over nodes.
+
+    Hints: ``torch.where(left < 0, torch.arange(M), right)``; stop when ``torch.equal``
+    says a round changed nothing.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_links(bvh)
+    # BEGIN SOLUTION (task 3)
     left, right = bvh["left"], bvh["right"]
     last = torch.where(left < 0, torch.arange(len(left), device=left.device), right)
     for _ in range(64):  # the depth doubles per round; 2^64 is more than enough
@@ -103,6 +129,7 @@ def bvh_skip_indices(bvh: dict) -> torch.Tensor:
             break
         last = jumped
     return last + 1
+    # END SOLUTION
 
 
 def bvh_closest_hit_stackless(rays: Rays, mesh: Mesh, bvh: dict, intersect):
@@ -121,9 +148,15 @@ def bvh_closest_hit_stackless(rays: Rays, mesh: Mesh, bvh: dict, intersect):
     A ray whose next node is ``M`` is done. No stack at all (one register on a GPU), but no
     near-first order either: the walk always takes the left child first, so it visits
     more nodes than the stack traversal: the lecture's trade of memory against work.
+
+    Hints: One ``slab_test`` per iteration on ``bvh['lo'][node]``; the next node
+    is ``torch.where(hit & inner, node + 1, skip[node])``. Every step moves right, so ``M + 1``
+    iterations bound the loop.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_trace_inputs(rays, mesh, intersect)
     check_structure(bvh, "bvh", "bvh", mesh)
+    # BEGIN SOLUTION (task 3)
     n, device = len(rays), rays.device
     closest = new_closest(n, rays.t_min)
     counters = new_counters(n, device)
@@ -148,3 +181,4 @@ def bvh_closest_hit_stackless(rays: Rays, mesh: Mesh, bvh: dict, intersect):
         keep = node < m
         ray, node = ray[keep], node[keep]
     return as_hits(closest), counters
+    # END SOLUTION

@@ -1,10 +1,32 @@
-# Lab 2 reference, task 4: the kd-tree (build_kdtree, kd_pack, kd_unpack, kd_closest_hit).
-# Run by solutions/lab2_accel.py in its own namespace: its imports and the other parts'
-# functions are this file's globals (see that file's docstring).
+"""Task 4: the kd-tree: ``build_kdtree`` (SAH over triangle bound planes), ``kd_pack`` /
+``kd_unpack`` (the 8-byte node), ``kd_closest_hit`` (early exit).
+"""
+
 from __future__ import annotations
 
-# =======================================================================================
-# Task 4: the kd-tree
+import math
+
+import torch
+
+from course.core.types import Mesh, Rays
+from course.given.lab2 import (
+    OFFSET_BITS,
+    add_count,
+    as_hits,
+    check_kd_fields,
+    check_kd_knobs,
+    check_leaf_size,
+    check_mesh,
+    check_packed,
+    check_structure,
+    check_trace_inputs,
+    new_closest,
+    new_counters,
+    slab_test,
+    surface_area,
+    test_ranges,
+    triangle_bounds,
+)
 
 
 def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
@@ -45,10 +67,19 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
     triangle goes below iff its start event comes before the split event and above iff
     its end event comes after it (so one lying in the plane goes to one side, and every
     triangle to at least one). Coincident triangles offer no plane inside the box: a leaf.
+
+    Hints: Keep (node, triangle) pairs. Number each axis's planes once (``torch.sort`` of
+    all bounds, ``torch.searchsorted`` for each bound's number): clipping to a node's box is
+    then a clamp of integers, and one integer key ``(node * planes + plane) * 2 + is_end``
+    sorts a level's events. The inverse permutation (``slot[perm] = arange``) finds each
+    pair's events again when you partition; ``scatter_reduce(..., 'amin')`` finds each
+    node's best cost. Create children in pairs (below, above) so that ``above = left + 1``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_mesh(mesh, finite=True)
     check_leaf_size(leaf_size)
     max_depth = check_kd_knobs(mesh, max_depth, traversal_cost, intersect_cost, empty_bonus)
+    # BEGIN SOLUTION (task 4)
     f, device = mesh.num_faces, mesh.device
     tri_lo, tri_hi = triangle_bounds(mesh)
     dtype = tri_lo.dtype
@@ -145,8 +176,10 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
             "axis": torch.cat(axis), "left": torch.cat(left),
             "first": torch.cumsum(count, 0) - count, "count": count,
             "triangles": leaf_tri[order]}
+    # END SOLUTION
 
 
+# BEGIN SOLUTION
 def _kd_sweep(a, seg, n, box_lo, box_hi, starts, ends, planes, traversal_cost, intersect_cost,
               empty_bonus):
     """The SAH sweep of one level on axis ``a``: the cost of splitting at every event.
@@ -188,8 +221,7 @@ def _kd_sweep(a, seg, n, box_lo, box_hi, starts, ends, planes, traversal_cost, i
         area_below * n_below + area_above * n_above) / surface_area(nlo, nhi)[owner]
     inside = (plane > lo_a[owner]) & (plane < hi_a[owner])
     return torch.where(inside, cost, math.inf), plane, owner, slot
-
-
+# END SOLUTION
 
 
 def kd_pack(tree: dict) -> torch.Tensor:
@@ -209,8 +241,13 @@ def kd_pack(tree: dict) -> torch.Tensor:
     Compute in int64 and wrap to int32 (``leaf << 31`` is ``2^31``, one more than int32
     holds). ValueError naming ``tree`` if an offset needs more than 29 bits or a count
     more than 31.
+
+    Hints: ``tree['split'].to(torch.float32).contiguous().view(torch.int32)``; build word 1 in
+    int64 and wrap values ``>= 2**31`` by subtracting ``2**32`` before ``.to(torch.int32)``.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_kd_fields(tree)
+    # BEGIN SOLUTION (task 4)
     m = len(tree["axis"])
     leaf = tree["axis"] < 0
     index = torch.arange(m, device=tree["axis"].device)
@@ -225,6 +262,7 @@ def kd_pack(tree: dict) -> torch.Tensor:
     word1 = offset | (tree["axis"].clamp(min=0) << OFFSET_BITS) | (leaf.long() << 31)
     packed = torch.stack((word0, word1), dim=1)
     return torch.where(packed >= 2**31, packed - 2**32, packed).to(torch.int32)
+    # END SOLUTION
 
 
 def kd_unpack(packed: torch.Tensor) -> dict:
@@ -234,8 +272,13 @@ def kd_unpack(packed: torch.Tensor) -> dict:
     leaves), ``axis`` int64 (-1 for leaves), ``left`` int64 (absolute index, -1 for
     leaves), ``first`` and ``count`` int64 (0 for inner nodes). Mask before shifting:
     ``>>`` on a negative int32 (a leaf's word) copies the sign bit.
+
+    Hints: Work on ``packed[:, 1].long() & 0xFFFFFFFF``; ``packed[:, 0].contiguous()
+    .view(torch.float32)`` reinterprets the split's bits.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_packed(packed)
+    # BEGIN SOLUTION (task 4)
     word0, word1 = packed[:, 0], packed[:, 1].long() & 0xFFFFFFFF
     leaf = (word1 >> 31) == 1
     offset = word1 & (2**OFFSET_BITS - 1)
@@ -246,6 +289,7 @@ def kd_unpack(packed: torch.Tensor) -> dict:
             "axis": torch.where(leaf, -1, axis), "left": torch.where(leaf, -1, index + offset),
             "first": torch.where(leaf, offset, zero),
             "count": torch.where(leaf, word0.long(), zero)}
+    # END SOLUTION
 
 
 def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
@@ -270,9 +314,15 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
       split sits in several leaves and can be hit beyond this leaf, where a nearer
       triangle of a later leaf may still be waiting. Otherwise pop the next (node,
       interval); an empty stack ends the ray.
+
+    Hints: ``rays.origins[r].gather(1, axis[:, None])`` picks each ray's component on
+    its node's axis. Handle the leaves first (test, then exit or pop), then the inner nodes
+    (descend, maybe push); ``2 M + 1`` iterations bound the loop.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_trace_inputs(rays, mesh, intersect)
     check_structure(tree, "kd", "tree", mesh)
+    # BEGIN SOLUTION (task 4)
     n, device, dtype = len(rays), rays.device, rays.dtype
     closest = new_closest(n, rays.t_min)
     counters = new_counters(n, device)
@@ -340,3 +390,4 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
         ray, node, t_near, t_far, sp = ray[keep], node[keep], t_near[keep], t_far[keep], sp[keep]
         stack, stack_near, stack_far = stack[keep], stack_near[keep], stack_far[keep]
     return as_hits(closest), counters
+    # END SOLUTION

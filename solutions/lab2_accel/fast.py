@@ -1,10 +1,26 @@
-# Lab 2 reference, task 7: the sync-free BVH walk (bvh_closest_hit_fast, CUDA graphs).
-# Run by solutions/lab2_accel.py in its own namespace: its imports and the other parts'
-# functions are this file's globals (see that file's docstring).
+"""Task 7: ``bvh_closest_hit_fast``, the BVH traversal with fixed shapes and fixed trip counts
+(no host sync inside the loop, ``torch.compile``-able), and its any-hit mode.
+"""
+
 from __future__ import annotations
 
-# =======================================================================================
-# Task 7: sync-free BVH traversal
+import collections
+import math
+
+import torch
+
+from course.core.raymath import gamma
+from course.core.types import Hits, Mesh, Rays
+from course.given.lab2 import (
+    _positive_int,
+    check_structure,
+    check_trace_inputs,
+    check_walk,
+    moller_trumbore_rows,
+    pack_bvh,
+    ray_octants,
+    slab_test,
+)
 
 
 def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
@@ -20,9 +36,9 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     ``"default"`` and, on a GPU, replays the ``k`` steps of a look from one CUDA graph,
     captured once per (padded) number of rays and kept for later calls with the same
     ``walk`` (packed here: a graph of one step, replayed ``k`` times, not kept); compact:
-    at a look, drop finished rays if at most half (an eighth with graphs, and only from
-    65,536 rays up) are still running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree once
-    and trace it many times (default: packed here, for the octants of these rays);
+    at a look, drop finished rays if at most half (an eighth with graphs) are still
+    running; walk: ``pack_bvh(bvh, mesh)``, to pack a tree once and trace it many times
+    (default: packed here, for the octants of these rays);
     fuse_steps: with ``compile``, the steps one compiled call runs (and fuses): the state
     could stay in registers across them, but the compile time grows with them (2 CPU
     cores: 21 s for 1 step, 2 minutes for 8) and 8 ran slower than 1 on the CPU and on an
@@ -49,23 +65,28 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
       slot (Möller–Trumbore in the mesh's dtype; ties to the lowest triangle index);
       after the last slot, ``skip``;
     * the host looks only every ``k`` steps: stop when every ray is done, compact if few
-      rays are left. A compaction costs ~15 small ops of host time: the rays' columns and
-      state are packed in one float and one int tensor, gathered with the indices of the
-      rays still running (padding included), and written back in two scatters;
+      rays are left;
     * a step is gathers from read-only tables and elementwise ops, nothing else, so
       ``torch.compile`` turns it into **one kernel** (one thread per ray, the state in
       registers): the lecture's kernel, written in torch; on a GPU one CUDA graph holds
       the ``k`` steps between two looks. With a ``walk`` packed once, the rays are padded
       (with finished ones) to a few sizes, so the graphs of a size are captured once and
       replayed by every later traversal of that size: a warm traversal pays no capture and
-      no compiled call, and a look is one graph launch and one read of the number of rays
-      still running (counted in the graph). The call's set-up (the root-box test and the
-      packing of the rays, ~40 small ops) is one more graph of that number of rays.
+      no compiled call.
 
     The triangle test is Lab 1's Möller–Trumbore (relative parallel test) written inline,
     in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
     (rounding may decide a ray grazing an edge differently when the ops are fused).
+
+    Hints: ``pack_bvh`` (provided) lays the tree out for you (``boxes``, ``links``,
+    ``base``, ``slots``, ``tri``; ``ray_octants`` gives each ray's array). Write one step as
+    a function of (n,) columns, state in and state out, with ``torch.where`` for the masked
+    updates and plain indexing (``boxes[row, 0]``) for the gathers: no ``scatter_``, no
+    in-place writes, no ``nonzero`` inside it. ``moller_trumbore_rows`` (provided) is the
+    triangle test; it takes column tuples. Compile the ``k`` steps once
+    (``torch.compile(fn, dynamic=True)``) and keep them, not per call.
     """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_trace_inputs(rays, mesh, moller_trumbore_rows)
     check_structure(bvh, "bvh", "bvh", mesh)
     _positive_int(check_every, "check_every", 1, 1024)
@@ -73,11 +94,19 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
                        "max-autotune-no-cudagraphs"):
         raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
-    packed_here = walk is None  # fresh tables: no later call can reuse graphs that read them
+    if walk is not None:
+        check_walk(walk, mesh, rays)
+    # BEGIN SOLUTION (task 7)
+    # Compaction starts only from _GRAPH_COMPACT_FROM rays with graphs, and costs ~15 small
+    # ops of host time: the rays' columns and state are packed in one float and one int
+    # tensor, gathered with the indices of the rays still running (padding included), and
+    # written back in two scatters. With graphs kept, a look is one graph launch and one
+    # read of the number of rays still running (counted in the graph); the call's set-up
+    # (the root-box test and the packing of the rays, ~40 small ops) is one more graph of
+    # that number of rays.
+    packed_here = walk is None
     if packed_here:  # only the octants these rays go in
         walk = pack_bvh(bvh, mesh, torch.unique(ray_octants(rays.directions)).tolist())
-    else:
-        check_walk(walk, mesh, rays)
     device = rays.device
     graphs = compile == "reduce-overhead" and device.type in _GRAPH_DEVICES
     cache = graphs and not packed_here
@@ -142,8 +171,10 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
             graph = None
     _write_back(out_f, out_i, ray, *_pack(fixed, state))
     return _hits(out_f, out_i)
+    # END SOLUTION
 
 
+# BEGIN SOLUTION
 _GRAPH_COMPACT_FROM = 1 << 16
 """With graphs, the fewest rays worth compacting. A GPU runs fewer rays than it holds
 (an H200: 270K threads) in one wave, so a step over 18K rays costs what a step over 500
@@ -430,3 +461,4 @@ def _compiled_fast_steps(mode):
         _COMPILED[mode] = torch.compile(fn, mode="default" if mode == "in place" else mode,
                                         dynamic=True)
     return _COMPILED[mode]
+# END SOLUTION
