@@ -55,7 +55,13 @@ def make_class(folder: Path, lab: int, n: int) -> dict[str, str]:
     """``n`` students of lab ``lab`` in ``folder`` (one folder each); student -> kind."""
     module = lab_module(ROOT, lab)
     solution, skeleton = lab_source(ROOT / "solutions", module), lab_source(ROOT / "labs", module)
-    mutants = [m for m in load_mutants(ROOT) if m.module == module]
+    mutants = []
+    for mutant in (m for m in load_mutants(ROOT) if m.module == module):
+        try:  # a mutant that no longer applies to the reference is left out, and said
+            apply_mutant(mutant, defining_file(solution, mutant.function).read_text())
+            mutants.append(mutant)
+        except ValueError as exc:
+            print(f"  left out: {exc}", flush=True)
     cycle = ["reference", "skeleton", *(f"mutant:{m.name}" for m in mutants)]
     kinds = list(SPECIAL[:max(0, min(3, n - 2))])
     kinds += [cycle[i % len(cycle)] for i in range(n - len(kinds))]
@@ -128,12 +134,17 @@ def bench_lab(lab: int, n: int, jobs: int, tasks, time_limit, scratch: Path) -> 
                 str(folder / student), "--lab", str(lab), "--json", str(json_path),
                 *selection]
         print(f"lab {lab}: one-off grade of {student}", flush=True)
-        w1, c1, _ = _run(cmd1, one_env)
+        w1, c1, done = _run(cmd1, one_env)
+        if not json_path.is_file():
+            print(f"  no results: {(done.stdout + done.stderr)[-1500:]}", flush=True)
+            continue
         score = json.loads(json_path.read_text())["score"]
         one_off.append({"student": student, "kind": kind, "wall_s": round(w1, 2),
                         "cpu_s": round(c1, 2), "score": score,
                         "bulk_score": float(rows[student]["score"]),
                         "bulk_seconds": float(rows[student]["seconds"])})
+    if not one_off:
+        raise SystemExit(f"lab {lab}: no one-off grade wrote its results")
     one_wall = sum(o["wall_s"] for o in one_off) / len(one_off)
     one_cpu = sum(o["cpu_s"] for o in one_off) / len(one_off)
     same_wall = sum(o["bulk_seconds"] for o in one_off) / len(one_off)

@@ -76,6 +76,39 @@ away Möller–Trumbore survives by luck (the vertices sit on a coarse float gri
 transform loses ``|x| / |edge|`` digits. At 1e7 the float32 spacing is the sphere's radius:
 the mesh collapses, and even watertight misses most aimed points (its contract is about the
 triangles that remain).
+
+Scaled rather than moved, the limit is float32's range, and it depends on the directions:
+``python bench/lab1_far.py`` measures it.
+
+Far field (fp32, icosphere level 1 scaled by S: 80 rays aimed at its triangles'
+centroids from 3 S away; hit rate with unit directions / with directions of
+length ~S):
+
+========  ==================  ==================  ==================  ==================
+scale S   intersect_simple    moller_trumbore     woop_unit           watertight
+========  ==================  ==================  ==================  ==================
+1         1 / 1               1 / 1               1 / 1               1 / 1
+1e+06     1 / 1               1 / 1               1 / 1               1 / 1
+1e+12     1 / 1               1 / 1               1 / 1               1 / 1
+1e+13     0.29 / 0.26         0.39 / 0            1 / 1               0.38 / 1
+1e+16     0 / 0               0 / 0               1 / 1               0 / 1
+1e+19     0 / 0               0 / 0               1 / 1               0 / 1
+1e+22     0 / 0               0 / 0               1 / 1               0 / 0
+1e+25     0 / 0               0 / 0               1 / 1               0 / 0
+1e+30     0 / 0               0 / 0               1 / 1               0 / 0
+========  ==================  ==================  ==================  ==================
+
+With unit directions the simple, Möller–Trumbore and watertight tests form products of
+three coordinates (``e2 . (s x e1)``, ``U Az``): of order ``S^3``, they overflow float32
+(3.4e38) past ``S`` about 7e12 and every hit is lost. With directions that scale with the
+scene, watertight's ``T`` and ``det`` are both of order ``S^2 |d|`` and it holds to 1e19
+(1e22: overflow); Möller–Trumbore's ``det = e1 . (d x e2)`` overflows first. Woop's test
+survives by rescaling: its transform, made once per triangle in float64, maps the triangle
+to the unit one, so every product stays of order 1 up to float32's range (the offsets'
+cancellation of ``|x| / |edge|`` digits, above, is the price). The other tests could rescale
+the same way: a power of two ``2^-k`` per triangle (exact) applied to ``e1, e2, s`` and
+``d``, about 12 more multiplications a pair, or a float64 fallback where a product
+overflows (the watertight test's fallback, extended).
 """
 
 from __future__ import annotations

@@ -282,12 +282,12 @@ def probe_framebuffer_to_numpy(lab, height, width):
     if not isinstance(arr, np.ndarray):
         return {"type": type(arr).__name__}
     report = {"type": "ndarray", "dtype": str(arr.dtype), "shape": arr.shape,
-              "same_address": arr.__array_interface__["data"][0] == fb.data_ptr()}
+              "addresses": (arr.__array_interface__["data"][0], fb.data_ptr())}
     if arr.shape == (height, width) and arr.flags.writeable:
         arr[1, 2] = 12345
         fb[0, 1] = -77
-        report["tensor_sees_numpy_write"] = int(fb[1, 2]) == 12345
-        report["numpy_sees_tensor_write"] = int(arr[0, 1]) == -77
+        report["tensor_sees_numpy_write"] = int(fb[1, 2])  # the test wants 12345
+        report["numpy_sees_tensor_write"] = int(arr[0, 1])  # and -77
     return report
 
 
@@ -298,12 +298,12 @@ def probe_numpy_to_framebuffer(lab, height, width):
         return {"type": type(fb).__name__}
     report = {"type": "Tensor", "dtype": str(fb.dtype), "shape": tuple(fb.shape),
               "device": fb.device.type,
-              "same_address": arr.__array_interface__["data"][0] == fb.data_ptr()}
+              "addresses": (arr.__array_interface__["data"][0], fb.data_ptr())}
     if tuple(fb.shape) == (height, width):
         fb[1, 2] = 12345
         arr[0, 1] = -77
-        report["numpy_sees_tensor_write"] = int(arr[1, 2]) == 12345
-        report["tensor_sees_numpy_write"] = int(fb[0, 1]) == -77
+        report["numpy_sees_tensor_write"] = int(arr[1, 2])  # the test wants 12345
+        report["tensor_sees_numpy_write"] = int(fb[0, 1])  # and -77
     return report
 
 
@@ -312,12 +312,12 @@ def probe_share_dlpack(lab, height, width, device):
     shared = lab.share_dlpack(fb)
     if not isinstance(shared, torch.Tensor):
         return {"type": type(shared).__name__}
-    report = {"type": "Tensor", "new_object": shared is not fb, "dtype": str(shared.dtype),
+    report = {"type": "Tensor", "ids": (id(shared), id(fb)), "dtype": str(shared.dtype),
               "shape": tuple(shared.shape), "device": shared.device.type,
-              "same_address": shared.data_ptr() == fb.data_ptr()}
+              "addresses": (shared.data_ptr(), fb.data_ptr())}
     if tuple(shared.shape) == (height, width):
         shared[1, 2] = 12345
-        report["fb_sees_write"] = int(fb[1, 2]) == 12345
+        report["fb_sees_write"] = int(fb[1, 2])  # the test wants 12345
     return report
 
 
@@ -332,7 +332,8 @@ def probe_cuda_array_interface(lab, height, width):
     report = {"type": "dict", "shape": info.get("shape"),
               "typestr": info.get("typestr"), "strides": info.get("strides"),
               "version": info.get("version"),
-              "pointer_ok": isinstance(data, tuple) and len(data) == 2 and data[0] == fb.data_ptr(),
+              "pointers": (data[0] if isinstance(data, tuple) and len(data) == 2
+                           and isinstance(data[0], int) else None, fb.data_ptr()),
               "read_only": data[1] if isinstance(data, tuple) and len(data) == 2 else None}
     report["stream"] = info.get("stream")
     side = torch.cuda.Stream()
@@ -340,12 +341,12 @@ def probe_cuda_array_interface(lab, height, width):
         on_side = lab.cuda_array_interface(fb)
     report["side_stream"] = on_side.get("stream") if isinstance(on_side, dict) else None
     report["side_stream_handle"] = side.cuda_stream
-    if report["pointer_ok"]:  # a consumer builds a view from the dict alone
+    if report["pointers"][0] == report["pointers"][1]:  # a consumer builds a view from it
         view = torch.as_tensor(types.SimpleNamespace(__cuda_array_interface__=info),
                                device="cuda")
         view[1, 2] = 12345
         torch.cuda.synchronize()
-        report["fb_sees_consumer_write"] = int(fb[1, 2]) == 12345
+        report["fb_sees_consumer_write"] = int(fb[1, 2])  # the test wants 12345
     return report
 
 
@@ -372,17 +373,27 @@ def probe_bad_framebuffers(lab, fn_name, device):
     return {case: _caught(fn, value) for case, value in cases.items()}
 
 
+# What each probe writes through one side of a view, read back through the other.
+WRITTEN = {"tensor_sees_numpy_write": {"framebuffer_to_numpy": 12345,
+                                       "numpy_to_framebuffer": -77},
+           "numpy_sees_tensor_write": {"framebuffer_to_numpy": -77,
+                                       "numpy_to_framebuffer": 12345},
+           "fb_sees_write": {"share_dlpack": 12345}}
+
+
 def _check_view_report(report, fn_name, expect_dtype, shape):
     assert report["type"] in ("ndarray", "Tensor"), f"{fn_name} returned a {report['type']}"
     assert report["dtype"] == expect_dtype and tuple(report["shape"]) == shape, (
         f"{fn_name}: expected dtype {expect_dtype} and shape {shape}, got {report['dtype']} "
         f"and {tuple(report['shape'])}")
-    assert report["same_address"], (
+    mine, theirs = report["addresses"]
+    assert type(mine) is int and mine == theirs, (
         f"{fn_name} returned a copy: its data lives at another address. A view shares the "
         f"memory (tensor.numpy() / torch.from_numpy); no bytes should move.")
-    for key, ok in report.items():
+    for key, value in report.items():
         if key.endswith("_write"):
-            assert ok, f"{fn_name}: {key.replace('_', ' ')} failed: the two do not share memory"
+            assert value == WRITTEN[key][fn_name], (
+                f"{fn_name}: {key.replace('_', ' ')} failed: the two do not share memory")
 
 
 @pytest.mark.task(2)
@@ -409,8 +420,9 @@ def test_numpy_to_framebuffer_is_a_view(impl):
 def test_share_dlpack_same_memory(impl, device):
     report = impl.probe(probe_share_dlpack, 5, 7, device)
     assert report["type"] == "Tensor", f"share_dlpack returned a {report['type']}, not a tensor"
-    assert report["new_object"], ("share_dlpack returned fb itself: import the DLPack export "
-                                  "with torch.from_dlpack to get the consumer's tensor")
+    assert report["ids"][0] != report["ids"][1], (
+        "share_dlpack returned fb itself: import the DLPack export with torch.from_dlpack to "
+        "get the consumer's tensor")
     assert report["device"] == device, (f"share_dlpack: the shared tensor is on "
                                         f"{report['device']}, fb on {device}")
     _check_view_report(report, "share_dlpack", "torch.int32", (5, 7))
@@ -429,8 +441,9 @@ def test_cuda_array_interface(impl, device):
         got = report[key]
         got = tuple(got) if isinstance(got, list) else got
         assert got == want, f"cuda_array_interface: {key!r} should be {want!r}, got {got!r}"
-    assert report["pointer_ok"], ("cuda_array_interface: 'data' must be (fb.data_ptr(), "
-                                  "False): the device pointer and a read-only flag")
+    assert report["pointers"][0] == report["pointers"][1], (
+        "cuda_array_interface: 'data' must be (fb.data_ptr(), False): the device pointer and "
+        "a read-only flag")
     assert report["read_only"] is False, "cuda_array_interface: the framebuffer is writable"
     assert report["stream"] == 1, (
         f"cuda_array_interface on the default stream: 'stream' should be 1 (the legacy default "
@@ -439,7 +452,7 @@ def test_cuda_array_interface(impl, device):
         f"cuda_array_interface under torch.cuda.stream(s): 'stream' should be the current "
         f"stream's handle s.cuda_stream = {report['side_stream_handle']}, got "
         f"{report['side_stream']!r}: a consumer synchronises with the producer's stream")
-    assert report.get("fb_sees_consumer_write"), (
+    assert report.get("fb_sees_consumer_write") == 12345, (
         "cuda_array_interface: a consumer's write through the described memory did not "
         "reach fb")
 
@@ -504,18 +517,17 @@ def test_FrameDownloader_fifo_order_and_content(impl, device, num_buffers):
 def probe_downloader_buffers(lab, device, num_buffers, n_frames):
     shape = (8, 16)
     downloader = lab.FrameDownloader(shape, device, num_buffers=num_buffers)
-    kept, report = [], {"pointers": [], "pinned": [], "device": [], "correct": []}
+    kept, report = [], {"pointers": [], "pinned": [], "device": [], "frames": []}
     for i in range(n_frames):
         frame = make_frame(i, shape, device)
         downloader.submit(frame)
         if i >= num_buffers - 1:
-            j = i - num_buffers + 1
             host = downloader.receive()
             kept.append(host)  # alive, so a fresh allocation could not reuse its address
             report["pointers"].append(host.data_ptr())
             report["pinned"].append(host.is_pinned() if device == "cuda" else None)
             report["device"].append(host.device.type)
-            report["correct"].append(torch.equal(host.cpu(), make_frame(j, shape, "cpu")))
+            report["frames"].append(host.detach().cpu().clone())  # the test compares
     return report
 
 
@@ -526,9 +538,11 @@ def test_FrameDownloader_reuses_pinned_staging_buffers(impl, device, num_buffers
     report = impl.probe(probe_downloader_buffers, device, num_buffers, 10)
     assert all(d == "cpu" for d in report["device"]), (
         f"receive() must return a host (CPU) staging buffer, got devices {report['device']}")
-    assert all(report["correct"]), (
-        f"receive() returned the wrong content for frames "
-        f"{[i for i, ok in enumerate(report['correct']) if not ok]}")
+    wrong = [j for j, host in enumerate(report["frames"])
+             if not (isinstance(host, torch.Tensor) and host.shape == (8, 16)
+                     and torch.equal(host, make_frame(j, (8, 16), "cpu")))]
+    assert len(report["frames"]) == 10 - num_buffers + 1 and not wrong, (
+        f"receive() returned the wrong content for frames {wrong}")
     distinct = len(set(report["pointers"]))
     assert distinct <= num_buffers, (
         f"receive() returned {distinct} different host buffers over "
@@ -709,15 +723,16 @@ def probe_render_in_place(lab, device):
     fb = torch.full((12, 20), -1, dtype=torch.int32, device=device)
     with replaced(lab, {"pack_rgba8": given_pack_rgba8}):
         result = lab.render_rotating_triangle(2, fb)
-    return {"returns_out": isinstance(result, torch.Tensor) and result.data_ptr() == fb.data_ptr(),
-            "frame": fb.cpu()}
+    return {"pointers": (result.data_ptr() if isinstance(result, torch.Tensor) else None,
+                         fb.data_ptr()), "frame": fb.cpu()}
 
 
 @pytest.mark.task(4)
 @pytest.mark.points(0.25)
 def test_render_rotating_triangle_writes_in_place(impl, device):
     report = impl.probe(probe_render_in_place, device)
-    assert report["returns_out"], "render_rotating_triangle must return out itself, not a copy"
+    assert report["pointers"][0] == report["pointers"][1], \
+        "render_rotating_triangle must return out itself, not a copy"
     frame = report["frame"]
     unwritten = (frame == -1).nonzero()
     assert not len(unwritten), (f"render_rotating_triangle left {len(unwritten)} pixels of out "

@@ -43,6 +43,7 @@ from course.given.lab2 import (
     STRUCTURES,
     choose_structure,
     grid_resolutions,
+    moller_trumbore_rows,
     pack_bvh,
     ray_octants,
 )
@@ -396,9 +397,12 @@ def median_bvh(mesh: Mesh, leaf_size: int = 2) -> dict:
             "triangles": torch.tensor(order, dtype=torch.int64, device=device)}
 
 
-def median_kdtree(mesh: Mesh, max_depth: int = 10, leaf_size: int = 3) -> dict:
+def median_kdtree(mesh: Mesh, max_depth: int = 10, leaf_size: int = 3,
+                  at_vertices: bool = False) -> dict:
     """A spatial-median kd-tree: split the longest axis of the node's box in the middle;
-    a triangle whose bounds reach the plane goes to both sides (recursive; small meshes)."""
+    a triangle whose bounds reach the plane goes to both sides (recursive; small meshes).
+    ``at_vertices``: move each plane to the triangle bound nearest the middle (inside the
+    box), as an SAH build over bound planes does: vertices then lie in split planes."""
     corners = mesh.triangles().cpu()
     tri_lo, tri_hi = corners.amin(1), corners.amax(1)
     lo, hi = tri_lo.amin(0), tri_hi.amax(0)
@@ -411,6 +415,11 @@ def median_kdtree(mesh: Mesh, max_depth: int = 10, leaf_size: int = 3) -> dict:
         a = int((box_hi - box_lo).argmax())
         s = float((box_lo[a] + box_hi[a]) / 2)
         s = float(torch.tensor(s, dtype=box_lo.dtype))  # representable in the mesh dtype
+        if at_vertices:
+            planes = torch.cat((tri_lo[ids, a], tri_hi[ids, a]))
+            planes = planes[(planes > box_lo[a]) & (planes < box_hi[a])]
+            if len(planes):
+                s = float(planes[(planes.double() - s).abs().argmin()])
         child = len(split)
         split[i], axis[i], left[i] = s, a, child
         split.extend([0.0, 0.0])
@@ -445,14 +454,17 @@ def grid_padding(lo: torch.Tensor, hi: torch.Tensor) -> float:
     return pad if pad > 0 else 1.0
 
 
-def uniform_grid(mesh: Mesh, resolution=None, density: float = 2.0) -> dict:
+def uniform_grid(mesh: Mesh, resolution=None, density: float = 2.0,
+                 pad: float | None = None) -> dict:
     """A uniform grid in the lab's layout, built here one triangle at a time (small meshes):
     the padded scene box, ``grid_resolutions`` cells (or ``resolution``), every triangle in
     each cell its padded bounds reach. It takes ``build_grid``'s arguments, so that a test
-    can also hand it to the lab in place of the lab's own builder."""
+    can also hand it to the lab in place of the lab's own builder. ``pad``: the margin
+    (default ``grid_padding``); 0 lays the cells on the scene's bounds, and a triangle whose
+    lower bound lies on a cell boundary is listed only in the cell above it."""
     corners = mesh.triangles().cpu()
     tri_lo, tri_hi = corners.amin(1), corners.amax(1)
-    pad = grid_padding(tri_lo.amin(0), tri_hi.amax(0))
+    pad = grid_padding(tri_lo.amin(0), tri_hi.amax(0)) if pad is None else pad
     lo, hi = tri_lo.amin(0) - pad, tri_hi.amax(0) + pad
     if resolution is None:
         res = grid_resolutions((hi - lo)[None], torch.tensor([mesh.num_faces]), density)[0]
@@ -2008,3 +2020,159 @@ def test_builders_reject_nonfinite_vertices(impl, device):
         assert len(messages) == 1 and next(iter(messages)).startswith("mesh: "), (
             f"builders given a vertex coordinate {bad}: expected one and the same error "
             f"naming 'mesh' from all of {', '.join(builders)}, got {sorted(messages)}")
+
+
+# ---------------------------------------------------------------------------------------
+# Rays aimed exactly at vertices and edge midpoints: every walk at its extremes. Such a ray
+# hits several triangles at the same true t; their computed t differ by rounding, and the
+# planes of cells, boxes and splits through the vertex are crossed at a t that rounds on its
+# own. Each walk must still return brute force's triangle (the smallest computed t, ties to
+# the lowest index): a structure may visit more, never less.
+
+VERTEX_SCENES = ("ico", "suzanne", "soup", "terrain")
+VERTEX_SHIFTS = (0.0, 1e5)  # near the origin, and far from it (float32 spacing 1/128)
+LATTICE = 6  # the terrain's quads per side: its vertices lie on integer x and y
+
+
+def mt_rows(origins, directions, v0, v1, v2, t_min=0.0, t_max=INF):
+    """Brute force's kernel for ``bvh_closest_hit_fast``: the provided
+    ``moller_trumbore_rows`` (the mesh's dtype, edges ``v1 - v0``, ``v2 - v0``), broadcast
+    like Lab 1's kernels, ``(t, u, v)`` with ``t = inf`` and u = v = 0 on a miss."""
+    o, d, a, b, c = torch.broadcast_tensors(origins, directions, v0, v1, v2)
+    t_min = torch.as_tensor(t_min, dtype=o.dtype, device=o.device).expand(o.shape[:-1])
+    t_max = torch.as_tensor(t_max, dtype=o.dtype, device=o.device).expand(o.shape[:-1])
+    t, u, v, hit = moller_trumbore_rows(o, d, a, b - a, c - a, t_min, t_max)
+    return torch.where(hit, t, INF), torch.where(hit, u, 0.0), torch.where(hit, v, 0.0)
+
+
+@functools.cache
+def vertex_scene(name: str, shift: float) -> Mesh:
+    """The scenes aimed at (float32, CPU), moved by ``shift`` on every axis: a small
+    icosphere, Suzanne, a random soup, and a terrain over an integer lattice (the planes of
+    an aligned grid, and of boxes and splits at triangle bounds, pass through its vertices)."""
+    if name == "terrain":
+        g = generator(61)
+        xy = torch.stack(torch.meshgrid(torch.arange(LATTICE + 1.0), torch.arange(LATTICE + 1.0),
+                                        indexing="ij"), -1).reshape(-1, 2).to(F64)
+        z = torch.rand(len(xy), 1, generator=g, dtype=F64).float().double()
+        vertices = torch.cat((xy, z), 1)
+        q = torch.arange(LATTICE)
+        i, j = (x.reshape(-1) for x in torch.meshgrid(q, q, indexing="ij"))
+        a, b = i * (LATTICE + 1) + j, (i + 1) * (LATTICE + 1) + j
+        faces = torch.cat((torch.stack((a, b, a + 1), 1), torch.stack((b, b + 1, a + 1), 1)))
+    else:
+        kwargs = {"ico": {"level": 1}, "soup": {"n": 60, "seed": 3}}.get(name, {})
+        source = {"ico": "icosphere", "soup": "random_soup"}.get(name, name)
+        m = load_scene(source, device="cpu", dtype=F64, **kwargs).mesh
+        vertices, faces = m.vertices, m.faces
+    return Mesh(vertices=(vertices.to(F64) + shift).float(), faces=faces)
+
+
+@functools.cache
+def _vertex_case(name: str, shift: float, device: str, kernel: str):
+    """``(mesh, rays, (triangle, t))``: a ray at every vertex and every edge midpoint of the
+    scene from random points around it (outside its bounds), and brute force's hits
+    (computed on ``device``, as the walk's intersect is: the same bits)."""
+    mesh = vertex_scene(name, shift)
+    v = mesh.vertices.to(F64)
+    edges = torch.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), dim=1).values
+    edges = torch.unique(edges, dim=0)
+    targets = torch.cat((v, (v[edges[:, 0]] + v[edges[:, 1]]) / 2))
+    lo, hi = v.amin(0), v.amax(0)
+    g = generator(62)
+    out = torch.randn(len(targets), 3, generator=g, dtype=F64)
+    origins = (lo + hi) / 2 + 0.75 * float((hi - lo).norm()) * out / out.norm(dim=1, keepdim=True)
+    rays = Rays.create(origins.float(), (targets - origins).float()).to(device)
+    mesh = on(mesh, device)
+    fn = mt64 if kernel == "mt64" else mt_rows
+    tri = mesh.triangles()
+    t, _, _ = fn(rays.origins[:, None], rays.directions[:, None], tri[None, :, 0],
+                 tri[None, :, 1], tri[None, :, 2], rays.t_min[:, None], rays.t_max[:, None])
+    best = t.argmin(dim=1)  # the first of equal minima: the lowest index
+    t_best = t.gather(1, best[:, None])[:, 0]
+    return mesh, rays, (torch.where(t_best < INF, best, -1).cpu(), t_best.cpu())
+
+
+def vertex_cases(device, kernel: str = "mt64"):
+    """``(label, mesh, rays, reference)`` of every vertex scene, near and far."""
+    for name, shift in itertools.product(VERTEX_SCENES, VERTEX_SHIFTS):
+        mesh, rays, ref = _vertex_case(name, shift, str(device), kernel)
+        yield f"{name}{f' moved by {shift:g}' if shift else ''}", mesh, rays, ref
+
+
+def compare_at_vertices(result, rays: Rays, ref, what: str, counters=("steps", "tests")):
+    """Every ray must report brute force's triangle, exactly (its t then follows: the same
+    kernel on the same pair)."""
+    hits, _ = check_result(result, len(rays), rays.dtype, rays.device, what, counters)
+    tri, t = hits.triangle.cpu(), hits.t.cpu()
+    ref_tri, ref_t = ref
+    wrong = (tri != ref_tri).nonzero()[:, 0]
+    if len(wrong):
+        i = int(wrong[0])
+        raise AssertionError(
+            f"{what}: {len(wrong)} of {len(rays)} rays aimed exactly at a vertex or an edge "
+            f"midpoint report another triangle than brute force. First: ray {i} "
+            f"({describe(rays.to('cpu'), i)}): brute force: triangle {int(ref_tri[i])} at "
+            f"t={ref_t[i].item():.9g}; you: triangle {int(tri[i])} at t={t[i].item():.9g}. "
+            f"Such a ray hits every triangle around the point at the same t, give or take "
+            f"rounding, and crosses the planes of cells, boxes and splits through it at a t "
+            f"that rounds on its own: comparing the two without slack drops the triangle brute "
+            f"force picks (the smallest t, ties to the lowest index). Keep a node or cell "
+            f"entered up to reach(closest t), and end at a cell or leaf only if reach(closest "
+            f"t) < its exit (reach: course.given.lab2_robust).")
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+def test_grid_exact_at_vertices_and_edges(impl, device):
+    for label, mesh, rays, ref in vertex_cases(device):
+        grid = uniform_grid(mesh)
+        compare_at_vertices(impl.grid_closest_hit(rays, mesh, grid, mt64), rays, ref,
+                            f"grid_closest_hit({label}, a grid built by the grader)",
+                            GRID2_COUNTERS)
+        if label.startswith("terrain"):
+            # Cells on the lattice, unpadded: rays through cell corners, and triangles
+            # listed only in the cell above the boundary their vertex lies on.
+            grid = uniform_grid(mesh, (LATTICE, LATTICE, 1), pad=0.0)
+            compare_at_vertices(impl.grid_closest_hit(rays, mesh, grid, mt64), rays, ref,
+                                f"grid_closest_hit({label}, unpadded cells on its lattice)",
+                                GRID2_COUNTERS)
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.5)
+def test_bvh_walks_exact_at_vertices_and_edges(impl, device):
+    for label, mesh, rays, ref in vertex_cases(device):
+        bvh = median_bvh(mesh, 2)
+        for walk in ("bvh_closest_hit", "bvh_closest_hit_stackless"):
+            compare_at_vertices(getattr(impl, walk)(rays, mesh, bvh, mt64), rays, ref,
+                                f"{walk}({label}, median BVH, leaf_size=2)")
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(0.5)
+def test_kd_exact_at_vertices_and_edges(impl, device):
+    for label, mesh, rays, ref in vertex_cases(device):
+        tree = median_kdtree(mesh, 10, at_vertices=True)
+        compare_at_vertices(impl.kd_closest_hit(rays, mesh, tree, mt64), rays, ref,
+                            f"kd_closest_hit({label}, planes at triangle bounds)")
+
+
+@pytest.mark.task(6)
+@pytest.mark.points(0.5)
+def test_two_level_exact_at_vertices_and_edges(impl, device):
+    for label, mesh, rays, ref in vertex_cases(device):
+        compare_at_vertices(impl.two_level_closest_hit(rays, mesh, simple_two_level(mesh), mt64),
+                            rays, ref, f"two_level_closest_hit({label}, built by the grader)",
+                            GRID2_COUNTERS)
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(0.5)
+def test_fast_bvh_exact_at_vertices_and_edges(impl, device):
+    # Brute force with the walk's own kernel, moller_trumbore_rows: the same bits per pair
+    # (compile=False: no fused rounding), so the same triangle is required.
+    for label, mesh, rays, ref in vertex_cases(device, "rows"):
+        compare_at_vertices(impl.bvh_closest_hit_fast(rays, mesh, median_bvh(mesh, 2),
+                                                      check_every=4),
+                            rays, ref, f"bvh_closest_hit_fast({label}, median BVH, leaf_size=2)")

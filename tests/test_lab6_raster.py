@@ -47,7 +47,7 @@ import pytest
 import torch
 
 from course.core.camera import Camera, primary_rays
-from course.core.files import import_file
+from course.core.files import import_file, lab_source
 from course.core.scenes import load_scene
 from course.core.types import Hits, Mesh
 from course.grading.testing import (
@@ -100,8 +100,8 @@ def reference(request, impl):
     task builds on (a visibility buffer, a clipped screen), so each task is graded on its
     own. In the student handout, which has no solutions/, it is the lab itself: there an
     early mistake can also show in a later task's tests."""
-    path = Path(request.config.rootpath) / "solutions" / f"{LAB_MODULE}.py"
-    return import_file(path, f"reference_{LAB_MODULE}") if path.is_file() else impl
+    path = lab_source(Path(request.config.rootpath) / "solutions", LAB_MODULE)
+    return import_file(path, f"reference_{LAB_MODULE}") if path is not None else impl
 
 
 def reference_raster(reference, mesh: Mesh, camera: Camera):

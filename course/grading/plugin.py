@@ -35,7 +35,7 @@ import torch
 from course.core.files import import_file, lab_source, module_files
 from course.core.labs import default_impl, implementation_folder
 from course.core.labs import lab_number as module_lab_number
-from course.grading.catalog import function_tasks, near_misses, read_grader
+from course.grading.catalog import function_tasks, lab_file_rank, read_grader, read_manifest
 from course.grading.feedback import IMPORT_FAILED, Feedback, short_feedback
 from course.grading.sandbox import LocalLab, SandboxedLab, Worker
 
@@ -165,15 +165,70 @@ def resolve_impl(config) -> tuple[Path, bool]:
     return folder, trusted
 
 
+_LISTED = 12  # files of a submission named when its lab file is not among them
+
+
+def shown_folder(folder: Path) -> str:
+    """How messages name the submission ``folder``: "the submission" where it is one that
+    ``rtcourse gradescope`` collected (a temporary folder the student never saw), else its
+    path relative to the current folder where it lies below it."""
+    if read_manifest(folder) is not None:
+        return "the submission"
+    try:
+        return f"{Path(folder).resolve().relative_to(Path.cwd().resolve()).as_posix()}/"
+    except ValueError:
+        return f"{folder}/"
+
+
+def handed_in(folder: Path) -> list[str]:
+    """The files of a submission as the student handed them in: the collected upload's (its
+    manifest), else the files at the top of ``folder``."""
+    manifest = read_manifest(folder)
+    if manifest is not None:
+        return manifest["handed_in"]
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(p.name + "/" * p.is_dir() for p in folder.iterdir()
+                  if not p.name.startswith((".", "__pycache__")))
+
+
 def missing_file(folder: Path, name: str) -> str:
-    """The one line for a lab file (or package folder) that is not in the submission."""
-    text = (f"no {name}.py in {folder}: the submission must contain the file {name}.py (or "
-            f"the folder {name}/ of a lab kept as a package)")
-    close = near_misses(folder, name)
+    """The one line for a lab file (or package folder) that is not in the submission: the
+    submission as the student knows it, and the files it does hold (near misses of the
+    name first)."""
+    text = (f"no {name}.py in {shown_folder(folder)}: the submission must contain the file "
+            f"{name}.py (or the folder {name}/ of a lab kept as a package)")
+    files = handed_in(folder)
+    close = [f for f in files if lab_file_rank(f.rsplit("/", 1)[-1], name) == 1]
     if close:
-        text += (f" (found {', '.join(repr(p.name) for p in close)}: rename it to "
-                 f"{name}.py)")
-    return text
+        return text + (f" (found {', '.join(map(repr, close))}: rename it to {name}.py)")
+    if not files:
+        return text + "; it holds no files"
+    more = f" and {len(files) - _LISTED} more" if len(files) > _LISTED else ""
+    return text + f"; it holds {', '.join(map(repr, files[:_LISTED]))}{more}"
+
+
+def graded_as(folder: Path, name: str) -> str | None:
+    """What was graded as the lab ``name``, named as the student handed it in: "'lab4_march
+    (1).py'", or the files of a package handed in; None where the lab is not there."""
+    manifest = read_manifest(folder)
+    if manifest is not None:
+        files = manifest["files"]
+        mine = [(k, v) for k, v in files.items() if k == f"{name}.py" or k.startswith(
+            f"{name}/")]
+        taken = [v for _, v in mine if v is not None]
+        if not taken:
+            return None
+        if any("/" in k for k, _ in mine):
+            left = len(mine) - len(taken)
+            return ", ".join(map(repr, taken)) + (
+                f" (the skeleton's other {left} file{'s' * (left != 1)})" if left else "")
+        return repr(taken[0])
+    path = lab_source(folder, name)
+    if path is None:
+        return None
+    return f"{shown_folder(folder)}{path.name}" + ("/" if path.is_dir() else "")
 
 
 def syntax_problem(path: Path, name: str) -> str | None:

@@ -89,6 +89,7 @@ class ScoreKeeper:
     started: float = field(default_factory=time.monotonic)
     problems: dict = field(default_factory=dict)  # submission problems, each said once
     collect_errors: list = field(default_factory=list)  # graders that failed to load
+    graded_files: dict = field(default_factory=dict)  # lab module -> what was graded as it
     show_progress: bool = True
     progress_stream: object = None  # where the bars go (course.core.progress.terminal_stream)
     _bar: object = None
@@ -122,6 +123,24 @@ class ScoreKeeper:
         self._left = defaultdict(int)
         for r in self.results.values():
             self._left[r.lab] += 1
+        self.graded_files = self._graded_files(session.config)
+
+    def _graded_files(self, config) -> dict:
+        """Each graded lab module -> the file(s) graded as it, as the student handed them in
+        (``course.grading.plugin.graded_as``); a lab not handed in is left out."""
+        try:
+            from course.grading.plugin import graded_as, resolve_impl
+
+            folder, _ = resolve_impl(config)
+        except (ImportError, ValueError, AttributeError):
+            return {}
+        found = {}
+        for module in sorted({r.lab_module for r in self.results.values() if r.lab_module},
+                             key=lambda m: (_lab_number(m) or 0, m)):
+            shown = graded_as(folder, module)
+            if shown is not None:
+                found[module] = shown
+        return found
 
     def pytest_collectreport(self, report):
         if report.failed:
@@ -210,6 +229,9 @@ class ScoreKeeper:
             if r.status == "failed" and not row[5] and not r.problem:
                 row[5] = r.message
         lines = []
+        if self.graded_files:
+            lines += ["files graded: " + "; ".join(
+                f"lab {_lab_number(m)}: {shown}" for m, shown in self.graded_files.items()), ""]
         if self.problems or self.collect_errors:
             lines += ["submission problems (each fails every test of its lab):"]
             lines += [f"  {text}" for text in self.problems.values()]
@@ -259,7 +281,8 @@ class ScoreKeeper:
             tests.append(test)
         return {"score": round(score, 4), "max_score": round(top, 4),
                 "execution_time": round(time.monotonic() - self.started, 2),
-                "output": self.table(), "tests": tests}
+                "output": self.table(), "tests": tests,
+                "extra_data": {"graded_files": dict(self.graded_files)}}
 
 
 def write_json_atomically(path, data: dict):

@@ -7,6 +7,7 @@ task's points and the first failure message of every task that lost points. ``-v
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from course.core.files import repo_root
@@ -91,6 +92,17 @@ def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, t
     if not files:
         raise GradeError(f"rtcourse grade: no graders found for lab {labs} in "
                          f"{root / 'tests'}")
+    user = os.environ.get("RTCOURSE_WORKER_USER")
+    if not trusted and impl != "solutions" and user \
+            and os.environ.get("RTCOURSE_WORKER_CHECKED") != user:  # run_autograder checked
+        from course.grading.sandbox import worker_python_problem
+
+        try:
+            problem = worker_python_problem()
+        except RuntimeError as exc:  # no such user, or not root
+            problem = str(exc)
+        if problem:  # before any test: a broken interpreter is never the student's score
+            raise GradeError(f"rtcourse grade: {problem}")
     import pytest
 
     from course.grading.results import ScoreKeeper, write_json_atomically

@@ -34,11 +34,52 @@ with the same input-mutation check, so tests read the same either way.
 With ``RTCOURSE_WORKER_USER`` set (the Gradescope autograder sets it when it runs as root)
 the submission runs as that unprivileged user, so it cannot read what only the
 grader may (the reference solutions shipped in the autograder) or touch the results.
+
+Threat model
+------------
+The submission is a student who has read this grader's source (it is open) and whose code
+runs, with every right of its own process, in the worker's server and in each probe's
+process: it can patch any Python object there, read that process's memory, find and write
+its file descriptors, start processes and exit at will. It cannot run code in the
+grader's process (this one) or in the worker's keeper, which never import it. So:
+
+* **Verdicts are decided here.** What comes back from the submission's processes is data
+  (tensors, numbers, strings, pointers) rebuilt by :mod:`course.grading.wire`, which admits
+  no class; every comparison with a reference and every pass or fail is made by the test in
+  this process, against inputs and references this process holds. A probe
+  (``impl.probe(fn, ...)``) returns what it observed (addresses, values read back, copies
+  of frames), never a boolean the test would trust.
+* **A reply written by the submission is refused.** Each probe request carries a fresh
+  random nonce; the keeper takes it out of the request before the probe's process is
+  started, and that process's trusted code adds it to the reply after the probe returned.
+  A reply written on the probe's pipe by the submission's code (the "passed" report of a
+  forger) does not carry it and fails its test. What this cannot stop: the nonce lives
+  in the probe's process while the submission runs there, so a submission that searches
+  its own process's memory for it, and fabricates the observations themselves (two equal
+  addresses, the values a view would read back), can still pass a probe that watches
+  identity rather than values. No check made inside a process the submission controls can
+  rule that out; such code is in the submission, for a person to read, and a probe that
+  returns values (a frame, a packed word) gains it nothing: the grader compares them with
+  its own reference.
+* **Hidden graders and results are out of reach.** A probe's function and arguments are
+  loaded by the probe's process while it still has the grader's rights, before it drops to
+  ``RTCOURSE_WORKER_USER`` and imports the submission; as root the grader withholds
+  ``tests/hidden/`` and ``solutions/`` from other users (:func:`withhold`), and the
+  autograder its results folder. The worker's environment holds no path of the grader's
+  (:data:`SCRUBBED`). Without a worker user (a student's own ``rtcourse grade``) there is
+  nothing to hide: the student owns every file. Hidden lines are still removed from any
+  text the worker sends back (:class:`course.grading.sources.Redactor`), a second line of
+  defence, not the first.
+* **The worker's interpreter must run as the worker user.** :func:`worker_python_problem`
+  checks, before grading, that ``RTCOURSE_WORKER_USER`` can run this Python and import the
+  standard library and the course's dependencies; otherwise grading stops with one line
+  (a missing module would otherwise be scored as the student's failure).
 """
 
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
 import signal
 import socket
@@ -87,6 +128,10 @@ class ReplyTooLarge(RuntimeError):
     """A call's result is bigger than a reply may be."""
 
 
+class ForgedReply(AssertionError):
+    """A probe's reply that its process's trusted code did not write."""
+
+
 def _env_float(name, default):
     value = os.environ.get(name)
     return float(value) if value else default
@@ -131,6 +176,71 @@ def _as_user(name: str | None):
         raise RuntimeError(f"RTCOURSE_WORKER_USER={name}: only a grader running as root can "
                            f"start the worker as another user")
     return entry.pw_uid, entry.pw_gid
+
+
+# Names of the grader's environment the worker never sees: where the results and the
+# submission lie, the test node running (a hidden test's name) and the course's own paths.
+SCRUBBED = ("RTCOURSE_RESULTS_DIR", "RTCOURSE_SUBMISSION_DIR", "RTCOURSE_TEST_RESULTS",
+            "RTCOURSE_TEST_CWD", "RTCOURSE_FAILURE_DIR", "RTCOURSE_PYTHON",
+            "PYTEST_CURRENT_TEST", "PYTEST_ADDOPTS", "OLDPWD")
+# What the worker user must import for grading to mean anything: a few modules of the
+# standard library that the course and its dependencies import lazily, and the course.
+WORKER_IMPORTS = ("html", "json", "email.message", "decimal", "fractions", "sqlite3",
+                  "xml.etree.ElementTree", "numpy", "torch", "scipy", "matplotlib",
+                  "trimesh", "networkx", "PIL", "mpmath", "tqdm", "course.grading.worker")
+
+
+def worker_env() -> dict:
+    """The grader's environment less what the worker must not see."""
+    return {k: v for k, v in os.environ.items() if k not in SCRUBBED}
+
+
+def withhold(root) -> list[str]:
+    """As root with a worker user: take every right of other users on the hidden graders
+    and the references of the course at ``root``; return the folders changed."""
+    if root is None or not os.environ.get("RTCOURSE_WORKER_USER") or os.geteuid() != 0:
+        return []
+    changed = []
+    for sub in ("tests/hidden", "solutions"):
+        path = os.path.join(str(root), sub)
+        if os.path.isdir(path) and os.stat(path).st_mode & 0o077:
+            os.chmod(path, os.stat(path).st_mode & 0o700)
+            changed.append(path)
+    return changed
+
+
+def worker_python_problem(user: str | None = None, python: str | None = None) -> str | None:
+    """One line saying why ``user`` (default ``RTCOURSE_WORKER_USER``) cannot run the
+    worker's interpreter and import what grading needs, or None when it can (or when no
+    other user runs the worker)."""
+    user = os.environ.get("RTCOURSE_WORKER_USER") if user is None else user
+    if not user:
+        return None
+    uid, gid = _as_user(user)
+    python = python or sys.executable
+    code = ("import importlib, sys\n"
+            f"for name in {WORKER_IMPORTS!r}:\n"
+            "    try:\n        importlib.import_module(name)\n"
+            "    except ImportError as exc:\n"
+            "        sys.exit(f'cannot import {name}: {exc}')\n")
+    why = None
+    try:
+        proc = subprocess.run([python, "-c", code], user=uid, group=gid, extra_groups=[],
+                              cwd="/", env=worker_env(), stdin=subprocess.DEVNULL,
+                              capture_output=True, text=True, timeout=300, check=False)
+        if proc.returncode != 0:
+            lines = (proc.stderr or proc.stdout).strip().splitlines()
+            why = lines[-1] if lines else f"exit status {proc.returncode}"
+    except (OSError, subprocess.SubprocessError) as exc:
+        why = f"{type(exc).__name__}: {exc}"
+    if why is None:
+        return None
+    return (f"the worker user {user} cannot run the grader's Python {python} ({why[:200]}): "
+            f"install the course in an interpreter under /usr or /opt, or make this one and "
+            f"its packages readable by {user} (chmod -R o+rX on its folder and o+x on the "
+            f"folders above it), or set RTCOURSE_WORKER_USER= (empty) to run the submission "
+            f"as the grader's own user, which gives up hiding the reference solutions, the "
+            f"hidden tests and the results from it")
 
 
 # The worker tree's own Python and torch, before the submission allocates anything.
@@ -184,7 +294,7 @@ class Worker:
             os.chown(self.workdir, *user)
         ctl_parent, ctl_child = socket.socketpair()
         data_parent, data_child = socket.socketpair()
-        env = dict(os.environ, PYTHONUNBUFFERED="1", TMPDIR=self.workdir,
+        env = dict(worker_env(), PYTHONUNBUFFERED="1", TMPDIR=self.workdir,
                    PYTORCH_NVML_BASED_CUDA_CHECK="1")
         fds = (ctl_child.fileno(), data_child.fileno())
         self.proc = subprocess.Popen(
@@ -377,6 +487,7 @@ class SandboxedLab:
         self._test_spent = 0.0  # in the current test
         self._timed_out: dict[str, str] = {}  # where -> the message it failed with
         self._signatures = reference_signatures(reference_file(root, name))
+        withhold(root)  # before the worker starts: it may drop to another user
         if root is not None and not worker.redact.lines:
             worker.redact = Redactor(root)
 
@@ -471,9 +582,16 @@ class SandboxedLab:
         """Run ``fn(lab_module, *args)`` in a fresh process next to the submission; return
         its plain result."""
         where = f"probe {fn.__name__} of {self._name}"
+        nonce = secrets.token_hex(16)
         reply = self._request({"op": "probe", "probe": wire.encode(fn), "ref": None,
                                "args": wire.encode(args), "kwargs": wire.encode(kwargs),
-                               "signatures": self._signatures}, where, probe=True)
+                               "signatures": self._signatures, "nonce": nonce}, where,
+                              probe=True)
+        if not (isinstance(reply.get("nonce"), str)
+                and secrets.compare_digest(reply["nonce"], nonce)):
+            raise ForgedReply(f"the reply to {where} did not come from the probe: the "
+                              f"submission wrote its own onto the probe's channel, so the "
+                              f"test fails")
         self._fail(reply, where)
         return self._decode(reply.get("value"), where)
 
@@ -524,3 +642,24 @@ class RemoteObject:
 
     def __repr__(self):
         return f"<{self._type} in the sandboxed worker>"
+
+
+def main(argv=None) -> int:
+    """``python -m course.grading.sandbox check-worker [USER]``: exit 2 with one line when
+    the worker user cannot run this interpreter (run_autograder runs it before grading)."""
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv or argv[0] != "check-worker":
+        print("usage: python -m course.grading.sandbox check-worker [USER]", file=sys.stderr)
+        return 2
+    try:
+        problem = worker_python_problem(argv[1] if len(argv) > 1 else None)
+    except RuntimeError as exc:
+        problem = str(exc)
+    if problem:
+        print(f"rtcourse: {problem}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,6 +1,7 @@
 """The per-task table of the handout's ``labs/README.md``: for each task its points, every
 function it asks for (read from the skeleton's ``NotImplementedError``s), the earlier tasks
-its tests need, and the commands that run exactly its tests. For a lab kept as a package
+its tests run (directly, or through the lab's own functions, as the reference calls them),
+and the commands that run exactly its tests. For a lab kept as a package
 (``labs/lab2_accel/``) each function is listed with the file it is written in, the files
 the student hands in."""
 
@@ -42,12 +43,13 @@ def package_files(lab: LabInfo, lab_file: Path) -> list[str]:
                               for task in lab_tasks(lab, lab_file) for f in task.functions))
 
 
-def task_table(lab: LabInfo, lab_file: Path, test_file: str) -> list[str]:
+def task_table(lab: LabInfo, lab_file: Path, test_file: str, reference=None) -> list[str]:
     """Markdown lines: the table of ``lab``'s tasks (``test_file``: the grader's path as the
-    student types it; ``lab_file``: the skeleton, a file or a package folder)."""
+    student types it; ``lab_file``: the skeleton, a file or a package folder; ``reference``:
+    the solution, whose calls say what each task's tests run of the other tasks)."""
     lines = ["| task | title | points | you write | needs first | run only its tests |",
              "|---:|---|---:|---|---|---|"]
-    for task in lab_tasks(lab, lab_file):
+    for task in lab_tasks(lab, lab_file, reference):
         you_write = _you_write(task.functions, lab_file)
         needs = "; ".join(f"task {k} (" + ", ".join(f"`{f}`" for f in fns) + ")"
                           for k, fns in task.needs.items())

@@ -8,13 +8,15 @@ the pristine one. It forks
 * the *server*, which imports ``FOLDER/<lab>.py`` on the first request naming that lab and
   answers calls on ``DATA_FD`` until the grader closes it;
 * one fresh *probe* process per ``impl.probe`` request on ``CONTROL_FD``: the probe's
-  function is loaded before the submission is imported there, so nothing the submission
-  did in earlier calls is seen, and a probe whose process had the grader's own code changed
-  by the submission is refused (see :func:`fingerprint`). What this does not stop: the
-  submission runs in the probe's process, so code written against this grader could write
-  a made-up reply to the probe's pipe itself and exit. Only a check outside that process
-  could tell; the probes' observations (addresses, views, what was called) cannot be made
-  from outside it.
+  function and its arguments are loaded while the process still has the grader's rights
+  (a hidden test's file is read then, and never again: the submission, imported after the
+  drop to ``UID``, cannot open it), so nothing the submission did in earlier calls is seen,
+  and a probe whose process had the grader's own code changed by the submission is refused
+  (see :func:`fingerprint`). A probe returns data, never a verdict: the grader judges it.
+  Its reply carries the request's one-time nonce, taken out of the request before the
+  submission is imported; a reply without it (one the submission wrote on the pipe itself)
+  is refused by the grader. The threat model, and what this does not stop, are in
+  :mod:`course.grading.sandbox`.
 
 The keeper is a child subreaper: whatever the submission starts, even a grandchild that
 left its session, is reparented to it and killed when the server ends or the grader
@@ -106,12 +108,13 @@ def _reply_bytes(reply: dict, wire, limit: int, where: str, folder: str) -> byte
     try:
         data = wire.dumps(reply)
     except BaseException as exc:
-        data = wire.dumps({"error": _error(exc, folder), "output": reply.get("output", "")})
+        data = wire.dumps({"error": _error(exc, folder), "output": reply.get("output", ""),
+                           "nonce": reply.get("nonce")})
     if len(data) > limit:
         size = len(data)
         del data
         data = wire.dumps({"error": _assertion(too_large_message(where, size, limit)),
-                           "output": reply.get("output", "")})
+                           "output": reply.get("output", ""), "nonce": reply.get("nonce")})
     return data
 
 
@@ -319,15 +322,24 @@ def _server(conn, folder, reply_bytes, capture, wire):
                              folder))
 
 
-def _probe(request, folder, capture, wire) -> dict:
-    """Run one probe in this fresh process: load the probe and its arguments, take the
-    fingerprint, import the submission, run, check the fingerprint again."""
+def _load_probe(request, folder, wire):
+    """The probe's function and arguments, loaded with the grader's rights (before the drop
+    to the submission's user): (fn, args, kwargs), or an error reply."""
     try:
         fn = wire.load_function(request["probe"])
         args = wire.decode(request["args"], allow_functions=True)
         kwargs = wire.decode(request["kwargs"], allow_functions=True)
     except BaseException as exc:
         return {"error": _error(exc, folder)}
+    return fn, args, kwargs
+
+
+def _probe(request, loaded, folder, capture, wire) -> dict:
+    """Run one probe in this fresh process (its function and arguments ``loaded`` already):
+    take the fingerprint, import the submission, run, check the fingerprint again."""
+    if isinstance(loaded, dict):
+        return loaded
+    fn, args, kwargs = loaded
     # Bound before the submission is imported: replacing these names changes nothing.
     changes_of, encode, error_of, checked = fingerprint_changes, wire.encode, _error, _CheckedLab
     before = fingerprint()
@@ -427,15 +439,19 @@ def _run_probe(request_bytes, ctl_fd, folder, memory_bytes, reply_bytes, uid, gi
     """Fork a fresh probe process for one request; its reply, or why there is none."""
     request = wire.pickle.loads(request_bytes)
     where = request.get("where", "the probe")
+    nonce = request.pop("nonce", None)
     read_end, write_end = os.pipe()
     keeper = os.getpid()
     pid = os.fork()
     if pid == 0:
         try:
             os.close(read_end)
+            # Read with the grader's rights (a hidden test's file), then dropped for good.
+            loaded = _load_probe(request, folder, wire)
             capture = _child(ctl_fd, memory_bytes, uid, gid, keeper)
-            reply = _probe(request, folder, capture, wire)
+            reply = _probe(request, loaded, folder, capture, wire)
             reply["output"] = _take_output(capture)
+            reply["nonce"] = nonce
             data = _reply_bytes(reply, wire, reply_bytes, where, folder)
             with os.fdopen(write_end, "wb") as f:
                 f.write(len(data).to_bytes(8, "little") + data)
@@ -451,7 +467,8 @@ def _run_probe(request_bytes, ctl_fd, folder, memory_bytes, reply_bytes, uid, gi
         os.kill(pid, signal.SIGKILL)
     _, status = os.waitpid(pid, 0)
     if size > reply_bytes:
-        return wire.dumps({"error": _assertion(too_large_message(where, size, reply_bytes))})
+        return wire.dumps({"error": _assertion(too_large_message(where, size, reply_bytes)),
+                           "nonce": nonce})
     if size == 0 or len(data) < size:
         return wire.dumps({"crashed": os.waitstatus_to_exitcode(status)})
     return data

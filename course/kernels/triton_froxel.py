@@ -31,7 +31,7 @@ Kernels of one frame (no host synchronisation between them):
 5. ``_apply_kernel``: a lane per pixel, the trilinear lookup at its view depth.
 
 What it computes is Lab 5's ``render_froxels`` for the non-temporal path (jitter 0.5),
-with every numerical convention of the lab (``solutions/lab5_froxel.py`` states them):
+with every numerical convention of the lab (``solutions/lab5_froxel/`` states them):
 exponential slices, samples at the tile centre and the middle depth of the slice,
 ``MIN_LIGHT_DISTANCE`` and the ``range`` cut-off of point and spot lights, the spot's
 smoothstep, the shadow map's nearest-texel test with its bias, trilinear transmittance

@@ -358,3 +358,152 @@ def load_lab(name: str, impl: str | None = None, root=None):
     from course.core.labs import load_lab as load
 
     return load(name, impl, root)
+
+
+# ------------------------------------------------------------------ your point on the plot
+
+CALIBRATION = "float32 Möller–Trumbore brute force, 2048 rays x 256 triangles (torch)"
+
+
+def _calibration_batch(device: torch.device):
+    """The fixed workload of :func:`calibration_seconds`: rays from a sphere of radius 2
+    aimed into a random soup of small triangles in the unit cube, seeded (every machine
+    does the same arithmetic)."""
+    g = torch.Generator().manual_seed(7)
+    centre = torch.rand(256, 1, 3, generator=g)
+    corners = (centre + 0.2 * (torch.rand(256, 3, 3, generator=g) - 0.5)).to(device)
+    out = torch.randn(2048, 3, generator=g)
+    origins = 0.5 + 2.0 * out / out.norm(dim=1, keepdim=True)
+    directions = torch.rand(2048, 3, generator=g) - origins
+    return origins.to(device), directions.to(device), corners
+
+
+def _calibration_work(origins, directions, corners) -> torch.Tensor:
+    from course.core.raymath import cross, dot
+
+    o, d = origins[:, None], directions[:, None]
+    v0, e1, e2 = corners[None, :, 0], corners[None, :, 1] - corners[None, :, 0], \
+        corners[None, :, 2] - corners[None, :, 0]
+    p = cross(d, e2)
+    det = dot(e1, p)
+    inv = 1.0 / det
+    s = o - v0
+    u = dot(s, p) * inv
+    q = cross(s, e1)
+    v = dot(d, q) * inv
+    t = dot(e2, q) * inv
+    hit = (det.abs() > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+    return torch.where(hit, t, torch.inf).amin(1)
+
+
+def calibration_seconds(device: str | torch.device | None = None, repeats: int = 7) -> float:
+    """Seconds per call of a fixed workload (:data:`CALIBRATION`) on ``device``, timed as
+    every row of a bench is (:func:`time_fn`, median).
+
+    What it is for: reference times measured on another machine (the rows the student
+    handout ships in ``bench/reference/``) are scaled by the ratio of this machine's
+    calibration to theirs, so a ratio to the reference compares like with like. The scale
+    is approximate: it holds for work limited by the same arithmetic and memory as the
+    workload (batched tensor kernels), less for work dominated by Python or launches.
+    """
+    device = default_device(device)
+    batch = _calibration_batch(device)
+    return time_fn(_calibration_work, *batch, repeats=repeats, warmup=2, device=device).median
+
+
+def write_rows_csv(rows: Sequence[dict], path: str | Path) -> Path:
+    """Every row as one line of a CSV with the union of the rows' keys as its header (a key
+    a row lacks is an empty cell; floats keep their full precision)."""
+    import csv
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    columns = list(dict.fromkeys(key for row in rows for key in row))
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=columns)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: "" if row.get(k) is None else _plain(row[k]) for k in columns})
+    return path
+
+
+def _parse_cell(text: str):
+    if text == "":
+        return None
+    if text in ("True", "False"):
+        return text == "True"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def read_rows_csv(path: str | Path) -> list[dict]:
+    """The rows :func:`write_rows_csv` wrote: numbers and booleans parsed, empty cells
+    left out of their row."""
+    import csv
+
+    with Path(path).open(newline="") as f:
+        return [{k: v for k, v in ((k, _parse_cell(v)) for k, v in row.items()) if v is not None}
+                for row in csv.DictReader(f)]
+
+
+def trade_plot(reference: Sequence[dict], yours: Sequence[dict], extra: Sequence[dict] = (),
+               x: str = "seconds", y: str = "error", label: str = "setting",
+               path: str | Path | None = None, title: str | None = None,
+               yours_name: str = "yours", reference_name: str = "reference", ax=None):
+    """Your points over the reference's: the reference's rows in grey with their Pareto front
+    (dashed), ``extra`` rows (fused kernels) as grey triangles, and yours as red stars,
+    each labelled with its ``label`` and joined to the reference's point of the same
+    setting by a thin line (where the two differ, the line shows by how much and which
+    way). Log axes (symmetric-log where a column holds zeros: exact settings). Draws into
+    ``ax`` (a matplotlib Axes) when given, else into a new Figure; returns the Figure,
+    saved to ``path`` when given."""
+    from matplotlib.figure import Figure
+
+    def usable(rows):
+        return [r for r in rows if _finite(r.get(x)) and _finite(r.get(y))]
+
+    reference, yours, extra = usable(reference), usable(yours), usable(extra)
+    everything = reference + yours + extra
+    if not everything:
+        raise ValueError(f"rows: no row has finite values for both x={x!r} and y={y!r}")
+    if ax is None:
+        fig = Figure(figsize=(7.2, 5.0), layout="constrained")
+        ax = fig.add_subplot()
+    fig = ax.figure
+    if reference:
+        ax.scatter([r[x] for r in reference], [r[y] for r in reference], color="0.55", s=30,
+                   label=reference_name, zorder=2)
+        front = [reference[i] for i in pareto_front(reference, x, y)]
+        ax.plot([r[x] for r in front], [r[y] for r in front], "--", color="0.3", lw=1,
+                label=f"{reference_name}: Pareto front", zorder=1)
+    if extra:
+        ax.scatter([r[x] for r in extra], [r[y] for r in extra], marker="^", color="0.35",
+                   s=40, label="fused kernels", zorder=2)
+    if yours:
+        by_setting = {r.get(label): r for r in reference}
+        for r in yours:
+            twin = by_setting.get(r.get(label))
+            if twin is not None:
+                ax.plot([twin[x], r[x]], [twin[y], r[y]], "-", color="tab:red", lw=0.6,
+                        alpha=0.5, zorder=1)
+        ax.scatter([r[x] for r in yours], [r[y] for r in yours], marker="*", s=110,
+                   color="tab:red", label=yours_name, zorder=3)
+    for r in yours or reference:
+        ax.annotate(str(r.get(label, "")), (r[x], r[y]), textcoords="offset points",
+                    xytext=(4, 3), fontsize=7)
+    _log_scale(ax.set_xscale, [r[x] for r in everything])
+    _log_scale(ax.set_yscale, [r[y] for r in everything])
+    ax.set_xlabel(f"{x} (lower is better)")
+    ax.set_ylabel(f"{y} (lower is better)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=120)
+    return fig

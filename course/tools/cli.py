@@ -1,4 +1,4 @@
-"""``rtcourse``: demo, grade, mutants, release, gradescope, slides, skeletons."""
+"""``rtcourse``: demo, grade, bench, mutants, release, gradescope, slides, skeletons."""
 
 from __future__ import annotations
 
@@ -91,12 +91,30 @@ def _notebook_stack(command: str) -> None:
                          f"missing): pip install -e '.[notebooks]' (make test installs them)")
 
 
+def cmd_bench(args):
+    from course.tools.trade import NotWritten, run
+
+    try:
+        result = run(args.lab, impl=args.impl, device=args.device, quick=args.quick,
+                     out=args.out, root=_root())
+    except NotWritten as exc:
+        raise SystemExit(f"rtcourse bench --lab {args.lab}: {exc}") from None
+    except (FileNotFoundError, ValueError) as exc:
+        raise SystemExit(f"rtcourse bench: {exc}") from None
+    print(result.table)
+    print(f"\nrows: {result.csv}" + (f"\nplot: {result.png}" if result.png else "")
+          + f"\n({result.seconds:.1f} s)")
+    return 0
+
+
 def cmd_release(args):
     from course.tools.release import release
 
     if args.notes:
         _notebook_stack("rtcourse release (--no-notes needs none)")
-    files = release(_root(), args.out, notes=args.notes)
+    # The reference rows of rtcourse bench take well under a minute (every lab, --quick):
+    # always shipped, so a student's bench has the reference to stand beside.
+    files = release(_root(), args.out, notes=args.notes, reference_rows=True)
     print(f"wrote {len(files)} files of the student handout to {Path(args.out).resolve()}")
 
 
@@ -188,6 +206,18 @@ def main(argv=None):
                    help="with --generated: only mutants whose id matches this regex")
     p.add_argument("--json", default=None, help="with --generated: write the table here")
     p.set_defaults(func=cmd_mutants)
+
+    p = sub.add_parser("bench", help="your point on the plot: a lab's knobs timed on your "
+                                     "code and the reference; CSV, Pareto plot, table")
+    p.add_argument("--lab", type=int, required=True, choices=range(7), metavar="N",
+                   help="the lab measured (0 .. 6)")
+    p.add_argument("--impl", default="labs",
+                   help="labs (yours, the default), solutions or a folder of lab files")
+    p.add_argument("--device", default=None, help="cpu or cuda (default: cuda when present)")
+    p.add_argument("--quick", action="store_true", help="small sizes (under two minutes on "
+                                                         "a CPU core)")
+    p.add_argument("--out", default=None, help="output folder (default: out/bench/labN)")
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("release", help="write the student handout")
     p.add_argument("out", help="output folder")

@@ -32,13 +32,14 @@ wheel index; empty for pip's default).
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import sys
 import zipfile
 from pathlib import Path
 
 from course.core.files import lab_source, module_files
-from course.grading.catalog import lab_catalog, lab_file_rank
+from course.grading.catalog import SUBMISSION_MANIFEST, lab_catalog, lab_file_rank
 from course.grading.runner import lab_test_files
 from course.tools.release import course_files
 
@@ -119,8 +120,13 @@ then
     export RTCOURSE_WORKER_USER=@USER@
 fi
 if [ -n "${RTCOURSE_WORKER_USER:-}" ]; then
-    chmod -R go-rwx solutions   # the references are the grader's only
-    chmod -R a+rX "$WORK"       # the submission is the worker's to read
+    # The worker user must run this Python: a module it cannot import would fail the
+    # student's tests. One line and a non-zero exit, never a score.
+    "$PYTHON" -m course.grading.sandbox check-worker "$RTCOURSE_WORKER_USER" || exit 2
+    export RTCOURSE_WORKER_CHECKED="$RTCOURSE_WORKER_USER"
+    chmod -R go-rwx solutions tests/hidden   # the references and hidden tests: the grader's
+    chmod go-rwx "$RESULTS"                  # the results too
+    chmod -R a+rX "$WORK"                    # the submission is the worker's to read
 fi
 
 "$PYTHON" -m course.tools.cli grade --impl "$WORK" ${LABS[@]+"${LABS[@]}"} --json "$RESULTS/results.json"
@@ -214,14 +220,17 @@ def collect_submission(submission, dest, modules, skeletons=None) -> dict[str, P
 
     Returns each lab file's name as the grader sees it (``lab0_interop.py``,
     ``lab2_accel/grid.py``) -> the file copied (relative to ``submission``), or None where
-    the submission has none.
+    the submission has none. The same, with every file the submission holds, goes to
+    ``dest/SUBMISSION_MANIFEST``: the grader's messages name the files as handed in, never
+    ``dest``.
     """
     submission, dest = Path(submission), Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     found: dict[str, Path | None] = {}
-    candidates = [p for p in submission.rglob("*.py")
-                  if not any(part.startswith(".") or part == "__MACOSX"
-                             for part in p.relative_to(submission).parts)]
+    handed_in = sorted(p for p in submission.rglob("*") if (p.is_file() or p.is_symlink())
+                       and not any(part.startswith(".") or part == "__MACOSX"
+                                   for part in p.relative_to(submission).parts))
+    candidates = [p for p in handed_in if p.suffix == ".py"]
     for module in modules:
         package = lab_source(skeletons, module) if skeletons is not None else None
         if package is None or not package.is_dir():
@@ -255,6 +264,9 @@ def collect_submission(submission, dest, modules, skeletons=None) -> dict[str, P
                     shutil.copyfile(file, target)  # the skeleton's: its tasks score 0
         found.update({name: p.relative_to(submission) if p else None
                       for name, p in mine.items()})
+    manifest = {"files": {name: p.as_posix() if p else None for name, p in found.items()},
+                "handed_in": [p.relative_to(submission).as_posix() for p in handed_in]}
+    (dest / SUBMISSION_MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
     return found
 
 

@@ -66,10 +66,13 @@ def course_files(root, withheld=WITHHELD) -> list[Path]:
     return sorted(rel for rel in files if not _under(rel, withheld) and (root / rel).is_file())
 
 
-def release(root, out, *, notes=False, log=print) -> list[Path]:
+def release(root, out, *, notes=False, reference_rows=False, log=print) -> list[Path]:
     """Copy the handout of the course at ``root`` into ``out``; return the files written.
     ``notes``: also ship the executed lecture notebooks, their rendered notes and their
-    reference figures (True: every notebook; or a list of notebook names)."""
+    reference figures (True: every notebook; or a list of notebook names).
+    ``reference_rows``: also measure every lab's reference with ``rtcourse bench --quick``
+    on the CPU and ship its rows, with a calibration time, as ``bench/reference/labN.csv``:
+    the reference points of a student's ``rtcourse bench`` (``course.tools.trade``)."""
     root, out = Path(root).resolve(), Path(out).resolve()
     if out == root or root in out.parents and not _withheld(out.relative_to(root)):
         raise ValueError(f"out: the handout folder {out} must lie outside the course folder")
@@ -89,6 +92,11 @@ def release(root, out, *, notes=False, log=print) -> list[Path]:
     if (out / "labs").is_dir():
         (out / LABS_README).write_text(labs_readme(out, hidden_root=root))
         written.append(LABS_README)
+    if reference_rows and (root / "solutions").is_dir():
+        from course.tools.trade import write_reference_rows
+
+        log("reference rows for rtcourse bench (every lab's reference, --quick, CPU) ...")
+        written += write_reference_rows(root, out, log=log)
     if notes:
         written += lecture_notes(root, out, names=None if notes is True else notes, log=log)
     return written
@@ -175,7 +183,8 @@ def _lab_title(lab_file: Path, number: int) -> str:
     return doc.strip().splitlines()[0].rstrip(".") if doc.strip() else f"Lab {number}"
 
 
-def _lab_section(root: Path, lab: LabInfo, hidden: LabInfo | None) -> list[str]:
+def _lab_section(root: Path, lab: LabInfo, hidden: LabInfo | None,
+                 reference: Path | None = None) -> list[str]:
     lab_file = lab_source(root / "labs", lab.module) or root / "labs" / f"{lab.module}.py"
     test_file = lab.files[0].relative_to(root).as_posix()
     if lab_file.is_dir():
@@ -187,7 +196,7 @@ def _lab_section(root: Path, lab: LabInfo, hidden: LabInfo | None) -> list[str]:
                      f"Your file `labs/{lab.module}.py` is not in this handout yet")
     lines = [f"## {_lab_title(lab_file, lab.number)}", "",
              f"{your_file} · its grader: `{test_file}` · {_pts(lab.points())} points", "",
-             *task_table(lab, lab_file, test_file)]
+             *task_table(lab, lab_file, test_file, reference)]
     extra = [t for t in lab.tests if t.needs]
     notes = []
     if extra:
@@ -277,6 +286,8 @@ function earns part of its points.
 
 """
     sections = []
+    solutions = Path(hidden_root if hidden_root is not None else root) / "solutions"
     for number_, lab in labs.items():
-        sections += _lab_section(root, lab, hidden.get(number_))
+        sections += _lab_section(root, lab, hidden.get(number_),
+                                 lab_source(solutions, lab.module))
     return head + "\n".join(sections)

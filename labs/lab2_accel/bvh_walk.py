@@ -18,6 +18,7 @@ from course.given.lab2 import (
     slab_test,
     test_ranges,
 )
+from course.given.lab2_robust import reach
 
 
 def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
@@ -33,9 +34,12 @@ def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
     the root on the stack where the ray hits the root's box. Each iteration, every active
     ray pops one entry:
 
-    * culled: its entry ``t`` is beyond the closest hit found since it was pushed;
+    * culled: its entry ``t`` is beyond ``reach(best_t)``, the closest hit found since it
+      was pushed, widened by its rounding (``course.given.lab2_robust``: at a vertex,
+      triangles of several nodes are hit at the same ``t`` give or take rounding, and the
+      lowest index must win as in brute force);
     * a leaf: test its triangles (``test_ranges``);
-    * an inner node: slab-test both children against ``[t_min, min(t_max, closest t)]``
+    * an inner node: slab-test both children against ``[t_min, min(t_max, reach(best_t))]``
       and push those hit, **far child first**, so the near one is popped next: the near
       side's hit then culls the far side.
 
@@ -81,7 +85,7 @@ def bvh_closest_hit_stackless(rays: Rays, mesh: Mesh, bvh: dict, intersect):
     whose box the ray tested. Needs the depth-first layout (``left[i] == i + 1``).
 
     Each ray holds one node index, starting at the root (0). Each iteration, every active
-    ray slab-tests its node's box against ``[t_min, min(t_max, closest t)]``:
+    ray slab-tests its node's box against ``[t_min, min(t_max, reach(best_t))]``:
 
     * hit and inner node: go to ``i + 1`` (the left child: descend);
     * hit and leaf: test its triangles, then go to ``skip[i]``;

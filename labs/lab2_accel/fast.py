@@ -21,6 +21,7 @@ from course.given.lab2 import (
     ray_octants,
     slab_test,
 )
+from course.given.lab2_robust import reach
 
 
 def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
@@ -60,10 +61,11 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     * every tensor keeps its shape: all rays step together, finished ones masked
       (``node == M``); rays that miss the root box never start;
     * a step does **one** box test and **one** triangle test per ray and keeps what its
-      state asks for: outside a leaf, the node's box (hit: descend to ``i + 1``, or enter
-      the leaf's slots; miss or beyond the closest hit: ``skip``); inside a leaf, the next
-      slot (Möller–Trumbore in the mesh's dtype; ties to the lowest triangle index);
-      after the last slot, ``skip``;
+      state asks for: outside a leaf, the node's box against ``[t_min, min(t_max,
+      reach(best_t))]`` (hit: descend to ``i + 1``, or enter the leaf's slots; miss or
+      beyond: ``skip``; ``reach`` keeps a tie at a vertex for the lowest index); inside a
+      leaf, the next slot (Möller–Trumbore in the mesh's dtype; ties to the lowest
+      triangle index); after the last slot, ``skip``;
     * the host looks only every ``k`` steps: stop when every ray is done, compact if few
       rays are left;
     * a step is gathers from read-only tables and elementwise ops, nothing else, so

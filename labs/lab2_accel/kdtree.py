@@ -27,6 +27,7 @@ from course.given.lab2 import (
     test_ranges,
     triangle_bounds,
 )
+from course.given.lab2_robust import reach
 
 
 def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
@@ -137,12 +138,16 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
 
     * inner node: ``t_split = (split - o[axis]) / d[axis]``; the near child is the lower
       one if ``o[axis] < split`` (or ``== split`` with ``d[axis] <= 0``). If ``t_split >
-      t_far`` or ``t_split <= 0``: only the near child; if ``t_split < t_near``: only the
-      far one; else push (far, t_split, t_far) and go to (near, t_near, t_split). For
+      reach(t_far)`` or ``t_split <= 0``: only the near child; if ``reach(t_split) <
+      t_near``: only the far one; else push (far, t_split, t_far) and go to (near, t_near,
+      t_split). ``reach`` (``course.given.lab2_robust``) keeps a child the ray crosses at a
+      vertex in the plane, where the two ``t`` agree only up to rounding. For
       ``d[axis] = +-0``, ``t_split = +-inf`` selects the near child by these same rules; a
       ray lying *in* the plane (``0 * inf = NaN``) visits both children, whole interval.
-    * leaf: test its triangles. **Early exit** only if the closest hit so far has
-      ``t <= t_far``: it lies inside this leaf's interval. A triangle straddling the
+    * leaf: test its triangles. **Early exit** only if the closest hit so far lies inside
+      this leaf's interval, rounding included: ``reach(best_t) < t_far``. A vertex in the
+      split plane is hit from both leaves at the same ``t`` give or take rounding, and
+      brute force picks the lowest index among equal ``t``. A triangle straddling the
       split sits in several leaves and can be hit beyond this leaf, where a nearer
       triangle of a later leaf may still be waiting. Otherwise pop the next (node,
       interval); an empty stack ends the ray.

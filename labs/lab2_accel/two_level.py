@@ -26,6 +26,7 @@ from course.given.lab2 import (
     slab_test,
     triangle_bounds,
 )
+from course.given.lab2_robust import reach
 
 from .grid import build_grid
 
@@ -104,7 +105,9 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
        (``slab_test``) and walks it with the same DDA, one sub cell per inner step, until
        a hit lies inside the sub cell's interval, the interval ends, or the walk leaves
        the sub-grid;
-    3. ends if the closest hit lies inside ``[.., t_out]``, else steps to the next top cell.
+    3. ends if the closest hit lies inside ``[.., t_out]`` (``reach(best_t) < t_out``, as
+       in the uniform grid), else steps to the next top cell. The sub-grid's clip in 2. runs
+       to ``reach(t_out)``: a ray that grazes a crowded cell's corner still walks its sub-grid.
 
     The mailbox is O(1) per ray, and only skips a test that certainly ran before. A DDA
     is monotone, so a triangle was tested in the previous cell of the *same* walk iff

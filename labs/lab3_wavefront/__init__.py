@@ -1,7 +1,7 @@
 """Lab 3: organising the tracer.
 
-Fill in every function that raises ``NotImplementedError`` (the tasks below); the helpers
-imported from ``course.given.lab3`` are given. Run the grader for this lab with
+Fill in every function that raises ``NotImplementedError`` (the tasks below); what is
+imported from ``course.given.lab3`` is given. Run the grader for this lab with
 ``pytest tests/test_lab3_wavefront.py`` (add ``-k render_whitted`` for one function). The
 tests call your code on the CPU and, where present, on CUDA: write device- and
 dtype-agnostic tensor code, with no Python loop over rays or pixels (a loop over bounces or
@@ -38,7 +38,7 @@ Conventions
 * Degenerate input is a case, not an error: rays with NaN/inf components or a zero
   direction return the background; zero direction components (+0.0 or -0.0) are ordinary.
   Malformed input raises ``ValueError``/``TypeError`` naming the argument (the given
-  ``check_*`` helpers do that: call them first, as the skeleton does).
+  ``check_*`` functions do that: call them first, as the skeleton does).
 
 Tasks (points), one file each
 -----------------------------
@@ -56,12 +56,12 @@ Tasks (points), one file each
    renderers are graded with given ones)                                          (1)
 
 The lab is this package: the graders load ``lab3_wavefront/`` and call the functions this
-file imports from its modules. Each module imports the given helpers its code uses from
-``course.given.lab3``; every other helper there is one import away. The renderers of
-tasks 2 and 4 call task 1's building blocks through their import (``from .whitted import
-shade_direct``), so a grader that stands a given block in for yours is seen there too.
-Hand in the files you edit (see ``labs/README.md``): a file you leave out is graded as
-this skeleton's, so it costs only its own tasks.
+file imports from its modules. Each module imports from ``course.given.lab3`` what its
+code uses; everything else there is one import away. The renderers of tasks 2 and 4 call
+task 1's building blocks through their import (``from .whitted import shade_direct``),
+so a grader that stands a given block in for yours is seen there too. Hand in the files
+you edit (see ``labs/README.md``): a file you leave out is graded as this skeleton's, so
+it costs only its own tasks.
 
 What the organisations cost
 ---------------------------

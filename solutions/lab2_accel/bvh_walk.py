@@ -18,6 +18,7 @@ from course.given.lab2 import (
     slab_test,
     test_ranges,
 )
+from course.given.lab2_robust import reach
 
 
 def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
@@ -33,9 +34,12 @@ def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
     the root on the stack where the ray hits the root's box. Each iteration, every active
     ray pops one entry:
 
-    * culled: its entry ``t`` is beyond the closest hit found since it was pushed;
+    * culled: its entry ``t`` is beyond ``reach(best_t)``, the closest hit found since it
+      was pushed, widened by its rounding (``course.given.lab2_robust``: at a vertex,
+      triangles of several nodes are hit at the same ``t`` give or take rounding, and the
+      lowest index must win as in brute force);
     * a leaf: test its triangles (``test_ranges``);
-    * an inner node: slab-test both children against ``[t_min, min(t_max, closest t)]``
+    * an inner node: slab-test both children against ``[t_min, min(t_max, reach(best_t))]``
       and push those hit, **far child first**, so the near one is popped next: the near
       side's hit then culls the far side.
 
@@ -75,14 +79,14 @@ def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
         rows = torch.arange(len(ray), device=device)
         sp = sp - 1
         node, t_node = stack[rows, sp], stack_t[rows, sp]
-        live = t_node <= closest["t"][ray]
+        live = t_node <= reach(closest["t"][ray])
         add_count(counters["steps"], ray[live])
         leaf = live & (left[node] < 0)
         test_ranges(intersect, rays, corners, ray[leaf], bvh["first"][node[leaf]],
                     bvh["count"][node[leaf]], bvh["triangles"], closest, counters)
         inner = (live & (left[node] >= 0)).nonzero()[:, 0]
         r = ray[inner]
-        t_hi = torch.minimum(rays.t_max[r], closest["t"][r])
+        t_hi = torch.minimum(rays.t_max[r], reach(closest["t"][r]))
         a, b = left[node[inner]], right[node[inner]]
         o, iv, t_lo = rays.origins[r], inv[r], rays.t_min[r]
         ta, _, hit_a = slab_test(o, iv, lo[a], hi[a], t_lo, t_hi)
@@ -139,7 +143,7 @@ def bvh_closest_hit_stackless(rays: Rays, mesh: Mesh, bvh: dict, intersect):
     whose box the ray tested. Needs the depth-first layout (``left[i] == i + 1``).
 
     Each ray holds one node index, starting at the root (0). Each iteration, every active
-    ray slab-tests its node's box against ``[t_min, min(t_max, closest t)]``:
+    ray slab-tests its node's box against ``[t_min, min(t_max, reach(best_t))]``:
 
     * hit and inner node: go to ``i + 1`` (the left child: descend);
     * hit and leaf: test its triangles, then go to ``skip[i]``;
@@ -170,7 +174,7 @@ def bvh_closest_hit_stackless(rays: Rays, mesh: Mesh, bvh: dict, intersect):
     for _ in range(m + 1):  # every step moves right: at most M steps
         if len(ray) == 0:
             break
-        t_hi = torch.minimum(rays.t_max[ray], closest["t"][ray])
+        t_hi = torch.minimum(rays.t_max[ray], reach(closest["t"][ray]))
         _, _, hit = slab_test(rays.origins[ray], inv[ray], bvh["lo"][node], bvh["hi"][node],
                               rays.t_min[ray], t_hi)
         add_count(counters["steps"], ray)

@@ -26,6 +26,7 @@ from course.given.lab2 import (
     slab_test,
     triangle_bounds,
 )
+from course.given.lab2_robust import reach
 
 
 def grid_resolution(extent, num_triangles: int, density: float = 2.0,
@@ -142,8 +143,10 @@ def grid_closest_hit(rays: Rays, mesh: Mesh, grid: dict, intersect, mailbox: boo
     and ``"skipped"`` (tests the mailbox avoided), each (N,) int64.
 
     1. Clip each ray to the grid's box (``slab_test``): ``[t_enter, t_exit]``; rays that
-       miss it are done. The first cell is the one holding ``o + t_enter d``, computed with
-       ``floor`` and clamped into the grid (rounding may put the point just outside).
+       miss it are done (the test is conservative: its far distance is widened by
+       ``1 + 2 gamma(3)``, so rounding never turns a box hit into a miss). The first cell
+       is the one holding ``o + t_enter d``, computed with ``floor`` and clamped into the
+       grid (rounding may put the point just outside).
     2. Per axis: ``step = sign(d)`` (0 for ``+0.0`` and ``-0.0``) and ``t_next``, the ``t``
        where the ray crosses the cell's next boundary on that axis: the plane
        ``lo + (cell + 1) w`` when stepping up, ``lo + cell w`` when stepping down, ``inf``
@@ -152,10 +155,13 @@ def grid_closest_hit(rays: Rays, mesh: Mesh, grid: dict, intersect, mailbox: boo
        drifting off the cell boundaries.
     3. Each iteration, every active ray visits its cell ``[t_in, t_out]``,
        ``t_out = min(t_next, t_exit)``: it tests the cell's triangles and keeps the
-       closest hit. A hit only ends the walk if ``t <= t_out``: a triangle that spans
+       closest hit. A hit only ends the walk inside the cell: a triangle that spans
        several cells can be hit *beyond* this cell, and a nearer triangle may sit in the
        next cell (the classic grid bug is to stop at the first hit). Keep such a hit as
-       the best so far, but walk on.
+       the best so far, but walk on. Compare through ``reach``: end only if
+       ``reach(best_t) < t_out``. A ray through a vertex on a cell boundary (or a cell
+       corner) hits triangles of both cells at the same ``t`` give or take rounding, and
+       brute force may pick the one in the next cell (ties go to the lowest index).
     4. Then step along the axis of the smallest ``t_next``: ``cell[axis] += step[axis]``.
        A ray that leaves the grid or passes ``t_exit`` is done.
 
@@ -210,7 +216,7 @@ def grid_closest_hit(rays: Rays, mesh: Mesh, grid: dict, intersect, mailbox: boo
             intersect_pairs(intersect, rays, corners, ray[owner], tri, closest, counters)
         add_count(counters["steps"], ray)
         # Done: a hit inside this cell (or before it), or the ray left the grid / t_max.
-        done = (closest["t"][ray] <= t_out) | (t_out >= t_end)
+        done = (reach(closest["t"][ray]) < t_out) | (t_out >= t_end)
         axis = t_next.argmin(dim=1, keepdim=True)
         prev = cell
         cell = cell.scatter_add(1, axis, step.gather(1, axis))

@@ -26,6 +26,7 @@ from course.given.lab2 import (
     slab_test,
     triangle_bounds,
 )
+from course.given.lab2_robust import reach
 
 from .grid import build_grid
 
@@ -170,7 +171,9 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
        (``slab_test``) and walks it with the same DDA, one sub cell per inner step, until
        a hit lies inside the sub cell's interval, the interval ends, or the walk leaves
        the sub-grid;
-    3. ends if the closest hit lies inside ``[.., t_out]``, else steps to the next top cell.
+    3. ends if the closest hit lies inside ``[.., t_out]`` (``reach(best_t) < t_out``, as
+       in the uniform grid), else steps to the next top cell. The sub-grid's clip in 2. runs
+       to ``reach(t_out)``: a ray that grazes a crowded cell's corner still walks its sub-grid.
 
     The mailbox is O(1) per ray, and only skips a test that certainly ran before. A DDA
     is monotone, so a triangle was tested in the previous cell of the *same* walk iff
@@ -227,9 +230,9 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
         crowded = (sub >= 0).nonzero()[:, 0]
         if len(crowded):
             _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray[crowded],
-                            sub[crowded], t_in[crowded], t_out[crowded],
+                            sub[crowded], t_in[crowded], reach(t_out[crowded]),
                             torch.where(prev_plain[crowded, None], prev[crowded], -1), mailbox)
-        done = (closest["t"][ray] <= t_out) | (t_out >= t_end)
+        done = (reach(closest["t"][ray]) < t_out) | (t_out >= t_end)
         axis = t_next.argmin(dim=1, keepdim=True)
         prev, prev_plain = cell, sub < 0
         cell = cell.scatter_add(1, axis, step.gather(1, axis))
@@ -283,7 +286,7 @@ def _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray, sub
                 owner, tri = owner[~seen], tri[~seen]
             intersect_pairs(intersect, rays, corners, ray[owner], tri, closest, counters)
         add_count(counters["steps"], ray)
-        done = (closest["t"][ray] <= t_out) | (t_out >= s_out)
+        done = (reach(closest["t"][ray]) < t_out) | (t_out >= s_out)
         axis = t_next.argmin(dim=1, keepdim=True)
         prev = cell
         cell = cell.scatter_add(1, axis, step.gather(1, axis))

@@ -13,7 +13,7 @@ from course.given.lab3 import MAX_DEPTH, WhittedScene, check_pool_size, check_re
 from .whitted import offset_origins, reflect, shade_direct, surface_at
 
 # BEGIN SOLUTION
-# A helper of the reference's, not in the skeleton: so is its import (a block of its own).
+# The reference's own function, which the skeleton leaves out, and so its import.
 # isort: split
 from .whitted import _is_mirror
 

@@ -31,7 +31,7 @@ MUTANTS = [
            replace="cell = cell.scatter_add(1, axis, step[:, :1])", tests=GRID,
            why="steps the chosen axis with the x axis's direction: the walk leaves the ray"),
     Mutant(name="grid_first_hit_ends_walk", module=M, function="grid_closest_hit",
-           find='done = (closest["t"][ray] <= t_out) | (t_out >= t_end)',
+           find='done = (reach(closest["t"][ray]) < t_out) | (t_out >= t_end)',
            replace='done = (closest["t"][ray] < math.inf) | (t_out >= t_end)', tests=GRID,
            why="the classic grid bug: a triangle spanning cells is hit beyond the current "
                "cell, and stopping there misses a nearer triangle in the next cell"),
@@ -70,14 +70,14 @@ MUTANTS = [
            tests="stackless or bvh_traversal_extremes",
            why="the skip link jumps one node too far: it skips the next sibling subtree"),
     Mutant(name="kd_early_exit_anywhere", module=M, function="kd_closest_hit",
-           find='exit_early = leaf & (closest["t"][ray] <= t_far)',
+           find='exit_early = leaf & (reach(closest["t"][ray]) < t_far)',
            replace='exit_early = leaf & (closest["t"][ray] < math.inf)',
            tests="kd_closest_hit or kdtree_build",
            why="stops at the first leaf with a hit, even one beyond the leaf: a straddling "
                "triangle hides a nearer one in the next leaf"),
     Mutant(name="kd_plane_behind_ignored", module=M, function="kd_closest_hit",
-           find="near_only = ~in_plane & ((t_split > tf) | (t_split <= 0))",
-           replace="near_only = ~in_plane & (t_split > tf)",
+           find="near_only = ~in_plane & ((t_split > reach(tf)) | (t_split <= 0))",
+           replace="near_only = ~in_plane & (t_split > reach(tf))",
            tests="kd_closest_hit or kdtree_build",
            why="a plane behind the ray (or at t = -inf for d = -0.0) sends it to the far child "
                "only: it never visits the side it is on"),
@@ -107,7 +107,7 @@ MUTANTS = [
            why="trusts the mailbox after a crowded top cell: a small triangle whose sub cells "
                "the ray did not cross there was never tested, and is skipped here"),
     Mutant(name="two_level_sub_walk_stops_at_any_hit", module=M, function="_walk_sub_grids",
-           find='done = (closest["t"][ray] <= t_out) | (t_out >= s_out)',
+           find='done = (reach(closest["t"][ray]) < t_out) | (t_out >= s_out)',
            replace='done = (closest["t"][ray] < math.inf) | (t_out >= s_out)',
            tests=GRID2,
            why="the classic grid bug, one level down: a hit found in a sub cell may lie "
@@ -143,10 +143,22 @@ MUTANTS = [
            why="goes to node + 1 after a missed box too, instead of skipping its subtree: "
                "right hits, but the walk tests every triangle"),
     Mutant(name="fast_no_cull_by_closest_hit", module=M, function="_fast_step",
-           find="t_in, t_out = t_min, torch.minimum(t_max, best_t)",
+           find="t_in, t_out = t_min, torch.minimum(t_max, reach(best_t))",
            replace="t_in, t_out = t_min, t_max", tests="fast_bvh",
            why="tests boxes against [t_min, t_max] only: boxes behind the closest hit are "
                "still entered (right hits, wasted work)"),
+    Mutant(name="fast_cull_without_slack", module=M, function="_fast_step",
+           find="t_in, t_out = t_min, torch.minimum(t_max, reach(best_t))",
+           replace="t_in, t_out = t_min, torch.minimum(t_max, best_t)",
+           tests="fast_bvh_exact_at_vertices",
+           why="culls a box entered at the closest hit's t, rounding included: at a vertex the "
+               "triangle brute force picks (ties to the lowest index) may be in that box"),
+    Mutant(name="grid_exit_without_slack", module=M, function="grid_closest_hit",
+           find='done = (reach(closest["t"][ray]) < t_out) | (t_out >= t_end)',
+           replace='done = (closest["t"][ray] <= t_out) | (t_out >= t_end)',
+           tests="grid_exact_at_vertices",
+           why="ends in a cell whose exit the hit reaches only up to rounding: a ray through a "
+               "vertex on a cell boundary misses the next cell's tie with a lower index"),
     Mutant(name="auto_builds_a_fallback_too", module=M, function="closest_hit",
            find="        structure = build(mesh, kind, **knobs)\n",
            replace="        fallback = build(mesh, \"bvh\", method=\"lbvh\")  # just in case\n"

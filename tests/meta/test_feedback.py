@@ -269,10 +269,11 @@ def test_every_not_implemented_belongs_to_a_listed_task():
             row = next(ln for ln in section.splitlines() if ln.startswith(f"| {task} |"))
             assert f"`{fn}`" in re.split(r"(?<!\\)\|", row)[4], f"lab {number} task {task} omits `{fn}`"
             assert f"--task {task}`" in row
-    # Tasks are graded on their own (a task's tests are given the earlier tasks' results), so
-    # only the end-to-end tasks need earlier ones: Lab 3's task 6 runs the student's tracer.
+    # Tasks are graded on their own (a task's tests are given the earlier tasks' results):
+    # the end-to-end tasks need earlier ones, Lab 3's task 6 the student's tracer (task 1's
+    # render_whitted and the blocks it calls); tests/meta/test_needs_first.py checks the rest.
     lab3 = readme.split("## Lab 3", 1)[1].split("\n## ", 1)[0]
-    assert re.search(r"\| 6 \|[^\n]*\| task 1 \(`render_whitted`\) \|", lab3), \
+    assert re.search(r"\| 6 \|[^\n]*\| task 1 \([^)]*`render_whitted`\) \|", lab3), \
         "Lab 3 task 6 (end to end) needs task 1"
     lab4 = readme.split("## Lab 4", 1)[1].split("\n## ", 1)[0]
     assert not re.search(r"\| 2 \|[^\n]*\| task 1 ", lab4), "Lab 4 task 2 is graded on its own"
@@ -433,8 +434,8 @@ def test_gradescope_accepts_a_renamed_upload(tmp_path):
     (sub / "lab1_intersect (2).py").write_text("B = 1\n")
     (sub / "labs" / "lab1_intersect.py").write_text("C = 1\n")  # the exact name wins
     found = collect_submission(sub, tmp_path / "work", ["lab0_interop", "lab1_intersect"])
-    assert found == {"lab0_interop": Path("Lab0_Interop (1).py"),
-                     "lab1_intersect": Path("labs/lab1_intersect.py")}
+    assert found == {"lab0_interop.py": Path("Lab0_Interop (1).py"),
+                     "lab1_intersect.py": Path("labs/lab1_intersect.py")}
     assert (tmp_path / "work" / "lab0_interop.py").read_text() == "A = 1\n"
     assert (tmp_path / "work" / "lab1_intersect.py").read_text() == "C = 1\n"
 
@@ -464,3 +465,78 @@ def test_grade_table_shows_whole_task_titles_and_whole_hints():
     table = keeper.table()
     assert title in table, table
     assert "line 8 of the hint" in table, table
+
+
+def test_collected_submission_is_named_as_handed_in(toy, tmp_path):
+    """Graded from the autograder's temporary folder, the messages, the table and
+    results.json name the files as the student handed them in, never that folder."""
+    course, _ = toy
+    uploads = {"renamed": {"labs/lab9_toy (1).py": (course / "solutions" / "lab9_toy.py")
+                           .read_text()},
+               "wrong name": {"lab9.py": "A = 1\n", "notes.txt": "notes\n"}}
+    for name, files in uploads.items():
+        upload, work = tmp_path / name / "upload", tmp_path / name / "work"
+        for file, text in files.items():
+            (upload / file).parent.mkdir(parents=True, exist_ok=True)
+            (upload / file).write_text(text)
+        collect = _run(["-m", "course.tools.gradescope", "collect", str(upload), str(work),
+                        "--lab", "9"], course)
+        assert collect.returncode == 0, collect.stderr
+        results = tmp_path / name / "results.json"
+        proc = _run(["-m", "course.tools.cli", "grade", "--impl", str(work), "--lab", "9",
+                     "--json", str(results)], course)
+        data = json.loads(results.read_text())
+        texts = [proc.stdout, data["output"], *(t["output"] for t in data["tests"])]
+        assert not any(str(work) in text for text in texts), proc.stdout
+        if name == "renamed":
+            assert data["score"] == data["max_score"] > 0, proc.stdout
+            assert "files graded: lab 9: 'labs/lab9_toy (1).py'" in proc.stdout
+            assert data["extra_data"]["graded_files"] == {"lab9_toy": "'labs/lab9_toy (1).py'"}
+        else:
+            needle = ("no lab9_toy.py in the submission: the submission must contain the file "
+                      "lab9_toy.py (or the folder lab9_toy/ of a lab kept as a package); it "
+                      "holds 'lab9.py', 'notes.txt'")
+            assert proc.stdout.count(needle) == 1, proc.stdout
+            assert all(needle in t["output"] for t in data["tests"])
+            assert data["extra_data"]["graded_files"] == {}
+
+
+def test_missing_lab_file_lists_the_folder(tmp_path, monkeypatch):
+    from course.grading.plugin import graded_as, missing_file
+
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "lab4_march.txt").write_text("")
+    (folder / "lab4.py").write_text("")
+    monkeypatch.chdir(tmp_path)
+    assert missing_file(folder, "lab4_march") == (
+        "no lab4_march.py in mine/: the submission must contain the file lab4_march.py (or "
+        "the folder lab4_march/ of a lab kept as a package); it holds 'lab4.py', "
+        "'lab4_march.txt'")
+    (folder / "Lab4_March (1).py").write_text("")
+    assert missing_file(folder, "lab4_march").endswith(
+        "(found 'Lab4_March (1).py': rename it to lab4_march.py)")
+    assert graded_as(folder, "lab4_march") is None
+    (folder / "lab4_march").mkdir()
+    (folder / "lab4_march" / "__init__.py").write_text("")
+    assert graded_as(folder, "lab4_march") == "mine/lab4_march/"
+
+
+def test_collected_package_names_its_files(tmp_path):
+    from course.grading.plugin import graded_as, missing_file
+    from course.tools.gradescope import collect_submission
+
+    labs = tmp_path / "labs" / "lab9_toy"
+    labs.mkdir(parents=True)
+    for name in ("__init__.py", "grid.py", "walk.py"):
+        (labs / name).write_text("X = 0\n")
+    upload = tmp_path / "upload"
+    (upload / "lab9_toy").mkdir(parents=True)
+    (upload / "lab9_toy" / "grid.py").write_text("X = 1\n")
+    (upload / "README.md").write_text("")
+    work = tmp_path / "work"
+    collect_submission(upload, work, ["lab9_toy", "lab8_guard"], tmp_path / "labs")
+    assert graded_as(work, "lab9_toy") == "'lab9_toy/grid.py' (the skeleton's other 2 files)"
+    assert missing_file(work, "lab8_guard").startswith("no lab8_guard.py in the submission:")
+    assert missing_file(work, "lab8_guard").endswith(
+        "it holds 'README.md', 'lab9_toy/grid.py'")

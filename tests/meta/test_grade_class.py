@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 
+from course.core.files import defining_file, lab_source, module_files, relative_name
 from course.grading.classroom_layouts import describe, find_submissions
 from course.grading.classroom_report import read_gradebook
 from course.grading.mutants import apply_mutant, load_mutants
@@ -43,31 +44,51 @@ submission_222:
 """
 
 
+def _lab_files(kind: str) -> dict[str, str]:
+    """The lab's files as a student of ``kind`` hands them in: name as ``copy_module`` keys
+    it (``lab4_march.py``, or ``lab4_march/grid.py`` for a lab kept as a package) -> text."""
+    solution = lab_source(ROOT / "solutions", MODULE)
+    source = solution if kind != "skeleton" else lab_source(ROOT / "labs", MODULE)
+    files = {relative_name(source, f): f.read_text() for f in module_files(source)}
+    if kind == "mutant":
+        mutant = next(m for m in load_mutants(ROOT) if m.name == MUTANT)
+        path = defining_file(solution, mutant.function)
+        files[relative_name(solution, path)] = apply_mutant(mutant, path.read_text())
+    if kind == "crash":
+        entry = next(iter(files))  # the module, or its package's __init__.py
+        files[entry] += "\nraise RuntimeError('broken at import')\n"
+    return files
+
+
 def _class(folder: Path) -> dict[str, str]:
     """Ten students over every layout; student -> what they handed in."""
-    reference = (ROOT / "solutions" / f"{MODULE}.py").read_text()
-    skeleton = (ROOT / "labs" / f"{MODULE}.py").read_text()
-    mutant = next(m for m in load_mutants(ROOT) if m.name == MUTANT)
-    mutated = apply_mutant(mutant, reference)
-    crash = reference + "\nraise RuntimeError('broken at import')\n"
 
     def write(path: Path, text: str):
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text)
 
-    write(folder / "alice" / f"{MODULE}.py", reference)
-    write(folder / "bob" / "labs" / f"{MODULE}.py", skeleton)
-    write(folder / "gus" / f"{MODULE}.py", crash)
+    def hand_in(dest: Path, kind: str, under: str = ""):
+        for name, text in _lab_files(kind).items():
+            write(dest / under / name, text)
+
+    hand_in(folder / "alice", "reference")
+    hand_in(folder / "bob", "skeleton", "labs")
+    hand_in(folder / "gus", "crash")
     write(folder / "hal" / "README.txt", "I forgot the lab file\n")
-    for name, text in (("carol", reference), ("dave", mutated)):
+    for name, kind in (("carol", "reference"), ("dave", "mutant")):
         with zipfile.ZipFile(folder / f"{name}.zip", "w") as archive:
-            archive.writestr(f"handout/labs/{MODULE}.py", text)
+            for file, text in _lab_files(kind).items():
+                archive.writestr(f"handout/labs/{file}", text)
     export = folder / "gradescope_export"
     write(export / "submission_metadata.yml", GRADESCOPE_METADATA)
-    write(export / "submission_111" / f"{MODULE}.py", reference)
-    write(export / "submission_222" / f"{MODULE}.py", skeleton)
-    write(folder / f"evansmith_LATE_20001_30001_{MODULE}.py", mutated)
-    write(folder / f"Fay Lee_20002_assignsubmission_file_{MODULE}.py", reference)
+    hand_in(export / "submission_111", "reference")
+    hand_in(export / "submission_222", "skeleton")
+    # An LMS hands in loose files: a lab kept as a package is laid over the skeleton.
+    for prefix, kind in (("evansmith_LATE_20001_30001_", "mutant"),
+                         ("Fay Lee_20002_assignsubmission_file_", "reference")):
+        for file, text in _lab_files(kind).items():
+            if not file.endswith("__init__.py"):
+                write(folder / f"{prefix}{Path(file).name}", text)
     return {"alice": "reference", "bob": "skeleton", "gus": "crash", "hal": "missing",
             "carol": "reference", "dave": "mutant", "Gina Gold": "reference",
             "Hugo Hall": "skeleton", "evansmith": "mutant", "Fay Lee": "reference"}

@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from course.core.files import module_files
-from course.grading.catalog import lab_catalog
+from course.grading.catalog import SUBMISSION_MANIFEST, lab_catalog, read_manifest
 from course.grading.runner import lab_test_files
 from course.tools.gradescope import STUDENT_USER, build_autograder, collect_submission
 from course.tools.release import release
@@ -135,6 +135,11 @@ def test_submitted_lab_full_marks_others_zero(graded):
     assert "lab0_interop.py          found: labs/lab0_interop.py" in proc.stdout
     missing = [t["output"] for t in data["tests"] if int(t["number"].split(".")[0]) > 1]
     assert all("must contain the file" in o for o in missing)
+    # Named as handed in, never the autograder's temporary folder.
+    assert all(" in the submission: " in o and "'notes.txt'" in o for o in missing), missing[0]
+    assert "/tmp" not in data["output"] and not any("/tmp" in t["output"] for t in data["tests"])
+    assert "files graded: lab 0: 'labs/lab0_interop.py'" in data["output"]
+    assert data["extra_data"]["graded_files"]["lab0_interop"] == "'labs/lab0_interop.py'"
 
 
 def test_hidden_tests_graded_with_their_visibility(graded):
@@ -181,7 +186,13 @@ def test_collect_submission_takes_lab_files_only(tmp_path):
     found = collect_submission(sub, tmp_path / "work", ["lab0_interop", "lab1_intersect"])
     assert found == {"lab0_interop.py": Path("labs/lab0_interop.py"), "lab1_intersect.py": None}
     assert (tmp_path / "work" / "lab0_interop.py").read_text() == "A = 1\n"
-    assert sorted(p.name for p in (tmp_path / "work").iterdir()) == ["lab0_interop.py"]
+    assert sorted(p.name for p in (tmp_path / "work").iterdir()) == [
+        SUBMISSION_MANIFEST, "lab0_interop.py"]
+    # What the grader's messages name: the files as handed in, and all of them.
+    assert read_manifest(tmp_path / "work") == {
+        "files": {"lab0_interop.py": "labs/lab0_interop.py", "lab1_intersect.py": None},
+        "handed_in": ["deep/labs/lab0_interop.py", "helper.py", "lab1_intersect.py",
+                      "labs/lab0_interop.py"]}
 
 
 def _skeleton_package(tmp_path) -> Path:

@@ -44,3 +44,23 @@ def test_docstring_crack_table_is_the_benchs_output():
                 f"{folder}/lab1_intersect.py: the pass-through table differs from "
                 f"`python bench/lab1_intersect.py --device cpu --crack-table`; paste the "
                 f"bench's output. Differing lines:\n" + "\n".join(diff[:8]))
+
+
+def _quoted_far_table(text: str) -> str:
+    """The block from "Far field (" to the table's closing rule."""
+    lines = text[text.index("Far field ("):].splitlines()
+    rules = [i for i, line in enumerate(lines) if line.startswith("========")]
+    return "\n".join(lines[:rules[2] + 1])
+
+
+def test_docstring_far_field_table_is_the_benchs_output():
+    spec = importlib.util.spec_from_file_location("bench_lab1_far", REPO / "bench" /
+                                                  "lab1_far.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    measured = bench.table(bench.measure(bench.load_lab("lab1_intersect", "solutions", REPO)))
+    for folder in ("solutions", "labs"):
+        quoted = _quoted_far_table((REPO / folder / "lab1_intersect.py").read_text())
+        assert quoted == measured, (
+            f"{folder}/lab1_intersect.py: the far-field table differs from `python "
+            f"bench/lab1_far.py`; paste the bench's output.\n{quoted}\n---\n{measured}")

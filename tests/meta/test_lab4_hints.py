@@ -16,7 +16,7 @@ def _failures(mutant: Mutant, tmp_path) -> str:
     data = grade_mutant(mutant, ROOT, tmp_path)
     failed = [t["output"] for t in data["tests"] if t["score"] < t["max_score"]]
     assert failed, f"{mutant.name} passed {TEST}"
-    return "\n".join(failed)
+    return " ".join(" ".join(failed).split())  # the words, wherever a long line wrapped
 
 
 def test_one_step_short_is_named_by_its_step_count(tmp_path):

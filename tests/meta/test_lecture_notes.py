@@ -62,9 +62,10 @@ def _toy_course(root: Path):
     (root / "course" / "README.md").write_text("the course package lives here\n")
     given = "def scale(n):\n    return 2 * n\n\n\n"
     (root / "solutions" / "lab9_toy.py").write_text(
-        given + "def wave(n):\n    return [((-1) ** i) * i for i in range(n)]\n")
-    (root / "labs" / "lab9_toy.py").write_text(
-        given + "def wave(n):\n    raise NotImplementedError('not implemented yet: wave')\n")
+        given + "def wave(n):\n    # BEGIN SOLUTION\n"
+        "    return [((-1) ** i) * i for i in range(n)]\n    # END SOLUTION\n")
+    (root / "labs" / "lab9_toy.py").write_text(  # what the release generates from it
+        given + 'def wave(n):\n    raise NotImplementedError("not implemented yet: wave")\n')
     (root / "tests" / "test_lab9_toy.py").write_text(textwrap.dedent("""\
         import pytest
 

@@ -1,0 +1,38 @@
+"""Task 2: ``segment_integral``, the energy-conserving per-step integral ("exact", exact
+for a medium constant over the step) against the Riemann sum.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from course.given.lab4 import check_segment_inputs
+
+
+def segment_integral(sigma, length, integrator="exact"):
+    """One step of emission–absorption through a medium constant over the step.
+
+    sigma: extinction >= 0 (may be +inf); length: the step's world length >= 0 (finite);
+    numbers or float tensors that broadcast (a negative value raises ValueError naming it:
+    the transmittance would exceed 1; the provided check does it). Returns ``(weight,
+    transmittance)`` of the broadcast shape: a source ``q`` constant over the step adds
+    ``T_before * q * weight`` to the radiance, and then ``T`` is multiplied by
+    ``transmittance = exp(-sigma length)``.
+
+    ``"exact"``: ``weight = int_0^D e^{-sigma x} dx = (1 - e^{-sigma D}) / sigma``, the
+    energy-conserving integral (Hillaire 2015), exact for a medium constant over the step.
+    Written as ``D f(sigma D)`` with ``f(x) = -expm1(-x) / x``: no cancellation for small
+    ``x``, ``f(0) = 1`` (vacuum: emission times length; ``0 / 0`` is not an answer) and
+    ``f(inf) = 0`` (an opaque step gives ``1 / sigma -> 0``, not ``inf - inf``).
+    ``sigma = inf`` over ``length = 0`` is no step at all: weight 0, transmittance 1.
+
+    ``"riemann"``: ``weight = D``, the naive sum, which ignores the absorption inside the
+    step: it overestimates by ``sigma D / (1 - e^{-sigma D})`` (first order in the step)
+    and emits more than a black body could (``q = c sigma`` gives ``L > c``).
+
+    Hints: ``x = sigma * length`` (but 0 where ``length == 0``); ``torch.expm1``;
+    ``torch.where(x > 0, ..., 1)`` keeps the 0 / 0 of the unused branch out of the result.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    sigma, length = check_segment_inputs(sigma, length, integrator)
+    raise NotImplementedError("not implemented yet: segment_integral (task 2)")

@@ -1,0 +1,73 @@
+"""Task 4: exact integration over a voxel grid: ``build_occupancy`` (the macro cells that
+hold any medium) and ``voxel_walk`` (a 3D DDA, with empty-space skipping).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from course.given.lab4 import check_occupancy_inputs, check_voxel_inputs
+
+from .integrals import segment_integral
+from .march import ray_box_interval
+
+
+def build_occupancy(density, macro_cell=1, emission=None):
+    """Which macro cells hold any medium: the acceleration grid of empty-space skipping.
+
+    density: (X, Y, Z) float grid; macro_cell: int >= 1, the macro cell's edge in voxels;
+    emission: optional (X, Y, Z) or (X, Y, Z, C) grid (emitting voxels are not empty).
+    Returns (ceil(X/m), ceil(Y/m), ceil(Z/m)) bool: True where some voxel of the macro
+    cell has ``density > 0`` or non-zero emission (a max over m^3 blocks; the last block
+    of an axis may be partial).
+
+    Hints: ``torch.nn.functional.max_pool3d`` on a float copy of the mask, shaped
+    (1, 1, X, Y, Z), with ``kernel_size = stride = macro_cell`` and ``ceil_mode=True``.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_occupancy_inputs(density, macro_cell, emission)
+    raise NotImplementedError("not implemented yet: build_occupancy (task 4)")
+
+
+def voxel_walk(origins, directions, box_min, box_max, density, emission=None, occupancy=None,
+               macro_cell=1):
+    """Exact emission–absorption through a piecewise-constant voxel grid (3D DDA).
+
+    origins, directions: (N, 3); box_min, box_max: (3,); density: (X, Y, Z) grid >= 0,
+    constant over each voxel (nearest, not trilinear); emission: None or (X, Y, Z) /
+    (X, Y, Z, C) grid, constant per voxel; occupancy: None (no skipping) or the bool grid
+    of :func:`build_occupancy` for ``macro_cell``.
+    Returns a dict: ``optical_depth`` (N,), ``transmittance`` (N,) ``= exp(-optical_depth)``,
+    ``radiance`` (N,) or (N, C), ``steps`` (N,) int64 (cells stepped through: voxels or
+    skipped macro cells) and ``samples`` (N,) int64 (voxels whose density was read).
+
+    Amanatides & Woo: from the entry voxel, step to the neighbour across the nearest
+    boundary plane ahead. Each boundary's ``t`` is computed afresh from the integer voxel
+    index, ``(index * voxel - (o - box_min)) / d`` (no accumulated increments, no absolute
+    coordinates), so the segments telescope to the chord and each is integrated exactly
+    (:func:`segment_integral`, "exact"): no step count to choose.
+
+    Skipping: a voxel whose macro cell is empty is crossed together with its whole macro
+    cell in one step, to the macro cell's exit plane; the indices on the other axes are
+    re-located from the exit point (clamped into the macro cell, never backwards). A fine
+    step is the same move with a block of one voxel. Every iteration advances at least one
+    index, so ``X + Y + Z + 1`` iterations finish every ray.
+
+    Ties: a ray lying exactly in a voxel plane (a zero direction component) belongs to the
+    voxel on the plane's positive side, ``floor((o - box_min) / voxel)``; where the ray
+    crosses several planes at one ``t`` (an edge or a corner), it steps one axis at a time
+    with zero-length segments in between.
+
+    Hints: per-ray state ``cell`` (N, 3) int64, ``t`` (N,) and ``active`` (N,) bool;
+    ``step = torch.sign(d).long()``. In each iteration: the block ``[block_lo, block_hi]``
+    (the voxel, or its macro cell when ``occupancy`` says it is empty), the plane ahead on
+    each axis (``block_hi + 1`` or ``block_lo``), its ``t`` (inf where ``step == 0``), the
+    exit ``t`` and axis (``amin``/``argmin``), the segment, then the move. Only
+    ``torch.where`` updates: no Python loop over rays.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    origins, directions, box_min, box_max = check_voxel_inputs(
+        origins, directions, box_min, box_max, density, emission, occupancy, macro_cell)
+    raise NotImplementedError("not implemented yet: voxel_walk (task 4)")

@@ -1,0 +1,86 @@
+"""Task 5: ``sphere_trace``, signed-distance scenes traced with over-relaxation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from course.given.lab4 import HIT, MISS, UNSURE, check_trace_inputs
+
+
+def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1e-4,
+                 relaxation=1.0):
+    """Sphere tracing (Hart 1996) with over-relaxation (Keinert et al. 2014).
+
+    origins, directions: (N, 3); sdf: callable ``points (N, 3) -> (N,)``, a signed distance
+    (negative inside; a lower bound of the distance is enough); t_max: finite number > 0,
+    rays that get beyond it miss (inf raises ValueError: the relative hit test accepts any
+    distance ``|f|`` once ``t >= |f| / epsilon``); max_steps: int >= 1, sdf evaluations per
+    ray at most; epsilon: number in (0, 1), the hit tolerance *relative to the distance*;
+    relaxation: omega in [1, 2).
+    Returns a dict: ``t`` (N,) (the hit's ray parameter, inf unless HIT), ``status`` (N,)
+    int64 (``MISS``, ``HIT`` or ``UNSURE``) and ``steps`` (N,) int64 (sdf evaluations).
+
+    From ``t = 0``: evaluate ``f = sdf(o + t d)``; a hit when ``|f| <= epsilon t |d|``
+    (the surface is nearer than the ray's footprint: a relative tolerance works at 1e-3 and
+    at 1e5 alike); else step ``t += omega |f| / |d|`` (no surface is nearer than ``|f|``).
+    A ray starting inside (``f < 0``) steps by ``|f|`` too and finds where it leaves the
+    solid. Over-relaxation steps further (omega > 1) while the unbounding spheres of
+    consecutive points overlap, ``|f_prev| + |f| >= step``; when they do not, a surface may
+    lie in the gap, so the ray goes back to ``t_prev + |f_prev| / |d|`` (the last safe step)
+    and continues with omega = 1. A ray past ``t_max`` misses; one still undecided after
+    ``max_steps`` evaluations (grazing a surface, where the steps shrink) is ``UNSURE``,
+    never a hit. NaN/inf rays, zero directions and NaN distances are misses.
+
+    Hints: per-ray state ``t``, ``status``, ``steps``, ``omega``, and for the
+    over-relaxation check the previous ``|f|`` and the previous step's world length. Update
+    everything with ``torch.where`` on an ``active`` mask; stop the loop early when no ray
+    is active.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    origins, directions = check_trace_inputs(origins, directions, sdf, t_max, max_steps,
+                                             epsilon, relaxation)
+    # BEGIN SOLUTION (task 5)
+    n = origins.shape[0]
+    like = {"dtype": origins.dtype, "device": origins.device}
+    length = directions.norm(dim=-1)
+    valid = (torch.isfinite(origins).all(-1) & torch.isfinite(directions).all(-1)
+             & (length > 0) & torch.isfinite(length))
+    o = torch.where(valid[:, None], origins, 0)
+    d = torch.where(valid[:, None], directions, 0)
+    t = torch.zeros(n, **like)
+    status = torch.full((n,), MISS, dtype=torch.int64, device=origins.device)
+    steps = torch.zeros(n, dtype=torch.int64, device=origins.device)
+    omega = torch.full((n,), float(relaxation), **like)
+    prev_radius = torch.zeros(n, **like)
+    prev_step = torch.zeros(n, **like)  # world length of the last step
+    active = valid
+    for _ in range(max_steps):
+        active = active & (t <= t_max)
+        if not bool(active.any()):
+            break
+        f = sdf(o + t[:, None] * d)
+        if not isinstance(f, torch.Tensor) or f.shape != (n,):
+            raise ValueError(f"sdf: the callable must return a tensor of shape ({n},), got "
+                             + (str(tuple(f.shape)) if isinstance(f, torch.Tensor)
+                                else type(f).__name__))
+        f = f.to(origins.dtype)
+        steps += active
+        radius = f.abs()
+        lost = active & torch.isnan(f)
+        fail = active & (omega > 1) & (radius + prev_radius < prev_step)
+        hit = active & ~fail & (radius <= epsilon * t * length)
+        status = torch.where(hit, HIT, status)
+        active = active & ~hit & ~lost
+        # Over-relaxation failed: back to the last safe point, plain steps from now on.
+        advance = torch.where(fail, (prev_radius - prev_step) / length, omega * radius / length)
+        t = torch.where(active, t + advance, t)
+        prev_step = torch.where(fail, prev_radius, omega * radius)
+        prev_radius = torch.where(fail, prev_radius, radius)
+        omega = torch.where(fail, 1, omega)
+    status = torch.where(active, torch.where(t > t_max, MISS, UNSURE), status)
+    t = torch.where(status == HIT, t, math.inf)
+    return {"t": t, "status": status, "steps": steps}
+    # END SOLUTION

@@ -1,0 +1,157 @@
+"""Task 2: ``edge_functions``, ``bounding_boxes`` and ``coverage``: which pixel centres a
+triangle covers, with the top-left fill rule and back-face culling.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from course.given.lab6 import check_screen, check_size
+
+
+def edge_functions(tri, px, py):
+    """The three edge functions of triangles at points.
+
+    tri: (..., 3, C) float screen positions (x, y first; C >= 2); px, py: (...) float
+    points (broadcast with ``tri``'s leading dimensions). Returns (..., 3): ``e0 = E_12(p)``,
+    ``e1 = E_20(p)``, ``e2 = E_01(p)`` with the edge function of the edge a -> b
+
+        E_ab(p) = (p_x - a_x) (b_y - a_y) - (p_y - a_y) (b_x - a_x),
+
+    twice the signed area of (a, b, p). Positive on the inside of a triangle with positive
+    area ``E_12(v0)`` (a front face, see the lab's conventions); ``e_i / (e0 + e1 + e2)``
+    are the screen-space barycentrics of p.
+
+    Accuracy contract: **consistent**. ``E_ab`` is evaluated from the lexicographically
+    smaller endpoint (by x, then y) and negated when that is b, so the two triangles sharing
+    an edge compute exactly opposite values (``E_ba = -E_ab`` bit for bit): a pixel centre
+    can never be inside both or neither because of rounding, only by the fill rule.
+
+    Hints: ``tri[..., [1, 2, 0], :2]`` and ``tri[..., [2, 0, 1], :2]`` are the start and end
+    corners of the three edges; ``px[..., None]`` broadcasts a point against them;
+    ``torch.where`` picks the reference endpoint and the sign.
+    """
+    # BEGIN SOLUTION (task 2)
+    a = tri[..., [1, 2, 0], :2]
+    b = tri[..., [2, 0, 1], :2]
+    ax, ay, bx, by = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
+    px, py = px[..., None], py[..., None]
+    swap = (bx < ax) | ((bx == ax) & (by < ay))
+    rx, ry = torch.where(swap, bx, ax), torch.where(swap, by, ay)
+    sx, sy = torch.where(swap, ax, bx), torch.where(swap, ay, by)
+    value = (px - rx) * (sy - ry) - (py - ry) * (sx - rx)
+    return torch.where(swap, -value, value)
+    # END SOLUTION
+
+
+def bounding_boxes(screen, width: int, height: int):
+    """The pixels whose centres a triangle could cover, clamped to the screen.
+
+    screen: (K, 3, C) float (x, y first); width, height: the viewport. Returns (K, 4) int64
+    ``[col_begin, row_begin, col_end, row_end]``, half-open: columns ``col_begin <= col <
+    col_end``. Pixel ``col`` qualifies when its centre ``col + 0.5`` lies in ``[x_min, x_max]``:
+    ``col_begin = ceil(x_min - 0.5)``, ``col_end = floor(x_max - 0.5) + 1``, both clamped
+    to ``[0, width]`` (rows likewise). A triangle off screen, or with a NaN/inf coordinate,
+    gets an empty box (``begin == end``).
+
+    Clamping is what makes huge triangles cheap: a triangle 1e6 pixels across costs at
+    most ``width * height`` fragments. (Clamp the floats before converting: ``1e30`` or
+    NaN do not fit an int64.)
+
+    Hints: ``xy.amin(1)``, ``xy.amax(1)``; clamp the floats to ``[-1, size + 1]``, then
+    ``torch.ceil``/``torch.floor`` and ``.to(torch.int64)``; ``torch.minimum``/``maximum``
+    with a ``tensor([width, height])`` clamp both axes at once.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_screen(screen)
+    check_size(width, height)
+    # BEGIN SOLUTION (task 2)
+    xy = screen[..., :2]
+    finite = torch.isfinite(xy).all(-1).all(-1)
+    xy = torch.where(finite[:, None, None], xy, torch.zeros_like(xy))
+    size = torch.tensor([width, height], device=xy.device)
+    bound = size.to(xy.dtype) + 1
+    lo = torch.minimum(xy.amin(1).clamp(min=-1.0), bound)
+    hi = torch.minimum(xy.amax(1).clamp(min=-1.0), bound)
+    begin = torch.ceil(lo - 0.5).to(torch.int64)
+    end = (torch.floor(hi - 0.5) + 1).to(torch.int64)
+    begin = torch.minimum(begin.clamp(min=0), size)
+    end = torch.maximum(torch.minimum(end, size), begin)
+    boxes = torch.cat([begin, end], dim=1)
+    return torch.where(finite[:, None], boxes, torch.zeros_like(boxes))
+    # END SOLUTION
+
+
+def _top_left(xy, positive):
+    """(K, 3) bool: whether edge i (opposite corner i, a -> b as in ``edge_functions``) is a
+    top or left edge of its triangle. For positive area (counter-clockwise on screen, y
+    down): left edges run downwards (``b_y > a_y``), top edges are horizontal and run to
+    the left (``b_x < a_x``). For negative area the edges run the other way round.
+
+    Write this helper for ``coverage``.
+    """
+    # BEGIN SOLUTION (task 2)
+    a = xy[:, [1, 2, 0]]
+    b = xy[:, [2, 0, 1]]
+    ax, ay, bx, by = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
+    forward = (by > ay) | ((by == ay) & (bx < ax))
+    backward = (ay > by) | ((ay == by) & (ax < bx))
+    return torch.where(positive[:, None], forward, backward)
+    # END SOLUTION
+
+
+def coverage(screen, width: int, height: int, cull_backfaces: bool = False):
+    """Every (triangle, pixel) pair whose pixel centre lies inside the triangle.
+
+    screen: (K, 3, C) float screen positions (x, y first; e.g. ``to_screen``'s output);
+    width, height: the viewport; cull_backfaces: drop triangles of negative area (seen from
+    behind). Returns ``(triangle, pixel, bary)``: triangle (N,) int64 indices into
+    ``screen``, pixel (N,) int64 ``row * width + col``, bary (N, 3) the screen-space
+    barycentrics ``e_i / (e0 + e1 + e2)`` at the pixel centre (same dtype as ``screen``).
+    Fragments come grouped by triangle, in increasing triangle order.
+
+    1. Per triangle: its area ``E_12(v0)``; zero-area and non-finite triangles cover
+       nothing, nor do back faces (area < 0) when culling.
+    2. Enumerate each triangle's ``bounding_boxes`` as fragments, without a Python loop:
+       ``counts = box width * height``, ``triangle = repeat_interleave(arange(K), counts)``,
+       the fragment's rank inside its box gives its column and row.
+    3. Inside test with the **top-left rule**: flip the edge functions of a negative-area
+       triangle, then a pixel centre is inside when every edge has ``e > 0``, or ``e == 0``
+       on a top or left edge (see ``_top_left``). A centre exactly on an edge shared by two
+       triangles is thus covered by exactly one of them (with ``e >= 0`` by both: double
+       blending and double counting; with ``e > 0`` by neither: cracks).
+
+    Hints: ``edge_functions(xy, v0[:, 0], v0[:, 1])[:, 0]`` is the area of every triangle;
+    ``torch.repeat_interleave(torch.arange(K), counts)`` and ``torch.cumsum`` enumerate the
+    boxes; ``rank % box_width`` and ``rank // box_width`` give column and row.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    check_screen(screen)
+    check_size(width, height)
+    # BEGIN SOLUTION (task 2)
+    xy = screen[..., :2]
+    K = xy.shape[0]
+    v0 = xy[:, 0]
+    area = edge_functions(xy, v0[:, 0], v0[:, 1])[:, 0]
+    drawn = torch.isfinite(xy).all(-1).all(-1) & torch.isfinite(area) & (area != 0)
+    if cull_backfaces:
+        drawn &= area > 0
+    boxes = bounding_boxes(screen, width, height)
+    box_w = boxes[:, 2] - boxes[:, 0]
+    box_h = boxes[:, 3] - boxes[:, 1]
+    counts = torch.where(drawn, box_w * box_h, 0)
+    triangle = torch.repeat_interleave(torch.arange(K, device=xy.device), counts)
+    starts = torch.cumsum(counts, 0) - counts
+    rank = torch.arange(triangle.shape[0], device=xy.device) - starts[triangle]
+    cols = boxes[triangle, 0] + rank % box_w[triangle]
+    rows = boxes[triangle, 1] + rank // box_w[triangle]
+    px = cols.to(xy.dtype) + 0.5
+    py = rows.to(xy.dtype) + 0.5
+    e = edge_functions(xy[triangle], px, py)
+    positive = area > 0
+    e = torch.where(positive[triangle, None], e, -e)
+    top_left = _top_left(xy, positive)[triangle]
+    inside = ((e > 0) | ((e == 0) & top_left)).all(-1)
+    bary = e / (e[:, 0] + e[:, 1] + e[:, 2])[:, None]
+    return triangle[inside], (rows * width + cols)[inside], bary[inside]
+    # END SOLUTION
