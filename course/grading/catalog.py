@@ -22,18 +22,6 @@ from course.core.files import module_files
 from course.core.labs import lab_number
 
 
-@dataclass(frozen=True)
-class LabCall:
-    """A test's use of the lab's ``function`` (``impl.f(...)``, or ``lab.f(...)`` in a probe),
-    made where the lab's functions named in ``replaced`` are the grader's stand-ins
-    (``with replaced(lab, {...}):``), so what ``function`` calls of them is not the lab's."""
-
-    function: str
-    replaced: frozenset[str] = frozenset()
-    runs: bool = True  # False: made to fail its argument checks (``expect_error``)
-    optional: bool = False  # tried, and skipped where it raises NotImplementedError
-
-
 @dataclass
 class GradedTest:
     name: str
@@ -42,7 +30,6 @@ class GradedTest:
     visibility: str = "visible"
     needs: tuple[str, ...] = ()  # "gpu", "slow": not graded on a default CPU run
     calls: frozenset[str] = frozenset()  # names X of ``impl.X`` in the test's body
-    uses: tuple[LabCall, ...] = ()  # every call of the lab, in probes too (``_GraderWalk``)
 
 
 @dataclass
@@ -168,14 +155,11 @@ def read_grader(path) -> LabInfo:
                     name=node.name, task=marks.get("task"), points=points,
                     visibility=marks.get("visibility", "visible"),
                     needs=tuple(m for m in ("gpu", "slow") if m in marks),
-                    calls=frozenset(_impl_calls(node, helpers)),
-                    uses=_GraderWalk(helpers, values).test(node)))
+                    calls=frozenset(_impl_calls(node, helpers))))
 
     helpers = {node.name: node for node in tree.body
                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
                and not node.name.startswith("test")}
-    values = {t.id: node.value for node in tree.body if isinstance(node, ast.Assign)
-              for t in node.targets if isinstance(t, ast.Name)}
     try:
         visit(tree.body, base)
     except ValueError as exc:
@@ -207,221 +191,6 @@ def _dispatches(helper) -> bool:
     return any(isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
                and n.func.id == "getattr" and n.args and isinstance(n.args[0], ast.Name)
                and n.args[0].id == "impl" for n in ast.walk(helper))
-
-
-_LAB = "<the lab module>"  # what a name bound to the lab (``impl``, a probe's ``lab``) holds
-_COLLECTIONS = ("tuple", "list", "set", "frozenset", "dict", "sorted")
-
-
-class _GraderWalk:
-    """What one test calls of the lab, read from the grader's source: ``impl.f`` in the test
-    and in the module-level helpers it calls (their parameters bound to the arguments),
-    ``lab.f`` in a probe that ``impl.probe(probe, ...)`` runs next to the lab, and
-    ``getattr(lab, name)`` where ``name`` is known there. Each call carries the names the
-    ``with replaced(lab, {...}):`` blocks around it swap for stand-ins: keys written out, or
-    read from a module-level dict, an argument or a comprehension over one. A replacement
-    whose names cannot be read (one picked at run time) cuts nothing."""
-
-    def __init__(self, helpers: dict, values: dict):
-        self.helpers, self.values = helpers, values  # module-level functions, NAME = value
-        self.found: dict[LabCall, None] = {}
-        self.seen: set = set()
-        self.checks = False  # inside ``expect_error(...)``: the lab's calls stop at checks
-        self.optional = False  # inside ``try: ... except NotImplementedError:``
-
-    def _found(self, function: str, cut: frozenset[str]) -> None:
-        self.found[LabCall(function, cut, runs=not self.checks,
-                           optional=self.optional)] = None
-
-    def test(self, node) -> tuple[LabCall, ...]:
-        self.found, self.seen = {}, set()
-        self._body(node.body, {"impl": _LAB}, frozenset())
-        return tuple(self.found)
-
-    # -- what a name or an expression holds: _LAB, a string, a set of names, or None
-
-    def _value(self, node, env: dict, depth: int = 0):
-        if isinstance(node, ast.Constant) and isinstance(node.value, str):
-            return node.value
-        if isinstance(node, ast.Name):
-            if node.id in env:
-                return env[node.id]
-            if node.id in self.values and depth < 8:
-                return self._value(self.values[node.id], {}, depth + 1)
-            return None
-        return self._names(node, env, depth)
-
-    def _names(self, node, env: dict, depth: int = 0) -> frozenset[str] | None:
-        """The names a dict's keys, a list, tuple or set, or a comprehension over one
-        hold; None where one of them is not known."""
-        if isinstance(node, ast.Name):
-            value = self._value(node, env, depth)
-            return value if isinstance(value, frozenset) else None
-        if isinstance(node, ast.Dict):
-            parts = [(v, True) if k is None else (k, False)
-                     for k, v in zip(node.keys, node.values)]
-        elif isinstance(node, (ast.List, ast.Tuple, ast.Set)):
-            parts = [(e.value, True) if isinstance(e, ast.Starred) else (e, False)
-                     for e in node.elts]
-        elif isinstance(node, (ast.DictComp, ast.ListComp, ast.SetComp, ast.GeneratorExp)):
-            key = node.key if isinstance(node, ast.DictComp) else node.elt
-            gen = node.generators[0]
-            if len(node.generators) != 1 or gen.ifs or not isinstance(gen.target, ast.Name) \
-                    or not isinstance(key, ast.Name) or key.id != gen.target.id:
-                return None
-            parts = [(gen.iter, True)]
-        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
-                and node.func.id in _COLLECTIONS and len(node.args) == 1 and not node.keywords:
-            parts = [(node.args[0], True)]
-        else:
-            return None
-        names: set[str] = set()
-        for part, many in parts:
-            value = self._names(part, env, depth) if many else self._value(part, env, depth)
-            if isinstance(value, frozenset) and many:
-                names |= value
-            elif isinstance(value, str) and not many:
-                names.add(value)
-            else:
-                return None
-        return frozenset(names)
-
-    def _is_lab(self, node, env: dict) -> bool:
-        return isinstance(node, ast.Name) and env.get(node.id) is _LAB
-
-    # -- the walk
-
-    def _helper(self, name: str, env: dict, cut: frozenset[str]) -> None:
-        key = (name, tuple(sorted(env.items(), key=str)), cut)
-        if key not in self.seen:
-            self.seen.add(key)
-            self._body(self.helpers[name].body, env, cut)
-
-    def _bind(self, name: str, args, keywords, env: dict, lab_first=False) -> dict:
-        """A helper's parameters -> what the call's arguments (or the defaults) hold."""
-        spec = self.helpers[name].args
-        params = [a.arg for a in (*spec.posonlyargs, *spec.args)]
-        bound = dict(zip(params[len(params) - len(spec.defaults):],
-                         (self._value(d, {}) for d in spec.defaults)))
-        bound.update((a.arg, self._value(d, {})) for a, d in
-                     zip(spec.kwonlyargs, spec.kw_defaults) if d is not None)
-        if lab_first and params:
-            bound[params.pop(0)] = _LAB
-        for param, arg in zip(params, args):
-            if isinstance(arg, ast.Starred):
-                break
-            bound[param] = self._value(arg, env)
-        names = set(params) | {a.arg for a in spec.kwonlyargs}
-        bound.update((k.arg, self._value(k.value, env)) for k in keywords if k.arg in names)
-        return bound
-
-    def _body(self, nodes, env: dict, cut: frozenset[str]) -> None:
-        for node in nodes:
-            self._visit(node, env, cut)
-
-    def _visit(self, node, env: dict, cut: frozenset[str]) -> None:
-        if isinstance(node, (ast.With, ast.AsyncWith)):
-            inner = cut
-            for item in node.items:
-                self._visit(item.context_expr, env, cut)
-                inner |= self._replacing(item.context_expr, env)
-            self._body(node.body, env, inner)
-            return
-        if isinstance(node, ast.Call) and self._call(node, env, cut):
-            return
-        if isinstance(node, ast.Try) and any(
-                h.type is not None and "NotImplementedError" in ast.unparse(h.type)
-                for h in node.handlers):  # what the submission may not have written yet
-            optional, self.optional = self.optional, True
-            try:
-                self._body(node.body, env, cut)
-            finally:
-                self.optional = optional
-            self._body([*node.handlers, *node.orelse, *node.finalbody], env, cut)
-            return
-        if isinstance(node, ast.Attribute) and self._is_lab(node.value, env):
-            if node.attr != "probe":
-                self._found(node.attr, cut)
-            return
-        if isinstance(node, (ast.If, ast.IfExp)):  # a branch on a known name: only it runs
-            live = self._truth(node.test, env)
-            self._visit(node.test, env, cut)
-            for part, runs in ((node.body, live is not False), (node.orelse, live is not True)):
-                if runs:
-                    self._body(part if isinstance(part, list) else [part], env, cut)
-            return
-        if isinstance(node, ast.Name) and node.id in self.helpers \
-                and isinstance(node.ctx, ast.Load):  # a helper passed on, called later
-            spec = self.helpers[node.id].args
-            self._helper(node.id, {a.arg: _LAB for a in (*spec.posonlyargs, *spec.args)
-                                   if a.arg in ("impl", "lab")}, cut)
-            return
-        for child in ast.iter_child_nodes(node):
-            self._visit(child, env, cut)
-
-    def _call(self, node: ast.Call, env: dict, cut: frozenset[str]) -> bool:
-        """Follow a call into a helper or a probe, or read ``getattr(lab, name)``; False for
-        any other call (the caller walks its parts)."""
-        func, args, keywords = node.func, node.args, node.keywords
-        if isinstance(func, ast.Attribute) and func.attr == "probe" \
-                and self._is_lab(func.value, env) and args and isinstance(args[0], ast.Name) \
-                and args[0].id in self.helpers:
-            self._helper(args[0].id, self._bind(args[0].id, args[1:], keywords, env, True), cut)
-            rest = args[1:]
-        elif isinstance(func, ast.Name) and func.id == "getattr" and len(args) >= 2 \
-                and self._is_lab(args[0], env):
-            name = self._value(args[1], env)
-            if isinstance(name, str):
-                self._found(name, cut)
-            rest = args[1:]
-        elif isinstance(func, ast.Name) and func.id == "expect_error":
-            checks, self.checks = self.checks, True
-            try:
-                for part in (*args, *(k.value for k in keywords)):
-                    self._visit(part, env, cut)
-            finally:
-                self.checks = checks
-            return True
-        elif isinstance(func, ast.Name) and func.id in self.helpers:
-            self._helper(func.id, self._bind(func.id, args, keywords, env), cut)
-            rest = args
-        else:
-            return False
-        for part in (*rest, *(k.value for k in keywords)):
-            self._visit(part, env, cut)
-        return True
-
-    def _truth(self, node, env: dict) -> bool | None:
-        """Whether a branch's test holds, where it compares known names (``variant ==
-        "woop_unit"``, ``stage in STAGES``); None where it is not known."""
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
-            value = self._truth(node.operand, env)
-            return None if value is None else not value
-        if isinstance(node, ast.BoolOp):
-            values = [self._truth(v, env) for v in node.values]
-            stop = isinstance(node.op, ast.Or)  # the value that decides an or (an and: False)
-            return stop if stop in values else (None if None in values else not stop)
-        if not isinstance(node, ast.Compare) or len(node.ops) != 1:
-            return None
-        left, right = self._value(node.left, env), self._value(node.comparators[0], env)
-        op = node.ops[0]
-        if not isinstance(left, str):
-            return None
-        if isinstance(op, (ast.Eq, ast.NotEq)) and isinstance(right, str):
-            return (left == right) == isinstance(op, ast.Eq)
-        if isinstance(op, (ast.In, ast.NotIn)) and isinstance(right, frozenset):
-            return (left in right) == isinstance(op, ast.In)
-        return None
-
-    def _replacing(self, node, env: dict) -> frozenset[str]:
-        """The names ``replaced(lab, {...})`` swaps for stand-ins (none when not known)."""
-        if not isinstance(node, ast.Call) or len(node.args) < 2:
-            return frozenset()
-        func = node.func
-        name = func.id if isinstance(func, ast.Name) else getattr(func, "attr", None)
-        if name != "replaced":
-            return frozenset()
-        return self._names(node.args[1], env) or frozenset()
 
 
 def lab_catalog(test_files) -> dict[int, LabInfo]:
@@ -461,7 +230,7 @@ def skeleton_functions(lab_file) -> list[str]:
             and not node.name.startswith("_") and unfinished(node)]
 
 
-def _named(test: GradedTest, functions) -> list[str]:
+def named_functions(test: GradedTest, functions) -> list[str]:
     """The functions a test's name mentions (the graders' naming rule ``test_<fn>_<what>``)."""
     named = [f for f in functions if re.search(rf"(^test|_){re.escape(f)}(_|$)", test.name)]
     # test_grid_closest_hit_... names grid_closest_hit, not closest_hit.
@@ -472,42 +241,8 @@ def functions_of(test: GradedTest, functions) -> list[str]:
     """The lab functions a test exercises: those it calls as ``impl.<fn>`` and those its
     name mentions (the graders' naming rule ``test_<fn>_<what>``, which also covers calls
     made through a helper)."""
-    named = _named(test, functions)
+    named = named_functions(test, functions)
     return [f for f in functions if f in test.calls or f in named]
-
-
-def lab_calls(lab_file) -> dict[str, set[str]]:
-    """Each top-level function and class of a lab (a file, or every file of a package) ->
-    the lab's own top-level functions and classes its body names (calls, and functions
-    passed on): what running it runs of the lab."""
-    defs = {node.name: node for node in _module_body(lab_file)
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))}
-    return {name: {n.id for n in ast.walk(node) if isinstance(n, ast.Name)
-                   and n.id in defs and n.id != name}
-            for name, node in defs.items()}
-
-
-def needed_functions(test: GradedTest, functions, calls: dict[str, set[str]]) -> set[str]:
-    """The functions of ``functions`` that a test runs: those it calls (or its name
-    mentions) and, through ``calls`` (:func:`lab_calls` of the reference), every lab function
-    they call in turn, except those the test replaces with stand-ins around that call."""
-    optional = {use.function for use in test.uses if use.optional}
-    uses = [use for use in test.uses if not use.optional]
-    called = {use.function for use in test.uses}
-    uses += [LabCall(f) for f in _named(test, functions) if f not in called]
-    uses += [LabCall(f) for f in test.calls if f not in called]
-    reached: set[str] = set()
-    for use in uses:
-        seen, todo = set(), [use.function]
-        while todo:
-            f = todo.pop()
-            if f in seen or f in use.replaced or (f in optional and f != use.function):
-                continue
-            seen.add(f)
-            if use.runs:
-                todo += sorted(calls.get(f, ()))
-        reached |= seen
-    return {f for f in functions if f in reached}
 
 
 # --------------------------------------------------------- what each task asks for
@@ -581,23 +316,21 @@ class TaskInfo:
     needs: dict[int, list[str]]  # other tasks whose functions its tests run
 
 
-def lab_tasks(lab: LabInfo, lab_file, reference=None) -> list[TaskInfo]:
+def lab_tasks(lab: LabInfo, lab_file, runs=None) -> list[TaskInfo]:
     """The tasks of ``lab`` with the functions each asks for and what its tests need from
     other tasks (read from the skeleton ``lab_file`` and the graders): the other tasks'
-    functions its tests run, directly or through the lab's functions they call, read from
-    ``reference`` (the solution, a file or a package; without it the skeleton, whose given
-    code is all that calls there)."""
-    exists = Path(lab_file).exists()
-    owners = function_tasks(lab, lab_file) if exists else {}
-    source = reference if reference is not None and Path(reference).exists() else lab_file
-    calls = lab_calls(source) if Path(source).exists() else {}
+    functions its tests run, ``runs(test, functions)`` (default: those a test calls or
+    names, :func:`functions_of`; the handout's table follows the lab's own calls too,
+    :func:`course.grading.taskdoc.runs_through_lab`)."""
+    owners = function_tasks(lab, lab_file) if Path(lab_file).exists() else {}
+    runs = runs or functions_of
     tasks = []
     for number, title in sorted(lab.tasks.items()):
         mine = [f for f, t in owners.items() if t == number]
         used: set[str] = set()
         for test in lab.tests:
             if test.task == number:
-                used |= needed_functions(test, list(owners), calls)
+                used |= set(runs(test, list(owners)))
         needs: dict[int, list[str]] = {}
         for f, task in owners.items():  # in the skeleton's order
             if f in used and task is not None and task != number:

@@ -148,4 +148,6 @@ def short_feedback(*, exc: BaseException, frames, test_file, folder, task, task_
         lines.append(f"checked at {Path(test_file).parent.name}/{Path(test_file).name}:"
                      f"{grader[-1][1]}")
     lines.append(HINT)
-    return Feedback("\n".join(lines[:MAX_LINES - 1] + lines[-1:]))
+    if len(lines) > MAX_LINES:  # keep the hint line; the message lines are each whole
+        lines = lines[:MAX_LINES - 1] + lines[-1:]
+    return Feedback("\n".join(lines))

@@ -21,9 +21,9 @@ from pathlib import Path
 import pytest
 
 from course.core.files import copy_module, defining_file, lab_source, relative_name
-from course.grading.catalog import lab_catalog, lab_tasks, read_grader
+from course.grading.catalog import lab_catalog
 from course.grading.runner import lab_test_files
-from course.grading.taskdoc import task_table
+from course.grading.taskdoc import grader_uses, lab_task_needs, task_table
 from course.tools.release import labs_readme
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -32,8 +32,8 @@ LABS = lab_catalog(sorted((ROOT / "tests").glob("test_lab*_*.py")))
 
 def _tasks(number: int):
     lab = LABS[number]
-    return {t.number: t for t in lab_tasks(lab, lab_source(ROOT / "labs", lab.module),
-                                           lab_source(ROOT / "solutions", lab.module))}
+    return {t.number: t for t in lab_task_needs(lab, lab_source(ROOT / "labs", lab.module),
+                                                lab_source(ROOT / "solutions", lab.module))}
 
 
 def test_a_task_needs_what_its_tests_run_through_the_lab():
@@ -117,12 +117,12 @@ def test_checks(impl):
 def test_the_grader_walk(tmp_path):
     path = tmp_path / "test_lab9_toy.py"
     path.write_text(GRADER)
-    tests = {t.name: t for t in read_grader(path).tests}
+    tests = grader_uses([path])
     uses = {(u.function, tuple(sorted(u.replaced)), u.runs, u.optional)
-            for u in tests["test_outer_given"].uses}
+            for u in tests["test_outer_given"]}
     assert uses == {("outer", ("inner",), True, False), ("outer", (), True, False),
                     ("maybe", (), True, True)}
-    assert [(u.function, u.runs) for u in tests["test_checks"].uses] == [("outer", False)]
+    assert [(u.function, u.runs) for u in tests["test_checks"]] == [("outer", False)]
 
 
 # ------------------------------------------------------------------ graded
