@@ -274,7 +274,9 @@ class FrameDownloader:
 
 
 def measure_copy_bandwidth(nbytes: int, pinned: bool, device, repeats: int = 5) -> float:
-    """Device-to-host copy bandwidth in GB/s (1e9 bytes/s) for a block of ``nbytes``.
+    """Device-to-host copy bandwidth in GB/s (1e9 bytes/s) for a block of ``nbytes``:
+    ``nbytes / median / 1e9`` with ``median`` the seconds per copy that the given ``time_fn``
+    reports over ``repeats`` copies (the graders may stub that clock).
 
     On CUDA: a device tensor of ``nbytes`` uint8 copied into pinned (``pinned=True``) or
     pageable host memory. On the CPU there is no device: measure a host-to-host copy and
@@ -284,8 +286,8 @@ def measure_copy_bandwidth(nbytes: int, pinned: bool, device, repeats: int = 5) 
 
     Hints:
     - Allocate both buffers once, outside the timed function.
-    - ``course.measure.bench.time_fn(fn, *args, repeats=..., warmup=1, device=device)`` returns a
-      Timing in seconds per call (CUDA events on the GPU); use its ``median``.
+    - ``time_fn(fn, *args, repeats=..., warmup=1, device=device)`` returns a Timing in
+      seconds per call (CUDA events on the GPU).
     - ``dst.copy_(src, non_blocking=True)`` is asynchronous only into pinned memory.
     """
     raise NotImplementedError("not implemented yet: measure_copy_bandwidth (task 3)")

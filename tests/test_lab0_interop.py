@@ -165,7 +165,8 @@ def test_pack_rgba8_known_words(impl, device):
         signed = word - 2**32 if word >= 2**31 else word
         got = int(packed[0, j])
         assert got == signed, (
-            f"pack_rgba8: RGBA ({', '.join(f'0x{c:02X}' for c in channels)}) should pack to {_hex(word)} "
+            f"pack_rgba8: RGBA ({', '.join(f'0x{c:02X}' for c in channels)}) should pack to "
+            f"{_hex(word)} "
             f"(int32 {signed}), got {_hex(got)} (int32 {got}). R goes in bits 0-7, G 8-15, "
             f"B 16-23, A 24-31; a word with A >= 128 is a negative int32 (two's complement).")
     back = check_tensor(impl.unpack_rgba8(packed), "unpack_rgba8(packed)",
@@ -627,6 +628,8 @@ def test_measure_copy_bandwidth(impl, device, pinned):
         f"measure_copy_bandwidth(1, pinned={pinned}, {device!r}, repeats=1) should return a "
         f"positive float (GB/s): nbytes may be any positive int, 1 included; got {one!r}")
     expect_error("nbytes", impl.measure_copy_bandwidth, 0, pinned, device)
+    expect_error("repeats", impl.measure_copy_bandwidth, 1, pinned, device, repeats=0,
+                 case="repeats=0 (nothing would be timed)")
 
 
 @pytest.mark.task(3)
@@ -634,6 +637,8 @@ def test_measure_copy_bandwidth(impl, device, pinned):
 @pytest.mark.parametrize("overlap", [True, False])
 def test_run_frame_loop_displays_every_frame_in_order(impl, device, overlap):
     shape, n = (6, 10), 7
+    expect_error("n_frames", impl.run_frame_loop, render_test_frame, 0, shape, device,
+                 overlap=overlap, case="n_frames=0 (documented: an int >= 1)")
     result = impl.run_frame_loop(render_test_frame, n, shape, device, overlap=overlap,
                                  display=display_checksum)
     assert isinstance(result, dict), f"run_frame_loop should return a dict, got {type(result)}"

@@ -170,12 +170,47 @@ def first_line(exc: BaseException) -> str:
     return str(exc).splitlines()[0] if str(exc) else ""
 
 
+# Builtin errors a submission's own line raises by accident (an index past the end, a shape
+# torch refuses, a missing attribute): where a check was expected, they are a wrong answer
+# with a message, not a crash of the test.
+_ACCIDENTS = (LookupError, RuntimeError, TypeError, ValueError, ArithmeticError,
+              AttributeError)
+_LIBRARY = ("site-packages", "dist-packages", "lib/python")
+
+
+def _raising_line(exc: BaseException) -> str:
+    """Where ``exc`` was raised, as ``file:line in function: source``: the last frame of the
+    submission's traceback (the worker's, carried in the message, else the local one) that
+    lies outside installed libraries and the course package."""
+    import traceback
+
+    from course.grading.feedback import text_frames
+
+    course = Path(__file__).resolve().parents[1]
+    frames = text_frames(str(exc)) or [
+        (f.filename, f.lineno, f.name, f.line or "")
+        for f in traceback.extract_tb(exc.__traceback__)]
+    found = ""
+    for file, line, name, source in frames:
+        path = Path(file)
+        if any(part in file for part in _LIBRARY) or course in path.resolve().parents:
+            continue
+        found = f"{path.name}:{line} in {name}" + (f": {source.strip()}" if source else "")
+    return found
+
+
 def expect_error(names, fn, *args, kinds=(ValueError, TypeError), case: str = "", **kwargs):
     """``fn(*args, **kwargs)`` must raise one of ``kinds`` whose message names one of the
-    arguments ``names`` (a name or a sequence of names). ``case`` describes the bad input."""
+    arguments ``names`` (a name or a sequence of names). ``case`` describes the bad input.
+
+    Another builtin error (an ``IndexError`` from an index past the end, a ``RuntimeError``
+    from torch, a ``TypeError`` where a ``ValueError`` was asked for) fails the test with
+    what was expected, what came and the line that raised it, never as a bare crash."""
     names = (names,) if isinstance(names, str) else tuple(names)
     what = getattr(fn, "__name__", None) or getattr(fn, "_name", "the call")
     case = case or "bad input"
+    named = " or ".join(f"`{n}`" for n in names)
+    expected = f"{' or '.join(k.__name__ for k in kinds)} naming {named}"
     try:
         fn(*args, **kwargs)
     except kinds as exc:
@@ -183,9 +218,19 @@ def expect_error(names, fn, *args, kinds=(ValueError, TypeError), case: str = ""
             f"{what} with {case} raised {type(exc).__name__}({first_line(exc)!r}); the message "
             f"should name the argument {' or '.join(map(repr, names))} and say what was expected")
         return
-    raise AssertionError(f"{what} accepted {case} without complaint: expected "
-                         f"{' or '.join(k.__name__ for k in kinds)} naming "
-                         f"{' or '.join(map(repr, names))}")
+    except _ACCIDENTS as exc:
+        text = first_line(exc)
+        if (isinstance(exc, NotImplementedError) or type(exc).__module__ != "builtins"
+                or text.startswith("not implemented yet") or "failed to import" in text):
+            raise  # an unwritten function or a sandbox failure keeps its own message
+        kind = type(exc).__name__
+        text = text if text.startswith(kind) else f"{kind}: {text}"
+        line = _raising_line(exc)
+        raise AssertionError(
+            f"{what}: expected {expected} ({case}), got {text}"
+            + (f" at {line}" if line else "")
+            + "; check the argument first and raise with a message that names it") from None
+    raise AssertionError(f"{what} accepted {case} without complaint: expected {expected}")
 
 
 @contextlib.contextmanager

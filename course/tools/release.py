@@ -29,8 +29,9 @@ from course.grading.taskdoc import package_files, task_table
 from course.tools.skeletons import write as write_skeletons
 
 # Paths (relative to the repository root) that never ship to students.
-WITHHELD = ("solutions", "tests/meta", "tests/hidden", ".git", ".venv", ".ci", "out", "build",
-            "dist")
+# tests/contracts names hidden tests and the mutants each one catches: the graders' own notes.
+WITHHELD = ("solutions", "tests/meta", "tests/hidden", "tests/contracts", ".git", ".venv", ".ci",
+            "out", "build", "dist")
 _IGNORED_NAMES = ("__pycache__", ".pytest_cache", ".ruff_cache", ".ipynb_checkpoints",
                   "*.egg-info", "results.json")
 LABS_README = Path("labs") / "README.md"

@@ -30,6 +30,8 @@ def layout_indexed(mesh: Mesh) -> dict:
     triangle). Compact (a vertex is stored once, shared by ~6 triangles of a closed mesh),
     but a triangle test first gathers three vertices through the indices: dependent loads.
 
+    Errors: ValueError or TypeError naming ``mesh`` unless it is a ``Mesh``.
+
     Hints: ``x.numel() * x.element_size()`` is a tensor's size in bytes.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
@@ -47,6 +49,9 @@ def layout_float4(mesh: Mesh, order: torch.Tensor | None = None) -> dict:
     ``order[k]``, and every ``triangles[k, j, 3]`` holds ``order[k]`` bit for bit
     (``index_as_float``). One aligned 16-byte load per corner and no indirection; the index
     in w tells a hit's original triangle after reordering.
+
+    Errors: ValueError or TypeError naming ``mesh`` unless it is a ``Mesh``, and naming
+    ``order`` unless it is None or a permutation of ``range(F)``.
 
     Hints: ``mesh.triangles()`` gives (F, 3, 3) corners; ``torch.cat`` the w column.
     """
@@ -69,6 +74,8 @@ def layout_woop(mesh: Mesh) -> dict:
 
     The test then costs two transformed coordinates and a division (the lecture: mul 20,
     add 20, div 1) and needs no vertices at all: 48 bytes in float32, like float4.
+
+    Errors: ValueError or TypeError naming ``mesh`` unless it is a ``Mesh``.
 
     Hints: ``torch.linalg.inv_ex`` returns ``info != 0`` for singular frames.
     """
@@ -95,6 +102,9 @@ def intersect_layout(layout: dict, origins: torch.Tensor, directions: torch.Tens
 
     Tiles of at most ``MEMORY_BUDGET_BYTES / BYTES_PER_PAIR`` (ray, triangle) pairs:
     ``pair_tiles(N, F)`` yields them.
+
+    Errors (the provided check): ValueError or TypeError naming ``layout`` (not a layout of
+    a kind in ``LAYOUTS``), ``origins``, ``directions``, ``t_min`` or ``t_max``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     kind, f = check_layout_inputs(  # noqa: RUF059 (the layout's kind and F, for your code)

@@ -43,8 +43,13 @@ def render_uber(scene: WhittedScene, origins: torch.Tensor, directions: torch.Te
     ``nonzero``, ``.item()``, ``if`` on tensor values), so ``torch.compile(step,
     backend=..., fullgraph=True)`` captures each as one graph of fixed-size tensors and
     fuses it (the grader inspects the captured graphs); the tracer stays outside (on a GPU
-    the Triton uber kernel fuses the traversal too: ``course.kernels.triton_tracer``). TypeError
-    for a ``compile`` of another type.
+    the Triton uber kernel fuses the traversal too: ``course.kernels.triton_tracer``).
+
+    Errors (the provided check): ValueError or TypeError naming ``scene`` (not a
+    ``WhittedScene``, a scene without ``lights``, a ``material`` index beyond its table),
+    ``origins`` or ``directions`` (a wrong shape; TypeError for half precision or a dtype
+    other than the scene's), ``trace`` (not callable) or ``max_depth`` (not an int >= 0).
+    TypeError naming ``compile`` for a value of another type.
 
     Hints: pass the scene's tensors to the step functions one by one (not the dataclass);
     cache the compiled functions (``functools.cache``) so a second call does not recompile.

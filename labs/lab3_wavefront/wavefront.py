@@ -39,11 +39,17 @@ def render_wavefront(scene: WhittedScene, origins: torch.Tensor, directions: tor
     ``hits``             of those, rays that hit something
     ``shadow_rays``      shadow rays traced by the shade stage
     ``reflected_rays``   rays spawned for the next bounce
-    ``material_runs``    runs of equal material in the shading queue (the number of
-                         distinct materials when sorted)
+    ``material_runs``    runs of equal material in the shading queue as it is shaded:
+                         in the rays' order when not sorted (compaction keeps the
+                         order), the number of distinct materials when sorted
     ``seconds``          ``{"generate", "trace", "shade", "spawn"}``: seconds per stage
                          (``StageClock`` does it; shadow rays count as shading)
     ===================  =======================================================
+
+    Errors: as :func:`render_whitted`, ValueError or TypeError naming ``scene`` (also for
+    a scene without ``lights`` or a ``material`` index beyond its table), ``origins``,
+    ``directions``, ``trace`` or ``max_depth``; TypeError naming ``sort_by_material``
+    unless it is a bool.
 
     Hints: compact with a mask, ``x = x[keep]``, applied to *every* per-ray tensor alike;
     ``torch.argsort(material, stable=True)`` sorts; ``clock = StageClock(device)`` and

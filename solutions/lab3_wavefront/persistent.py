@@ -48,6 +48,12 @@ def render_persistent(scene: WhittedScene, origins: torch.Tensor, directions: to
     trace, shade, push" until the queue is empty: no relaunch, mixed depths in one batch,
     idle lanes only at the tail.
 
+    Errors (the provided check): ValueError or TypeError naming ``scene`` (not a
+    ``WhittedScene``, a scene without ``lights``, a ``material`` index beyond its table),
+    ``origins`` or ``directions`` (a wrong shape; TypeError for half precision or a dtype
+    other than the scene's), ``trace`` (not callable) or ``max_depth`` (not an int >= 0).
+    ValueError or TypeError naming ``pool_size`` unless it is an int >= 1.
+
     Hints: keep the queue and the pool as dicts of tensors; ``(pool['pixel'] < 0)`` marks
     empty slots; the queue's head index is a Python int.
     """

@@ -36,6 +36,9 @@ def offset_origins(points: torch.Tensor, normals: torch.Tensor) -> torch.Tensor:
     rounding error cures it; the rounding grows with the coordinates' magnitude, hence the
     ``max(1, |p|_inf)`` (at 1e5 a fixed offset would vanish in the rounding).
 
+    Errors: ValueError or TypeError naming ``points`` or ``normals`` for a wrong shape or
+    unequal lengths; TypeError for float16/bfloat16 (too coarse to hold the offset).
+
     Hints: ``points.abs().amax(dim=1, keepdim=True).clamp(min=1)``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
@@ -54,6 +57,9 @@ def reflect(directions: torch.Tensor, normals: torch.Tensor) -> torch.Tensor:
     does not depend on which side ``n`` faces (but the *origin* of the reflected ray does:
     it is offset to the side the ray came from). A grazing ``d`` (``d . n = 0``) goes on
     unchanged.
+
+    Errors: ValueError or TypeError naming ``directions`` or ``normals`` (wrong shape or
+    unequal lengths).
 
     Hints: ``dot`` and ``normalize`` are given.
     """
@@ -82,6 +88,9 @@ def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Ten
 
     ``hits`` is taken as given: the ``Hits`` of these N rays from ``trace``. Any other value
     is outside the contract (it need not be checked, nor raise any particular error).
+
+    Errors (the provided check): ValueError or TypeError naming ``scene``, ``origins`` or
+    ``directions``.
 
     Hints: ``hits.hit`` is the mask of hits; index with ``hits.triangle.clamp(min=0)`` and
     mask the misses with ``torch.where``.
@@ -150,6 +159,11 @@ def shade_direct(scene: WhittedScene, points: torch.Tensor, normals: torch.Tenso
     Trace only the shadow rays that can matter: toward lights with ``n . l > 0`` (the
     others cannot contribute) -- all of them in **one** ``trace(..., any_hit=True)`` call.
 
+    Errors (the provided check): ValueError or TypeError naming ``scene``, ``points``,
+    ``normals``, ``directions``, ``material`` (not int64, or an index beyond the material
+    table) or ``trace`` (not callable); TypeError naming ``points`` for a dtype other than
+    the scene's.
+
     Hints: work on ``(N, L, 3)`` tensors (point lights then directional ones, ``torch.cat``);
     ``(cos > 0).nonzero(as_tuple=True)`` lists the (hit, light) pairs that need a shadow ray.
     """
@@ -203,6 +217,11 @@ def render_whitted(scene: WhittedScene, origins: torch.Tensor, directions: torch
 
     Adding ``throughput * (direct at each bounce)`` is the recursion ``L = direct + kr *
     L(reflected)`` unrolled. Stop early once no ray is alive.
+
+    Errors (the provided check): ValueError or TypeError naming ``scene`` (not a
+    ``WhittedScene``, a scene without ``lights``, a ``material`` index beyond its table),
+    ``origins`` or ``directions`` (a wrong shape; TypeError for half precision or a dtype
+    other than the scene's), ``trace`` (not callable) or ``max_depth`` (not an int >= 0).
 
     Hints: ``surface_at``, ``shade_direct`` (on the hits: ``x[hit]``), ``offset_origins``,
     ``reflect``, and ``torch.where(alive[:, None], new, old)`` to update the buffers.

@@ -87,3 +87,77 @@ MUTANTS = [
                    "        render_rotating_triangle(self.frame_index, self.framebuffer,",
            tests="FrameLoop", why="allocates a new framebuffer every frame"),
 ]
+
+# Written from the docstrings alone, as a student reads them, before looking at the tests:
+# boundaries, units, rounding and the promises of the frame ring.
+MUTANTS += [
+    Mutant(name="srgb_decode_threshold", module=M, function="linear_to_srgb8",
+           find="torch.floor(srgb_encode(x) * 255 + 0.5)",
+           replace="torch.floor(torch.where(x <= 0.04045, 12.92 * x, "
+                   "1.055 * x.pow(1 / 2.4) - 0.055) * 255 + 0.5)",
+           tests="linear_to_srgb8",
+           why="writes the OETF by hand with the decoder's threshold 0.04045 instead of "
+               "0.0031308: dark values in between take the linear toe"),
+    Mutant(name="srgb_nan_is_white", module=M, function="linear_to_srgb8",
+           find="nan=0.0, posinf=1.0", replace="nan=1.0, posinf=1.0",
+           tests="linear_to_srgb8", why="NaN becomes 255 instead of 0"),
+    Mutant(name="srgb_posinf_is_black", module=M, function="linear_to_srgb8",
+           find="nan=0.0, posinf=1.0", replace="nan=0.0, posinf=0.0",
+           tests="linear_to_srgb8", why="+inf becomes 0 instead of 255 (nan_to_num's defaults "
+                                        "read as 'every non-finite value is 0')"),
+    Mutant(name="unpack_masks_before_shifting", module=M, function="unpack_rgba8",
+           find="(packed.unsqueeze(-1) >> shifts) & 0xFF",
+           replace="(packed.unsqueeze(-1) & 0xFF) >> shifts",
+           tests="unpack_rgba8", why="masks the low byte first: G, B and A come out 0"),
+    Mutant(name="numpy_accepts_fortran_order", module=M, function="numpy_to_framebuffer",
+           find="if not arr.flags.c_contiguous:",
+           replace="if not (arr.flags.c_contiguous or arr.flags.f_contiguous):",
+           tests="numpy_to_framebuffer",
+           why="accepts a transposed (Fortran-ordered) array: it is one block, but a view of "
+               "it is not a row-major framebuffer"),
+    Mutant(name="downloader_accepts_zero_buffers", module=M, function="FrameDownloader.__init__",
+           find="num_buffers < 1", replace="num_buffers < 0", tests="FrameDownloader",
+           why="'an int >= 1' read as 'not negative': a ring of no buffers"),
+    Mutant(name="downloader_ring_never_advances", module=M, function="FrameDownloader.submit",
+           find="self.next_slot = (slot + 1) % len(self.buffers)", replace="self.next_slot = slot",
+           tests="FrameDownloader or run_frame_loop",
+           why="every frame is copied into slot 0: the second frame in flight overwrites the "
+               "first, which is then received twice"),
+    Mutant(name="receive_returns_a_copy", module=M, function="FrameDownloader.receive",
+           find="return self.buffers[slot]", replace="return self.buffers[slot].clone()",
+           tests="FrameDownloader",
+           why="returns a copy of the staging buffer: one allocation per frame, not the "
+               "mapped buffer itself"),
+    Mutant(name="bandwidth_in_gibibytes", module=M, function="measure_copy_bandwidth",
+           find="return nbytes / timing.median / 1e9",
+           replace="return nbytes / timing.median / 2**30",
+           tests="measure_copy_bandwidth",
+           why="reports GiB/s (2**30 bytes) where the docstring asks for GB/s (1e9 bytes)"),
+    Mutant(name="bandwidth_best_not_median", module=M, function="measure_copy_bandwidth",
+           find="timing.median / 1e9", replace="timing.min / 1e9",
+           tests="measure_copy_bandwidth",
+           why="reports the best repeat instead of the median: an optimistic bandwidth"),
+    Mutant(name="frame_loop_accepts_zero_frames", module=M, function="run_frame_loop",
+           find="n_frames < 1", replace="n_frames < 0", tests="run_frame_loop",
+           why="'an int >= 1' read as 'not negative': n_frames=0 then fails deep in the loop"),
+    Mutant(name="triangle_truncates_colour", module=M, function="render_rotating_triangle",
+           find="torch.floor(bary.clamp(0, 1) * 255 + 0.5)",
+           replace="torch.floor(bary.clamp(0, 1) * 255)",
+           tests="render_rotating_triangle or FrameLoop",
+           why="truncates 255 b instead of rounding half up: colours off by one"),
+    Mutant(name="triangle_ignores_period", module=M, function="render_rotating_triangle",
+           find="triangle_vertices(frame_index, width, height, period)",
+           replace="triangle_vertices(frame_index, width, height)",
+           tests="render_rotating_triangle or FrameLoop",
+           why="forgets to pass the period on: every animation turns once in 120 frames"),
+    Mutant(name="triangle_width_height_swapped", module=M, function="render_rotating_triangle",
+           find="height, width = out.shape", replace="width, height = out.shape",
+           tests="render_rotating_triangle or FrameLoop",
+           why="reads out.shape as (W, H): a non-square frame is drawn transposed"),
+    Mutant(name="frameloop_advances_first", module=M, function="FrameLoop.step",
+           find="render_rotating_triangle(self.frame_index, self.framebuffer, "
+                "period=self.period)\n        self.frame_index += 1",
+           replace="self.frame_index += 1\n        render_rotating_triangle(self.frame_index, "
+                   "self.framebuffer, period=self.period)",
+           tests="FrameLoop", why="advances before rendering: the first step draws frame 1"),
+]

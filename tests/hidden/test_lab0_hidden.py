@@ -8,13 +8,16 @@ order.
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 
-from course.grading.testing import assert_equal, check_tensor, generator
+from course.grading.testing import assert_equal, check_tensor, generator, replaced
+from course.measure.bench import Timing
 
 LAB_MODULE = "lab0_interop"
-TASKS = {1: "Packed framebuffers"}
+TASKS = {1: "Packed framebuffers", 3: "The PBO analogue"}
 pytestmark = pytest.mark.visibility("after_due_date")
 
 # One pixel, a single odd row, a single column, odd primes, and a 1080p frame.
@@ -83,3 +86,37 @@ def test_pack_rgba8_strided_views(impl, device):
         packed = check_tensor(result, f"pack_rgba8 of {name}", shape=view.shape[:2],
                               dtype=torch.int32)
         assert_equal(packed, formula_pack(view), name=f"pack_rgba8 of {name}", where="pixel")
+
+
+# ---------------------------------------------------------------- task 3, under a stub clock
+
+
+def stub_clock(fn, *args, repeats=5, warmup=1, device=None, **kwargs):
+    """``time_fn``'s stand-in: calls ``fn`` once and reports a fixed clock, a median of
+    0.25 s per call and a best of 0.125 s, so the units and the statistic are seen exactly."""
+    fn(*args, **kwargs)
+    return Timing(median=0.25, min=0.125, max=0.5, mean=0.3, repeats=repeats,
+                  device=str(device), method="stub")
+
+
+def probe_bandwidth_under_a_stub_clock(lab, nbytes, pinned, device):
+    with replaced(lab, {"time_fn": stub_clock}) as module:
+        return module.measure_copy_bandwidth(nbytes, pinned, device, repeats=3)
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.25)
+@pytest.mark.parametrize("pinned", [False, True])
+def test_measure_copy_bandwidth_under_a_stub_clock(impl, device, pinned):
+    nbytes = 3 << 20
+    got = impl.probe(probe_bandwidth_under_a_stub_clock, nbytes, pinned, device)
+    want = nbytes / 0.25 / 1e9
+    why = ""
+    if isinstance(got, float) and math.isclose(got, nbytes / 0.25 / 2**30, rel_tol=1e-6):
+        why = " That is GiB/s (2**30 bytes); the docstring asks for GB/s (1e9 bytes)."
+    elif isinstance(got, float) and math.isclose(got, nbytes / 0.125 / 1e9, rel_tol=1e-6):
+        why = " That is the best copy's bandwidth; the docstring asks for the median's."
+    assert isinstance(got, float) and math.isclose(got, want, rel_tol=1e-9), (
+        f"measure_copy_bandwidth({nbytes}, pinned={pinned}) with the given time_fn stubbed "
+        f"to a median of 0.25 s per copy (best 0.125 s): expected nbytes / median / 1e9 = "
+        f"{want!r} GB/s, got {got!r}.{why}")

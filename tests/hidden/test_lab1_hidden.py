@@ -157,3 +157,126 @@ def test_closest_hit_hidden_soup(impl, device):
         visible.check_hits(hits, len(rays), torch.float32, device, variant)
         compare_closest(hits, ref, f"hidden soup of 77 + 2 triangles, variant={variant!r}, "
                         f"a 16 KB memory budget")
+
+
+# ---------------------------------------------------------------- promises, one at a time
+
+# Direction lengths far from 1: "directions need not be unit length (t is in units of the
+# direction's length)", so every tolerance that involves d must scale with |d|.
+LENGTHS = (1e-4, 1.0, 1e2)
+
+
+def grazing_case(slope: float):
+    """Rays ``slope`` off the plane z = 0 of the triangle (0,0,0), (1,0,0), (0,1,0), each
+    crossing it at t = 0.3 (unit speed along (1, 0.2, -slope)): four well inside, two well
+    outside. Returns float64 ``o, d, v0, v1, v2`` and the expected hits."""
+    starts = torch.tensor([[0.1, 0.3], [0.2, 0.1], [0.05, 0.05], [0.3, 0.25], [0.9, 0.6],
+                           [-0.5, 0.2]], dtype=F64)
+    o = torch.cat((starts, torch.full((6, 1), 0.3 * slope, dtype=F64)), 1)
+    d = torch.tensor([1.0, 0.2, -slope], dtype=F64).expand(6, 3)
+    cross = starts + 0.3 * torch.tensor([1.0, 0.2], dtype=F64)
+    inside = (cross >= 0).all(1) & (cross.sum(1) <= 1)
+    corners = torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=F64)
+    return o, d, *(c.expand(6, 3) for c in corners), inside
+
+
+def check_any_direction_length(impl, device, variant):
+    for slope in (3e-4, 2e-3):
+        o, d, v0, v1, v2, inside = grazing_case(slope)
+        for dtype in (torch.float32, F64):
+            for k in LENGTHS:
+                args = [x.to(device, dtype) for x in (o, d * k, v0, v1, v2)]
+                t, _, _ = checked(intersect(impl, variant, *args), variant, (6,), dtype,
+                                  device)
+                t = t.cpu().double()
+                hit = t < INF
+                case = (f"{variant} ({dtype}): rays {slope:g} off the triangle's plane with "
+                        f"directions of length {k:g}")
+                assert bool((hit == inside).all()), (
+                    f"{case}: hits {hit.tolist()}, expected {inside.tolist()} (the same as "
+                    f"with unit directions). A tolerance that compares a quantity scaled by "
+                    f"|d| with one that is not (e.g. |det| against eps |e1| |e2| without "
+                    f"|d|) decides differently for short and long directions.")
+                assert_close(t[inside] * k, torch.full((int(inside.sum()),), 0.3, dtype=F64),
+                             rtol=2e-3 if dtype == torch.float32 else 1e-9,
+                             name=f"{case}: t * |d| (t is in units of |d|)", where="ray")
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.25)
+def test_intersect_simple_any_direction_length(impl, device):
+    check_any_direction_length(impl, device, "intersect_simple")
+
+
+@pytest.mark.task(2)
+@pytest.mark.points(0.25)
+def test_moller_trumbore_any_direction_length(impl, device):
+    check_any_direction_length(impl, device, "moller_trumbore")
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.25)
+def test_woop_unit_any_direction_length(impl, device):
+    check_any_direction_length(impl, device, "woop_unit")
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(0.25)
+def test_watertight_any_direction_length(impl, device):
+    check_any_direction_length(impl, device, "watertight")
+
+
+def woop_float64(v0, v1, v2):
+    """The map of ``woop_precompute``'s docstring, in float64: the inverse of the frame
+    [e1 e2 n] (unit n) and the offsets -r . v0, by a route of its own (a linear solve)."""
+    e1, e2 = v1 - v0, v2 - v0
+    n = torch.linalg.cross(e1, e2, dim=-1)
+    n = n / n.norm(dim=-1, keepdim=True)
+    frame = torch.stack((e1, e2, n), dim=-1)
+    rows = torch.linalg.solve(frame, torch.eye(3, dtype=F64).expand_as(frame))
+    return torch.cat((rows, -(rows @ v0[..., None])), dim=-1)
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.25)
+def test_woop_precompute_rounded_once_from_float64(impl, device):
+    g = generator(5157)
+    v0 = torch.randn(64, 3, generator=g, dtype=F64) * 4
+    v1 = v0 + torch.randn(64, 3, generator=g, dtype=F64)
+    v2 = v0 + torch.randn(64, 3, generator=g, dtype=F64)
+    got = impl.woop_precompute(*(x.float().to(device) for x in (v0, v1, v2)))
+    got = check_tensor(got, "woop_precompute(...)", shape=(64, 3, 4), dtype=torch.float32,
+                       device=device).cpu().double()
+    # The float32 corners are the input: the float64 map of *those* corners, rounded once,
+    # is within one float32 ulp (2**-23 relative) of each entry; entries that cancel to
+    # about zero get an allowance from the size of their row.
+    want = woop_float64(*(x.float().double() for x in (v0, v1, v2)))
+    scale = want.abs().amax(-1, keepdim=True).expand_as(want)
+    assert_close(got, want, rtol=2.0**-23, atol=0, mask=want.abs() > 1e-6 * scale,
+                 name="woop_precompute in float32: each entry against the float64 map rounded "
+                      "once (about one ulp; compute it in float64 and cast at the end)",
+                 where="(triangle, row, column)")
+    # The third row is the unit normal: z' is the signed distance from the plane, and
+    # v0 + n goes to (0, 0, 1).
+    n = torch.linalg.cross(v1 - v0, v2 - v0, dim=-1)
+    n = n / n.norm(dim=-1, keepdim=True)
+    lifted = torch.cat((v0 + n, torch.ones(64, 1, dtype=F64)), 1)[..., None]
+    image = (got @ lifted)[..., 0]
+    assert_close(image, torch.tensor([0.0, 0, 1]).double().expand(64, 3), atol=1e-5,
+                 name="woop_precompute: the transform applied to v0 + n (unit normal) should "
+                      "be (0, 0, 1): the third row is n itself, not e1 x e2", where="triangle")
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(0.25)
+def test_ray_sphere_negative_radius_misses(impl, device):
+    o = torch.tensor([[0.0, 0, -5], [0, 0, 0], [0.2, 0.1, -3]], device=device)
+    d = torch.tensor([[0.0, 0, 1], [1, 0, 0], [0, 0, 2]], device=device)
+    centre = torch.zeros(3, 3, device=device)
+    for radius in (-1.0, torch.tensor([-1.0, -0.5, -2.0], device=device)):
+        t = impl.ray_sphere(o, d, centre, radius)
+        t = check_tensor(t, "ray_sphere t", shape=(3,), dtype=torch.float32, device=device)
+        assert bool((t.cpu() == INF).all()), (
+            f"ray_sphere with a negative radius ({radius}) returned t = {t.cpu().tolist()}: "
+            f"the docstring says a negative radius gives inf. r * r hides the sign, so test "
+            f"r >= 0 yourself.")

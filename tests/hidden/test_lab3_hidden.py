@@ -40,7 +40,7 @@ from course.given.lab3 import (
     translated,
     whitted_camera,
 )
-from course.grading.testing import assert_close, check_tensor, generator
+from course.grading.testing import assert_close, assert_equal, check_tensor, generator
 
 LAB_MODULE = "lab3_wavefront"
 TASKS = visible.TASKS
@@ -259,3 +259,82 @@ def test_intersect_layout_hidden_soup(impl, device):
                              ("woop", impl.layout_woop(mesh))):
             check_layout_hits(impl.intersect_layout(layout, o, d, t_min, t_max), want,
                               f"intersect_layout ({what}, hidden soup, {dtype})", dtype)
+
+
+# ---------------------------------------------------------------- promises, one at a time
+
+# Coplanar triangles at z = 2 (three pairs that cover the same points, two of them exact
+# copies) and one at z = 3 behind them: rays along +z from z = 0 meet them at exactly t = 2
+# (or 3), so ties in t are exact and t equals the bound of a closed interval exactly.
+TIE_TRIANGLES = [[(10, 10, 2), (12, 10, 2), (10, 12, 2)],
+                 [(1, 1, 2), (3, 1, 2), (1, 3, 2)],
+                 [(0, 0, 2), (4, 0, 2), (0, 4, 2)],
+                 [(1, 1, 2), (1, 3, 2), (3, 1, 2)],      # triangle 1, wound the other way
+                 [(10, 10, 2), (12, 10, 2), (10, 12, 2)],  # a copy of triangle 0
+                 [(0, 0, 3), (20, 0, 3), (0, 20, 3)]]
+TIE_RAYS = [(1.5, 1.5), (0.5, 0.5), (10.5, 10.5), (5.0, 5.0), (30.0, 30.0), (2.0, 1.25)]
+
+
+def tie_case(dtype, device):
+    corners = torch.tensor(TIE_TRIANGLES, dtype=dtype)
+    mesh = Mesh(corners.reshape(-1, 3).to(device),
+                torch.arange(corners.shape[0] * 3).reshape(-1, 3).to(device))
+    scene = make_scene(mesh, torch.zeros(mesh.num_faces, dtype=torch.int64),
+                       {"kd": [[1, 1, 1]], "ks": [[0, 0, 0]], "shininess": [1],
+                        "kr": [[0, 0, 0]]}, dir_lights=[((0, 1, 0), (1, 1, 1))])
+    xy = torch.tensor(TIE_RAYS, dtype=dtype)
+    o = torch.cat((xy, torch.zeros(len(xy), 1, dtype=dtype)), 1).to(device)
+    d = torch.tensor([[0.0, 0, 1]], dtype=dtype).expand(len(xy), 3).contiguous().to(device)
+    return mesh, scene, o, d
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(0.25)
+@pytest.mark.parametrize("dtype", [F32, F64], ids=["f32", "f64"])
+def test_intersect_layout_exact_ties_and_closed_interval(impl, device, dtype):
+    mesh, scene, o, d = tie_case(dtype, device)
+    n, f = len(o), mesh.num_faces
+    reverse = torch.arange(f - 1, -1, -1, device=device)
+    layouts = {"indexed": impl.layout_indexed(mesh), "woop": impl.layout_woop(mesh),
+               "float4 in reverse order": impl.layout_float4(mesh, reverse)}
+    zeros = torch.zeros(n, dtype=dtype, device=device)
+    intervals = {"[0, inf]": (zeros, zeros + INF),
+                 "[2, 2] (a hit exactly at t_min = t_max)": (zeros + 2, zeros + 2),
+                 "[0, 2]": (zeros, zeros + 2), "[2, inf]": (zeros + 2, zeros + INF)}
+    for what, layout in layouts.items():
+        for interval, (t_min, t_max) in intervals.items():
+            expected = trace_brute_force(scene, o, d, t_min, t_max)
+            for pairs in (None, 2):
+                if pairs is None:
+                    hits = impl.intersect_layout(layout, o, d, t_min, t_max)
+                else:
+                    hits = impl.probe(visible.intersect_in_small_tiles, pairs, layout, o, d,
+                                      t_min, t_max)
+                case = (f"intersect_layout ({what}, {dtype}, t in {interval}"
+                        + (f", tiles of {pairs} pairs" if pairs else "") + ")")
+                check_layout_hits(hits, expected, case, dtype)
+                assert_equal(hits.triangle.cpu(), expected.triangle.cpu(), where="ray",
+                             name=f"{case}: triangle. Coplanar copies give exact ties in t, "
+                                  f"which go to the lowest original index whatever tile or "
+                                  f"slot they come in (an equal t in a later tile wins when "
+                                  f"its index is lower); the interval is closed")
+
+
+@pytest.mark.task(2)
+@pytest.mark.points(0.25)
+def test_render_wavefront_material_runs_in_queue_order(impl, device):
+    scene = visible.scene_on("cornell_mirror", F64, device)
+    o, d = visible.camera_rays("cornell_mirror", F64, device)
+    zeros = torch.zeros(len(o), dtype=F64, device=device)
+    hits = trace_brute_force(scene, o, d, zeros, zeros + INF)
+    material = scene.material[hits.triangle[hits.hit]].cpu()
+    runs = 1 + int((material[1:] != material[:-1]).sum())
+    for sort, want in ((False, runs), (True, len(material.unique()))):
+        _, stats = with_blocks(impl, "render_wavefront", scene, o, d, trace_brute_force, 1,
+                               sort)
+        got = stats["material_runs"][0] if isinstance(stats, dict) else None
+        assert got == want, (
+            f"render_wavefront(sort_by_material={sort}) on the Cornell box: "
+            f"stats['material_runs'][0] = {got!r}, expected {want}: the runs of equal "
+            f"material in the shading queue as it is shaded (in pixel order when not sorted, "
+            f"since compaction keeps the order; one run per material when sorted)")

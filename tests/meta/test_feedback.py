@@ -540,3 +540,56 @@ def test_collected_package_names_its_files(tmp_path):
     assert missing_file(work, "lab8_guard").startswith("no lab8_guard.py in the submission:")
     assert missing_file(work, "lab8_guard").endswith(
         "it holds 'README.md', 'lab9_toy/grid.py'")
+
+
+def _depth_test_without_check(pixel, key, out):
+    out[pixel] = key  # no range check: an index past the end is torch's IndexError
+    return out
+
+
+def test_expect_error_names_the_expected_error_when_another_comes():
+    from course.grading.testing import expect_error
+
+    out = torch.zeros(4, dtype=torch.int64)
+    with pytest.raises(AssertionError) as caught:
+        expect_error("pixel", _depth_test_without_check, torch.tensor([3, 10]),
+                     torch.tensor([1, 2]), out, kinds=(ValueError,),
+                     case="a pixel index out of range")
+    text = str(caught.value)
+    assert text.startswith("_depth_test_without_check: expected ValueError naming `pixel` "
+                           "(a pixel index out of range), got IndexError: "), text
+    assert "at test_feedback.py:" in text and "out[pixel] = key" in text, text
+    # A TypeError where only a ValueError is accepted says the same; with the default
+    # kinds a TypeError naming the argument passes.
+    with pytest.raises(AssertionError, match=r"expected ValueError naming `key` \(x\), got "
+                                             r"TypeError: key: no"):
+        expect_error("key", _raises, TypeError("key: no"), kinds=(ValueError,), case="x")
+    expect_error("key", _raises, TypeError("key: expected int64"))
+    # An unwritten function keeps its own message: "not implemented yet" is no mistake.
+    with pytest.raises(NotImplementedError):
+        expect_error("pixel", _raises, NotImplementedError("not implemented yet: f (task 1)"))
+
+
+def _raises(exc):
+    raise exc
+
+
+def test_expect_error_finds_the_line_in_the_workers_traceback(tmp_path):
+    from course.grading.testing import expect_error
+
+    lab = tmp_path / "labs" / "lab6_raster" / "visibility.py"
+    text = ("RuntimeError: index 10 is out of bounds for dimension 0 with size 4\n"
+            "(raised in lab6_raster.depth_test; traceback from the worker:)\n"
+            "Traceback (most recent call last):\n"
+            '  File "/site/course/grading/worker.py", line 180, in _serve\n'
+            "    result = fn(*args)\n"
+            f'  File "{lab}", line 97, in depth_test\n'
+            '    out.scatter_reduce_(0, pixel, key, reduce="amin")\n')
+    with pytest.raises(AssertionError) as caught:
+        expect_error("pixel", _raises, RuntimeError(text), kinds=(ValueError,),
+                     case="a pixel index out of range")
+    assert str(caught.value).splitlines()[0] == (
+        "_raises: expected ValueError naming `pixel` (a pixel index out of range), got "
+        "RuntimeError: index 10 is out of bounds for dimension 0 with size 4 at "
+        'visibility.py:97 in depth_test: out.scatter_reduce_(0, pixel, key, reduce="amin"); '
+        "check the argument first and raise with a message that names it"), caught.value
