@@ -111,6 +111,11 @@ def wrong_shape_density(p):
     return p
 
 
+def nan_density(p):
+    """Not an extinction coefficient: NaN everywhere (bad input)."""
+    return torch.full(p.shape[:1], math.nan, dtype=p.dtype, device=p.device)
+
+
 def sdf_unit_sphere(p):
     return p.norm(dim=-1) - 1.0
 
@@ -915,6 +920,13 @@ def test_march_box_extremes(impl, device):
                  case="a density grid of -1 (transmittance above 1)")
     expect_error("density", impl.march_box, oo, dd, [0.0] * 3, [1.0] * 3, negative_density,
                  None, 4, case="a density callable returning -1 (transmittance above 1)")
+    # A NaN extinction would make every transmittance behind it NaN: refused, not marched.
+    nan_grid = torch.full_like(dens, math.nan)
+    expect_error("density", impl.march_box, oo, dd, [0.0] * 3, [1.0] * 3, nan_grid, None, 4,
+                 kinds=(ValueError,), case="a density grid of NaN (check it before marching)")
+    expect_error("density", impl.march_box, oo, dd, [0.0] * 3, [1.0] * 3, nan_density, None, 4,
+                 kinds=(ValueError,), case="a density callable returning NaN (the provided "
+                 "evaluate checks its values: call it)")
 
 
 # ---------------------------------------------------------------------------------------
@@ -965,6 +977,25 @@ def test_segment_integral_values_and_limits(impl, device):
             f"segment_integral(sigma={sg}, length={length}): expected weight {ww!r} and "
             f"transmittance {tt!r}, got {w.cpu()[i].item()!r} and {t.cpu()[i].item()!r} "
             f"(vacuum: the length; opaque: 1/sigma; a zero-length step: no step at all)")
+    # An endless step (length = inf, all that lies behind the last sample) is the limit,
+    # never inf * 0 = NaN: the tail's 1/sigma, and vacuum forever adds endless light.
+    endless = [(2.0, 0.5, 0.0), (0.25, 4.0, 0.0), (INF, 0.0, 0.0), (0.0, INF, 1.0)]
+    for dtype in (F64, torch.float32):
+        s = torch.tensor([c[0] for c in endless], dtype=dtype, device=device)
+        w, t = impl.segment_integral(s, torch.full_like(s, INF), "exact")
+        for i, (sg, ww, tt) in enumerate(endless):
+            got = (w.cpu()[i].item(), t.cpu()[i].item())
+            assert got == (ww, tt), (
+                f"segment_integral(sigma={sg}, length=inf, {dtype}): expected weight {ww!r} "
+                f"and transmittance {tt!r}, got {got[0]!r} and {got[1]!r}. An endless step "
+                f"is the limit of D (1 - e^(-sigma D)) / sigma: 1/sigma (0 for sigma = inf), "
+                f"and +inf in vacuum with transmittance 1; sigma * inf, inf * 0 and 0 * inf "
+                f"are not answers")
+    w, t = impl.segment_integral(torch.tensor([0.0, 2.0], dtype=F64, device=device), INF,
+                                 "riemann")
+    assert w.cpu().tolist() == [INF, INF] and t.cpu().tolist() == [1.0, 0.0], (
+        f"segment_integral(sigma=[0, 2], length=inf, 'riemann'): expected weights [inf, inf] "
+        f"and transmittances [1, 0], got {w.cpu().tolist()} and {t.cpu().tolist()}")
     # Numbers broadcast; the Riemann sum is the length; bad integrators are refused.
     w, t = impl.segment_integral(torch.tensor([0.5, 2.0], dtype=F64, device=device), 0.25,
                                  "riemann")
@@ -1214,6 +1245,10 @@ def test_shadow_transmittance(impl, device):
                  case="a zero light direction")
     expect_error("points", impl.shadow_transmittance, inner[:, :2].to(device), light.to(device),
                  lo.to(device), hi.to(device), dens, 4, case="points of shape (N, 2)")
+    expect_error("density", impl.shadow_transmittance, inner.to(device), light.to(device),
+                 lo.to(device), hi.to(device), torch.full((2, 2, 2), math.nan, dtype=F64,
+                                                          device=device), 4,
+                 kinds=(ValueError,), case="a density grid of NaN (a NaN transmittance)")
 
 
 # march_single_scatter integrates its in-scattered source with march_box (task 1), which
@@ -1383,6 +1418,11 @@ def test_single_scatter_matches_closed_form(impl, device):
                  case="shadow_steps=-1")
     expect_error("albedo", impl.march_single_scatter, o.to(device), d.to(device), SCATTER_LO,
                  SCATTER_HI, dens, -0.5, light, 1.0, 0.3, 8, 1, case="albedo=-0.5")
+    # sigma_s / sigma_t above 1 scatters more light than the medium removes.
+    for bad in (1.5, torch.tensor([0.5, 1.2, 0.5], dtype=F64, device=device)):
+        expect_error("albedo", impl.march_single_scatter, o.to(device), d.to(device),
+                     SCATTER_LO, SCATTER_HI, dens, bad, light, 1.0, 0.3, 8, 1,
+                     kinds=(ValueError,), case=f"albedo={bad} (an albedo is in [0, 1])")
 
 
 @pytest.mark.task(3)
@@ -1582,6 +1622,8 @@ def test_voxel_walk_emission_and_extremes(impl, device):
                  kinds=(TypeError,))
     expect_error("density", impl.voxel_walk, *args, -grid.to(device), case="negative densities",
                  kinds=(ValueError,))
+    expect_error("density", impl.voxel_walk, *args, torch.full_like(grid, math.nan).to(device),
+                 case="NaN densities (a NaN transmittance)", kinds=(ValueError,))
     expect_error("emission", impl.voxel_walk, *args, grid.to(device),
                  torch.ones(6, 5, 6, dtype=F64, device=device), case="emission of another shape")
     expect_error("occupancy", impl.voxel_walk, *args, grid.to(device), None,

@@ -442,6 +442,14 @@ def test_to_clip_space_and_to_screen_pixel_convention(impl, device):
     expect_error("mvp", impl.to_clip_space, v, mvp[:3, :3].to(device), case="a (3, 3) mvp")
     expect_error("width", impl.to_screen, exact[:1, None].expand(1, 3, 4).float().to(device),
                  0, 5, case="width=0")
+    # A corner at w <= 0 (or NaN) is on or behind the eye: x / w has no screen position
+    # (inf or NaN, or mirrored through the eye); clip_triangles never outputs one.
+    for w_bad in (0.0, -2.0, math.nan):
+        bad = torch.tensor([[[0.0, 0.0, 0.5, 2.0]] * 3], device=device)
+        bad[0, 1, 3] = w_bad
+        expect_error("clipped", impl.to_screen, bad, 4, 4, kinds=(ValueError,),
+                     case=f"a corner with w = {w_bad} (the perspective divide needs w > 0: "
+                          f"check the corners and raise ValueError naming `clipped`)")
 
 
 def near_plane_cases(device, dtype):

@@ -27,7 +27,9 @@ from test_flat_bvh import (
     brute_force64,
     check_axis_parallel,
     check_hits,
+    check_vertex_hits,
     make_case,
+    vertex_case,
 )
 
 from course.grading.testing import run_in_triton_interpreter
@@ -191,6 +193,47 @@ def test_interpreted_kernels_follow_the_contract(tmp_path):
         assert info.n_regs is None and info.occupancy() is None
 
 
+def run_vertex_case(case: dict, device: str) -> dict:
+    """The closest-hit walk on rays aimed at shared vertices and edges, leaves of 1 and 4,
+    and its brute force: the same kernel on one leaf of every triangle (its own
+    Möller–Trumbore on each, no box but the root's)."""
+    from course.kernels import triton_tracer as tt
+    from course.kernels.flat_bvh import build_flat_bvh
+
+    rays = [case[k].to(device) for k in ("origins", "directions")]
+    faces = len(case["faces"])
+    return {leaf: tt.trace_flat_triton(build_flat_bvh(case["vertices"].to(device),
+                                                      case["faces"].to(device),
+                                                      leaf_size=leaf), *rays).to("cpu")
+            for leaf in (1, 4, faces)}
+
+
+@needs_triton
+def test_interpreted_walk_at_shared_vertices_hits_as_brute_force(tmp_path):
+    """The kernel's box test is conservative like the torch walk's: rays aimed at a mesh's
+    shared vertices and edges hit what brute-force Möller–Trumbore hits (same triangle, same
+    t) and miss only where it misses."""
+    case = vertex_case(edges=False)
+    out = run_in_triton_interpreter(__file__, {"vertex_case": case}, tmp_path)
+    brute = out.pop(len(case["faces"]))
+    assert brute.hit.any() and not brute.hit.all(), "a mesh's vertices: hits and misses"
+    for leaf, hits in out.items():
+        check_vertex_hits(case, hits, f"interpreted trace_flat_triton, leaves of {leaf}",
+                          ref=brute)
+
+
+@needs_triton
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_compiled_walk_at_shared_vertices_hits_as_brute_force():
+    _compiled_tracer()  # skips under the interpreter
+    case = vertex_case()
+    out = run_vertex_case(case, "cuda")
+    brute = out.pop(len(case["faces"]))
+    for leaf, hits in out.items():
+        check_vertex_hits(case, hits, f"compiled trace_flat_triton, leaves of {leaf}",
+                          ref=brute)
+
+
 def _compiled_tracer():
     """course.kernels.triton_tracer, or a skip where this process interprets Triton."""
     from course.kernels import triton_tracer as tt
@@ -294,4 +337,7 @@ def test_bad_arguments_raise_clear_errors():
 
 if __name__ == "__main__":  # the interpreter subprocess: python THIS INPUTS OUTPUTS
     data = torch.load(sys.argv[1], weights_only=False)
-    torch.save(run_kernels(data["case"], data["renders"], "cpu"), sys.argv[2])
+    if "vertex_case" in data:
+        torch.save(run_vertex_case(data["vertex_case"], "cpu"), sys.argv[2])
+    else:
+        torch.save(run_kernels(data["case"], data["renders"], "cpu"), sys.argv[2])

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import torch
 
 from course.core.camera import Camera, _camera_axes
-from course.given.lab5_scene import FogVolume, Scene, _num
+from course.given.lab5_scene import DirectionalLight, FogVolume, Scene, _num
 
 
 @dataclass(frozen=True)
@@ -164,6 +164,43 @@ TILES_PER_VOLUME = 12
 MAX_TILES = 240 * 135
 
 
+def lights_in_media(scene: Scene, camera: Camera) -> bool:
+    """Whether a point or spot light sits inside a scattering medium (inside a fog volume's
+    shape, its density texture aside, or anywhere in an unbounded constant or height fog)
+    and in view: in front of the camera, its image on the screen or within ``TILE`` pixels
+    of its border.
+
+    Such a light's ``1 / d^2`` makes the in-scattered light peak around its image, over
+    distances as small as the light is close to a pixel's ray: froxel samples at tile
+    centres, read bilinearly, miss or smear that peak (a lamp inside a box of fog seen
+    through 2-pixel tiles: -2% to -27% in mean radiance, depending on where the tile centres
+    fall). A light behind the camera or far off screen lights the view smoothly: any tile
+    resolves it (a lamp just behind the camera in fog: -0.4% with 8-pixel tiles)."""
+    eye, right, up, fwd, (half_w, half_h) = FroxelGrid(camera).axes()
+    for light in scene.lights:
+        if isinstance(light, DirectionalLight):
+            continue
+        rel = torch.tensor(light.position, dtype=torch.float64) - eye
+        z = float(rel @ fwd)
+        if z <= 0:
+            continue
+        col = (float(rel @ right) / (z * half_w) + 1) / 2 * camera.width
+        row = (1 - float(rel @ up) / (z * half_h)) / 2 * camera.height
+        if not (-TILE <= col <= camera.width + TILE and -TILE <= row <= camera.height + TILE):
+            continue
+        for m in scene.media:
+            if max(m.scattering) <= 0:
+                continue
+            if not isinstance(m, FogVolume):
+                return True
+            local = [sum(r * (x - c) for r, x, c in zip(axis, light.position, m.center))
+                     for axis in m.rotation]
+            q = [abs(a / h) for a, h in zip(local, m.half_size)]
+            if (max(q) if m.shape == "box" else math.sqrt(sum(x * x for x in q))) <= 1:
+                return True
+    return False
+
+
 def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None,
                far=None) -> FroxelGrid:
     """The ``FroxelGrid`` for ``scene`` seen by ``camera``; None picks what the scene needs.
@@ -174,9 +211,13 @@ def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None
     (height or constant fog) or the media lie behind the camera. ``tile`` None: the largest
     of ``TILE``, ``TILE / 2``, ... 1 at which every fog volume in front of the camera (and not
     around it) spans ``TILES_PER_VOLUME`` tiles across its thinnest side at its centre's
-    depth, as long as the screen holds at most ``MAX_TILES`` tiles. A scene of unbounded
-    media, or volumes filling the view, keeps ``TILE``; a 2 m box 5 m away in a 64 x 36
-    image gets tile 1 (36 x 64 x 64 froxels, few of them lit).
+    depth, and down to 1 when a point or spot light sits inside a medium in view
+    (:func:`lights_in_media`: its ``1 / d^2`` peak is narrower than any tile, and tiles of
+    one pixel sample every pixel's own ray), as long as the screen holds at most
+    ``MAX_TILES`` tiles (so a large image keeps coarser tiles, and the accuracy of tile 1
+    only up to 240 x 135 pixels). A scene of unbounded media lit by the sun, or volumes
+    filling the view, keeps ``TILE``; a 2 m box 5 m away in a 64 x 36 image gets tile 1
+    (36 x 64 x 64 froxels, few of them lit).
     Given numbers are kept (and checked by ``FroxelGrid``).
     """
     if tile is None or near is None or far is None:
@@ -206,7 +247,8 @@ def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None
             far = (max(hi, near * 1.01) if given else hi) if far is None else far
         if tile is None:
             tile = TILE
-            while tile > 1 and any(s < TILES_PER_VOLUME * tile for s in sizes) and (
+            lamps = lights_in_media(scene, camera)
+            while tile > 1 and (lamps or any(s < TILES_PER_VOLUME * tile for s in sizes)) and (
                     -(-camera.width // (tile // 2)) * -(-camera.height // (tile // 2))
                     <= MAX_TILES):
                 tile //= 2

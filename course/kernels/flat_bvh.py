@@ -45,12 +45,22 @@ Traversal contract (the torch fallback here and both GPU kernels implement the s
 * box test: the slab test on ``(box - o) * (1/d)``. A zero direction component gives
   ``1/d = +-inf``; a ray lying exactly in a slab plane then makes ``0 * inf = NaN``, which
   counts as "inside this slab" (near -inf, far +inf), so axis-parallel rays along a face
-  are not lost. The exit distance is widened by ``1 + 2 gamma(3)`` (Ize 2013), so rounding
-  never culls a box the ray touches;
+  are not lost. Conservative: the exit distance is widened by ``1 + 2 gamma(3)`` (Ize 2013,
+  pbrt-v4), so rounding never culls a box the ray touches, and then the interval's end
+  ``min(best hit so far or t_max, exit)`` by ``1 + HIT_SLACK``, so a triangle whose float32
+  hit falls a little outside its box or before its entry (at a vertex or an edge on the
+  box's face) is still tested;
 * triangle test: Möller–Trumbore in float32 with one division, the closed interval
-  ``t_min <= t <= t_max``, ``u >= 0, v >= 0, u + v <= 1``. Not watertight: a ray through a
-  shared edge may miss both triangles. ``det`` that rounds to 0 misses (degenerate,
-  zero-area triangles and rays in a triangle's plane never hit);
+  ``t_min <= t <= t_max``, ``u >= 0, v >= 0, u + v <= 1``. ``det`` that rounds to 0 misses
+  (degenerate, zero-area triangles and rays in a triangle's plane never hit);
+* what that promises at shared edges and vertices: the walk finds what a brute-force loop
+  of the same float32 Möller–Trumbore over every triangle finds (the same closest triangle
+  and ``t``; a miss where it misses), the box tests never lose a hit. It is **not
+  watertight**: ``u, v`` are rounded per triangle, so a ray through a shared edge or vertex
+  may miss every triangle around it (rays aimed at the vertices of a rotated height-field
+  mesh: 11.7% miss, at its edges' midpoints 10.9%; ``tests/test_flat_bvh.py``), and a ray
+  may hit two neighbours, the nearer (then lower-index) one reported. A watertight test
+  (Woop et al. 2013, pbrt-v4) is Lab 2's subject, not this tracer's;
 * closest hit: the smallest t; exact ties go to the lower original triangle index, so the
   result does not depend on the traversal order;
 * any hit: stops at the first triangle hit in ``[t_min, t_max]`` (which one is unspecified;
@@ -94,7 +104,18 @@ MEDIAN_DEPTH = 40
 says, so that even pathological inputs stay within STACK_DEPTH levels for up to 2^23
 triangles."""
 EXIT_SCALE = 1.0 + 2.0 * gamma(3, torch.float32)
-"""Ize's factor on the slab exit distance: conservative box tests in float32."""
+"""Ize's factor on the slab exit distance: conservative box tests in float32 (pbrt-v4's
+``1 + 2 gamma(3)``); an exit behind the origin (< 0) is scaled by ``2 - EXIT_SCALE``."""
+HIT_SLACK = 2.0**-12
+"""Relative slack of the box test for the triangle test's rounding: a box is culled only when
+its entry lies beyond ``min(t_hi, exit) (1 + HIT_SLACK)`` (``t_hi`` the best hit so far, or
+``t_max``). Möller–Trumbore in float32 accepts hits a little outside its triangle (u, v
+rounded to >= 0) and rounds their ``t`` by a few ulps (more on grazing rays), so at a
+vertex or an edge on a box's face its hit may lie just outside the box or just before its
+entry: without the slack, 7 of 196 rays aimed at a mesh's vertices lost the nearest
+triangle (the box culled once a neighbour's hit a few ulps farther was found, or missed
+outright). The triangle test keeps the exact ``t_max`` and best hit, so the slack only
+costs a few box visits."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -416,7 +437,11 @@ def _slab(o, inv, lo, hi, t_lo, t_hi):
     near = torch.minimum(t0, t1).nan_to_num(nan=-math.inf, posinf=math.inf, neginf=-math.inf)
     far = torch.maximum(t0, t1).nan_to_num(nan=math.inf, posinf=math.inf, neginf=-math.inf)
     enter = torch.maximum(t_lo, near.amax(1))
-    leave = torch.minimum(t_hi, far.amin(1) * EXIT_SCALE)
+    far = far.amin(1)
+    # Widened away from zero (a negative distance is scaled toward it), by multiplications:
+    # the exit by its own rounding, then the interval's end by the triangle test's.
+    leave = torch.minimum(t_hi, far * torch.where(far >= 0, EXIT_SCALE, 2.0 - EXIT_SCALE))
+    leave = leave * torch.where(leave >= 0, 1.0 + HIT_SLACK, 1.0 - HIT_SLACK)
     return enter, enter <= leave
 
 

@@ -26,7 +26,10 @@ def trace_bvh(scene, origins, directions, t_min=0.0, t_max=math.inf,
     any_hit: stop at the first hit found (shadow rays): ``triangle >= 0`` says "occluded".
     Returns float32 ``Hits`` on the rays' device. Runs the Triton kernel on CUDA and the
     torch traversal elsewhere; both follow the contract of
-    ``course.kernels.flat_bvh``'s docstring.
+    ``course.kernels.flat_bvh``'s docstring: the hits of a brute-force float32
+    Möller–Trumbore over every triangle (the box tests are conservative and lose none), which
+    is not watertight: a ray through a shared edge or vertex may miss all the triangles
+    around it (about 10% of rays aimed exactly at a mesh's vertices or edges).
     """
     if not isinstance(any_hit, bool):
         raise TypeError(f"any_hit: expected a bool, got {type(any_hit).__name__}")

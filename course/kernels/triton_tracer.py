@@ -34,9 +34,13 @@ instructions per iteration from ``bench/sass_loops.py``) are in bench/results/nv
 best launches), ``lab3_rows/`` (the SASS of both kernels), ``lab3_refill/`` (refill).
 
 Accuracy contract: that of course.kernels.flat_bvh (float32 slab test with NaN-safe zero
-directions and Ize's widened exit, float32 Möller–Trumbore with IEEE division, closed
-``[t_min, t_max]``, ties to the lower triangle index, NaN/inf/zero rays miss, not
-watertight). The uber kernel shades by the contract of course.given.lab3, in float32.
+directions, conservative: Ize's widened exit and the best hit widened by ``HIT_SLACK``;
+float32 Möller–Trumbore with IEEE division, closed ``[t_min, t_max]``, ties to the lower
+triangle index, NaN/inf/zero rays miss). The hits are those of a brute-force float32
+Möller–Trumbore, which is not watertight: a ray through a shared edge or vertex may miss
+every triangle around it (compiled, where FMA contraction may round ``u, v`` otherwise
+than the torch walk, the edge cases may fall the other way). The uber kernel shades by
+the contract of course.given.lab3, in float32.
 
 Runs compiled on CUDA, or in Triton's CPU interpreter under ``TRITON_INTERPRET=1`` (set
 before ``triton`` is imported; slow, for tiny tests). Importing this module without

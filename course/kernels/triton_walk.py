@@ -16,7 +16,9 @@ contract):
    and links: four 16-byte loads, the layout the CUDA C kernel reads), tests both boxes,
    goes to the nearer hit child and pushes the farther; a leaf child becomes pending work;
 2. INTERSECT: a lane with pending leaf work tests one triangle (Möller–Trumbore, three
-   16-byte loads), or two with ``tris_per_step=2``;
+   16-byte loads), or two with ``tris_per_step=2``: not watertight (a ray through a shared
+   edge or vertex may miss every triangle around it), while the box tests of TRAVERSE are
+   conservative (``_slab``), so every miss is the triangle test's, as in flat_bvh;
 3. POP: a lane with no node pops its stack (or finishes when it is empty and its leaf is
    done). With ``speculate`` it does so even while its leaf is being tested, parking at
    most one more leaf: it then takes part in both stages of a step instead of idling
@@ -50,7 +52,7 @@ The launch knobs' defaults are here too (``DEFAULT_*``); their launchers are in
 
 from __future__ import annotations
 
-from course.kernels.flat_bvh import STACK_DEPTH
+from course.kernels.flat_bvh import HIT_SLACK, STACK_DEPTH
 from course.kernels.triton_intersect import _jit, _store_hits, tl
 
 DEFAULT_BLOCK = 32
@@ -77,6 +79,9 @@ if STACK_DEPTH != 64:  # _local_stack declares 64 entries in its PTX
                       f"{STACK_DEPTH}")
 NONE = tl.constexpr(-2147483648) if tl is not None else -2147483648
 """The walk's "no node" (int32 min: every other negative value is a leaf's ``~first``)."""
+HIT_UP = tl.constexpr(1.0 + HIT_SLACK) if tl is not None else 1.0 + HIT_SLACK
+HIT_DOWN = tl.constexpr(1.0 - HIT_SLACK) if tl is not None else 1.0 - HIT_SLACK
+"""The box test's interval end widened away from zero by ``flat_bvh.HIT_SLACK``."""
 
 
 # --------------------------------------------------------------------------------------
@@ -156,7 +161,10 @@ def _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz, t
     (hi) for a positive (negative) direction, so ``(plane - o) / d`` comes out in order. A
     NaN from ``0 * inf`` (a ray in a slab plane, parallel to it) means "inside this slab":
     compiled, ``max.f32``/``min.f32`` return the other operand; interpreted (numpy), the
-    NaN is replaced first (SANITIZE)."""
+    NaN is replaced first (SANITIZE). Conservative, as ``flat_bvh._slab``: the exit is
+    widened away from zero by ``EXIT`` (its own rounding), then the end of the interval,
+    ``min(t_hi, exit)``, by ``HIT_SLACK`` (the triangle test's rounding), by multiplications
+    as in torch."""
     nx = (tl.where(neg_x, hx, lx) - ox) * ix
     fx = (tl.where(neg_x, lx, hx) - ox) * ix
     ny = (tl.where(neg_y, hy, ly) - oy) * iy
@@ -171,7 +179,9 @@ def _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz, t
         fy = _nan_to(fy, float("inf"))
         fz = _nan_to(fz, float("inf"))
     enter = tl.maximum(tl.maximum(t_lo, nx), tl.maximum(ny, nz))
-    leave = tl.minimum(t_hi, tl.minimum(fx, tl.minimum(fy, fz)) * EXIT)
+    far = tl.minimum(fx, tl.minimum(fy, fz))
+    leave = tl.minimum(t_hi, far * tl.where(far >= 0, EXIT, 2.0 - EXIT))
+    leave = leave * tl.where(leave >= 0, HIT_UP, HIT_DOWN)
     return enter, enter <= leave
 
 

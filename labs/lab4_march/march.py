@@ -15,14 +15,27 @@ from .integrals import segment_integral
 # Provided (not a task): a field's values at points, for every task that samples a medium.
 
 
+def check_density_defined(values: torch.Tensor, name: str = "density") -> None:
+    """An extinction coefficient is a number or +inf (opaque), never NaN: a NaN density
+    would turn every transmittance behind it into NaN. ValueError naming ``name``."""
+    if bool(torch.isnan(values).any()):
+        raise ValueError(f"{name}: expected extinction coefficients >= 0 (or +inf), got "
+                         f"{int(torch.isnan(values).sum())} NaN values: a NaN density makes "
+                         f"the transmittance NaN for every ray that crosses it")
+
+
 def evaluate(field, name: str, points: torch.Tensor, local: torch.Tensor,
              channels: bool = False) -> torch.Tensor:
     """A field's values at N points: ``field(points)`` for a callable (world points, checked
     by ``field_values``), ``sample_grid(field, local)`` for a grid (box coordinates in
-    [0, 1]^3). Returns (N,), or also (N, C) when ``channels``, in the points' dtype."""
+    [0, 1]^3). Returns (N,), or also (N, C) when ``channels``, in the points' dtype.
+    NaN values of a callable ``"density"`` raise ValueError naming it."""
     if isinstance(field, torch.Tensor):
         return sample_grid(field, local)
-    return field_values(field, name, points, channels)
+    values = field_values(field, name, points, channels)
+    if name == "density":
+        check_density_defined(values)
+    return values
 
 
 def ray_box_interval(origins, directions, box_min, box_max):
@@ -106,9 +119,9 @@ def march_box(origins, directions, box_min, box_max, density, emission=None, ste
 
     Grids are sampled at box coordinates computed as ``((o - box_min) + t d) / size``,
     never from the absolute point, so a box far from the origin keeps its accuracy;
-    callables get world points. The density is an extinction coefficient, >= 0: a grid or
-    a callable with negative values raises ValueError naming ``density`` (the provided check
-    and ``evaluate`` do it). Rays that miss (and NaN/inf rays) sample nothing:
+    callables get world points. The density is an extinction coefficient, >= 0 or +inf: a
+    grid or a callable with negative or NaN values raises ValueError naming ``density`` (the
+    provided checks and ``evaluate`` do it). Rays that miss (and NaN/inf rays) sample nothing:
     radiance 0, transmittance 1, samples 0. ``steps = 0`` is an empty march.
 
     Hints: ``ray_box_interval`` gives the span. Keep ``rel = o - box_min`` (0 for
@@ -122,4 +135,6 @@ def march_box(origins, directions, box_min, box_max, density, emission=None, ste
     origins, directions, box_min, box_max = check_march_inputs(
         origins, directions, box_min, box_max, density, emission, steps, integrator,
         min_transmittance)
+    if isinstance(density, torch.Tensor):
+        check_density_defined(density)
     raise NotImplementedError("not implemented yet: march_box (task 1)")

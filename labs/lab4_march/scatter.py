@@ -12,7 +12,7 @@ import torch
 from course.core.raymath import dot
 from course.given.lab4 import check_phase_inputs, check_scatter_inputs, check_shadow_inputs
 
-from .march import evaluate, march_box, ray_box_interval
+from .march import check_density_defined, evaluate, march_box, ray_box_interval
 
 
 def henyey_greenstein(cos_theta, g):
@@ -45,11 +45,12 @@ def shadow_transmittance(points, light_direction, box_min, box_max, density, ste
     """Transmittance from each point toward a directional light, to where it leaves the box.
 
     points: (N, 3) float; light_direction: (3,), toward the light (any length);
-    box_min, box_max: (3,); density: callable or grid; steps: int >= 0.
-    Returns (N,): ``exp(-sum_k sigma_k dt)``, a midpoint-rule march of ``steps`` equal
-    steps over the part of the ray ``p + t l`` (unit ``l``, ``t >= 0``) inside the box:
-    exact for a homogeneous medium with one step, second order for a smooth one. Points
-    whose light ray misses the box, NaN points and ``steps = 0`` give 1 (unshadowed).
+    box_min, box_max: (3,); density: callable or grid (NaN values raise ValueError);
+    steps: int >= 0. Returns (N,): ``exp(-sum_k sigma_k dt)``, a midpoint-rule march of
+    ``steps`` equal steps over the part of the ray ``p + t l`` (unit ``l``, ``t >= 0``)
+    inside the box: exact for a homogeneous medium with one step, second order for a
+    smooth one. Points whose light ray misses the box, NaN points and ``steps = 0`` give 1
+    (unshadowed).
 
     Hints: ``ray_box_interval`` from the points along the (already unit, from the
     provided check) light direction; loop over the steps summing ``sigma * dt`` (0 where the
@@ -58,6 +59,8 @@ def shadow_transmittance(points, light_direction, box_min, box_max, density, ste
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     points, light, box_min, box_max = check_shadow_inputs(points, light_direction, box_min,
                                                           box_max, density, steps)
+    if isinstance(density, torch.Tensor):
+        check_density_defined(density)
     raise NotImplementedError("not implemented yet: shadow_transmittance (task 3)")
 
 
@@ -67,7 +70,8 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
     """Single scattering of a directional light in a box, marched like :func:`march_box`.
 
     origins, directions: (N, 3); box_min, box_max: (3,); density: callable or grid (the
-    extinction sigma_t); albedo: number in [0, 1] or (C,) tensor, ``sigma_s / sigma_t``;
+    extinction sigma_t); albedo: number or (C,) tensor in [0, 1], ``sigma_s / sigma_t``
+    (else ValueError);
     light_direction: (3,), toward the light; light_irradiance: number or (C,) tensor, the
     light's irradiance E; g: Henyey–Greenstein parameter; steps, shadow_steps: ints >= 0.
     Returns ``march_box``'s dict; radiance is (N, C) when albedo or irradiance has
@@ -92,4 +96,8 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
     origins, directions, box_min, box_max, light, factor = check_scatter_inputs(
         origins, directions, box_min, box_max, density, albedo, light_direction,
         light_irradiance, g, steps, shadow_steps, integrator, min_transmittance)
+    bad = torch.as_tensor(albedo, dtype=torch.float64)
+    if not bool(((bad >= 0) & (bad <= 1)).all()):
+        raise ValueError(f"albedo: expected values in [0, 1] (sigma_s / sigma_t: a medium "
+                         f"scatters at most what it removes), got {albedo!r}")
     raise NotImplementedError("not implemented yet: march_single_scatter (task 3)")

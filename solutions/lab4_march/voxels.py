@@ -11,7 +11,7 @@ import torch
 from course.given.lab4 import check_occupancy_inputs, check_voxel_inputs
 
 from .integrals import segment_integral
-from .march import ray_box_interval
+from .march import check_density_defined, ray_box_interval
 
 
 def build_occupancy(density, macro_cell=1, emission=None):
@@ -43,10 +43,10 @@ def voxel_walk(origins, directions, box_min, box_max, density, emission=None, oc
                macro_cell=1):
     """Exact emission–absorption through a piecewise-constant voxel grid (3D DDA).
 
-    origins, directions: (N, 3); box_min, box_max: (3,); density: (X, Y, Z) grid >= 0,
-    constant over each voxel (nearest, not trilinear); emission: None or (X, Y, Z) /
-    (X, Y, Z, C) grid, constant per voxel; occupancy: None (no skipping) or the bool grid
-    of :func:`build_occupancy` for ``macro_cell``.
+    origins, directions: (N, 3); box_min, box_max: (3,); density: (X, Y, Z) grid >= 0
+    (NaN raises ValueError), constant over each voxel (nearest, not trilinear); emission:
+    None or (X, Y, Z) / (X, Y, Z, C) grid, constant per voxel; occupancy: None (no
+    skipping) or the bool grid of :func:`build_occupancy` for ``macro_cell``.
     Returns a dict: ``optical_depth`` (N,), ``transmittance`` (N,) ``= exp(-optical_depth)``,
     ``radiance`` (N,) or (N, C), ``steps`` (N,) int64 (cells stepped through: voxels or
     skipped macro cells) and ``samples`` (N,) int64 (voxels whose density was read).
@@ -78,6 +78,7 @@ def voxel_walk(origins, directions, box_min, box_max, density, emission=None, oc
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max = check_voxel_inputs(
         origins, directions, box_min, box_max, density, emission, occupancy, macro_cell)
+    check_density_defined(density)
     # BEGIN SOLUTION (task 4)
     n = origins.shape[0]
     like = {"dtype": origins.dtype, "device": origins.device}

@@ -80,7 +80,12 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slice
     voxelize -> light_froxels -> (temporal: reproject + temporal_blend of the lit source
     and the extinction) -> integrate_froxels -> apply_froxels, on a
     ``scene_grid(scene, camera, tile, slices, near, far)`` (None: the tile size and depth
-    range the scene's media need, see there), in the dtype and on the device of the images.
+    range the scene's media and lights need, see there: 1-pixel tiles when a point or spot
+    light sits inside a medium in view, since froxels at tile centres miss its ``1 / d^2``
+    peak), in
+    the dtype and on the device of the images. With these defaults the frame's mean
+    radiance is within 2% of the converged brute-force reference, lit by the sun or by a
+    lamp inside the fog (up to ``MAX_TILES`` tiles: larger images keep coarser tiles).
     With ``temporal`` the froxels sample at ``frame_jitter(frame)`` (material and lighting
     alike), and ``history`` (the previous report's ``"history"``, or None) is
     reprojected and blended with weight ``BLEND`` for the new frame.

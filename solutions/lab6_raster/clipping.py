@@ -122,10 +122,12 @@ def clip_triangles(clip):
 def to_screen(clipped, width: int, height: int):
     """Perspective divide and viewport transform.
 
-    clipped: (K, 3, 4) clip coordinates with ``w > 0`` (the output of ``clip_triangles``);
-    width, height: the viewport in pixels. Returns (K, 3, 4) ``(x, y, z_ndc, 1/w)``, same
-    dtype: ``x = (x_c / w + 1) * width / 2``, ``y = (1 - y_c / w) * height / 2`` (row 0 at
-    the top, pixel centres at ``+0.5``), ``z_ndc = z_c / w`` in [-1, 1] from the near to the
+    clipped: (K, 3, 4) clip coordinates with ``w > 0`` (the output of ``clip_triangles``;
+    a corner with ``w <= 0`` or NaN ``w`` has no screen position, and raises ValueError
+    naming ``clipped``: clip at the near plane first); width, height: the viewport in
+    pixels. Returns (K, 3, 4) ``(x, y, z_ndc, 1/w)``, same dtype:
+    ``x = (x_c / w + 1) * width / 2``, ``y = (1 - y_c / w) * height / 2`` (row 0 at the
+    top, pixel centres at ``+0.5``), ``z_ndc = z_c / w`` in [-1, 1] from the near to the
     far plane, and ``1/w``, which varies linearly across the screen (task 4 needs it).
 
     Hints: ``clipped.unbind(-1)`` gives x, y, z, w of shape (K, 3).
@@ -133,6 +135,12 @@ def to_screen(clipped, width: int, height: int):
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_tensor(clipped, "clipped", (None, 3, 4))
     check_size(width, height)
+    behind = ~(clipped[..., 3] > 0)
+    if bool(behind.any()):
+        k, corner = (int(i) for i in behind.nonzero()[0])
+        raise ValueError(f"clipped: expected w > 0 at every corner (clip_triangles' output), "
+                         f"got w = {clipped[k, corner, 3].item()} at triangle {k}, corner "
+                         f"{corner}: the perspective divide x / w has no answer there")
     # BEGIN SOLUTION (task 1)
     x, y, z, w = clipped.unbind(-1)
     sx = (x / w + 1) * (width / 2)

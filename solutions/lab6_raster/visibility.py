@@ -42,6 +42,10 @@ def pack_depth_id(depth, triangle, depth_bits: int = 32):
       in float64), for depths in [0, 1] (window z). Fewer bits: nearby surfaces quantise to
       equal keys and the id, not the depth, decides (z-fighting).
 
+    Errors: ValueError or TypeError naming ``depth`` (not a 1-D float tensor), ``triangle``
+    (not int64 of the length of ``depth``, or an id outside ``[0, 2**32)``: a negative id
+    would fill the depth bits with ones) or ``depth_bits`` (not 24 or 32).
+
     Hints: ``x.view(torch.int32)`` reinterprets float32 bits; ``torch.where(depth > 0, depth,
     0)`` turns -0.0 (and NaN) into +0.0, so deal with NaN first (``torch.isnan``).
     """
@@ -89,6 +93,10 @@ def depth_test(pixel, key, out):
     batched form of one ``atomicMin(&buffer[pixel], key)`` per GPU thread; a plain
     read-compare-write (``out[pixel] = minimum(out[pixel], key)``) is a race: among
     fragments of one pixel the last writer wins, not the nearest.
+
+    Errors: ValueError or TypeError naming ``out`` (not a 1-D int64 tensor), ``key`` (not
+    int64 of the length of ``pixel``) or ``pixel`` (not int64, or an index outside
+    ``[0, P)``: check it first, torch's own error for it names no argument).
 
     Hints: ``Tensor.scatter_reduce_`` with ``reduce="amin"`` (``include_self=True``, the default,
     keeps what ``out`` already holds).

@@ -56,8 +56,8 @@ MUTANTS = [
            tests="march_box",
            why="samples the grid from the absolute point: at 1e5 float32 rounds it to 1/128"),
     Mutant(name="segment_riemann_called_exact", module=M, function="segment_integral",
-           find="return length * ratio, transmittance",
-           replace="return length.expand_as(x), transmittance",
+           find="length * ratio), transmittance",
+           replace="length.expand_as(x)), transmittance",
            tests="segment_integral",
            why="the 'exact' step weight is the Riemann sum's length: it misses "
                "(1 - e^{-sigma ds}) / sigma, is first order and not energy-conserving"),
