@@ -36,6 +36,10 @@ def segment_integral(sigma, length, integrator="exact"):
     and emits more than a black body could (``q = c sigma`` gives ``L > c``); over an
     endless step it is +inf.
 
+    Errors: ValueError naming ``integrator`` unless it is ``"exact"`` or ``"riemann"``;
+    TypeError naming ``sigma`` or ``length`` unless each is a number or a float tensor
+    (tensors of one dtype and device); ValueError naming either for a negative value.
+
     Hints: ``x = sigma * length`` (but 0 where ``length == 0``); ``torch.expm1``;
     ``torch.where(x > 0, ..., 1)`` keeps the 0 / 0 of the unused branch out of the result.
     """

@@ -34,6 +34,12 @@ def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1
     ``max_steps`` evaluations (grazing a surface, where the steps shrink) is ``UNSURE``,
     never a hit. NaN/inf rays, zero directions and NaN distances are misses.
 
+    Errors: ValueError or TypeError naming ``origins`` or ``directions`` as in
+    ``ray_box_interval``; TypeError naming ``sdf`` unless it is callable (ValueError when it
+    returns a tensor not of shape (N,)); TypeError or ValueError naming ``max_steps`` unless
+    it is an int >= 1; ValueError naming ``t_max`` (not a finite number > 0), ``epsilon``
+    (not a number in (0, 1)) or ``relaxation`` (not a number in [1, 2)).
+
     Hints: per-ray state ``t``, ``status``, ``steps``, ``omega``, and for the
     over-relaxation check the previous ``|f|`` and the previous step's world length. Update
     everything with ``torch.where`` on an ``active`` mask; stop the loop early when no ray

@@ -60,6 +60,15 @@ def voxel_walk(origins, directions, box_min, box_max, density, emission=None, oc
     crosses several planes at one ``t`` (an edge or a corner), it steps one axis at a time
     with zero-length segments in between.
 
+    Errors: ValueError or TypeError naming ``origins``, ``directions``, ``box_min`` or
+    ``box_max`` as in ``ray_box_interval``; TypeError naming ``density`` unless it is a grid
+    tensor; ValueError or TypeError naming ``density`` for a grid not (X, Y, Z) of the rays'
+    dtype and device, and ValueError for negative or NaN values; ValueError or TypeError
+    naming ``emission`` (neither None nor an (X, Y, Z) / (X, Y, Z, C) grid with the
+    density's voxels) or ``macro_cell`` (not an int >= 1); ValueError naming ``occupancy``
+    unless it is None or the bool grid ``build_occupancy(density, macro_cell)`` returns, on
+    the rays' device.
+
     Hints: per-ray state ``cell`` (N, 3) int64, ``t`` (N,) and ``active`` (N,) bool;
     ``step = torch.sign(d).long()``. In each iteration: the block ``[block_lo, block_hi]``
     (the voxel, or its macro cell when ``occupancy`` says it is empty), the plane ahead on

@@ -54,6 +54,10 @@ def henyey_greenstein(cos_theta, g):
     in (-1, 1). Normalised over the sphere, mean cosine ``g``; ``1 / (4 pi)`` at g = 0.
     ``cos_theta`` outside [-1, 1] (a dot product of unit vectors a rounding step past
     +-1) is clamped to [-1, 1]: the value is always finite and positive.
+
+    Errors: TypeError naming ``cos_theta`` unless it is a float32/float64 tensor; TypeError
+    naming ``g`` unless it is a number or a tensor of the cos_theta's dtype and device;
+    ValueError naming ``g`` for a value outside (-1, 1).
     """
     raise NotImplementedError("not implemented yet: henyey_greenstein (task 3)")
 
@@ -78,6 +82,9 @@ def cull_lights(grid, lights, device="cpu"):
     plane (distance exactly -range), or within rounding of it (the planes may be computed
     in float32: about 1e-7 of the light's distance from the eye), may go either way: the
     light gives nothing at its range. Directional lights are listed everywhere.
+
+    Errors: TypeError naming ``grid`` unless it is a FroxelGrid; TypeError naming ``lights``
+    (as ``lights[i]``) for an item that is not a DirectionalLight, PointLight or SpotLight.
     """
     raise NotImplementedError("not implemented yet: cull_lights (task 3)")
 
@@ -129,5 +136,13 @@ def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_sh
     ``light_tiles`` (per light, tiles where it was evaluated), ``light_evaluations``
     (froxel-light pairs evaluated), ``volume_bounds`` (the extinction volume's ``(lo, hi)``,
     None when none was built) and ``volume_resolution`` (0 when none was built).
+
+    Errors: TypeError naming ``scene`` unless it is a Scene, or ``grid`` unless it is a
+    FroxelGrid; TypeError or ValueError naming ``jitter`` (not a number in [0, 1));
+    ValueError naming ``phase`` (not ``"hg"`` or ``"schlick"``), ``volume_resolution``
+    (neither None nor an int >= 2) or ``light_steps`` (not an int >= 1); TypeError naming
+    ``vbuffer`` unless it is a dict with the keys :func:`voxelize` returns, and TypeError or
+    ValueError naming ``vbuffer['...']`` for an entry not of its shape (float32/float64, the
+    scattering's dtype and device).
     """
     raise NotImplementedError("not implemented yet: light_froxels (task 3)")

@@ -21,6 +21,9 @@ def to_clip_space(vertices, mvp):
     (``m[r, 0] * x + m[r, 1] * y + m[r, 2] * z + m[r, 3]``) rather than as a matmul, whose
     summation order differs between BLAS libraries: the CPU and CUDA agree bit for bit.
 
+    Errors: ValueError or TypeError naming ``vertices`` (not an (N, 3) float tensor) or
+    ``mvp`` (not a (4, 4) float tensor on the vertices' device).
+
     Hints: ``m[r, 0] * x`` with a 0-d tensor ``m[r, 0]`` broadcasts over all vertices;
     ``torch.stack(rows, dim=-1)`` assembles the four coordinates.
     """
@@ -63,6 +66,8 @@ def clip_triangles(clip):
     perspective divide flips it to the other side of the screen. The other five planes
     need no clipping: the bounding box is clamped to the screen (a "guard band").
 
+    Errors: ValueError or TypeError naming ``clip`` unless it is an (F, 3, 4) float tensor.
+
     Hints: work on all F triangles at once and select at the end. ``d.gather(1, order)``
     and ``clip.gather(1, order[..., None].expand(F, 3, 4))`` rotate the corners;
     ``torch.nn.functional.one_hot(order, 3)`` gives each rotated corner's weight row; the
@@ -87,6 +92,10 @@ def to_screen(clipped, width: int, height: int):
     ``x = (x_c / w + 1) * width / 2``, ``y = (1 - y_c / w) * height / 2`` (row 0 at the
     top, pixel centres at ``+0.5``), ``z_ndc = z_c / w`` in [-1, 1] from the near to the
     far plane, and ``1/w``, which varies linearly across the screen (task 4 needs it).
+
+    Errors: ValueError or TypeError naming ``clipped`` (not a (K, 3, 4) float tensor, or a
+    corner with w <= 0); ValueError naming ``width`` / ``height`` unless they are positive
+    ints <= 32768.
 
     Hints: ``clipped.unbind(-1)`` gives x, y, z, w of shape (K, 3).
     """

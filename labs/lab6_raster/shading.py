@@ -76,6 +76,9 @@ def rasterize_mesh(mesh: Mesh, camera: Camera, *, depth_bits: int = 32,
     ``rasterize``, ``resolve_pixels``. face is -1 where nothing is visible; bary are the
     perspective-correct barycentrics of the pixel centre in that face.
 
+    Errors: TypeError naming ``mesh`` unless it is a Mesh, or ``camera`` unless it is a
+    Camera; an invalid mesh raises ``Mesh.validate``'s errors.
+
     Hints: ``camera.view_projection(torch.float64).to(mesh.device)``; ``clip[mesh.faces]``
     gathers the corners of every face.
     """
@@ -117,6 +120,10 @@ def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
 
     The interpolated normal must be normalised again: a blend of unit vectors is shorter
     than 1 (by up to a few percent on a coarse mesh), which darkens the middle of each face.
+
+    Errors: TypeError naming ``mesh`` unless it is a Mesh; ValueError or TypeError naming
+    ``face`` (not an (H, W) int64 tensor), ``bary`` (not (H, W, 3) float) or
+    ``light_direction`` (not a (3,) float tensor), any of them off the mesh's device.
 
     Hints: the provided ``face_normals`` and ``normalized``; ``index_add_`` over
     ``mesh.faces.reshape(-1)`` sums face normals into their vertices; ``interpolate``.

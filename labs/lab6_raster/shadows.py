@@ -24,6 +24,9 @@ def traced_visibility(trace, camera: Camera, device=None, dtype=torch.float32):
     trace: ``trace(origins, directions, t_min, t_max) -> hits`` (see the lab's docstring);
     camera: the view; device, dtype: of the rays (``course.core.camera.primary_rays``).
 
+    Errors: TypeError naming ``trace`` unless it is callable, or ``camera`` unless it is a
+    Camera.
+
     Hints: ``course.core.camera.primary_rays(camera, device, dtype)``; the provided ``traced_hits``
     calls the tracer and checks its answer.
     """
@@ -68,7 +71,7 @@ def shadow_epsilon(mesh: Mesh) -> float:
 def _shadow_rays(trace, mesh: Mesh, points, hit, light):
     """(N,) bool: which of the points (N, 3) marked ``hit`` see something toward ``light``.
 
-    Write this helper for ``hybrid_shadows`` and ``traced_shadows``: shadow rays from the
+    Write this function for ``hybrid_shadows`` and ``traced_shadows``: shadow rays from the
     points with ``hit``, ``t_min = shadow_epsilon(mesh)``, ``t_max = inf``, through
     ``traced_hits``.
     """
@@ -84,6 +87,10 @@ def hybrid_shadows(trace, mesh: Mesh, face, bary, light_direction):
     output; light_direction: (3,) toward the light. Primary visibility costs one raster pass
     instead of one ray per pixel; positions come from ``world_positions``; shadow rays start
     at ``t_min = shadow_epsilon(mesh)`` (unit directions) with ``t_max = inf``.
+
+    Errors: TypeError naming ``trace`` unless it is callable; ValueError or TypeError naming
+    ``light_direction`` (not a (3,) float tensor on the mesh's device), or ``face`` /
+    ``bary`` as in ``shade``.
 
     Hints: ``world_positions``, then ``_shadow_rays`` on the flattened pixels.
     """

@@ -54,6 +54,12 @@ def ray_box_interval(origins, directions, box_min, box_max):
     The differences ``box - o`` come first, so a box far from the world origin keeps the
     relative accuracy of its size.
 
+    Errors: TypeError or ValueError naming ``origins`` or ``directions`` (not float tensors
+    of shape (N, 3) or (3,) of one dtype and device); TypeError naming ``box_min`` /
+    ``box_max`` unless each is a (3,) tensor of the rays' dtype or 3 numbers; ValueError
+    naming them for another shape or device, a non-finite value, or ``box_min > box_max`` on
+    an axis.
+
     Hints: ``torch.reciprocal`` keeps the sign of zero; reduce over the three slabs
     with ``torch.fmax``/``torch.fmin`` (they ignore NaN) and clip ``t_near`` at 0; build the
     validity mask with ``torch.isfinite``; return ``torch.where(hit, t, 0)``.
@@ -92,6 +98,9 @@ def sample_grid(grid, uvw):
     Watch the axis order: x indexes the grid's *first* axis. ``grid_sample`` would want
     the grid as ``(1, C, Z, Y, X)`` (depth first) and coordinates ``2 uvw - 1`` in (x, y, z)
     order.
+
+    Errors: TypeError or ValueError naming ``uvw`` (not a float tensor of shape (..., 3)) or
+    ``grid`` (not an (X, Y, Z) or (X, Y, Z, C) tensor of the uvw's dtype and device).
 
     Hints: ``u = uvw * (X, Y, Z) - 0.5`` is the continuous index (voxel centres at the
     integers); clamp it to ``[0, n - 1]``; ``i0 = floor(u)`` clamped to ``[0, n - 2]`` (mind
@@ -154,6 +163,14 @@ def march_box(origins, directions, box_min, box_max, density, emission=None, ste
     grid or a callable with negative or NaN values raises ValueError naming ``density`` (the
     provided checks and ``evaluate`` do it). Rays that miss (and NaN/inf rays) sample nothing:
     radiance 0, transmittance 1, samples 0. ``steps = 0`` is an empty march.
+
+    Errors: ValueError or TypeError naming ``origins``, ``directions``, ``box_min`` or
+    ``box_max`` as in ``ray_box_interval``; ``density`` (neither a callable nor an (X, Y, Z)
+    grid of the rays' dtype and device; ValueError for negative or NaN values, also from a
+    callable) or ``emission`` (neither None, a callable nor an (X, Y, Z) / (X, Y, Z, C) grid
+    like that); TypeError or ValueError naming ``steps`` unless it is an int >= 0;
+    ValueError naming ``integrator`` (not ``"exact"`` or ``"riemann"``) or
+    ``min_transmittance`` (not a number in [0, 1]).
 
     Hints: ``ray_box_interval`` gives the span. Keep ``rel = o - box_min`` (0 for
     missed rays) and sample at ``offset = rel + t d``: ``local = offset / size`` for grids,

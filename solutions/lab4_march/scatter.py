@@ -33,6 +33,10 @@ def henyey_greenstein(cos_theta, g):
     ``(1 + g)^2 - 2 g (1 + cos)`` for g < 0, so it does not cancel at the peak when
     |g| -> 1 (there ``1 + g^2 - 2 g`` loses every digit).
 
+    Errors: TypeError naming ``cos_theta`` unless it is a float tensor; TypeError naming
+    ``g`` unless it is a number or a tensor of the cos_theta's dtype and device; ValueError
+    naming ``g`` for a value outside (-1, 1).
+
     Hints: compute both denominators and pick with ``torch.where(g >= 0, ...)``;
     ``(1 - g) * (1 + g)`` for the numerator; ``base * base.sqrt()`` is ``base^(3/2)``.
     """
@@ -56,6 +60,11 @@ def shadow_transmittance(points, light_direction, box_min, box_max, density, ste
     inside the box: exact for a homogeneous medium with one step, second order for a
     smooth one. Points whose light ray misses the box, NaN points and ``steps = 0`` give 1
     (unshadowed).
+
+    Errors: TypeError or ValueError naming ``points`` (not an (N, 3) float tensor),
+    ``box_min`` / ``box_max`` as in ``ray_box_interval``, ``light_direction`` (not a finite,
+    non-zero (3,) tensor of the points' dtype and device or 3 numbers), ``density`` (as in
+    ``march_box``: ValueError for negative or NaN values) or ``steps`` (not an int >= 0).
 
     Hints: ``ray_box_interval`` from the points along the (already unit, from the
     provided check) light direction; loop over the steps summing ``sigma * dt`` (0 where the
@@ -104,6 +113,13 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
     exact integrator a step adds ``T albedo p E T_light (1 - e^{-sigma ds})`` (Hillaire's
     formula). The phase depends only on the ray for a directional light. Cost per ray:
     ``steps * (shadow_steps + 2)`` density evaluations.
+
+    Errors: ValueError or TypeError naming the arguments ``march_box`` checks (``origins``,
+    ``directions``, ``box_min``, ``box_max``, ``density``, ``steps``, ``integrator``,
+    ``min_transmittance``); ``albedo`` or ``light_irradiance`` (TypeError for a tensor that
+    is not (C,) of the rays' dtype and device, ValueError for anything else but a number >=
+    0; ValueError for an albedo outside [0, 1]); ``g`` as in ``henyey_greenstein``;
+    ``shadow_steps`` (not an int >= 0); ``light_direction`` as in ``shadow_transmittance``.
 
     Hints: the phase is one value per ray, from ``dot(unit d, light)`` (``dot`` is
     imported from ``course.core.raymath``; ``torch.nan_to_num`` it for degenerate rays). Write

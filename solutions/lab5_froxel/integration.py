@@ -31,6 +31,9 @@ def slice_integral(source, extinction, length):
     A slice of zero length, or of no medium, is no optical depth even where the other
     factor is ``inf``: ``(0, 1)``, as ``sigma_t = inf`` over ``D = 0``.
     Returns tensors of the broadcast shape (integral with C).
+
+    Errors: TypeError naming ``source``, ``extinction`` or ``length`` unless it is a float
+    tensor; ValueError naming ``extinction`` or ``length`` for a negative value.
     """
     # BEGIN SOLUTION (task 6)
     for name, x in (("source", source), ("extinction", extinction), ("length", length)):
@@ -68,6 +71,12 @@ def integrate_froxels(source, extinction, grid, method="energy"):
     of the optical depths) are both fine; the result is the same to rounding. A negative
     extinction raises ValueError naming ``extinction`` with either method (it would give a
     transmittance above 1).
+
+    Errors: TypeError naming ``grid`` unless it is a FroxelGrid; ValueError naming
+    ``method`` unless it is ``"energy"`` or ``"naive"``; TypeError or ValueError naming
+    ``source`` (not an (S, ny, nx, 3) float32/float64 tensor) or ``extinction`` (not (S, ny,
+    nx) of the source's dtype and device); ValueError naming ``extinction`` for a negative
+    value.
     """
     # BEGIN SOLUTION (task 6)
     check_grid(grid)

@@ -43,6 +43,12 @@ def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out
     depths >= 0 or +inf (NaN or negative depths raise ValueError naming it); opaque_image
     (H, W, 3) of the depths' dtype (else TypeError) and device (``check_images``); NaN/inf
     colours pass through as ``opaque * T + L`` would make them.
+
+    Errors: TypeError naming ``grid`` unless it is a FroxelGrid; TypeError or ValueError
+    naming ``depth_image`` (not an (H, W) float32/float64 tensor for the grid's camera;
+    ValueError for NaN or negative depths), ``opaque_image`` (not (H, W, 3) of the depths'
+    dtype, else TypeError, and device), ``inscatter``, ``transmittance`` or ``out`` (not of
+    their shapes, in the depths' dtype and device).
     """
     # BEGIN SOLUTION (task 7)
     check_grid(grid)
@@ -99,6 +105,13 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slice
     :func:`light_froxels`), ``jitter``,
     ``history_valid`` (fraction of froxels that kept history) and ``history`` (a dict
     ``{"grid", "source", "extinction", "frame"}`` for the next frame).
+
+    Errors: TypeError naming ``scene`` unless it is a Scene; ``depth_image`` and
+    ``opaque_image`` as in :func:`apply_froxels` (TypeError naming ``depth_image`` for
+    float16/bfloat16 images); TypeError or ValueError naming ``tile``, ``slices``, ``near``
+    or ``far`` (checked by ``FroxelGrid``); ValueError naming ``phase`` or ``integration``
+    (not one of their choices) or ``frame`` (not an int >= 0); with ``temporal``, TypeError
+    naming ``history`` unless it is None or the previous report's ``"history"``.
     """
     # BEGIN SOLUTION (task 8)
     check_scene(scene)

@@ -60,7 +60,13 @@ def reproject(history, prev_grid, grid):
 def temporal_blend(current, history, valid, alpha=BLEND):
     """Exponential moving average: ``history + alpha (current - history)`` where ``valid``
     (broadcast over a trailing colour axis), ``current`` elsewhere. current, history:
-    (S, ny, nx) or (S, ny, nx, C) of one dtype; valid: (S, ny, nx) bool; alpha in (0, 1]."""
+    (S, ny, nx) or (S, ny, nx, C) of one dtype; valid: (S, ny, nx) bool; alpha in (0, 1].
+
+    Errors: TypeError or ValueError naming ``current`` (not a float32/float64 tensor) or
+    ``history`` (not of the current's shape, dtype and device); ValueError naming ``valid``
+    unless it is a bool tensor of shape (S, ny, nx), or ``alpha`` unless it is a number in
+    (0, 1].
+    """
     # BEGIN SOLUTION (task 5)
     check_volume(current, "current", current.shape if isinstance(current, torch.Tensor)
                  else ())

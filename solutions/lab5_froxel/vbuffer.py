@@ -50,6 +50,9 @@ def media_at(scene, points):
     ``g`` is the scattering-weighted mean of the media's ``g`` (weight: mean scattering over
     RGB), 0 where nothing scatters. Height fog: density ``exp(-falloff (y - base))``;
     fog volumes: 1 inside the shape times the density texture, 0 outside.
+
+    Errors: TypeError naming ``scene`` unless it is a Scene; TypeError or ValueError naming
+    ``points`` unless it is an (N, 3) float32/float64 tensor.
     """
     # BEGIN SOLUTION (task 2)
     check_scene(scene)
@@ -88,6 +91,10 @@ def voxelize(scene, grid, jitter=0.5, dtype=torch.float32, device="cpu"):
 
     Returns a dict of ``scattering`` (S, ny, nx, 3), ``extinction`` (S, ny, nx),
     ``emissive`` (S, ny, nx, 3), ``g`` (S, ny, nx) of ``dtype`` on ``device``.
+
+    Errors: TypeError naming ``scene`` unless it is a Scene, or ``grid`` unless it is a
+    FroxelGrid; TypeError or ValueError naming ``jitter`` unless it is a number in [0, 1);
+    TypeError naming ``dtype`` unless it is torch.float32 or torch.float64.
     """
     # BEGIN SOLUTION (task 2)
     check_scene(scene)

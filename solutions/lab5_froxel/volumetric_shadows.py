@@ -69,6 +69,10 @@ def light_transmittance(extinction, lo, hi, points, position, steps=LIGHT_STEPS)
     segment misses the box or has zero length (a point on the light); in [0, 1], no NaN.
     A segment lying in the plane of one of the box's faces (a tie between inside and
     outside) may count as either.
+
+    Errors: TypeError or ValueError naming ``extinction`` (not an (X, Y, Z) float32/float64
+    tensor) or ``points`` (not a float tensor of shape (..., 3)); ValueError naming
+    ``steps`` unless it is an int >= 1.
     """
     # BEGIN SOLUTION (task 4)
     check_volume(extinction, "extinction", extinction.shape if isinstance(
@@ -105,6 +109,10 @@ def transmittance_volume(extinction, lo, hi, light, resolution=32, steps=None):
     (K = ``steps`` or ``2 resolution``), accumulating optical depth with the midpoint rule:
     ``data[i, j, k] = exp(-sum_{m<k} sigma_t(mid_m) step)``. A point light gets no volume
     (TypeError naming ``light``): :func:`light_transmittance` marches its paths.
+
+    Errors: TypeError or ValueError naming ``extinction`` unless it is an (X, Y, Z)
+    float32/float64 tensor; TypeError naming ``light`` unless it is a DirectionalLight or
+    SpotLight; ValueError naming ``resolution`` unless it is an int >= 1.
     """
     # BEGIN SOLUTION (task 4)
     check_volume(extinction, "extinction", extinction.shape if isinstance(

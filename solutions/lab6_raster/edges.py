@@ -58,6 +58,9 @@ def bounding_boxes(screen, width: int, height: int):
     most ``width * height`` fragments. (Clamp the floats before converting: ``1e30`` or
     NaN do not fit an int64.)
 
+    Errors: ValueError or TypeError naming ``screen`` (not a (K, 3, C) float tensor with C
+    >= 2); ValueError naming ``width`` / ``height`` unless they are positive ints <= 32768.
+
     Hints: ``xy.amin(1)``, ``xy.amax(1)``; clamp the floats to ``[-1, size + 1]``, then
     ``torch.ceil``/``torch.floor`` and ``.to(torch.int64)``; ``torch.minimum``/``maximum``
     with a ``tensor([width, height])`` clamp both axes at once.
@@ -88,7 +91,7 @@ def _top_left(xy, positive):
     down): left edges run downwards (``b_y > a_y``), top edges are horizontal and run to
     the left (``b_x < a_x``). For negative area the edges run the other way round.
 
-    Write this helper for ``coverage``.
+    Write this function for ``coverage``.
     """
     # BEGIN SOLUTION (task 2)
     a = xy[:, [1, 2, 0]]
@@ -120,6 +123,9 @@ def coverage(screen, width: int, height: int, cull_backfaces: bool = False):
        on a top or left edge (see ``_top_left``). A centre exactly on an edge shared by two
        triangles is thus covered by exactly one of them (with ``e >= 0`` by both: double
        blending and double counting; with ``e > 0`` by neither: cracks).
+
+    Errors: ValueError or TypeError naming ``screen`` (not a (K, 3, C) float tensor with C
+    >= 2); ValueError naming ``width`` / ``height`` unless they are positive ints <= 32768.
 
     Hints: ``edge_functions(xy, v0[:, 0], v0[:, 1])[:, 0]`` is the area of every triangle;
     ``torch.repeat_interleave(torch.arange(K), counts)`` and ``torch.cumsum`` enumerate the

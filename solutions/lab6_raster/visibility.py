@@ -133,6 +133,11 @@ def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
     offset added to the ids, ``depth_test``. The atomic minimum makes the result independent
     of the chunking and of the triangle order: bit for bit the same keys.
 
+    Errors: ValueError or TypeError naming ``screen`` (not a (K, 3, 4) float tensor) or
+    ``out`` (not a (width * height,) int64 tensor on the screen's device); ValueError naming
+    ``width`` / ``height`` (not positive ints <= 32768), ``depth_bits`` (not 24 or 32) or
+    ``memory_budget_bytes`` (not a positive int).
+
     Hints: plan the chunks on the host: ``ends = torch.cumsum(sizes, 0).cpu()`` and
     ``torch.searchsorted(ends, before + per_chunk, right=True)`` find where a chunk ends; a
     Python loop over chunks (not triangles) is fine. ``fragment_depth`` is provided.

@@ -40,14 +40,17 @@ def _check(folder: Path) -> subprocess.CompletedProcess:
 def test_check_names_a_hand_edit(tmp_path):
     copy = _course_copy(tmp_path)
     assert _check(copy).returncode == 0
-    skeleton = sorted((copy / "labs").glob("lab4_*.py"))[0]
+    # A lab file or a module of a lab package: the first skeleton with a stub.
+    skeleton = next(p for p in sorted((copy / "labs").rglob("*.py"))
+                    if "raise NotImplementedError" in p.read_text())
     lines = skeleton.read_text().splitlines(keepends=True)
     number = next(i for i, line in enumerate(lines) if "raise NotImplementedError" in line)
     lines[number] = lines[number].replace("raise NotImplementedError", "return None  #")
     skeleton.write_text("".join(lines))
     proc = _check(copy)
     assert proc.returncode == 1, proc.stdout + proc.stderr
-    assert f"labs/{skeleton.name}:{number + 1}:" in proc.stdout, proc.stdout
+    where = skeleton.relative_to(copy).as_posix()
+    assert f"{where}:{number + 1}:" in proc.stdout, proc.stdout
     write(copy / "solutions", copy / "labs")  # regenerating repairs it
     assert _check(copy).returncode == 0
 
@@ -55,11 +58,11 @@ def test_check_names_a_hand_edit(tmp_path):
 def test_check_names_a_stray_and_a_missing_file(tmp_path):
     copy = _course_copy(tmp_path)
     (copy / "labs" / "lab9_extra.py").write_text("x = 1\n")
-    removed = sorted((copy / "labs").glob("lab1_*.py"))[0]
+    removed = sorted((copy / "labs").rglob("lab*_*.py"))[0]  # a lab file or a package's module
     removed.unlink()
     out = _check(copy).stdout
     assert "labs/lab9_extra.py: no reference" in out, out
-    assert f"labs/{removed.name}: missing" in out, out
+    assert f"{removed.relative_to(copy).as_posix()}: missing" in out, out
 
 
 REFERENCE = '''"""A lab."""
