@@ -15,8 +15,8 @@ products themselves reach inf. Woop's test works on the unit triangle (its trans
 in float64, absorbs ``1/S``) and keeps hitting up to float32's range.
 
 Usage: ``python bench/lab1_far.py [--impl solutions] [--json PATH]``; the table printed is
-the one quoted in ``solutions/lab1_intersect.py`` (``tests/meta/test_lab1_crack_table.py``
-re-runs it).
+the one quoted in Lab 1's docstring, ``solutions/lab1_intersect/__init__.py``
+(``tests/meta/test_lab1_crack_table.py`` re-runs it).
 """
 
 from __future__ import annotations

@@ -36,6 +36,11 @@ def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
     Sorting by the code puts points that are close in space close in the array, so a
     range of sorted triangles is a compact cluster: the whole idea of the LBVH.
 
+    Errors (the provided check): TypeError naming ``points`` unless it is a float tensor,
+    ValueError naming it unless its shape is (N, 3); ValueError naming ``lo`` or ``hi``
+    unless it is a (3,) tensor, or ``bits`` unless it is an int in 1..21 (three times 21
+    bits fill an int64).
+
     Hints: ``torch.floor``, ``.clamp``, ``.long()``; interleave with a loop over the bits:
     ``((q >> i) & 1) << (3 * i + shift)``.
     """
@@ -75,6 +80,10 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
     The tree's quality depends on the code's resolution only: a bad split wastes node
     visits, never correctness.
 
+    Errors (the provided checks): TypeError or ValueError naming ``mesh`` (not a ``Mesh``,
+    or a vertex with a NaN or inf coordinate); ValueError naming ``leaf_size`` unless it is
+    an int >= 1.
+
     Hints: ``TreeLevels`` (provided) records the levels: ``levels.ranges(nodes)`` gives their
     ranges, ``levels.split(nodes, mid, depth)`` the children's ids, and
     ``levels.finish(order, tri_lo, tri_hi)`` assembles the dict.
@@ -108,6 +117,10 @@ def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
        the node's range of ``order``: ``argsort`` by (node, side), stable).
     4. No valid split (all centroids in one bin on every axis: coincident triangles):
        split the range in the middle instead, so the build always ends.
+
+    Errors (the provided checks): TypeError or ValueError naming ``mesh`` (not a ``Mesh``,
+    or a vertex with a NaN or inf coordinate); ValueError naming ``leaf_size`` unless it is
+    an int >= 1, or ``bins`` unless it is an int in 2..1024.
 
     Hints: ``expand_ranges(start, count)`` lists each node's primitives (node, slot);
     number the (node, axis, bin) slots ``(node * 3 + axis) * bins + bin`` for ``index_add_``

@@ -46,6 +46,11 @@ def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
     A ray with an empty stack is done. The stack grows (a new column) if a ray would
     overflow it; a tree of depth D never needs more than D + 1 entries.
 
+    Errors (the provided checks): TypeError or ValueError naming ``rays`` (not ``Rays``),
+    ``mesh`` (not a ``Mesh``, or another dtype or device than the rays), ``intersect`` (not
+    callable) or ``bvh`` (not a BVH dict of this mesh's device and triangles: a grid passed
+    as the BVH, say).
+
     Hints: ``slab_test``, ``expand_ranges``, ``intersect_pairs``, ``new_closest``,
     ``new_counters`` and ``as_hits`` are provided. Push with ``stack[rows, sp[rows]] = node``
     then ``sp[rows] += 1``; a node is pushed at most once per ray, so ``2 M + 1`` iterations

@@ -80,6 +80,13 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     in the mesh's dtype, so it can be fused; it agrees with brute force with that kernel
     (rounding may decide a ray grazing an edge differently when the ops are fused).
 
+    Errors (the provided checks): TypeError or ValueError naming ``rays`` (not ``Rays``),
+    ``mesh`` (not a ``Mesh``, or another dtype or device than the rays) or ``bvh`` (not a
+    BVH dict of this mesh's device and triangles); ValueError naming ``check_every`` unless
+    it is an int in 1..1024, ``fuse_steps`` unless it is an int in 1..64, ``compile`` unless
+    it is False, True or a ``torch.compile`` mode, or ``walk`` unless it is None or
+    :func:`pack_bvh`'s dict of this mesh, packed for every octant these rays go in.
+
     Hints: ``pack_bvh`` (provided) lays the tree out for you (``boxes``, ``links``,
     ``base``, ``slots``, ``tri``; ``ray_octants`` gives each ray's array). Write one step as
     a function of (n,) columns, state in and state out, with ``torch.where`` for the masked

@@ -77,6 +77,11 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
     4. The sub cells' lists: as in :func:`build_grid`, one (entry, sub cell) pair per
        overlap, one stable sort by global sub cell: no loop over cells or triangles.
 
+    Errors (the provided checks): TypeError or ValueError naming ``mesh`` (not a ``Mesh``,
+    or a vertex with a NaN or inf coordinate); ValueError naming ``top_density`` or
+    ``density`` unless it is a positive number, or ``min_triangles`` unless it is a
+    non-negative int.
+
     Hints: start from your ``build_grid`` at ``top_density``; ``expand_ranges`` and a
     ``bincount`` per top cell give the small triangles of each cell; ``scatter_reduce``
     (amin/amax) their bounds per sub-grid; ``grid_resolutions`` (provided) sizes all

@@ -36,6 +36,10 @@ def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect,
     time. Each tile goes through ``intersect_pairs``, which keeps ties at the lowest
     triangle index.
 
+    Errors (the provided checks): TypeError or ValueError naming ``rays`` (not ``Rays``),
+    ``mesh`` (not a ``Mesh``, or another dtype or device than the rays) or ``intersect``
+    (not callable); ValueError naming ``memory_budget_bytes`` unless it is an int >= 1.
+
     Hints: ``intersect_pairs`` does the testing and the tie rule; a tile's pairs
     are ``r.repeat_interleave(len(tri))`` and ``tri.repeat(len(r))``.
     """
@@ -88,10 +92,13 @@ def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
     ``mailbox``), ``bvh_closest_hit`` or,
     with ``stackless=True``, ``bvh_closest_hit_stackless``, and ``kd_closest_hit``.
     Returns ``(Hits, counters)``; every structure returns the brute-force hits, so only
-    the counters (and the clock) tell them apart. ValueError naming ``structure`` for
-    anything else, or an option the structure does not take; bad ``rays``, ``mesh`` (e.g. a
-    float64 mesh with float32 rays) or an ``intersect`` that is not callable raise the
-    error naming them that the called function raises (its provided checks).
+    the counters (and the clock) tell them apart.
+
+    Errors: ValueError naming ``structure`` for anything else (another string, a dict of
+    another kind) or an option the structure does not take (yours to raise); bad ``rays``
+    (not ``Rays``), ``mesh`` (e.g. a float64 mesh with float32 rays) or an ``intersect``
+    that is not callable raise the TypeError or ValueError naming them that the called
+    function raises (its provided checks).
 
     Hints: Check ``structure['kind']`` and the options, then call the matching function.
     For ``"auto"``: ``choose_structure`` (provided) names the kind and knobs, ``build``

@@ -43,6 +43,10 @@ def grid_resolution(extent, num_triangles: int, density: float = 2.0,
     a flat scene) gets one cell and drops out: solve for ``k`` again over the other axes
     (``k = (lambda N / prod of their extents) ** (1/d)`` for ``d`` remaining axes).
 
+    Errors (the provided check): ValueError naming ``extent`` unless it is 3 finite
+    non-negative numbers, ``num_triangles`` unless it is an int >= 1, or ``density`` unless
+    it is a positive number.
+
     Hints: Plain Python: ``math.prod`` and a loop that drops thin axes (at most three
     rounds).
     """
@@ -89,6 +93,10 @@ def build_grid(mesh: Mesh, resolution=None, density: float = 2.0) -> dict:
     Build without a loop over triangles or cells: the count of cells per triangle, then
     one ``repeat_interleave`` into (triangle, cell) pairs, one stable sort by cell, and a
     ``bincount`` for ``cell_count`` (``cell_start`` is its exclusive prefix sum).
+
+    Errors (the provided checks): TypeError or ValueError naming ``mesh`` (not a ``Mesh``,
+    or a vertex with a NaN or inf coordinate); ValueError naming ``resolution`` unless it is
+    None or 3 ints >= 1.
 
     Hints: ``triangle_bounds(mesh)`` gives the bounds; ``expand_ranges(torch.zeros_like(n), n)``
     enumerates ``n[f]`` cells per triangle ``f``; split each local index into x, y, z with ``%``
@@ -173,6 +181,11 @@ def grid_closest_hit(rays: Rays, mesh: Mesh, grid: dict, intersect, mailbox: boo
 
     Contract: the same hits as brute force with ``intersect`` (same triangle, same
     ``t``), whatever the resolution. At most ``rx + ry + rz`` steps per ray.
+
+    Errors (the provided checks): TypeError or ValueError naming ``rays`` (not ``Rays``),
+    ``mesh`` (not a ``Mesh``, or another dtype or device than the rays), ``intersect`` (not
+    callable) or ``grid`` (not a :func:`build_grid` dict of this mesh's device and
+    triangles).
 
     Hints: Keep, per active ray, its index, origin, direction, ``1 / d``, ``t_exit``, cell
     ``(a, 3)`` int64, step ``(a, 3)`` and previous cell ``(a, 3)`` (-1: none), and compact them

@@ -69,6 +69,12 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
     its end event comes after it (so one lying in the plane goes to one side, and every
     triangle to at least one). Coincident triangles offer no plane inside the box: a leaf.
 
+    Errors (the provided checks): TypeError or ValueError naming ``mesh`` (not a ``Mesh``,
+    or a vertex with a NaN or inf coordinate); ValueError naming ``leaf_size`` unless it is
+    an int >= 1, ``max_depth`` unless it is None or an int in 0..60, ``traversal_cost`` or
+    ``intersect_cost`` unless it is a positive number, or ``empty_bonus`` unless it is a
+    number in [0, 1].
+
     Hints: Keep (node, triangle) pairs. Number each axis's planes once (``torch.sort`` of
     all bounds, ``torch.searchsorted`` for each bound's number): clipping to a node's box is
     then a clamp of integers, and one integer key ``(node * planes + plane) * 2 + is_end``
@@ -240,8 +246,11 @@ def kd_pack(tree: dict) -> torch.Tensor:
       leaf test.
 
     Compute in int64 and wrap to int32 (``leaf << 31`` is ``2^31``, one more than int32
-    holds). ValueError naming ``tree`` if an offset needs more than 29 bits or a count
-    more than 31.
+    holds).
+
+    Errors: TypeError naming ``tree`` unless it is a dict holding the tensors read here
+    (the provided check); ValueError naming ``tree`` if an offset needs more than 29 bits or
+    a count more than 31 (yours to raise: the node has no room for it).
 
     Hints: ``tree['split'].to(torch.float32).contiguous().view(torch.int32)``; build word 1 in
     int64 and wrap values ``>= 2**31`` by subtracting ``2**32`` before ``.to(torch.int32)``.

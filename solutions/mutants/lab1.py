@@ -72,7 +72,7 @@ MUTANTS = [
            why="b^2 - ac cancels catastrophically for a small sphere far away"),
     Mutant(name="closest_first_hit", module=M, function="closest_hit",
            find="first = torch.where(t == t_near, cols, t.shape[1])",
-           replace="first = torch.where(t < math.inf, cols, t.shape[1])",
+           replace="first = torch.where(torch.isfinite(t), cols, t.shape[1])",
            tests="closest_hit",
            why="takes the first triangle hit in index order, not the nearest"),
     Mutant(name="closest_no_chunk_offset", module=M, function="closest_hit",

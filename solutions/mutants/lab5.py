@@ -7,110 +7,173 @@ from course.grading.mutants import Mutant
 M = "lab5_froxel"
 
 MUTANTS = [
-    Mutant(name="linear_slicing", module=M, function="slice_depths",
-           find="z = near * torch.exp(k / slices * math.log(far / near))",
-           replace="z = near + (far - near) * k / slices",
-           tests="slice_depths",
-           why="linear depth slices: froxels near the camera are long splinters, far ones "
-               "flat plates; the slicing no longer follows perspective"),
-    Mutant(name="froxel_y_up", module=M, function="world_to_froxel",
-           find="y = (1 - ndc_y) * grid.camera.height",
-           replace="y = (1 + ndc_y) * grid.camera.height",
-           tests="world_to_froxel",
-           why="tile rows counted from the bottom of the screen (OpenGL's window origin) while "
-               "images and froxel volumes start at the top"),
-    Mutant(name="g_not_scattering_weighted", module=M, function="media_at",
-           find="g_weighted = g_weighted + w * (sigma_s.mean() * medium.g)",
-           replace="g_weighted = g_weighted + w * medium.g",
-           tests="media_at",
-           why="phase g averaged by density, not by scattering: a thin strongly-scattering "
-               "medium's g loses to a thick absorbing one's"),
-    Mutant(name="voxelize_ignores_jitter", module=M, function="voxelize",
-           find="coords = froxel_sample_coords(grid, jitter, dtype, device)",
-           replace="coords = froxel_sample_coords(grid, 0.5, dtype, device)",
-           tests="voxelize",
-           why="the V-buffer always samples the slice's middle: temporal jitter has nothing "
-               "to average"),
-    Mutant(name="hg_wrong_sign", module=M, function="henyey_greenstein",
-           find="denom = (1 + g * g - 2 * g * cos_theta).clamp(min=0)",
-           replace="denom = (1 + g * g + 2 * g * cos_theta).clamp(min=0)",
-           tests="henyey_greenstein",
-           why="cos theta measured between the view ray and the light's travel direction: "
-               "forward scattering turns into back scattering"),
-    Mutant(name="schlick_no_clamp", module=M, function="schlick_phase",
-           find="k = (1.55 * g - 0.55 * g ** 3).clamp(-SCHLICK_K_MAX, SCHLICK_K_MAX)",
-           replace="k = 1.55 * g - 0.55 * g ** 3",
-           tests="schlick_phase",
-           why="k = 1.55 g - 0.55 g^3 passes 1 near g = 0.999: the phase function blows up"),
-    Mutant(name="tile_list_drops_border_lights", module=M, function="cull_lights",
-           find="cols = (left >= -r) & (right_d >= -r)\n        rows = (top >= -r) & "
-                "(bottom >= -r)",
-           replace="cols = (left >= 0) & (right_d >= 0)\n        rows = (top >= 0) & "
-                   "(bottom >= 0)",
-           tests="cull_lights",
-           why="a light is listed only in the tile holding its centre: spheres straddling "
-               "tile borders light one tile and leave seams in the next"),
-    Mutant(name="shadow_volume_unit_steps", module=M, function="transmittance_volume",
-           find="torch.cumsum(sigma * step, -1)",
-           replace="torch.cumsum(sigma, -1)",
-           tests="transmittance_volume",
-           why="optical depth summed per sample without the step length: shadows depend on "
-               "the volume's resolution"),
-    Mutant(name="history_never_rejected", module=M, function="reproject",
-           find="valid = ((prev >= 0) & (prev <= limits)).all(-1)",
-           replace="valid = torch.ones(prev.shape[:-1], dtype=torch.bool, "
-                   "device=prev.device)",
-           tests="reproject",
-           why="history from outside the previous frustum is kept: the clamped border "
-               "smears in as ghosts after a camera move"),
-    Mutant(name="slice_integral_unstable", module=M, function="slice_integral",
-           find="phi = torch.where(small, 1 - tau / 2 + tau * tau / 6, -torch.expm1(-safe) / safe)",
-           replace="phi = (1 - torch.exp(-tau)) / tau",
-           tests="slice_integral",
-           why="(S - S e^(-sigma D)) / sigma as written: 0/0 = NaN in empty froxels and "
-               "cancellation for thin ones"),
-    Mutant(name="transmittance_before_integral", module=M, function="integrate_froxels",
-           find="radiance = torch.cumsum(in_front[..., None] * piece, 0)",
-           replace="radiance = torch.cumsum(torch.exp(-behind)[..., None] * piece, 0)",
-           tests="integrate_froxels",
-           why="transmittance updated before adding the slice: its own medium absorbs the "
-               "slice's light twice"),
-    Mutant(name="naive_integration", module=M, function="integrate_froxels",
-           find="piece, _ = slice_integral(source, extinction, lengths)",
-           replace="piece = source * lengths[..., None]",
-           tests="integrate_froxels",
-           why="the naive S D per slice (the talk's light leak): thick slices emit more than "
-               "the medium can, and the result depends on the slice count"),
-    Mutant(name="trilinear_half_froxel_off", module=M, function="apply_froxels",
-           find="coords = torch.stack([z + 0.5, rows.expand(h, w), cols.expand(h, w)], -1)",
-           replace="coords = torch.stack([z, rows.expand(h, w), cols.expand(h, w)], -1)",
-           tests="apply_froxels",
-           why="slice boundaries treated as voxel centres: the lookup reads half a froxel "
-               "too near, so fog in front of a wall thins"),
-    Mutant(name="point_lights_unattenuated", module=M, function="light_froxels",
-           find="e = e * light_transmittance(extinction, lo, hi, p, light.position,",
-           replace="e = e * 1 or light_transmittance(extinction, lo, hi, p, light.position,",
-           tests="point_light_in_fog",
-           why="point lights shine through the fog unattenuated (only the sun and spots get "
-               "volumetric shadows): a lamp inside fog is far too bright"),
-    Mutant(name="light_march_unit_steps", module=M, function="light_transmittance",
-           find="return torch.exp(-depth * (span * rel.norm(dim=-1) / steps))",
-           replace="return torch.exp(-depth * span / steps)",
-           tests="light_transmittance or point_light_in_fog",
-           why="optical depth summed over the segment's parameter, not its length: the "
-               "attenuation depends on the distance's units, not the medium"),
-    Mutant(name="volumes_over_the_frustum", module=M, function="light_froxels",
-           find="bounds = volume_bounds(scene, grid) if volumetric_shadows and scene.lights "
-                "else None",
-           replace="bounds = frustum_bounds(grid) if volumetric_shadows and scene.lights "
-                   "else None",
-           tests="sun_in_fog_box_defaults",
-           why="the extinction volume spans the whole frustum: its voxels miss a small fog "
-               "box, which then casts no volumetric shadow on itself"),
-    Mutant(name="jitter_not_shared", module=M, function="render_froxels",
-           find="source, light_report = light_froxels(scene, grid, vbuffer, jitter,",
-           replace="source, light_report = light_froxels(scene, grid, vbuffer, 0.5,",
-           tests="render_froxels_temporal",
-           why="material sampled at the Halton offset but lighting at the slice's middle: "
-               "scattering and light meet at different points"),
+    Mutant(
+        name="linear_slicing",
+        module=M,
+        function="slice_depths",
+        find="z = near * torch.exp(k / slices * math.log(far / near))",
+        replace="z = near + (far - near) * k / slices",
+        tests="slice_depths",
+        why="linear depth slices: froxels near the camera are long splinters, far ones "
+        "flat plates; the slicing no longer follows perspective",
+    ),
+    Mutant(
+        name="froxel_y_up",
+        module=M,
+        function="world_to_froxel",
+        find="y = (1 - ndc_y) * grid.camera.height",
+        replace="y = (1 + ndc_y) * grid.camera.height",
+        tests="world_to_froxel",
+        why="tile rows counted from the bottom of the screen (OpenGL's window origin) while "
+        "images and froxel volumes start at the top",
+    ),
+    Mutant(
+        name="g_not_scattering_weighted",
+        module=M,
+        function="media_at",
+        find="g_weighted = g_weighted + w * (sigma_s.mean() * medium.g)",
+        replace="g_weighted = g_weighted + w * medium.g",
+        tests="media_at",
+        why="phase g averaged by density, not by scattering: a thin strongly-scattering "
+        "medium's g loses to a thick absorbing one's",
+    ),
+    Mutant(
+        name="voxelize_ignores_jitter",
+        module=M,
+        function="voxelize",
+        find="coords = froxel_sample_coords(grid, jitter, dtype, device)",
+        replace="coords = froxel_sample_coords(grid, 0.5, dtype, device)",
+        tests="voxelize",
+        why="the V-buffer always samples the slice's middle: temporal jitter has nothing "
+        "to average",
+    ),
+    Mutant(
+        name="hg_wrong_sign",
+        module=M,
+        function="henyey_greenstein",
+        find="denom = (1 + g * g - 2 * g * cos_theta).clamp(min=0)",
+        replace="denom = (1 + g * g + 2 * g * cos_theta).clamp(min=0)",
+        tests="henyey_greenstein",
+        why="cos theta measured between the view ray and the light's travel direction: "
+        "forward scattering turns into back scattering",
+    ),
+    Mutant(
+        name="schlick_no_clamp",
+        module=M,
+        function="schlick_phase",
+        find="k = (1.55 * g - 0.55 * g**3).clamp(-SCHLICK_K_MAX, SCHLICK_K_MAX)",
+        replace="k = 1.55 * g - 0.55 * g ** 3",
+        tests="schlick_phase",
+        why="k = 1.55 g - 0.55 g^3 passes 1 near g = 0.999: the phase function blows up",
+    ),
+    Mutant(
+        name="tile_list_drops_border_lights",
+        module=M,
+        function="cull_lights",
+        find="cols = (left >= -r) & (right_d >= -r)\n        rows = (top >= -r) & (bottom >= -r)",
+        replace="cols = (left >= 0) & (right_d >= 0)\n        rows = (top >= 0) & (bottom >= 0)",
+        tests="cull_lights",
+        why="a light is listed only in the tile holding its centre: spheres straddling "
+        "tile borders light one tile and leave seams in the next",
+    ),
+    Mutant(
+        name="shadow_volume_unit_steps",
+        module=M,
+        function="transmittance_volume",
+        find="torch.cumsum(sigma * step, -1)",
+        replace="torch.cumsum(sigma, -1)",
+        tests="transmittance_volume",
+        why="optical depth summed per sample without the step length: shadows depend on "
+        "the volume's resolution",
+    ),
+    Mutant(
+        name="history_never_rejected",
+        module=M,
+        function="reproject",
+        find="valid = ((prev >= 0) & (prev <= limits)).all(-1)",
+        replace="valid = torch.ones(prev.shape[:-1], dtype=torch.bool, device=prev.device)",
+        tests="reproject",
+        why="history from outside the previous frustum is kept: the clamped border "
+        "smears in as ghosts after a camera move",
+    ),
+    Mutant(
+        name="slice_integral_unstable",
+        module=M,
+        function="slice_integral",
+        find="phi = torch.where(small, 1 - tau / 2 + tau * tau / 6, -torch.expm1(-safe) / safe)",
+        replace="phi = (1 - torch.exp(-tau)) / tau",
+        tests="slice_integral",
+        why="(S - S e^(-sigma D)) / sigma as written: 0/0 = NaN in empty froxels and "
+        "cancellation for thin ones",
+    ),
+    Mutant(
+        name="transmittance_before_integral",
+        module=M,
+        function="integrate_froxels",
+        find="radiance = torch.cumsum(in_front[..., None] * piece, 0)",
+        replace="radiance = torch.cumsum(torch.exp(-behind)[..., None] * piece, 0)",
+        tests="integrate_froxels",
+        why="transmittance updated before adding the slice: its own medium absorbs the "
+        "slice's light twice",
+    ),
+    Mutant(
+        name="naive_integration",
+        module=M,
+        function="integrate_froxels",
+        find="piece, _ = slice_integral(source, extinction, lengths)",
+        replace="piece = source * lengths[..., None]",
+        tests="integrate_froxels",
+        why="the naive S D per slice (the talk's light leak): thick slices emit more than "
+        "the medium can, and the result depends on the slice count",
+    ),
+    Mutant(
+        name="trilinear_half_froxel_off",
+        module=M,
+        function="apply_froxels",
+        find="coords = torch.stack([z + 0.5, rows.expand(h, w), cols.expand(h, w)], -1)",
+        replace="coords = torch.stack([z, rows.expand(h, w), cols.expand(h, w)], -1)",
+        tests="apply_froxels",
+        why="slice boundaries treated as voxel centres: the lookup reads half a froxel "
+        "too near, so fog in front of a wall thins",
+    ),
+    Mutant(
+        name="point_lights_unattenuated",
+        module=M,
+        function="light_froxels",
+        find="e = e * light_transmittance(extinction, lo, hi, p, light.position,",
+        replace="e = e * 1 or light_transmittance(extinction, lo, hi, p, light.position,",
+        tests="point_light_in_fog",
+        why="point lights shine through the fog unattenuated (only the sun and spots get "
+        "volumetric shadows): a lamp inside fog is far too bright",
+    ),
+    Mutant(
+        name="light_march_unit_steps",
+        module=M,
+        function="light_transmittance",
+        find="return torch.exp(-depth * (span * rel.norm(dim=-1) / steps))",
+        replace="return torch.exp(-depth * span / steps)",
+        tests="light_transmittance or point_light_in_fog",
+        why="optical depth summed over the segment's parameter, not its length: the "
+        "attenuation depends on the distance's units, not the medium",
+    ),
+    Mutant(
+        name="volumes_over_the_frustum",
+        module=M,
+        function="light_froxels",
+        find="bounds = volume_bounds(scene, grid) if volumetric_shadows and scene.lights else None",
+        replace="bounds = frustum_bounds(grid) if volumetric_shadows and scene.lights else None",
+        tests="sun_in_fog_box_defaults",
+        why="the extinction volume spans the whole frustum: its voxels miss a small fog "
+        "box, which then casts no volumetric shadow on itself",
+    ),
+    Mutant(
+        name="jitter_not_shared",
+        module=M,
+        function="render_froxels",
+        find="        vbuffer,\n        jitter,\n        phase=phase,",
+        replace="        vbuffer,\n        0.5,\n        phase=phase,",
+        tests="render_froxels_temporal",
+        why="material sampled at the Halton offset but lighting at the slice's middle: "
+        "scattering and light meet at different points",
+    ),
 ]

@@ -1,12 +1,12 @@
-"""Lab 1's contracts: each promise a student function's docstring makes (and the module
-docstring's conventions shared by every kernel), with the grader test that fails when that
-promise alone is broken and, where one is shipped, the mutant (``solutions/mutants/lab1.py``)
-that breaks just it. ``tests/meta/test_contracts.py`` keeps these lists, the graders and the
-mutants in step."""
+"""Lab 1's contracts: each promise a student function's docstring makes (and the
+conventions shared by every kernel, in the lab's docstring, ``lab1_intersect/__init__.py``),
+with the grader test that fails when that promise alone is broken and, where one is shipped,
+the mutant (``solutions/mutants/lab1.py``) that breaks just it.
+``tests/meta/test_contracts.py`` keeps these lists, the graders and the mutants in step."""
 
 
 def kernel(name: str) -> list:
-    """The conventions every triangle kernel promises (module docstring), with its tests."""
+    """The conventions every triangle kernel promises (the lab's docstring), with its tests."""
     return [
         ("hits in the closed interval [t_min, t_max]; t = inf, u = v = 0 for a miss",
          f"test_{name}_degenerate_and_interval_cases", None),

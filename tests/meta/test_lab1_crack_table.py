@@ -1,8 +1,9 @@
 """The pass-through table in Lab 1's docstring is the bench's output, re-run here.
 
-``python bench/lab1_intersect.py --device cpu --crack-table`` prints the table; the docstring
-of ``solutions/lab1_intersect.py`` and of the student's ``labs/lab1_intersect.py`` quote it
-verbatim, so every crack figure a student reads is one the bench produces on this checkout.
+``python bench/lab1_intersect.py --device cpu --crack-table`` prints the table; the lab's
+docstring, in ``solutions/lab1_intersect/__init__.py`` and in the student's
+``labs/lab1_intersect/__init__.py``, quotes it verbatim, so every crack figure a student reads
+is one the bench produces on this checkout.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from pathlib import Path
 import torch
 
 REPO = Path(__file__).resolve().parents[2]
+DOCSTRING = "lab1_intersect/__init__.py"  # the lab's docstring, under solutions/ and labs/
 
 
 def _bench():
@@ -35,13 +37,13 @@ def test_docstring_crack_table_is_the_benchs_output():
     bench = _bench()
     measured = bench.crack_table(ico_level=2, device=torch.device("cpu"))
     for folder in ("solutions", "labs"):
-        text = (REPO / folder / "lab1_intersect.py").read_text()
+        text = (REPO / folder / DOCSTRING).read_text()
         quoted = _quoted_table(text)
         if quoted != measured:
             diff = [f"  docstring: {a}\n  bench:     {b}" for a, b in
                     zip(quoted.splitlines(), measured.splitlines()) if a != b]
             raise AssertionError(
-                f"{folder}/lab1_intersect.py: the pass-through table differs from "
+                f"{folder}/{DOCSTRING}: the pass-through table differs from "
                 f"`python bench/lab1_intersect.py --device cpu --crack-table`; paste the "
                 f"bench's output. Differing lines:\n" + "\n".join(diff[:8]))
 
@@ -60,7 +62,7 @@ def test_docstring_far_field_table_is_the_benchs_output():
     spec.loader.exec_module(bench)
     measured = bench.table(bench.measure(bench.load_lab("lab1_intersect", "solutions", REPO)))
     for folder in ("solutions", "labs"):
-        quoted = _quoted_far_table((REPO / folder / "lab1_intersect.py").read_text())
+        quoted = _quoted_far_table((REPO / folder / DOCSTRING).read_text())
         assert quoted == measured, (
-            f"{folder}/lab1_intersect.py: the far-field table differs from `python "
+            f"{folder}/{DOCSTRING}: the far-field table differs from `python "
             f"bench/lab1_far.py`; paste the bench's output.\n{quoted}\n---\n{measured}")

@@ -1,0 +1,49 @@
+"""Task 4: ``watertight``, the watertight test of Woop, Benthin & Wald 2013: the ray sheared
+to the +z axis, 2D edge functions with a float64 fallback, no division before the hit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from course.core.raymath import check_triangle_inputs, cross, masked_result
+
+
+def watertight(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
+    """Woop, Benthin & Wald 2013, "Watertight Ray/Triangle Intersection" (JCGT 2(1)).
+
+    Same arguments and results as :func:`intersect_simple`.
+
+    1. Per ray: ``kz = argmax |d|``, ``kx = (kz + 1) % 3``, ``ky = (kx + 1) % 3`` (swapped
+       when ``d[kz] < 0`` to keep the winding), shear ``Sx = d[kx] / d[kz]``,
+       ``Sy = d[ky] / d[kz]``, ``Sz = 1 / d[kz]``: the ray becomes the +z axis.
+    2. Per vertex ``V`` (A, B, C = v0, v1, v2, relative to the origin):
+       ``Vx = V[kx] - Sx V[kz]``, ``Vy = V[ky] - Sy V[kz]``.
+    3. 2D edge functions ``U = Cx By - Cy Bx``, ``V = Ax Cy - Ay Cx``, ``W = Bx Ay - By Ax``;
+       where any of them rounds to exactly 0, all three are recomputed in float64 from
+       the same sheared floats (products of two floats are exact there), so every sign is
+       exact (the double fallback; nothing to do for float64 inputs).
+    4. Miss on mixed signs, or ``det = U + V + W == 0``, or a zero-area triangle
+       (``e1 x e2 == 0``: after the rounded shear it may have a sliver of noise area).
+    5. ``T = U Az + V Bz + W Cz`` with ``Vz = Sz V[kz]``; compare ``T`` with ``t_min det``
+       and ``t_max det`` (sign-corrected) without dividing. Only hits divide:
+       ``t = T / det``, ``u = V / det``, ``v = W / det``.
+
+    Contract: **watertight**. A shared edge gives the two triangles the same edge function
+    with opposite signs, bit for bit, so a ray through a shared edge or vertex of a closed
+    mesh hits at least one of the triangles sharing it. (Holds in eager PyTorch, where
+    every product is rounded; a compiler that fuses ``a*b - c*d`` into an FMA breaks it.)
+
+    Errors: as :func:`intersect_simple`, ValueError or TypeError naming ``origins``,
+    ``directions``, ``v0``, ``v1``, ``v2``, ``t_min`` or ``t_max``.
+
+    Hints: ``torch.argmax(d.abs(), dim=-1, keepdim=True)`` and
+    ``torch.take_along_dim(x, k, dim=-1)`` pick per-ray components with broadcasting;
+    for the fallback, index the lanes that need it with a boolean mask, compute in
+    ``float64``, cast back and write them into (a full-shape copy of) U, V, W.
+    """
+    # Provided: validates the arguments (ValueError/TypeError naming the argument).
+    t_min, t_max = check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max)
+    raise NotImplementedError("not implemented yet: watertight (task 4)")
