@@ -56,16 +56,21 @@ def _check_framebuffer(fb, name: str) -> torch.Tensor:
     Given: use it in tasks 2-4 so that every function reports bad framebuffers the same way.
     """
     if not isinstance(fb, torch.Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor framebuffer of shape (H, W) int32, "
-                        f"got {type(fb).__name__}")
+        raise TypeError(
+            f"{name}: expected a torch.Tensor framebuffer of shape (H, W) int32, "
+            f"got {type(fb).__name__}"
+        )
     if fb.dim() != 2:
-        raise ValueError(f"{name}: expected a framebuffer of shape (H, W), got shape "
-                         f"{tuple(fb.shape)}")
+        raise ValueError(
+            f"{name}: expected a framebuffer of shape (H, W), got shape {tuple(fb.shape)}"
+        )
     if fb.dtype != torch.int32:
         raise ValueError(f"{name}: expected dtype torch.int32 (packed RGBA8), got {fb.dtype}")
     if not fb.is_contiguous():
-        raise ValueError(f"{name}: expected a contiguous framebuffer (row-major, strides "
-                         f"(W, 1)), got strides {fb.stride()}; a display reads one flat block")
+        raise ValueError(
+            f"{name}: expected a contiguous framebuffer (row-major, strides "
+            f"(W, 1)), got strides {fb.stride()}; a display reads one flat block"
+        )
     return fb
 
 
@@ -293,8 +298,9 @@ def measure_copy_bandwidth(nbytes: int, pinned: bool, device, repeats: int = 5) 
     raise NotImplementedError("not implemented yet: measure_copy_bandwidth (task 3)")
 
 
-def run_frame_loop(render, n_frames: int, shape, device, overlap: bool = True,
-                   display=None) -> dict:
+def run_frame_loop(
+    render, n_frames: int, shape, device, overlap: bool = True, display=None
+) -> dict:
     """Render, download and display ``n_frames`` frames of ``shape`` on ``device``.
 
     render(frame_index, out): writes frame ``frame_index`` into ``out`` (H, W) int32.
@@ -335,8 +341,13 @@ def triangle_vertices(frame_index: int, width: int, height: int, period: int = 1
     """
     theta = 2 * math.pi * (frame_index % period) / period
     r = 0.4 * min(width, height)
-    return [(width / 2 + r * math.cos(theta + 2 * math.pi * k / 3),
-             height / 2 - r * math.sin(theta + 2 * math.pi * k / 3)) for k in range(3)]
+    return [
+        (
+            width / 2 + r * math.cos(theta + 2 * math.pi * k / 3),
+            height / 2 - r * math.sin(theta + 2 * math.pi * k / 3),
+        )
+        for k in range(3)
+    ]
 
 
 def render_rotating_triangle(frame_index: int, out: torch.Tensor, *, period: int = 120):

@@ -56,16 +56,21 @@ def _check_framebuffer(fb, name: str) -> torch.Tensor:
     Given: use it in tasks 2-4 so that every function reports bad framebuffers the same way.
     """
     if not isinstance(fb, torch.Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor framebuffer of shape (H, W) int32, "
-                        f"got {type(fb).__name__}")
+        raise TypeError(
+            f"{name}: expected a torch.Tensor framebuffer of shape (H, W) int32, "
+            f"got {type(fb).__name__}"
+        )
     if fb.dim() != 2:
-        raise ValueError(f"{name}: expected a framebuffer of shape (H, W), got shape "
-                         f"{tuple(fb.shape)}")
+        raise ValueError(
+            f"{name}: expected a framebuffer of shape (H, W), got shape {tuple(fb.shape)}"
+        )
     if fb.dtype != torch.int32:
         raise ValueError(f"{name}: expected dtype torch.int32 (packed RGBA8), got {fb.dtype}")
     if not fb.is_contiguous():
-        raise ValueError(f"{name}: expected a contiguous framebuffer (row-major, strides "
-                         f"(W, 1)), got strides {fb.stride()}; a display reads one flat block")
+        raise ValueError(
+            f"{name}: expected a contiguous framebuffer (row-major, strides "
+            f"(W, 1)), got strides {fb.stride()}; a display reads one flat block"
+        )
     return fb
 
 
@@ -130,8 +135,9 @@ def unpack_rgba8(packed: torch.Tensor) -> torch.Tensor:
     """
     # BEGIN SOLUTION (task 1)
     if not isinstance(packed, torch.Tensor):
-        raise TypeError(f"packed: expected a torch.Tensor (H, W) int32, "
-                        f"got {type(packed).__name__}")
+        raise TypeError(
+            f"packed: expected a torch.Tensor (H, W) int32, got {type(packed).__name__}"
+        )
     if packed.dim() != 2:
         raise ValueError(f"packed: expected shape (H, W), got {tuple(packed.shape)}")
     if packed.dtype != torch.int32:
@@ -199,8 +205,10 @@ def framebuffer_to_numpy(fb: torch.Tensor) -> np.ndarray:
     # BEGIN SOLUTION (task 2)
     _check_framebuffer(fb, "fb")
     if fb.device.type != "cpu":
-        raise ValueError(f"fb: expected a CPU framebuffer (numpy cannot see {fb.device} "
-                         f"memory); download it first, e.g. with a FrameDownloader")
+        raise ValueError(
+            f"fb: expected a CPU framebuffer (numpy cannot see {fb.device} "
+            f"memory); download it first, e.g. with a FrameDownloader"
+        )
     return fb.numpy()
     # END SOLUTION
 
@@ -261,11 +269,19 @@ def cuda_array_interface(fb: torch.Tensor) -> dict:
     # BEGIN SOLUTION (task 2)
     _check_framebuffer(fb, "fb")
     if fb.device.type != "cuda":
-        raise ValueError(f"fb: the CUDA array interface describes device memory; got a "
-                         f"framebuffer on {fb.device}")
+        raise ValueError(
+            f"fb: the CUDA array interface describes device memory; got a "
+            f"framebuffer on {fb.device}"
+        )
     stream = torch.cuda.current_stream(fb.device).cuda_stream
-    return {"shape": tuple(fb.shape), "typestr": "<i4", "data": (fb.data_ptr(), False),
-            "strides": None, "version": 3, "stream": stream if stream != 0 else 1}
+    return {
+        "shape": tuple(fb.shape),
+        "typestr": "<i4",
+        "data": (fb.data_ptr(), False),
+        "strides": None,
+        "version": 3,
+        "stream": stream if stream != 0 else 1,
+    }
     # END SOLUTION
 
 
@@ -302,8 +318,11 @@ class FrameDownloader:
         the next slot to write.
         """
         # BEGIN SOLUTION (task 3)
-        if (not isinstance(shape, (tuple, list, torch.Size)) or len(shape) != 2
-                or not all(isinstance(s, int) and s > 0 for s in shape)):
+        if (
+            not isinstance(shape, (tuple, list, torch.Size))
+            or len(shape) != 2
+            or not all(isinstance(s, int) and s > 0 for s in shape)
+        ):
             raise ValueError(f"shape: expected (H, W) with positive ints, got {shape!r}")
         if not isinstance(num_buffers, int) or num_buffers < 1:
             raise ValueError(f"num_buffers: expected an int >= 1, got {num_buffers!r}")
@@ -311,8 +330,9 @@ class FrameDownloader:
         self.device = torch.device(device)
         cuda = self.device.type == "cuda"
         # Pinned (page-locked) memory lets the DMA engine copy without a bounce buffer.
-        self.buffers = [torch.empty(self.shape, dtype=torch.int32, pin_memory=cuda)
-                        for _ in range(num_buffers)]
+        self.buffers = [
+            torch.empty(self.shape, dtype=torch.int32, pin_memory=cuda) for _ in range(num_buffers)
+        ]
         self.stream = torch.cuda.Stream(self.device) if cuda else None
         self.done = [None] * num_buffers  # per slot: event recorded after its copy
         self.pending = collections.deque()  # slots submitted and not yet received, oldest first
@@ -338,11 +358,15 @@ class FrameDownloader:
         # BEGIN SOLUTION (task 3)
         _check_framebuffer(frame, "frame")
         if tuple(frame.shape) != self.shape or frame.device.type != self.device.type:
-            raise ValueError(f"frame: expected shape {self.shape} on {self.device}, got "
-                             f"{tuple(frame.shape)} on {frame.device}")
+            raise ValueError(
+                f"frame: expected shape {self.shape} on {self.device}, got "
+                f"{tuple(frame.shape)} on {frame.device}"
+            )
         if len(self.pending) == len(self.buffers):
-            raise RuntimeError(f"all {len(self.buffers)} staging buffers are in flight: "
-                               f"receive() a frame before submitting another")
+            raise RuntimeError(
+                f"all {len(self.buffers)} staging buffers are in flight: "
+                f"receive() a frame before submitting another"
+            )
         slot = self.next_slot
         if self.stream is None:
             self.buffers[slot].copy_(frame)
@@ -406,14 +430,16 @@ def measure_copy_bandwidth(nbytes: int, pinned: bool, device, repeats: int = 5) 
     cuda = device.type == "cuda"
     src = torch.ones(nbytes, dtype=torch.uint8, device=device)
     dst = torch.empty(nbytes, dtype=torch.uint8, pin_memory=cuda and pinned)
-    timing = time_fn(dst.copy_, src, non_blocking=cuda and pinned, repeats=repeats, warmup=1,
-                     device=device)
+    timing = time_fn(
+        dst.copy_, src, non_blocking=cuda and pinned, repeats=repeats, warmup=1, device=device
+    )
     return nbytes / timing.median / 1e9
     # END SOLUTION
 
 
-def run_frame_loop(render, n_frames: int, shape, device, overlap: bool = True,
-                   display=None) -> dict:
+def run_frame_loop(
+    render, n_frames: int, shape, device, overlap: bool = True, display=None
+) -> dict:
     """Render, download and display ``n_frames`` frames of ``shape`` on ``device``.
 
     render(frame_index, out): writes frame ``frame_index`` into ``out`` (H, W) int32.
@@ -437,8 +463,9 @@ def run_frame_loop(render, n_frames: int, shape, device, overlap: bool = True,
     """
     # BEGIN SOLUTION (task 3)
     if not callable(render):
-        raise TypeError(f"render: expected a callable render(frame_index, out), got "
-                        f"{type(render).__name__}")
+        raise TypeError(
+            f"render: expected a callable render(frame_index, out), got {type(render).__name__}"
+        )
     if display is not None and not callable(display):
         raise TypeError(f"display: expected None or a callable, got {type(display).__name__}")
     if not isinstance(n_frames, int) or n_frames < 1:
@@ -470,8 +497,13 @@ def run_frame_loop(render, n_frames: int, shape, device, overlap: bool = True,
     if device.type == "cuda":
         torch.cuda.synchronize(device)
     seconds = time.perf_counter() - start
-    return {"frames": n_frames, "seconds": seconds, "frames_per_second": n_frames / seconds,
-            "overlap": overlap, "displayed": displayed}
+    return {
+        "frames": n_frames,
+        "seconds": seconds,
+        "frames_per_second": n_frames / seconds,
+        "overlap": overlap,
+        "displayed": displayed,
+    }
     # END SOLUTION
 
 
@@ -491,8 +523,13 @@ def triangle_vertices(frame_index: int, width: int, height: int, period: int = 1
     """
     theta = 2 * math.pi * (frame_index % period) / period
     r = 0.4 * min(width, height)
-    return [(width / 2 + r * math.cos(theta + 2 * math.pi * k / 3),
-             height / 2 - r * math.sin(theta + 2 * math.pi * k / 3)) for k in range(3)]
+    return [
+        (
+            width / 2 + r * math.cos(theta + 2 * math.pi * k / 3),
+            height / 2 - r * math.sin(theta + 2 * math.pi * k / 3),
+        )
+        for k in range(3)
+    ]
 
 
 def render_rotating_triangle(frame_index: int, out: torch.Tensor, *, period: int = 120):
@@ -526,8 +563,11 @@ def render_rotating_triangle(frame_index: int, out: torch.Tensor, *, period: int
     if isinstance(period, bool) or not isinstance(period, int) or period < 1:
         raise ValueError(f"period: expected an int >= 1, got {period!r}")
     if not isinstance(out, torch.Tensor) or out.dim() != 2 or out.dtype != torch.int32:
-        got = (f"{tuple(out.shape)} {out.dtype}" if isinstance(out, torch.Tensor)
-               else type(out).__name__)
+        got = (
+            f"{tuple(out.shape)} {out.dtype}"
+            if isinstance(out, torch.Tensor)
+            else type(out).__name__
+        )
         raise ValueError(f"out: expected a framebuffer (H, W) int32, got {got}")
     height, width = out.shape
     (x0, y0), (x1, y1), (x2, y2) = triangle_vertices(frame_index, width, height, period)
@@ -539,8 +579,10 @@ def render_rotating_triangle(frame_index: int, out: torch.Tensor, *, period: int
         return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
 
     area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
-    bary = torch.stack([edge(x1, y1, x2, y2), edge(x2, y2, x0, y0), edge(x0, y0, x1, y1)],
-                       dim=-1) / area  # (H, W, 3): weights of v0, v1, v2
+    bary = (
+        torch.stack([edge(x1, y1, x2, y2), edge(x2, y2, x0, y0), edge(x0, y0, x1, y1)], dim=-1)
+        / area
+    )  # (H, W, 3): weights of v0, v1, v2
     inside = (bary >= 0).all(dim=-1, keepdim=True)
     rgb = torch.floor(bary.clamp(0, 1) * 255 + 0.5)
     background = torch.tensor(BACKGROUND_RGBA[:3], dtype=rgb.dtype, device=dev)
@@ -572,8 +614,9 @@ class FrameLoop:
                 raise ValueError(f"{name}: expected a positive int, got {value!r}")
         self.period = period
         self.frame_index = 0
-        self.framebuffer = torch.empty((height, width), dtype=torch.int32,
-                                       device=torch.device(device))
+        self.framebuffer = torch.empty(
+            (height, width), dtype=torch.int32, device=torch.device(device)
+        )
         # END SOLUTION
 
     def step(self) -> torch.Tensor:

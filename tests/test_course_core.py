@@ -54,9 +54,10 @@ def test_default_device_argument_overrides_env(monkeypatch):
     assert default_device(torch.device("cpu")) == torch.device("cpu")
 
 
-@pytest.mark.parametrize("spec, match", [("gpu0", "prefer.*not a device"),
-                                         ("meta", "prefer.*cpu' and 'cuda"),
-                                         ("cuda:99", "prefer")])
+@pytest.mark.parametrize(
+    "spec, match",
+    [("gpu0", "prefer.*not a device"), ("meta", "prefer.*cpu' and 'cuda"), ("cuda:99", "prefer")],
+)
 def test_default_device_rejects_bad_devices(spec, match):
     with pytest.raises(ValueError, match=match):
         default_device(spec)
@@ -80,8 +81,9 @@ def test_default_device_cuda_missing():
 
 def _rays(n=4, dtype=torch.float32):
     g = torch.Generator().manual_seed(0)
-    return Rays.create(torch.rand(n, 3, generator=g, dtype=dtype),
-                       torch.randn(n, 3, generator=g, dtype=dtype))
+    return Rays.create(
+        torch.rand(n, 3, generator=g, dtype=dtype), torch.randn(n, 3, generator=g, dtype=dtype)
+    )
 
 
 def test_rays_create_broadcasts():
@@ -90,18 +92,27 @@ def test_rays_create_broadcasts():
     assert rays.origins.shape == (5, 3) and rays.origins[4].tolist() == [0.0, 1.0, 2.0]
     assert rays.t_min.shape == (5,) and torch.all(rays.t_min == 1e-3)
     assert torch.all(torch.isinf(rays.t_max))
-    assert torch.equal(rays.at(torch.full((5,), 2.0, dtype=torch.float64)),
-                       rays.origins + 2 * rays.directions)
+    assert torch.equal(
+        rays.at(torch.full((5,), 2.0, dtype=torch.float64)), rays.origins + 2 * rays.directions
+    )
 
 
-@pytest.mark.parametrize("field, value, error, match", [
-    ("origins", torch.zeros(4, 4), ValueError, r"origins: expected shape \(N, 3\), got \(4, 4\)"),
-    ("directions", torch.zeros(4, 3, dtype=torch.int32), TypeError, "directions.*floating"),
-    ("t_min", torch.zeros(4, dtype=torch.float64), TypeError, "t_min.*float32 like origins"),
-    ("t_max", torch.zeros(3), ValueError, r"t_max.*N=4 as in origins"),
-    ("origins", [[0.0, 0.0, 0.0]] * 4, TypeError, "origins.*torch.Tensor"),
-    ("t_max", torch.zeros(4, device="meta"), ValueError, "t_max.*device cpu like origins"),
-])
+@pytest.mark.parametrize(
+    "field, value, error, match",
+    [
+        (
+            "origins",
+            torch.zeros(4, 4),
+            ValueError,
+            r"origins: expected shape \(N, 3\), got \(4, 4\)",
+        ),
+        ("directions", torch.zeros(4, 3, dtype=torch.int32), TypeError, "directions.*floating"),
+        ("t_min", torch.zeros(4, dtype=torch.float64), TypeError, "t_min.*float32 like origins"),
+        ("t_max", torch.zeros(3), ValueError, r"t_max.*N=4 as in origins"),
+        ("origins", [[0.0, 0.0, 0.0]] * 4, TypeError, "origins.*torch.Tensor"),
+        ("t_max", torch.zeros(4, device="meta"), ValueError, "t_max.*device cpu like origins"),
+    ],
+)
 def test_rays_validation_names_field(field, value, error, match):
     with pytest.raises(error, match=match):
         dataclasses.replace(_rays(), **{field: value})
@@ -148,10 +159,18 @@ def test_hits_miss_and_validation():
 
 
 def test_closest_takes_nearer_and_keeps_first_on_ties():
-    h1 = Hits(torch.tensor([1.0, 5.0, math.inf, 2.0]), torch.tensor([0, 1, -1, 3]),
-              torch.full((4,), 0.1), torch.full((4,), 0.2))
-    h2 = Hits(torch.tensor([3.0, 4.0, 6.0, 2.0]), torch.tensor([10, 11, 12, 13]),
-              torch.full((4,), 0.3), torch.full((4,), 0.4))
+    h1 = Hits(
+        torch.tensor([1.0, 5.0, math.inf, 2.0]),
+        torch.tensor([0, 1, -1, 3]),
+        torch.full((4,), 0.1),
+        torch.full((4,), 0.2),
+    )
+    h2 = Hits(
+        torch.tensor([3.0, 4.0, 6.0, 2.0]),
+        torch.tensor([10, 11, 12, 13]),
+        torch.full((4,), 0.3),
+        torch.full((4,), 0.4),
+    )
     best = closest(h1, h2)
     assert best.t.tolist() == [1.0, 4.0, 6.0, 2.0]
     assert best.triangle.tolist() == [0, 11, 12, 3]
@@ -188,12 +207,18 @@ def test_look_at_is_orthonormal_and_maps_eye_to_origin():
     assert view.dtype == torch.float64
     assert torch.allclose(rotation @ rotation.T, torch.eye(3, dtype=torch.float64), atol=1e-12)
     assert torch.det(rotation).item() == pytest.approx(1.0)  # right-handed
-    assert torch.allclose(view @ torch.tensor([*eye, 1.0], dtype=torch.float64),
-                          torch.tensor([0.0, 0, 0, 1], dtype=torch.float64), atol=1e-12)
+    assert torch.allclose(
+        view @ torch.tensor([*eye, 1.0], dtype=torch.float64),
+        torch.tensor([0.0, 0, 0, 1], dtype=torch.float64),
+        atol=1e-12,
+    )
     # The target lies straight ahead, on the camera's -z axis.
     distance = math.dist(eye, target)
-    assert torch.allclose(view @ torch.tensor([*target, 1.0], dtype=torch.float64),
-                          torch.tensor([0.0, 0, -distance, 1], dtype=torch.float64), atol=1e-12)
+    assert torch.allclose(
+        view @ torch.tensor([*target, 1.0], dtype=torch.float64),
+        torch.tensor([0.0, 0, -distance, 1], dtype=torch.float64),
+        atol=1e-12,
+    )
 
 
 def test_look_at_errors():
@@ -221,20 +246,33 @@ def test_perspective_maps_near_and_far_planes():
     assert _ndc(infinite, (0.0, 0.0, -1e12))[2].item() == pytest.approx(1.0)
 
 
-@pytest.mark.parametrize("args, match", [((0.0, 1.0, 0.1, 10.0), "fov_y_deg"),
-                                         ((180.0, 1.0, 0.1, 10.0), "fov_y_deg"),
-                                         ((60.0, 0.0, 0.1, 10.0), "aspect"),
-                                         ((60.0, 1.0, 0.0, 10.0), "near"),
-                                         ((60.0, 1.0, 1.0, 1.0), "far")])
+@pytest.mark.parametrize(
+    "args, match",
+    [
+        ((0.0, 1.0, 0.1, 10.0), "fov_y_deg"),
+        ((180.0, 1.0, 0.1, 10.0), "fov_y_deg"),
+        ((60.0, 0.0, 0.1, 10.0), "aspect"),
+        ((60.0, 1.0, 0.0, 10.0), "near"),
+        ((60.0, 1.0, 1.0, 1.0), "far"),
+    ],
+)
 def test_perspective_errors(args, match):
     with pytest.raises(ValueError, match=match):
         perspective(*args)
 
 
-@pytest.mark.parametrize("changes, match", [({"width": 0}, "width"), ({"height": -3}, "height"),
-                                            ({"width": 2.5}, "width"), ({"fov_y": 180.0}, "fov_y"),
-                                            ({"fov_y": 0.0}, "fov_y"), ({"near": -1.0}, "near"),
-                                            ({"target": (1.0, 2.0, 3.0)}, "target")])
+@pytest.mark.parametrize(
+    "changes, match",
+    [
+        ({"width": 0}, "width"),
+        ({"height": -3}, "height"),
+        ({"width": 2.5}, "width"),
+        ({"fov_y": 180.0}, "fov_y"),
+        ({"fov_y": 0.0}, "fov_y"),
+        ({"near": -1.0}, "near"),
+        ({"target": (1.0, 2.0, 3.0)}, "target"),
+    ],
+)
 def test_camera_validation(changes, match):
     args = {"eye": (1.0, 2.0, 3.0), "target": (0.0, 0.0, 0.0)}
     with pytest.raises(ValueError, match=match):
@@ -242,8 +280,14 @@ def test_camera_validation(changes, match):
 
 
 def _camera(width=7, height=5):
-    return Camera(eye=(2.0, 1.5, 4.0), target=(-0.5, 0.3, 0.2), up=(0.1, 1.0, 0.0), fov_y=50.0,
-                  width=width, height=height)
+    return Camera(
+        eye=(2.0, 1.5, 4.0),
+        target=(-0.5, 0.3, 0.2),
+        up=(0.1, 1.0, 0.0),
+        fov_y=50.0,
+        width=width,
+        height=height,
+    )
 
 
 def test_primary_rays_layout():
@@ -272,13 +316,16 @@ def test_primary_rays_reproject_to_pixel_centres():
     camera = _camera()
     rays = primary_rays(camera, dtype=torch.float64, device="cpu")
     points = rays.at(torch.full((len(rays),), 3.7, dtype=torch.float64))
-    clip = torch.cat([points, torch.ones(len(rays), 1, dtype=torch.float64)], 1) @ \
-        camera.view_projection().T
+    clip = (
+        torch.cat([points, torch.ones(len(rays), 1, dtype=torch.float64)], 1)
+        @ camera.view_projection().T
+    )
     ndc = clip[:, :3] / clip[:, 3:]
     x = (ndc[:, 0] + 1) / 2 * camera.width
     y = (1 - ndc[:, 1]) / 2 * camera.height
-    rows, cols = torch.meshgrid(torch.arange(camera.height), torch.arange(camera.width),
-                                indexing="ij")
+    rows, cols = torch.meshgrid(
+        torch.arange(camera.height), torch.arange(camera.width), indexing="ij"
+    )
     assert torch.allclose(x, cols.flatten().double() + 0.5, atol=1e-9)
     assert torch.allclose(y, rows.flatten().double() + 0.5, atol=1e-9)
     assert torch.all(ndc[:, 2].abs() < 1)  # inside the depth range
@@ -295,8 +342,9 @@ def test_srgb_transfer_function():
     grid = torch.linspace(0, 1, 1001, dtype=torch.float64)
     assert torch.allclose(srgb_decode(srgb_encode(grid)), grid, atol=1e-12)
     # The two pieces meet: the function is continuous at the threshold (to ~1e-7).
-    assert srgb_encode(torch.tensor(0.0031308 + 1e-12, dtype=torch.float64)).item() == \
-        pytest.approx(0.04045, abs=1e-6)
+    assert srgb_encode(
+        torch.tensor(0.0031308 + 1e-12, dtype=torch.float64)
+    ).item() == pytest.approx(0.04045, abs=1e-6)
 
 
 def test_srgb_clamps_and_zeroes_nan():
@@ -332,8 +380,9 @@ def test_save_png_roundtrip(tmp_path):
     path = save_png(tmp_path / "sub" / "img.png", img)
     assert np.array_equal(np.asarray(Image.open(path).convert("RGB")), to_srgb8(img).numpy())
     codes = torch.randint(0, 256, (3, 2, 3), dtype=torch.uint8)
-    assert np.array_equal(np.asarray(Image.open(save_png(tmp_path / "c.png", codes))),
-                          codes.numpy())
+    assert np.array_equal(
+        np.asarray(Image.open(save_png(tmp_path / "c.png", codes))), codes.numpy()
+    )
 
 
 def test_show_draws_on_axes():
@@ -415,20 +464,41 @@ def test_result_table_json_and_markdown(tmp_path):
 
 
 def test_pareto_front():
-    rows = [{"seconds": 1.0, "error": 0.1}, {"seconds": 2.0, "error": 0.01},
-            {"seconds": 3.0, "error": 0.05}, {"seconds": 0.5, "error": 0.5},
-            {"seconds": 2.0, "error": 0.2}, {"seconds": math.nan, "error": 0.0}]
+    rows = [
+        {"seconds": 1.0, "error": 0.1},
+        {"seconds": 2.0, "error": 0.01},
+        {"seconds": 3.0, "error": 0.05},
+        {"seconds": 0.5, "error": 0.5},
+        {"seconds": 2.0, "error": 0.2},
+        {"seconds": math.nan, "error": 0.0},
+    ]
     assert pareto_front(rows, "seconds", "error") == [3, 0, 1]
-    fast = [{"rays_per_s": 1e6, "error": 0.1}, {"rays_per_s": 1e7, "error": 0.2},
-            {"rays_per_s": 1e5, "error": 0.3}]
+    fast = [
+        {"rays_per_s": 1e6, "error": 0.1},
+        {"rays_per_s": 1e7, "error": 0.2},
+        {"rays_per_s": 1e5, "error": 0.3},
+    ]
     assert pareto_front(fast, "rays_per_s", "error", maximize_x=True) == [1, 0]
 
 
 def test_pareto_plot_writes_file(tmp_path):
-    rows = [{"setting": f"s{i}", "variant": "ab"[i % 2], "rays_per_s": 10.0 ** i,
-             "error": 10.0 ** -i if i else 0.0} for i in range(5)]
-    fig = pareto_plot(rows, x="rays_per_s", y="error", label="setting", group="variant",
-                      path=tmp_path / "plots" / "p.png")
+    rows = [
+        {
+            "setting": f"s{i}",
+            "variant": "ab"[i % 2],
+            "rays_per_s": 10.0**i,
+            "error": 10.0**-i if i else 0.0,
+        }
+        for i in range(5)
+    ]
+    fig = pareto_plot(
+        rows,
+        x="rays_per_s",
+        y="error",
+        label="setting",
+        group="variant",
+        path=tmp_path / "plots" / "p.png",
+    )
     assert (tmp_path / "plots" / "p.png").stat().st_size > 0
     assert "higher is better" in fig.axes[0].get_xlabel()
     with pytest.raises(ValueError, match="rows: no row"):
@@ -440,14 +510,24 @@ def test_pareto_plot_writes_file(tmp_path):
 
 
 def test_list_scenes():
-    assert {"triangle", "cornell_box", "icosphere", "random_soup", "teapot_in_stadium",
-            "suzanne", "bunny", "bunny_x4", "bunny_x16"} <= set(list_scenes())
+    assert {
+        "triangle",
+        "cornell_box",
+        "icosphere",
+        "random_soup",
+        "teapot_in_stadium",
+        "suzanne",
+        "bunny",
+        "bunny_x4",
+        "bunny_x16",
+    } <= set(list_scenes())
     with pytest.raises(ValueError, match="name: unknown scene 'nope'"):
         load_scene("nope")
 
 
-@pytest.mark.parametrize("name", ["triangle", "icosphere", "random_soup", "cornell_box",
-                                  "suzanne", "teapot_in_stadium"])
+@pytest.mark.parametrize(
+    "name", ["triangle", "icosphere", "random_soup", "cornell_box", "suzanne", "teapot_in_stadium"]
+)
 def test_small_scenes_have_mesh_and_camera(name):
     scene = load_scene(name, device="cpu", dtype=torch.float64)
     assert scene.mesh.vertices.dtype == torch.float64 and scene.mesh.device.type == "cpu"
@@ -460,7 +540,7 @@ def test_small_scenes_have_mesh_and_camera(name):
 
 def test_icosphere_is_watertight():
     mesh = load_scene("icosphere", level=2, device="cpu").mesh
-    assert mesh.num_faces == 20 * 4 ** 2
+    assert mesh.num_faces == 20 * 4**2
     surface = trimesh.Trimesh(mesh.vertices.numpy(), mesh.faces.numpy(), process=False)
     assert surface.is_watertight and surface.is_winding_consistent and surface.volume > 0
     with pytest.raises(ValueError, match="level"):
@@ -508,16 +588,20 @@ def test_load_mesh_assets_and_formats(tmp_path):
         sphere.export(tmp_path / f"s.{suffix}")
         mesh = load_mesh(tmp_path / f"s.{suffix}", device="cpu", dtype=torch.float64)
         assert mesh.num_faces == 80
-        assert np.allclose(np.sort(mesh.triangles().numpy().reshape(-1)),
-                           np.sort(sphere.triangles.reshape(-1)), atol=1e-6)
+        assert np.allclose(
+            np.sort(mesh.triangles().numpy().reshape(-1)),
+            np.sort(sphere.triangles.reshape(-1)),
+            atol=1e-6,
+        )
 
 
 def test_load_mesh_flattens_gltf_node_transforms(tmp_path):
     tri = trimesh.Trimesh([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
     scene = trimesh.Scene()
     scene.add_geometry(tri, node_name="a")
-    scene.add_geometry(tri, node_name="b",
-                       transform=trimesh.transformations.translation_matrix([10.0, 0, 0]))
+    scene.add_geometry(
+        tri, node_name="b", transform=trimesh.transformations.translation_matrix([10.0, 0, 0])
+    )
     scene.export(tmp_path / "two.glb")
     mesh = load_mesh(tmp_path / "two.glb", device="cpu")
     assert mesh.num_faces == 2

@@ -105,8 +105,11 @@ def cpu_build(tmp_path):
         pytest.skip("no C++ compiler to build the CUDA C walk for the CPU")
     src, lib = tmp_path / "walk.cpp", tmp_path / "walk.so"
     src.write_text(CPU_SHIMS + ct.kernel_source() + CPU_ENTRY)
-    subprocess.run([cxx, "-O1", "-ffp-contract=off", "-shared", "-fPIC", str(src), "-o",
-                    str(lib)], check=True, capture_output=True)
+    subprocess.run(
+        [cxx, "-O1", "-ffp-contract=off", "-shared", "-fPIC", str(src), "-o", str(lib)],
+        check=True,
+        capture_output=True,
+    )
     walk = ctypes.CDLL(str(lib))
     pointer, number = ctypes.c_void_p, ctypes.c_int
     walk.trace_cpu.argtypes = [pointer] * 3 + [number] + [pointer] * 8 + [number, number]
@@ -117,11 +120,25 @@ def trace_cpu(walk, bvh, case, any_hit=False):
     from course.core.types import Hits
 
     n = case["origins"].shape[0]
-    out = Hits(t=torch.full((n,), -1.0), triangle=torch.full((n,), -7, dtype=torch.int64),
-               u=torch.full((n,), -1.0), v=torch.full((n,), -1.0))  # poisoned
-    args = [bvh.pairs, bvh.nodes, bvh.triangles, bvh.root_ref,
-            *(case[k].contiguous() for k in ("origins", "directions", "t_min", "t_max")),
-            out.t, out.triangle, out.u, out.v, n, int(any_hit)]
+    out = Hits(
+        t=torch.full((n,), -1.0),
+        triangle=torch.full((n,), -7, dtype=torch.int64),
+        u=torch.full((n,), -1.0),
+        v=torch.full((n,), -1.0),
+    )  # poisoned
+    args = [
+        bvh.pairs,
+        bvh.nodes,
+        bvh.triangles,
+        bvh.root_ref,
+        *(case[k].contiguous() for k in ("origins", "directions", "t_min", "t_max")),
+        out.t,
+        out.triangle,
+        out.u,
+        out.v,
+        n,
+        int(any_hit),
+    ]
     walk.trace_cpu(*(x.data_ptr() if isinstance(x, torch.Tensor) else x for x in args))
     return out
 
@@ -135,14 +152,20 @@ def test_cuda_walk_built_for_the_cpu_matches_float64_brute_force(tmp_path, shift
     closest = trace_cpu(walk, bvh, case)
     check_hits(case, closest, f"CUDA C walk on the CPU, shift {shift}", ref=ref)
     occluded = trace_cpu(walk, bvh, case, any_hit=True)
-    check_hits(case, occluded, f"CUDA C walk on the CPU, any hit, shift {shift}",
-               any_hit=True, ref=ref)
+    check_hits(
+        case, occluded, f"CUDA C walk on the CPU, any hit, shift {shift}", any_hit=True, ref=ref
+    )
     assert torch.equal(occluded.hit, closest.hit)
     v, f, o, d = axis_parallel_case()
-    axis = {"origins": o, "directions": d, "t_min": torch.zeros(len(o)),
-            "t_max": torch.full((len(o),), math.inf)}
-    check_axis_parallel(trace_cpu(walk, build_flat_bvh(v, f, leaf_size=1), axis),
-                        "CUDA C walk on the CPU")
+    axis = {
+        "origins": o,
+        "directions": d,
+        "t_min": torch.zeros(len(o)),
+        "t_max": torch.full((len(o),), math.inf),
+    }
+    check_axis_parallel(
+        trace_cpu(walk, build_flat_bvh(v, f, leaf_size=1), axis), "CUDA C walk on the CPU"
+    )
     single = build_flat_bvh(case["vertices"], case["faces"][:1])  # the root is a leaf
     assert single.root_ref == -1
     one = trace_cpu(walk, single, case)
@@ -163,8 +186,9 @@ def test_cuda_matches_float64_brute_force(shift):
     check_hits(case, occluded, f"CUDA any hit, shift {shift}", any_hit=True, ref=ref)
     assert torch.equal(occluded.hit, closest.hit)
     v, f, o, d = axis_parallel_case()
-    axis = ct.trace_flat_cuda(build_flat_bvh(v.cuda(), f.cuda(), leaf_size=1), o.cuda(),
-                              d.cuda()).to("cpu")
+    axis = ct.trace_flat_cuda(
+        build_flat_bvh(v.cuda(), f.cuda(), leaf_size=1), o.cuda(), d.cuda()
+    ).to("cpu")
     check_axis_parallel(axis, "CUDA")
 
 

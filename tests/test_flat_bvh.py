@@ -38,20 +38,24 @@ C_FP32 = 32.0  # rounding budget of a float32 Möller–Trumbore pair, in units 
 # Cases: triangles, rays, and the properties they exercise
 # --------------------------------------------------------------------------------------
 
+
 def soup(n: int, seed: int, shift: float = 0.0, degenerate: int = 8):
     """``n`` random triangles in [0, 1]^3 (+ shift), sizes log-uniform 0.002..0.3, the last
     ``degenerate`` of them collapsed to a segment or a point (zero area)."""
     g = torch.Generator().manual_seed(seed)
-    size = torch.exp(torch.empty(n, dtype=torch.float64).uniform_(math.log(2e-3), math.log(0.3),
-                                                                 generator=g))
+    size = torch.exp(
+        torch.empty(n, dtype=torch.float64).uniform_(math.log(2e-3), math.log(0.3), generator=g)
+    )
     centre = torch.rand(n, 3, dtype=torch.float64, generator=g)
-    corners = centre[:, None] + (2 * torch.rand(n, 3, 3, dtype=torch.float64, generator=g) - 1) \
-        * size[:, None, None]
+    corners = (
+        centre[:, None]
+        + (2 * torch.rand(n, 3, 3, dtype=torch.float64, generator=g) - 1) * size[:, None, None]
+    )
     k = min(degenerate, n)
     if k:
-        corners[n - k:, 2] = corners[n - k:, 1]               # a segment: v1 == v2
-        corners[n - k // 2:, 1] = corners[n - k // 2:, 0]     # a point: all three equal
-        corners[n - k // 2:, 2] = corners[n - k // 2:, 0]
+        corners[n - k :, 2] = corners[n - k :, 1]  # a segment: v1 == v2
+        corners[n - k // 2 :, 1] = corners[n - k // 2 :, 0]  # a point: all three equal
+        corners[n - k // 2 :, 2] = corners[n - k // 2 :, 0]
     vertices = (corners.reshape(-1, 3) + shift).to(torch.float32)
     return vertices, torch.arange(3 * n).reshape(n, 3)
 
@@ -93,8 +97,8 @@ def make_case(n_tris: int = 200, n_rays: int = 160, seed: int = 0, shift: float 
         t_min[i + k] = 1e-4 if k % 2 else 0.0
     i += 8
     # Bounded intervals.
-    t_max[i:i + 8] = torch.rand(8, generator=g, dtype=torch.float64) * 0.8
-    t_min[i + 4:i + 8] = t_max[i + 4:i + 8] * 0.5
+    t_max[i : i + 8] = torch.rand(8, generator=g, dtype=torch.float64) * 0.8
+    t_min[i + 4 : i + 8] = t_max[i + 4 : i + 8] * 0.5
     i += 8
     # Invalid rays: NaN/inf origin or direction, zero direction, t_max < t_min.
     o[i, 0] = math.nan
@@ -103,13 +107,21 @@ def make_case(n_tris: int = 200, n_rays: int = 160, seed: int = 0, shift: float 
     o[i + 3, 1] = -math.inf
     t_min[i + 4], t_max[i + 4] = 1.0, 0.5
     d[i + 5] = math.nan
-    return {"vertices": vertices, "faces": faces, "origins": o.float(), "directions": d.float(),
-            "t_min": t_min.float(), "t_max": t_max.float(), "invalid": list(range(i, i + 6))}
+    return {
+        "vertices": vertices,
+        "faces": faces,
+        "origins": o.float(),
+        "directions": d.float(),
+        "t_min": t_min.float(),
+        "t_max": t_max.float(),
+        "invalid": list(range(i, i + 6)),
+    }
 
 
 # --------------------------------------------------------------------------------------
 # The float64 reference and the rules a float32 traversal must follow
 # --------------------------------------------------------------------------------------
+
 
 def brute_force64(case: dict) -> dict:
     """Every (ray, triangle) pair in float64 on the float32 inputs: (N, F) tensors of t, u,
@@ -134,15 +146,27 @@ def brute_force64(case: dict) -> dict:
     uv_tol = C_FP32 * EPS32 * cond * sn
     t_tol = C_FP32 * EPS32 * cond * sn * en / dn.clamp(min=1e-30) + 1e-6 * t.abs()
     t_lo, t_hi = case["t_min"].double()[:, None], case["t_max"].double()[:, None]
-    ok = (torch.isfinite(o).all(-1) & torch.isfinite(d).all(-1) & (d != 0).any(-1)
-          & (t_lo <= t_hi) & (det != 0) & torch.isfinite(t))
+    ok = (
+        torch.isfinite(o).all(-1)
+        & torch.isfinite(d).all(-1)
+        & (d != 0).any(-1)
+        & (t_lo <= t_hi)
+        & (det != 0)
+        & torch.isfinite(t)
+    )
     w = 1 - u - v
-    near = (ok & (u >= -uv_tol) & (v >= -uv_tol) & (w >= -uv_tol) & (t >= t_lo - t_tol)
-            & (t <= t_hi + t_tol))
-    solid = (ok & (u > uv_tol) & (v > uv_tol) & (w > uv_tol) & (t > t_lo + t_tol)
-             & (t < t_hi - t_tol))
-    return {"t": t, "u": u, "v": v, "uv_tol": uv_tol, "t_tol": t_tol, "near": near,
-            "solid": solid}
+    near = (
+        ok
+        & (u >= -uv_tol)
+        & (v >= -uv_tol)
+        & (w >= -uv_tol)
+        & (t >= t_lo - t_tol)
+        & (t <= t_hi + t_tol)
+    )
+    solid = (
+        ok & (u > uv_tol) & (v > uv_tol) & (w > uv_tol) & (t > t_lo + t_tol) & (t < t_hi - t_tol)
+    )
+    return {"t": t, "u": u, "v": v, "uv_tol": uv_tol, "t_tol": t_tol, "near": near, "solid": solid}
 
 
 def check_hits(case: dict, hits, label: str, any_hit: bool = False, ref: dict | None = None):
@@ -157,7 +181,8 @@ def check_hits(case: dict, hits, label: str, any_hit: bool = False, ref: dict | 
     t_k, id_k = hits.t.double().cpu(), hits.triangle.cpu()
     u_k, v_k = hits.u.double().cpu(), hits.v.double().cpu()
     assert not (torch.isnan(t_k).any() or torch.isnan(u_k).any() or torch.isnan(v_k).any()), (
-        f"{label}: NaN in the outputs (rays {torch.isnan(t_k).nonzero()[:, 0].tolist()})")
+        f"{label}: NaN in the outputs (rays {torch.isnan(t_k).nonzero()[:, 0].tolist()})"
+    )
     miss = id_k < 0
     any_solid = ref["solid"].any(1)
     bad = (miss & any_solid).nonzero()[:, 0]
@@ -165,13 +190,16 @@ def check_hits(case: dict, hits, label: str, any_hit: bool = False, ref: dict | 
         f"{label}: ray {int(bad[0])} (origin {case['origins'][bad[0]].tolist()}, direction "
         f"{case['directions'][bad[0]].tolist()}) missed, but the float64 reference hits "
         f"triangle {int(ref['solid'][bad[0]].nonzero()[0, 0])} well inside its edges and "
-        f"interval ({len(bad)} such rays)")
+        f"interval ({len(bad)} such rays)"
+    )
     assert (t_k[miss] == math.inf).all() and (u_k[miss] == 0).all() and (v_k[miss] == 0).all(), (
-        f"{label}: a miss must report t = inf, u = v = 0")
+        f"{label}: a miss must report t = inf, u = v = 0"
+    )
     invalid = torch.tensor(case.get("invalid", []), dtype=torch.int64)
     assert (id_k[invalid] < 0).all(), (
         f"{label}: invalid rays (NaN/inf, zero direction, t_max < t_min) {invalid.tolist()} "
-        f"must miss, got triangles {id_k[invalid].tolist()}")
+        f"must miss, got triangles {id_k[invalid].tolist()}"
+    )
     hit = (~miss).nonzero()[:, 0]
     j = id_k[hit]
     assert ((j >= 0) & (j < ref["t"].shape[1])).all(), f"{label}: triangle index out of range"
@@ -180,17 +208,20 @@ def check_hits(case: dict, hits, label: str, any_hit: bool = False, ref: dict | 
         f"{label}: ray {int(hit[~near][0])} reports triangle {int(j[~near][0])}, which the "
         f"float64 reference does not hit (t = {float(ref['t'][hit[~near][0], j[~near][0]]):.7g}"
         f", u = {float(ref['u'][hit[~near][0], j[~near][0]]):.4g}, v = "
-        f"{float(ref['v'][hit[~near][0], j[~near][0]]):.4g}) ({int((~near).sum())} such rays)")
+        f"{float(ref['v'][hit[~near][0], j[~near][0]]):.4g}) ({int((~near).sum())} such rays)"
+    )
     t_err = (t_k[hit] - ref["t"][hit, j]).abs()
     t_bad = t_err > ref["t_tol"][hit, j]
     assert not t_bad.any(), (
         f"{label}: ray {int(hit[t_bad][0])}: t = {float(t_k[hit][t_bad][0]):.9g}, reference "
         f"{float(ref['t'][hit[t_bad][0], j[t_bad][0]]):.9g} (tolerance "
-        f"{float(ref['t_tol'][hit[t_bad][0], j[t_bad][0]]):.2g})")
+        f"{float(ref['t_tol'][hit[t_bad][0], j[t_bad][0]]):.2g})"
+    )
     uv_err = torch.maximum((u_k[hit] - ref["u"][hit, j]).abs(), (v_k[hit] - ref["v"][hit, j]).abs())
     uv_bad = uv_err > ref["uv_tol"][hit, j] + 1e-6
     assert not uv_bad.any(), (
-        f"{label}: ray {int(hit[uv_bad][0])}: barycentrics off by {float(uv_err[uv_bad][0]):.3g}")
+        f"{label}: ray {int(hit[uv_bad][0])}: barycentrics off by {float(uv_err[uv_bad][0]):.3g}"
+    )
     if not any_hit:
         t_solid = torch.where(ref["solid"], ref["t"], math.inf).amin(1)
         tol = ref["t_tol"].amax(1)
@@ -200,12 +231,14 @@ def check_hits(case: dict, hits, label: str, any_hit: bool = False, ref: dict | 
             f"but triangle "
             f"{int(torch.where(ref['solid'], ref['t'], math.inf)[hit[nearer][0]].argmin())} "
             f"is hit solidly nearer, at t = {float(t_solid[hit][nearer][0]):.9g}: the walk "
-            f"culled a box it should have entered")
+            f"culled a box it should have entered"
+        )
 
 
 # --------------------------------------------------------------------------------------
 # Build invariants
 # --------------------------------------------------------------------------------------
+
 
 def check_structure(bvh: FlatBVH, vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int):
     nodes, ints = bvh.nodes, bvh.node_ints
@@ -215,19 +248,22 @@ def check_structure(bvh: FlatBVH, vertices: torch.Tensor, faces: torch.Tensor, l
     leaf = count > 0
     inner = (~leaf).nonzero()[:, 0]
     assert torch.equal(torch.sort(bvh.order).values, torch.arange(f)), (
-        "every triangle must appear in exactly one leaf position")
+        "every triangle must appear in exactly one leaf position"
+    )
     # Leaves tile the triangle rows exactly once.
     owner, rows = expand_ranges(word6[leaf], count[leaf])
     covered = torch.zeros(f, dtype=torch.int64).index_add_(0, rows, torch.ones_like(rows))
     assert (covered == 1).all(), "leaves must cover every triangle row exactly once"
     assert (count[leaf] <= leaf_size).all(), (
-        f"a leaf holds {int(count[leaf].max())} triangles, more than leaf_size={leaf_size}")
+        f"a leaf holds {int(count[leaf].max())} triangles, more than leaf_size={leaf_size}"
+    )
     # Depth-first layout: left child right after its parent, right child after it.
     a, b = inner + 1, word6[inner]
     assert ((b > a) & (b < m)).all(), "right children must follow the left subtree"
     for child in (a, b):
         assert (lo[child] >= lo[inner]).all() and (hi[child] <= hi[inner]).all(), (
-            "a child's box must lie inside its parent's box")
+            "a child's box must lie inside its parent's box"
+        )
     parents = torch.zeros(m, dtype=torch.int64)
     parents[a] += 1
     parents[b] += 1
@@ -239,7 +275,8 @@ def check_structure(bvh: FlatBVH, vertices: torch.Tensor, faces: torch.Tensor, l
     owner = leaf.nonzero()[:, 0][owner]
     tri = corners[bvh.order[rows]]
     assert (tri >= lo[owner][:, None]).all() and (tri <= hi[owner][:, None]).all(), (
-        "a leaf's box must enclose its triangles")
+        "a leaf's box must enclose its triangles"
+    )
     v0 = bvh.triangles[:, 0:3]
     assert torch.equal(v0, corners[bvh.order][:, 0]), "row v0 must be the triangle's v0"
     assert bvh.depth <= STACK_DEPTH
@@ -252,23 +289,27 @@ def check_pairs(bvh: FlatBVH, leaf, inner, a, b) -> None:
     the r-th interior node; each leaf's last triangle row carries the end flag."""
     nodes, ints = bvh.nodes, bvh.node_ints
     pairs, links = bvh.pairs, bvh.pair_ints[:, 12:]
-    assert pairs.shape == (len(inner), 16), f"pairs: expected ({len(inner)}, 16), got " \
-        f"{tuple(pairs.shape)}"
+    assert pairs.shape == (len(inner), 16), (
+        f"pairs: expected ({len(inner)}, 16), got {tuple(pairs.shape)}"
+    )
     assert bvh.root_ref == (0 if len(inner) else -1)
     rank = torch.full((len(nodes),), -1, dtype=torch.int64)
     rank[inner] = torch.arange(len(inner))
     for k, child in enumerate((a, b)):
         for axis in range(3):
             assert torch.equal(pairs[:, 4 * axis + 2 * k], nodes[child, axis]), (
-                f"pairs: child {'ab'[k]}'s lower plane on axis {axis} differs from its node")
+                f"pairs: child {'ab'[k]}'s lower plane on axis {axis} differs from its node"
+            )
             assert torch.equal(pairs[:, 4 * axis + 2 * k + 1], nodes[child, 3 + axis]), (
-                f"pairs: child {'ab'[k]}'s upper plane on axis {axis} differs from its node")
+                f"pairs: child {'ab'[k]}'s upper plane on axis {axis} differs from its node"
+            )
         is_leaf = leaf[child]
         want_ref = torch.where(is_leaf, ~ints[child, 6].long(), rank[child])
         assert torch.equal(links[:, k].long(), want_ref), f"pairs: wrong ref of child {'ab'[k]}"
         want_count = torch.where(is_leaf, ints[child, 7].long(), 0)
         assert torch.equal(links[:, 2 + k].long(), want_count), (
-            f"pairs: wrong count of child {'ab'[k]}")
+            f"pairs: wrong count of child {'ab'[k]}"
+        )
     flag = bvh.triangle_ints[:, 11]
     last = torch.zeros_like(flag)
     last[(ints[leaf, 6] + ints[leaf, 7] - 1).long()] = 1
@@ -317,6 +358,7 @@ def test_single_triangle():
 # Tracing
 # --------------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("shift", [0.0, 1e5], ids=["unit", "far1e5"])
 def test_torch_trace_matches_float64_brute_force(shift):
     case = make_case(seed=3, shift=shift)
@@ -330,7 +372,8 @@ def test_torch_trace_matches_float64_brute_force(shift):
     check_hits(case, occluded, f"any hit, shift {shift}", any_hit=True, ref=ref)
     assert torch.equal(occluded.hit, closest.hit), (
         f"any hit must agree with closest hit on occlusion; differs on rays "
-        f"{(occluded.hit != closest.hit).nonzero()[:, 0].tolist()}")
+        f"{(occluded.hit != closest.hit).nonzero()[:, 0].tolist()}"
+    )
 
 
 def test_axis_parallel_ray_in_a_box_face_plane():
@@ -345,8 +388,19 @@ def axis_parallel_case():
     plane of the boxes' faces), one with a -0.0 y component: 0 * inf must not cull a box.
     Each ray meets its triangle on the edge y = 0 (an inclusive hit, v = 0 exactly) and is
     coplanar with the third triangle (det = 0: no hit)."""
-    vertices = torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0], [3, 0, 0], [2, 1, 0],
-                             [0.0, 0, 1], [3, 0, 1], [0, 0, 2]])
+    vertices = torch.tensor(
+        [
+            [0.0, 0, 0],
+            [1, 0, 0],
+            [0, 1, 0],
+            [2, 0, 0],
+            [3, 0, 0],
+            [2, 1, 0],
+            [0.0, 0, 1],
+            [3, 0, 1],
+            [0, 0, 2],
+        ]
+    )
     faces = torch.tensor([[0, 1, 2], [3, 4, 5], [6, 7, 8]])
     o = torch.tensor([[2.5, 0.0, 5.0], [0.25, 0.0, -5.0]])
     d = torch.tensor([[0.0, -0.0, -1.0], [0.0, 0.0, 1.0]])
@@ -357,7 +411,8 @@ def check_axis_parallel(hits, label: str) -> None:
     assert hits.triangle.tolist() == [1, 0] and hits.t.tolist() == [5.0, 5.0], (
         f"{label}: rays along a box face plane (direction components +-0.0) should hit "
         f"triangles [1, 0] at t = 5 on their edges; got {hits.triangle.tolist()}, "
-        f"t = {hits.t.tolist()}")
+        f"t = {hits.t.tolist()}"
+    )
 
 
 def test_trace_bvh_caches_per_scene_and_checks_inputs():
@@ -379,9 +434,11 @@ def test_trace_bvh_caches_per_scene_and_checks_inputs():
         trace_bvh(scene, o, d, 0.0, math.inf, any_hit=1)
     with pytest.raises(TypeError, match="scene"):
         trace_bvh(object(), o, d, 0.0, math.inf)
-    for args, word in [((torch.zeros(3, 2), torch.zeros(1, 3, dtype=torch.long)), "vertices"),
-                       ((torch.zeros(3, 3), torch.tensor([[0, 1, 3]])), "faces"),
-                       ((torch.zeros(3, 3), torch.tensor([[0, 1, 2]]).float()), "faces")]:
+    for args, word in [
+        ((torch.zeros(3, 2), torch.zeros(1, 3, dtype=torch.long)), "vertices"),
+        ((torch.zeros(3, 3), torch.tensor([[0, 1, 3]])), "faces"),
+        ((torch.zeros(3, 3), torch.tensor([[0, 1, 2]]).float()), "faces"),
+    ]:
         with pytest.raises((ValueError, TypeError), match=word):
             build_flat_bvh(*args)
     with pytest.raises(ValueError, match="leaf_size"):
@@ -398,10 +455,12 @@ def test_trace_bvh_on_the_bunny_matches_brute_force():
     scene = whitted_scene("bunny_mirror", device="cpu")
     rays = primary_rays(whitted_camera("bunny_mirror", 12, 12), "cpu")
     n = len(rays)
-    ours = trace_bvh(scene, rays.origins, rays.directions, torch.zeros(n),
-                     torch.full((n,), math.inf))
-    ref = trace_brute_force(scene, rays.origins, rays.directions, torch.zeros(n),
-                            torch.full((n,), math.inf))
+    ours = trace_bvh(
+        scene, rays.origins, rays.directions, torch.zeros(n), torch.full((n,), math.inf)
+    )
+    ref = trace_brute_force(
+        scene, rays.origins, rays.directions, torch.zeros(n), torch.full((n,), math.inf)
+    )
     same = (ours.triangle == ref.triangle).float().mean().item()
     assert same >= 0.99, f"only {same:.1%} of the bunny's primary rays agree with brute force"
     both = ours.hit & ref.hit
@@ -411,6 +470,7 @@ def test_trace_bvh_on_the_bunny_matches_brute_force():
 # --------------------------------------------------------------------------------------
 # Shared vertices and edges: the box tests lose nothing, the triangle test is not watertight
 # --------------------------------------------------------------------------------------
+
 
 def vertex_case(n: int = 8, seed: int = 7, per_target: int = 4, edges: bool = True) -> dict:
     """A rotated, bumpy height field of ``2 n^2`` triangles and rays aimed exactly at its
@@ -422,27 +482,39 @@ def vertex_case(n: int = 8, seed: int = 7, per_target: int = 4, edges: bool = Tr
     y, x = torch.meshgrid(xs, xs, indexing="ij")
     z = 0.15 * torch.rand(n + 1, n + 1, generator=g, dtype=torch.float64)
     rotation, _ = torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=torch.float64))
-    vertices = ((torch.stack([x, y, z], -1).reshape(-1, 3) - 0.5) @ rotation.T
-                + torch.tensor([0.3, -0.2, 0.7], dtype=torch.float64)).float()
+    vertices = (
+        (torch.stack([x, y, z], -1).reshape(-1, 3) - 0.5) @ rotation.T
+        + torch.tensor([0.3, -0.2, 0.7], dtype=torch.float64)
+    ).float()
     i = torch.arange(n)
     a = (i[:, None] * (n + 1) + i[None, :]).reshape(-1)
-    faces = torch.cat([torch.stack([a, a + 1, a + n + 2], 1),
-                       torch.stack([a, a + n + 2, a + n + 1], 1)])
+    faces = torch.cat(
+        [torch.stack([a, a + 1, a + n + 2], 1), torch.stack([a, a + n + 2, a + n + 1], 1)]
+    )
     inner = [r * (n + 1) + c for r in range(1, n) for c in range(1, n)]
     sides = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    targets = torch.cat([vertices[inner].double(),
-                         (vertices[sides[:, 0]].double() + vertices[sides[:, 1]].double()) / 2])
-    targets = targets if edges else targets[:len(inner)]
+    targets = torch.cat(
+        [
+            vertices[inner].double(),
+            (vertices[sides[:, 0]].double() + vertices[sides[:, 1]].double()) / 2,
+        ]
+    )
+    targets = targets if edges else targets[: len(inner)]
     targets = targets.repeat(per_target, 1)
     side = torch.where(torch.rand(len(targets), 1, generator=g) < 0.5, -1.0, 1.0).double()
     normal = rotation[:, 2]
-    origins = targets + side * (2 * normal + 1.5 * torch.randn(len(targets), 3, generator=g,
-                                                               dtype=torch.float64))
+    origins = targets + side * (
+        2 * normal + 1.5 * torch.randn(len(targets), 3, generator=g, dtype=torch.float64)
+    )
     vertex_rays = torch.zeros(len(targets) // per_target, dtype=torch.bool)
-    vertex_rays[:len(inner)] = True
-    return {"vertices": vertices, "faces": faces, "origins": origins.float(),
-            "directions": (targets - origins).float(), "vertex_rays": vertex_rays.repeat(
-                per_target)}
+    vertex_rays[: len(inner)] = True
+    return {
+        "vertices": vertices,
+        "faces": faces,
+        "origins": origins.float(),
+        "directions": (targets - origins).float(),
+        "vertex_rays": vertex_rays.repeat(per_target),
+    }
 
 
 def brute_force32(case: dict) -> tuple:
@@ -476,7 +548,8 @@ def check_vertex_hits(case: dict, hits, label: str, ref=None) -> None:
         f"disagree with brute force where it hits (rays {lost.nonzero()[:8, 0].tolist()}: "
         f"triangles {got[lost][:8].tolist()} at t {got_t[lost][:8].tolist()}, brute force "
         f"{triangle[lost][:8].tolist()} at {t[lost][:8].tolist()}): a box test culled the "
-        f"box holding the nearest triangle")
+        f"box holding the nearest triangle"
+    )
     extra = (triangle < 0) & (got >= 0)
     assert not extra.any(), f"{label}: hits where brute force misses: {extra.nonzero()[:8]}"
 

@@ -57,12 +57,16 @@ from course.grading.testing import (
 )
 
 LAB_MODULE = "lab2_accel"
-TASKS = {1: "Uniform grid: build, 3D DDA, mailboxing", 2: "BVH builds: LBVH and binned SAH",
-         3: "BVH traversal: stack and stackless", 4: "kd-tree: SAH build, packing, traversal",
-         5: "The common entry point: dispatch and the structure chooser",
-         6: "The two-level grid: teapot in a stadium",
-         7: "Sync-free BVH traversal: fixed shapes, any-hit",
-         8: "End to end: your builders and walks on the teapot in a stadium"}
+TASKS = {
+    1: "Uniform grid: build, 3D DDA, mailboxing",
+    2: "BVH builds: LBVH and binned SAH",
+    3: "BVH traversal: stack and stackless",
+    4: "kd-tree: SAH build, packing, traversal",
+    5: "The common entry point: dispatch and the structure chooser",
+    6: "The two-level grid: teapot in a stadium",
+    7: "Sync-free BVH traversal: fixed shapes, any-hit",
+    8: "End to end: your builders and walks on the teapot in a stadium",
+}
 END_TO_END = 8  # the one task graded on the lab's own chain; every other task on its own
 
 INF = math.inf
@@ -95,8 +99,11 @@ def mt64(origins, directions, v0, v1, v2, t_min=0.0, t_max=INF):
     hit = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= t_min) & (t <= t_max)
     inf = torch.full((), INF, dtype=F64, device=device)
     zero = torch.zeros((), dtype=F64, device=device)
-    return (torch.where(hit, t, inf).to(dtype), torch.where(hit, u, zero).to(dtype),
-            torch.where(hit, v, zero).to(dtype))
+    return (
+        torch.where(hit, t, inf).to(dtype),
+        torch.where(hit, u, zero).to(dtype),
+        torch.where(hit, v, zero).to(dtype),
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -106,8 +113,10 @@ def mt64(origins, directions, v0, v1, v2, t_min=0.0, t_max=INF):
 def mesh_of(corners: torch.Tensor, dtype=F32, device="cpu") -> Mesh:
     """A triangle soup (F, 3, 3) as a Mesh."""
     corners = corners.to(dtype)
-    return Mesh(vertices=corners.reshape(-1, 3).to(device),
-                faces=torch.arange(3 * len(corners), device=device).reshape(-1, 3))
+    return Mesh(
+        vertices=corners.reshape(-1, 3).to(device),
+        faces=torch.arange(3 * len(corners), device=device).reshape(-1, 3),
+    )
 
 
 @functools.cache
@@ -137,8 +146,9 @@ def scene(name: str) -> Mesh:
         soup = load_scene("random_soup", device="cpu", dtype=F64, n=120, seed=41).mesh
         return mesh_of(soup.vertices[soup.faces] + 1e5)
     if name == "single":
-        return mesh_of(torch.tensor([[[0.1, 0.2, 0.5], [0.9, 0.3, 0.5], [0.4, 0.8, 0.5]]],
-                                    dtype=F64))
+        return mesh_of(
+            torch.tensor([[[0.1, 0.2, 0.5], [0.9, 0.3, 0.5], [0.4, 0.8, 0.5]]], dtype=F64)
+        )
     if name == "coincident":
         one = torch.tensor([[0.1, 0.2, 0.3], [0.9, 0.3, 0.6], [0.4, 0.8, 0.4]], dtype=F64)
         return mesh_of(one.expand(40, 3, 3))
@@ -154,8 +164,9 @@ def bounds(mesh: Mesh):
     return v.amin(0), v.amax(0)
 
 
-def rays_around(mesh: Mesh, n: int, seed: int, inside: float = 0.25, clip: float = 0.15,
-                dtype=F32) -> Rays:
+def rays_around(
+    mesh: Mesh, n: int, seed: int, inside: float = 0.25, clip: float = 0.15, dtype=F32
+) -> Rays:
     """n rays at the scene: most from a sphere around its bounds aimed at random points in
     them, a fraction ``inside`` starting inside the bounds in random directions; a fraction
     ``clip`` gets a random t_max (some hits lie beyond it), a few a t_min > 0."""
@@ -169,14 +180,16 @@ def rays_around(mesh: Mesh, n: int, seed: int, inside: float = 0.25, clip: float
     starts_inside = torch.rand(n, generator=g, dtype=F64) < inside
     inner = lo + (hi - lo) * torch.rand(n, 3, generator=g, dtype=F64)
     origins = torch.where(starts_inside[:, None], inner, origins)
-    directions = torch.where(starts_inside[:, None], torch.randn(n, 3, generator=g, dtype=F64),
-                             directions)
-    t_max = torch.where(torch.rand(n, generator=g, dtype=F64) < clip,
-                        torch.rand(n, generator=g, dtype=F64) * 1.2, torch.full((n,), INF,
-                                                                            dtype=F64))
+    directions = torch.where(
+        starts_inside[:, None], torch.randn(n, 3, generator=g, dtype=F64), directions
+    )
+    t_max = torch.where(
+        torch.rand(n, generator=g, dtype=F64) < clip,
+        torch.rand(n, generator=g, dtype=F64) * 1.2,
+        torch.full((n,), INF, dtype=F64),
+    )
     t_min = torch.where(torch.rand(n, generator=g, dtype=F64) < 0.05, 0.3, 0.0)
-    return Rays.create(origins.to(dtype), directions.to(dtype), t_min.to(dtype),
-                       t_max.to(dtype))
+    return Rays.create(origins.to(dtype), directions.to(dtype), t_min.to(dtype), t_max.to(dtype))
 
 
 def teapot_rays(n: int, seed: int) -> Rays:
@@ -215,17 +228,33 @@ def axis_rays(mesh: Mesh, seed: int, per_axis: int = 24, dtype=F32) -> Rays:
 
 
 def cat_rays(*batches: Rays) -> Rays:
-    return Rays(*(torch.cat([getattr(r, f) for r in batches]) for f in
-                  ("origins", "directions", "t_min", "t_max")))
+    return Rays(
+        *(
+            torch.cat([getattr(r, f) for r in batches])
+            for f in ("origins", "directions", "t_min", "t_max")
+        )
+    )
 
 
 def bad_rays(n_each: int = 3) -> Rays:
     """NaN and inf origins and directions, and a zero direction: all must miss."""
     nan, inf = math.nan, INF
-    o = [[nan, 0.5, 0.5], [0.5, inf, 0.5], [-2.0, 0.5, 0.5], [-2.0, 0.5, 0.5], [0.5, 0.5, 0.5],
-         [-2.0, 0.4, 0.6]]
-    d = [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [nan, 0.0, 0.0], [inf, 1.0, 0.0], [0.0, 0.0, 0.0],
-         [1.0, nan, 0.0]]
+    o = [
+        [nan, 0.5, 0.5],
+        [0.5, inf, 0.5],
+        [-2.0, 0.5, 0.5],
+        [-2.0, 0.5, 0.5],
+        [0.5, 0.5, 0.5],
+        [-2.0, 0.4, 0.6],
+    ]
+    d = [
+        [1.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [nan, 0.0, 0.0],
+        [inf, 1.0, 0.0],
+        [0.0, 0.0, 0.0],
+        [1.0, nan, 0.0],
+    ]
     return Rays.create(torch.tensor(o), torch.tensor(d))
 
 
@@ -245,8 +274,15 @@ def reference(rays: Rays, mesh: Mesh):
     chunk = max(1, 2**18 // len(tri))
     for r0 in range(0, n, chunk):
         s = slice(r0, r0 + chunk)
-        t, u, v = mt64(o[s, None], d[s, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2],
-                       t_lo[s, None], t_hi[s, None])
+        t, u, v = mt64(
+            o[s, None],
+            d[s, None],
+            tri[None, :, 0],
+            tri[None, :, 1],
+            tri[None, :, 2],
+            t_lo[s, None],
+            t_hi[s, None],
+        )
         best = t.argmin(dim=1, keepdim=True)  # the first of equal minima: the lowest index
         tb = t.gather(1, best)[:, 0]
         hit = tb < INF
@@ -258,52 +294,65 @@ def reference(rays: Rays, mesh: Mesh):
 
 def describe(rays: Rays, i: int) -> str:
     o, d = rays.origins[i].tolist(), rays.directions[i].tolist()
-    return (f"origin {[float(f'{x:.6g}') for x in o]}, direction "
-            f"{[float(f'{x:.6g}') for x in d]}, t in [{rays.t_min[i].item():.4g}, "
-            f"{rays.t_max[i].item():.4g}]")
+    return (
+        f"origin {[float(f'{x:.6g}') for x in o]}, direction "
+        f"{[float(f'{x:.6g}') for x in d]}, t in [{rays.t_min[i].item():.4g}, "
+        f"{rays.t_max[i].item():.4g}]"
+    )
 
 
 def check_result(result, n: int, dtype, device, what: str, counters=("steps", "tests")):
     """The ``(Hits, counters)`` pair, each part checked for type, shape, dtype, device."""
     if not (isinstance(result, tuple) and len(result) == 2):
-        raise AssertionError(f"{what}: expected a tuple (Hits, counters), got "
-                             f"{type(result).__name__}")
+        raise AssertionError(
+            f"{what}: expected a tuple (Hits, counters), got {type(result).__name__}"
+        )
     hits, count = result
-    assert isinstance(hits, Hits), \
+    assert isinstance(hits, Hits), (
         f"{what}: expected course.core.types.Hits first, got {type(hits).__name__}"
+    )
     for name in ("t", "u", "v"):
-        check_tensor(getattr(hits, name), f"{what}: Hits.{name}", shape=(n,), dtype=dtype,
-                     device=device)
-    check_tensor(hits.triangle, f"{what}: Hits.triangle", shape=(n,), dtype=torch.int64,
-                 device=device)
+        check_tensor(
+            getattr(hits, name), f"{what}: Hits.{name}", shape=(n,), dtype=dtype, device=device
+        )
+    check_tensor(
+        hits.triangle, f"{what}: Hits.triangle", shape=(n,), dtype=torch.int64, device=device
+    )
     # The miss contract (course.core.types.Hits): triangle -1, t = inf, u = v = 0.
     tri = hits.triangle.cpu()
     if (tri < -1).any():
         i = int((tri < -1).nonzero()[0, 0])
-        raise AssertionError(f"{what}: Hits.triangle[{i}] = {int(tri[i])}: a miss is -1, a hit "
-                             f"a triangle index ({int((tri < -1).sum())} rays below -1)")
+        raise AssertionError(
+            f"{what}: Hits.triangle[{i}] = {int(tri[i])}: a miss is -1, a hit "
+            f"a triangle index ({int((tri < -1).sum())} rays below -1)"
+        )
     miss = tri == -1
     for name, want in (("t", math.inf), ("u", 0.0), ("v", 0.0)):
         value = getattr(hits, name).cpu()[miss]
         wrong = value != want
         if wrong.any():
             i = int(miss.nonzero()[:, 0][wrong][0])
-            raise AssertionError(f"{what}: ray {i} misses (triangle -1) but Hits.{name} = "
-                                 f"{getattr(hits, name)[i].item()}: a miss has {name} = {want}")
-    assert isinstance(count, dict), \
+            raise AssertionError(
+                f"{what}: ray {i} misses (triangle -1) but Hits.{name} = "
+                f"{getattr(hits, name)[i].item()}: a miss has {name} = {want}"
+            )
+    assert isinstance(count, dict), (
         f"{what}: expected a dict of counters second, got {type(count).__name__}"
+    )
     for name in counters:
         if name not in count:
             raise AssertionError(f"{what}: counters lack {name!r} (got {sorted(count)})")
-        check_tensor(count[name], f"{what}: counters[{name!r}]", shape=(n,), dtype=torch.int64,
-                     device=device)
+        check_tensor(
+            count[name], f"{what}: counters[{name!r}]", shape=(n,), dtype=torch.int64, device=device
+        )
         if (count[name] < 0).any():
             raise AssertionError(f"{what}: counters[{name!r}] has negative entries")
     return hits, {k: v.cpu() for k, v in count.items()}
 
 
-def compare(result, rays: Rays, mesh: Mesh, what: str, counters=("steps", "tests"), ref=None,
-            walks=True):
+def compare(
+    result, rays: Rays, mesh: Mesh, what: str, counters=("steps", "tests"), ref=None, walks=True
+):
     """The structure's hits must be brute force's; returns the counters (CPU). ``walks``:
     the method visits cells or nodes (every ray that tests a triangle took a step)."""
     hits, count = check_result(result, len(rays), rays.dtype, rays.device, what, counters)
@@ -314,21 +363,34 @@ def compare(result, rays: Rays, mesh: Mesh, what: str, counters=("steps", "tests
     if wrong.any():
         i = int(wrong.nonzero()[0, 0])
         if ref_i[i] >= 0:
-            detail = (f"brute force hits triangle {int(ref_i[i])} at t={ref_t[i].item():.9g}, "
-                      f"you report a miss")
+            detail = (
+                f"brute force hits triangle {int(ref_i[i])} at t={ref_t[i].item():.9g}, "
+                f"you report a miss"
+            )
         else:
-            detail = (f"brute force finds no hit in [t_min, t_max], you report triangle "
-                      f"{int(tri[i])} at t={t[i].item():.9g}")
-        raise AssertionError(f"{what}: {int(wrong.sum())} of {len(rays)} rays hit where brute "
-                             f"force misses or the other way round. First: ray {i} ({describe(rays, i)}): "
-                             f"{detail}.")
+            detail = (
+                f"brute force finds no hit in [t_min, t_max], you report triangle "
+                f"{int(tri[i])} at t={t[i].item():.9g}"
+            )
+        raise AssertionError(
+            f"{what}: {int(wrong.sum())} of {len(rays)} rays hit where brute "
+            f"force misses or the other way round. First: ray {i} ({describe(rays, i)}): "
+            f"{detail}."
+        )
     other = (tri != ref_i) & (ref_i >= 0)
     if other.any():
         # Another triangle is fine only as a tie: hit by the same ray at the same t.
         i = other.nonzero()[:, 0]
         corners = mesh.triangles()[tri[i].clamp(min=0)]
-        t_other, _, _ = mt64(rays.origins[i], rays.directions[i], corners[:, 0], corners[:, 1],
-                             corners[:, 2], rays.t_min[i], rays.t_max[i])
+        t_other, _, _ = mt64(
+            rays.origins[i],
+            rays.directions[i],
+            corners[:, 0],
+            corners[:, 1],
+            corners[:, 2],
+            rays.t_min[i],
+            rays.t_max[i],
+        )
         tol = 4 * torch.finfo(rays.dtype).eps * ref_t[i].abs()
         bad = ~((t_other - ref_t[i]).abs() <= tol) | ~((t[i] - ref_t[i]).abs() <= tol)
         if bad.any():
@@ -338,26 +400,39 @@ def compare(result, rays: Rays, mesh: Mesh, what: str, counters=("steps", "tests
                 f"ray {j} ({describe(rays, j)}): expected triangle {int(ref_i[j])} at "
                 f"t={ref_t[j].item():.9g}, got triangle {int(tri[j])} at t={t[j].item():.9g} "
                 f"(that triangle is hit at t={t_other[bad][0].item():.9g}). A nearer hit was "
-                f"missed: a cell, node or leaf skipped, or the walk stopped too early.")
+                f"missed: a cell, node or leaf skipped, or the walk stopped too early."
+            )
     same = tri == ref_i
     tol = 1e-6
     assert_close(t[same], ref_t[same], rtol=tol, name=f"{what}: t of the hits", where="hit")
     assert_close(u[same], ref_u[same], rtol=tol, atol=tol, name=f"{what}: u", where="hit")
     assert_close(v[same], ref_v[same], rtol=tol, atol=tol, name=f"{what}: v", where="hit")
     missed = tri < 0
-    assert_equal(t[missed], torch.full((int(missed.sum()),), INF, dtype=t.dtype),
-                 name=f"{what}: t of misses (inf)", where="miss")
-    assert_equal(u[missed], torch.zeros(int(missed.sum()), dtype=u.dtype),
-                 name=f"{what}: u of misses (0)", where="miss")
+    assert_equal(
+        t[missed],
+        torch.full((int(missed.sum()),), INF, dtype=t.dtype),
+        name=f"{what}: t of misses (inf)",
+        where="miss",
+    )
+    assert_equal(
+        u[missed],
+        torch.zeros(int(missed.sum()), dtype=u.dtype),
+        name=f"{what}: u of misses (0)",
+        where="miss",
+    )
     # Work: a hit needs a triangle test, and a triangle test needs a visited cell or node.
     hit = tri >= 0
     if "tests" in count and (count["tests"][hit] < 1).any():
         i = int((hit & (count["tests"] < 1)).nonzero()[0, 0])
-        raise AssertionError(f"{what}: ray {i} hits a triangle but counters['tests'] is "
-                             f"{int(count['tests'][i])}: count every ray/triangle test")
+        raise AssertionError(
+            f"{what}: ray {i} hits a triangle but counters['tests'] is "
+            f"{int(count['tests'][i])}: count every ray/triangle test"
+        )
     if walks and (count["steps"][count["tests"] > 0] < 1).any():
-        raise AssertionError(f"{what}: rays with triangle tests but counters['steps'] == 0: "
-                             f"count every cell or node a ray visits")
+        raise AssertionError(
+            f"{what}: rays with triangle tests but counters['steps'] == 0: "
+            f"count every cell or node a ray visits"
+        )
     return count
 
 
@@ -383,22 +458,28 @@ def median_bvh(mesh: Mesh, leaf_size: int = 2) -> dict:
         spread = centre[ids].amax(0) - centre[ids].amin(0)
         axis = int(spread.argmax())
         ids = ids[torch.sort(centre[ids, axis], stable=True).indices]
-        nodes[i][2] = build(ids[:len(ids) // 2])
-        nodes[i][3] = build(ids[len(ids) // 2:])
+        nodes[i][2] = build(ids[: len(ids) // 2])
+        nodes[i][3] = build(ids[len(ids) // 2 :])
         return i
 
     build(torch.arange(mesh.num_faces))
     device = mesh.device
     col = list(zip(*nodes))
-    return {"kind": "bvh", "lo": torch.stack(col[0]).to(device),
-            "hi": torch.stack(col[1]).to(device),
-            **{k: torch.tensor(col[j], dtype=torch.int64, device=device)
-               for j, k in ((2, "left"), (3, "right"), (4, "first"), (5, "count"))},
-            "triangles": torch.tensor(order, dtype=torch.int64, device=device)}
+    return {
+        "kind": "bvh",
+        "lo": torch.stack(col[0]).to(device),
+        "hi": torch.stack(col[1]).to(device),
+        **{
+            k: torch.tensor(col[j], dtype=torch.int64, device=device)
+            for j, k in ((2, "left"), (3, "right"), (4, "first"), (5, "count"))
+        },
+        "triangles": torch.tensor(order, dtype=torch.int64, device=device),
+    }
 
 
-def median_kdtree(mesh: Mesh, max_depth: int = 10, leaf_size: int = 3,
-                  at_vertices: bool = False) -> dict:
+def median_kdtree(
+    mesh: Mesh, max_depth: int = 10, leaf_size: int = 3, at_vertices: bool = False
+) -> dict:
     """A spatial-median kd-tree: split the longest axis of the node's box in the middle;
     a triangle whose bounds reach the plane goes to both sides (recursive; small meshes).
     ``at_vertices``: move each plane to the triangle bound nearest the middle (inside the
@@ -436,26 +517,32 @@ def median_kdtree(mesh: Mesh, max_depth: int = 10, leaf_size: int = 3,
     first = [0, *itertools.accumulate(count)][:-1]
     device = mesh.device
     flat = torch.cat([x for x in lists if x is not None]) if any(count) else torch.zeros(0)
-    return {"kind": "kd", "lo": lo.to(device), "hi": hi.to(device),
-            "split": torch.tensor(split, dtype=mesh.dtype, device=device),
-            "axis": torch.tensor(axis, dtype=torch.int64, device=device),
-            "left": torch.tensor(left, dtype=torch.int64, device=device),
-            "first": torch.tensor(first, dtype=torch.int64, device=device),
-            "count": torch.tensor(count, dtype=torch.int64, device=device),
-            "triangles": flat.to(torch.int64).to(device)}
+    return {
+        "kind": "kd",
+        "lo": lo.to(device),
+        "hi": hi.to(device),
+        "split": torch.tensor(split, dtype=mesh.dtype, device=device),
+        "axis": torch.tensor(axis, dtype=torch.int64, device=device),
+        "left": torch.tensor(left, dtype=torch.int64, device=device),
+        "first": torch.tensor(first, dtype=torch.int64, device=device),
+        "count": torch.tensor(count, dtype=torch.int64, device=device),
+        "triangles": flat.to(torch.int64).to(device),
+    }
 
 
 def grid_padding(lo: torch.Tensor, hi: torch.Tensor) -> float:
     """A margin around the box [lo, hi]: relative to its size, plus a few ulps of its
     coordinates (so that a scene far from the origin keeps it after rounding); 1 for a point."""
     eps = torch.finfo(lo.dtype).eps
-    pad = 1e-3 * float((hi - lo).amax()) + 64 * eps * float(torch.maximum(lo.abs(),
-                                                                          hi.abs()).amax())
+    pad = 1e-3 * float((hi - lo).amax()) + 64 * eps * float(
+        torch.maximum(lo.abs(), hi.abs()).amax()
+    )
     return pad if pad > 0 else 1.0
 
 
-def uniform_grid(mesh: Mesh, resolution=None, density: float = 2.0,
-                 pad: float | None = None) -> dict:
+def uniform_grid(
+    mesh: Mesh, resolution=None, density: float = 2.0, pad: float | None = None
+) -> dict:
     """A uniform grid in the lab's layout, built here one triangle at a time (small meshes):
     the padded scene box, ``grid_resolutions`` cells (or ``resolution``), every triangle in
     each cell its padded bounds reach. It takes ``build_grid``'s arguments, so that a test
@@ -482,9 +569,17 @@ def uniform_grid(mesh: Mesh, resolution=None, density: float = 2.0,
     pairs = torch.cat(pairs)
     pairs = pairs[torch.argsort(pairs[:, 0] * mesh.num_faces + pairs[:, 1])]
     count = torch.bincount(pairs[:, 0], minlength=int(res.prod()))
-    grid = {"kind": "grid", "lo": lo, "hi": hi, "resolution": res,
-            "cell_start": torch.cumsum(count, 0) - count, "cell_count": count,
-            "triangles": pairs[:, 1].contiguous(), "tri_cell_lo": c_lo, "tri_cell_hi": c_hi}
+    grid = {
+        "kind": "grid",
+        "lo": lo,
+        "hi": hi,
+        "resolution": res,
+        "cell_start": torch.cumsum(count, 0) - count,
+        "cell_count": count,
+        "triangles": pairs[:, 1].contiguous(),
+        "tri_cell_lo": c_lo,
+        "tri_cell_hi": c_hi,
+    }
     return {k: v.to(mesh.device) if isinstance(v, torch.Tensor) else v for k, v in grid.items()}
 
 
@@ -517,17 +612,27 @@ def given_walk(rays: Rays, mesh: Mesh):
     t, tri, u, v = reference(rays.to("cpu"), on(mesh, "cpu"))
     device, n = rays.device, len(rays)
     hits = Hits(t=t.to(device), triangle=tri.to(device), u=u.to(device), v=v.to(device))
-    return hits, {"steps": torch.ones(n, dtype=torch.int64, device=device),
-                  "tests": torch.full((n,), mesh.num_faces, dtype=torch.int64, device=device),
-                  "skipped": torch.zeros(n, dtype=torch.int64, device=device)}
+    return hits, {
+        "steps": torch.ones(n, dtype=torch.int64, device=device),
+        "tests": torch.full((n,), mesh.num_faces, dtype=torch.int64, device=device),
+        "skipped": torch.zeros(n, dtype=torch.int64, device=device),
+    }
 
 
-GIVEN_WALKS = {"grid_closest_hit": "given_walk", "two_level_closest_hit": "given_walk",
-               "bvh_closest_hit": "given_walk", "bvh_closest_hit_stackless": "given_walk",
-               "kd_closest_hit": "given_walk"}
-GIVEN_BUILDERS = {"build_grid": "uniform_grid", "build_two_level_grid": "given_two_level_grid",
-                  "build_lbvh": "given_bvh", "build_sah_bvh": "given_bvh",
-                  "build_kdtree": "given_kdtree"}
+GIVEN_WALKS = {
+    "grid_closest_hit": "given_walk",
+    "two_level_closest_hit": "given_walk",
+    "bvh_closest_hit": "given_walk",
+    "bvh_closest_hit_stackless": "given_walk",
+    "kd_closest_hit": "given_walk",
+}
+GIVEN_BUILDERS = {
+    "build_grid": "uniform_grid",
+    "build_two_level_grid": "given_two_level_grid",
+    "build_lbvh": "given_bvh",
+    "build_sah_bvh": "given_bvh",
+    "build_kdtree": "given_kdtree",
+}
 
 
 def _walk_arguments(rays, mesh, structure, intersect, mailbox=True):
@@ -553,6 +658,7 @@ def with_given(lab, given: dict, call: str, *args, **kwargs):
             grid_walk = name in ("grid_closest_hit", "two_level_closest_hit")
             calls.append((name, {"mailbox": bound["mailbox"]} if grid_walk else {}))
             return fn(bound["rays"], bound["mesh"])
+
         return replaced_by_given
 
     with replaced(lab, {name: stand_in(name) for name in given}):
@@ -568,8 +674,9 @@ def field(structure, key, what, shape, dtype, device):
     assert isinstance(structure, dict), f"{what}: expected a dict, got {type(structure).__name__}"
     if key not in structure:
         raise AssertionError(f"{what}: no {key!r} in the dict (keys: {sorted(structure)})")
-    return check_tensor(structure[key], f"{what}[{key!r}]", shape=shape, dtype=dtype,
-                        device=device).cpu()
+    return check_tensor(
+        structure[key], f"{what}[{key!r}]", shape=shape, dtype=dtype, device=device
+    ).cpu()
 
 
 def check_bvh(bvh, mesh: Mesh, what: str, leaf_size: int | None = None) -> None:
@@ -581,48 +688,74 @@ def check_bvh(bvh, mesh: Mesh, what: str, leaf_size: int | None = None) -> None:
     lo = field(bvh, "lo", what, (None, 3), mesh.dtype, device)
     m = len(lo)
     hi = field(bvh, "hi", what, (m, 3), mesh.dtype, device)
-    left, right, first, count = (field(bvh, k, what, (m,), torch.int64, device)
-                                 for k in ("left", "right", "first", "count"))
+    left, right, first, count = (
+        field(bvh, k, what, (m,), torch.int64, device) for k in ("left", "right", "first", "count")
+    )
     tris = field(bvh, "triangles", what, (f,), torch.int64, device)
     leaf = left < 0
     inner = (~leaf).nonzero()[:, 0]
-    assert_equal(left[inner], inner + 1, name=f"{what}: left child of inner node i (the "
-                 "depth-first layout puts it at i + 1)", where="inner node")
+    assert_equal(
+        left[inner],
+        inner + 1,
+        name=f"{what}: left child of inner node i (the depth-first layout puts it at i + 1)",
+        where="inner node",
+    )
     bad = (right[inner] <= inner + 1) | (right[inner] >= m)
-    assert not bad.any(), (f"{what}: inner node {int(inner[bad][0])} has right child "
-                           f"{int(right[inner][bad][0])}: expected after its left subtree, < {m}")
+    assert not bad.any(), (
+        f"{what}: inner node {int(inner[bad][0])} has right child "
+        f"{int(right[inner][bad][0])}: expected after its left subtree, < {m}"
+    )
     children = torch.sort(torch.cat((left[inner], right[inner]))).values
-    assert_equal(children, torch.arange(1, m), name=f"{what}: the children of all inner nodes "
-                 "(every node but the root exactly once)", where="position")
+    assert_equal(
+        children,
+        torch.arange(1, m),
+        name=f"{what}: the children of all inner nodes (every node but the root exactly once)",
+        where="position",
+    )
     assert (right[leaf] == -1).all(), f"{what}: leaves must have right == -1"
     assert (count[leaf] >= 1).all(), f"{what}: a leaf with no triangles"
     if leaf_size is not None and (count[leaf] > leaf_size).any():
-        raise AssertionError(f"{what}: a leaf holds {int(count[leaf].max())} triangles, "
-                             f"more than leaf_size={leaf_size}")
+        raise AssertionError(
+            f"{what}: a leaf holds {int(count[leaf].max())} triangles, "
+            f"more than leaf_size={leaf_size}"
+        )
     leaves = leaf.nonzero()[:, 0]
     starts = first[leaves].sort()
     ends = starts.values + count[leaves][starts.indices]
-    covers = (starts.values[0] == 0) and bool((starts.values[1:] == ends[:-1]).all()) \
+    covers = (
+        (starts.values[0] == 0)
+        and bool((starts.values[1:] == ends[:-1]).all())
         and int(ends[-1]) == f
+    )
     assert covers, f"{what}: the leaves' ranges [first, first + count) must tile 0..{f}"
-    assert_equal(tris.sort().values, torch.arange(f), name=f"{what}: sorted triangles (each "
-                 "triangle exactly once)", where="position")
+    assert_equal(
+        tris.sort().values,
+        torch.arange(f),
+        name=f"{what}: sorted triangles (each triangle exactly once)",
+        where="position",
+    )
     # Bounds: parents contain children, leaves their triangles (exact comparisons).
     for child in (left[inner], right[inner]):
         inside = (lo[inner] <= lo[child]).all(1) & (hi[inner] >= hi[child]).all(1)
         if not inside.all():
             i = int(inner[~inside][0])
-            raise AssertionError(f"{what}: node {i}'s box [{lo[i].tolist()}, {hi[i].tolist()}] "
-                                 f"does not contain its child's box")
+            raise AssertionError(
+                f"{what}: node {i}'s box [{lo[i].tolist()}, {hi[i].tolist()}] "
+                f"does not contain its child's box"
+            )
     owner = torch.repeat_interleave(leaves, count[leaves])
-    k = torch.repeat_interleave(first[leaves], count[leaves]) + torch.arange(len(owner)) - \
-        torch.repeat_interleave(torch.cumsum(count[leaves], 0) - count[leaves], count[leaves])
+    k = (
+        torch.repeat_interleave(first[leaves], count[leaves])
+        + torch.arange(len(owner))
+        - torch.repeat_interleave(torch.cumsum(count[leaves], 0) - count[leaves], count[leaves])
+    )
     corners = mesh.triangles().cpu()[tris[k]]
     inside = (lo[owner] <= corners.amin(1)).all(1) & (hi[owner] >= corners.amax(1)).all(1)
     if not inside.all():
         j = int((~inside).nonzero()[0, 0])
-        raise AssertionError(f"{what}: leaf {int(owner[j])} does not contain its triangle "
-                             f"{int(tris[k][j])}")
+        raise AssertionError(
+            f"{what}: leaf {int(owner[j])} does not contain its triangle {int(tris[k][j])}"
+        )
 
 
 def sah_cost(bvh) -> float:
@@ -645,16 +778,22 @@ def check_kdtree(tree, mesh: Mesh, what: str) -> None:
     hi = field(tree, "hi", what, (3,), mesh.dtype, device)
     split = field(tree, "split", what, (None,), mesh.dtype, device)
     m = len(split)
-    axis, left, first, count = (field(tree, k, what, (m,), torch.int64, device)
-                                for k in ("axis", "left", "first", "count"))
+    axis, left, first, count = (
+        field(tree, k, what, (m,), torch.int64, device) for k in ("axis", "left", "first", "count")
+    )
     tris = field(tree, "triangles", what, (None,), torch.int64, device)
     leaf = axis < 0
     inner = (~leaf).nonzero()[:, 0]
     assert ((axis >= -1) & (axis <= 2)).all(), f"{what}: axis must be -1 (leaf), 0, 1 or 2"
     assert (left[leaf] == -1).all(), f"{what}: leaves must have left == -1"
     children = torch.sort(torch.cat((left[inner], left[inner] + 1))).values
-    assert_equal(children, torch.arange(1, m), name=f"{what}: the children (left, left + 1) "
-                 "of all inner nodes (every node but the root exactly once)", where="position")
+    assert_equal(
+        children,
+        torch.arange(1, m),
+        name=f"{what}: the children (left, left + 1) "
+        "of all inner nodes (every node but the root exactly once)",
+        where="position",
+    )
     # Boxes top-down, one tree level at a time.
     box_lo, box_hi = lo.expand(m, 3).clone(), hi.expand(m, 3).clone()
     level = torch.zeros(1, dtype=torch.int64)
@@ -664,8 +803,10 @@ def check_kdtree(tree, mesh: Mesh, what: str) -> None:
         bad = (s < box_lo[level, a]) | (s > box_hi[level, a])
         if bad.any():
             i = int(level[bad][0])
-            raise AssertionError(f"{what}: node {i} splits axis {int(axis[i])} at "
-                                 f"{split[i].item()!r}, outside its box")
+            raise AssertionError(
+                f"{what}: node {i} splits axis {int(axis[i])} at "
+                f"{split[i].item()!r}, outside its box"
+            )
         below, above = left[level], left[level] + 1
         box_lo[below], box_hi[below] = box_lo[level], box_hi[level]
         box_lo[above], box_hi[above] = box_lo[level], box_hi[level]
@@ -674,23 +815,32 @@ def check_kdtree(tree, mesh: Mesh, what: str) -> None:
         level = torch.cat((below, above))
     leaves = leaf.nonzero()[:, 0]
     if (first[leaves] < 0).any() or (first[leaves] + count[leaves] > len(tris)).any():
-        raise AssertionError(f"{what}: a leaf's range [first, first + count) runs outside "
-                             f"triangles (length {len(tris)})")
+        raise AssertionError(
+            f"{what}: a leaf's range [first, first + count) runs outside "
+            f"triangles (length {len(tris)})"
+        )
     owner = torch.repeat_interleave(leaves, count[leaves])
-    k = torch.repeat_interleave(first[leaves], count[leaves]) + torch.arange(len(owner)) - \
-        torch.repeat_interleave(torch.cumsum(count[leaves], 0) - count[leaves], count[leaves])
+    k = (
+        torch.repeat_interleave(first[leaves], count[leaves])
+        + torch.arange(len(owner))
+        - torch.repeat_interleave(torch.cumsum(count[leaves], 0) - count[leaves], count[leaves])
+    )
     listed = tris[k]
     assert ((listed >= 0) & (listed < mesh.num_faces)).all(), f"{what}: bad triangle index"
     missing = torch.ones(mesh.num_faces, dtype=torch.bool)
     missing[listed] = False
-    assert not missing.any(), (f"{what}: triangle {int(missing.nonzero()[0, 0])} is in no leaf "
-                               f"({int(missing.sum())} triangles missing)")
+    assert not missing.any(), (
+        f"{what}: triangle {int(missing.nonzero()[0, 0])} is in no leaf "
+        f"({int(missing.sum())} triangles missing)"
+    )
     corners = mesh.triangles().cpu()[listed]
     touch = (corners.amin(1) <= box_hi[owner]).all(1) & (corners.amax(1) >= box_lo[owner]).all(1)
     if not touch.all():
         j = int((~touch).nonzero()[0, 0])
-        raise AssertionError(f"{what}: leaf {int(owner[j])} lists triangle {int(listed[j])}, "
-                             f"whose bounds do not reach the leaf's box")
+        raise AssertionError(
+            f"{what}: leaf {int(owner[j])} lists triangle {int(listed[j])}, "
+            f"whose bounds do not reach the leaf's box"
+        )
 
 
 # ---------------------------------------------------------------------------------------
@@ -702,21 +852,29 @@ def check_kdtree(tree, mesh: Mesh, what: str) -> None:
 def test_grid_resolution_and_build(impl, device):
     # The heuristic: about lambda N cells, nearly cubic; thin axes get one cell.
     # (10, 10, 0.37): k * extent_z = 1.9 >= 1, so z is not thin: round(1.9) = 2 cells.
-    for extent, n, lam in (((1, 1, 1), 1000, 2.0), ((4, 1, 2), 500, 3.0), ((1, 1, 0), 800, 2.0),
-                           ((10, 0.01, 10), 5000, 1.0), ((1, 1, 1), 1, 2.0),
-                           ((10, 10, 0.37), 5000, 1.0)):
+    for extent, n, lam in (
+        ((1, 1, 1), 1000, 2.0),
+        ((4, 1, 2), 500, 3.0),
+        ((1, 1, 0), 800, 2.0),
+        ((10, 0.01, 10), 5000, 1.0),
+        ((1, 1, 1), 1, 2.0),
+        ((10, 10, 0.37), 5000, 1.0),
+    ):
         res = impl.grid_resolution(extent, n, lam)
-        assert isinstance(res, tuple) and len(res) == 3 and all(
-            isinstance(r, int) and r >= 1 for r in res), (
-            f"grid_resolution{extent, n, lam}: expected a tuple of 3 ints >= 1, got {res!r}")
+        assert (
+            isinstance(res, tuple)
+            and len(res) == 3
+            and all(isinstance(r, int) and r >= 1 for r in res)
+        ), f"grid_resolution{extent, n, lam}: expected a tuple of 3 ints >= 1, got {res!r}"
         cells = math.prod(res)
         assert lam * n / 2.5 <= cells <= lam * n * 2.5 or lam * n < 8, (
             f"grid_resolution(extent={extent}, N={n}, density={lam}) = {res}: {cells} cells, "
-            f"expected about lambda N = {lam * n:g}")
+            f"expected about lambda N = {lam * n:g}"
+        )
         widths = [e / r for e, r in zip(extent, res) if r > 1]
         assert not widths or max(widths) <= 2.0 * min(widths), (
-            f"grid_resolution(extent={extent}, ...) = {res}: cell sizes {widths} are far from "
-            f"cubes")
+            f"grid_resolution(extent={extent}, ...) = {res}: cell sizes {widths} are far from cubes"
+        )
         # A one-cell axis is thin (thinner than a cell: k * extent < 1) or rounds to one cell
         # (k * extent < 1.5): never much wider than the cells of the other axes.
         single = [e for e, r in zip(extent, res) if r == 1 and e > 0]
@@ -724,23 +882,31 @@ def test_grid_resolution_and_build(impl, device):
             f"grid_resolution(extent={extent}, N={n}, density={lam}) = {res}: an axis of "
             f"extent {max(single):g} gets one cell, {max(single) / min(widths):.2f} times as "
             f"wide as the cells of the other axes ({min(widths):.4g}): only an axis with "
-            f"k * extent < 1 is thin (drops out with one cell); others get round(k * extent)")
+            f"k * extent < 1 is thin (drops out with one cell); others get round(k * extent)"
+        )
         for e, r in zip(extent, res):
             if e == 0:
-                assert r == 1, f"grid_resolution(extent={extent}, ...) = {res}: a flat axis " \
-                               f"needs one cell"
+                assert r == 1, (
+                    f"grid_resolution(extent={extent}, ...) = {res}: a flat axis needs one cell"
+                )
     expect_error("density", impl.grid_resolution, (1, 1, 1), 10, -1.0, case="density=-1")
     expect_error("extent", impl.grid_resolution, (1, 1), 10, case="a 2-element extent")
     # The build: CSR lists that are exactly each triangle's box of cells, and that box is
     # conservative (every cell the triangle's bounds touch) and tight (no farther).
     # "tiny": the soup shrunk 100 times: the padding must shrink with the scene.
-    for name, resolution in (("soup", None), ("teapot", None), ("shards", (7, 3, 5)),
-                             ("single", None), ("tiny", None)):
+    for name, resolution in (
+        ("soup", None),
+        ("teapot", None),
+        ("shards", (7, 3, 5)),
+        ("single", None),
+        ("tiny", None),
+    ):
         mesh = on(scene(name), device)
         grid = impl.build_grid(mesh, resolution)
         what = f"build_grid({name}, resolution={resolution})"
-        assert isinstance(grid, dict) and grid.get("kind") == "grid", \
+        assert isinstance(grid, dict) and grid.get("kind") == "grid", (
             f"{what}: expected a dict with kind 'grid'"
+        )
         f = mesh.num_faces
         lo = field(grid, "lo", what, (3,), mesh.dtype, device)
         hi = field(grid, "hi", what, (3,), mesh.dtype, device)
@@ -754,16 +920,23 @@ def test_grid_resolution_and_build(impl, device):
         c_lo = field(grid, "tri_cell_lo", what, (f, 3), torch.int64, device)
         c_hi = field(grid, "tri_cell_hi", what, (f, 3), torch.int64, device)
         v_lo, v_hi = bounds(mesh)
-        assert (lo.double() <= v_lo).all() and (hi.double() >= v_hi).all(), \
+        assert (lo.double() <= v_lo).all() and (hi.double() >= v_hi).all(), (
             f"{what}: the grid's box [{lo.tolist()}, {hi.tolist()}] must contain the scene"
-        assert_equal(start, torch.cumsum(count, 0) - count, name=f"{what}: cell_start (the "
-                     "exclusive prefix sum of cell_count)", where="cell")
-        assert int(count.sum()) == len(tris), f"{what}: cell_count sums to {int(count.sum())}, " \
-                                              f"but triangles has {len(tris)} entries"
+        )
+        assert_equal(
+            start,
+            torch.cumsum(count, 0) - count,
+            name=f"{what}: cell_start (the exclusive prefix sum of cell_count)",
+            where="cell",
+        )
+        assert int(count.sum()) == len(tris), (
+            f"{what}: cell_count sums to {int(count.sum())}, but triangles has {len(tris)} entries"
+        )
         # Expected (triangle, cell) pairs from the declared boxes of cells.
         span = c_hi - c_lo + 1
-        assert (span >= 1).all() and (c_lo >= 0).all() and (c_hi < res).all(), \
+        assert (span >= 1).all() and (c_lo >= 0).all() and (c_hi < res).all(), (
             f"{what}: tri_cell_lo/hi must be boxes inside the grid"
+        )
         pairs = []
         for t in range(f):
             xs, ys, zs = (torch.arange(int(c_lo[t, a]), int(c_hi[t, a]) + 1) for a in range(3))
@@ -777,43 +950,73 @@ def test_grid_resolution_and_build(impl, device):
         got = got[torch.argsort(got[:, 0] * f + got[:, 1])]
         assert got.shape == want.shape and torch.equal(got, want), (
             f"{what}: the cell lists must hold exactly the (cell, triangle) pairs of each "
-            f"triangle's box tri_cell_lo..tri_cell_hi ({len(want)} pairs), got {len(got)}")
+            f"triangle's box tri_cell_lo..tri_cell_hi ({len(want)} pairs), got {len(got)}"
+        )
         # Conservative and tight against the triangles' bounds.
         width = (hi.double() - lo.double()) / res
         corners = mesh.triangles().cpu().double()
         first = torch.floor((corners.amin(1) - lo.double()) / width).long().clamp(min=0)
         last = torch.minimum(torch.floor((corners.amax(1) - lo.double()) / width).long(), res - 1)
         assert ((c_lo <= first) & (c_hi >= last)).all(), (
-            f"{what}: a triangle's box of cells misses a cell its bounds overlap")
+            f"{what}: a triangle's box of cells misses a cell its bounds overlap"
+        )
         assert ((c_lo >= first - 1) & (c_hi <= last + 1)).all(), (
-            f"{what}: a triangle is listed in cells more than one cell beyond its bounds")
-    expect_error("resolution", impl.build_grid, on(scene("soup"), device), (0, 4, 4),
-                 case="resolution (0, 4, 4)")
+            f"{what}: a triangle is listed in cells more than one cell beyond its bounds"
+        )
+    expect_error(
+        "resolution",
+        impl.build_grid,
+        on(scene("soup"), device),
+        (0, 4, 4),
+        case="resolution (0, 4, 4)",
+    )
 
 
 @pytest.mark.task(1)
 @pytest.mark.points(1)
 def test_grid_closest_hit_matches_brute_force(impl, device):
-    for name, resolution in (("soup", None), ("shards", None), ("shards", (16, 16, 16)),
-                             ("shards", (1, 1, 1)), ("shards", (7, 2, 11)), ("ico", None),
-                             ("teapot", None)):
+    for name, resolution in (
+        ("soup", None),
+        ("shards", None),
+        ("shards", (16, 16, 16)),
+        ("shards", (1, 1, 1)),
+        ("shards", (7, 2, 11)),
+        ("ico", None),
+        ("teapot", None),
+    ):
         mesh = on(scene(name), device)
         rays = teapot_rays(200, 3) if name == "teapot" else rays_around(mesh, 240, 5)
         rays = rays.to(device)
         grid = uniform_grid(mesh, resolution)  # built here: the walk is graded on its own
-        compare(impl.grid_closest_hit(rays, mesh, grid, mt64), rays, mesh,
-                f"grid_closest_hit({name}, a grid built by the grader, resolution={resolution})",
-                counters=("steps", "tests", "skipped"))
-    expect_error("intersect", impl.grid_closest_hit, rays, mesh, grid, "mt",
-                 case="intersect='mt' (not callable)")
+        compare(
+            impl.grid_closest_hit(rays, mesh, grid, mt64),
+            rays,
+            mesh,
+            f"grid_closest_hit({name}, a grid built by the grader, resolution={resolution})",
+            counters=("steps", "tests", "skipped"),
+        )
+    expect_error(
+        "intersect",
+        impl.grid_closest_hit,
+        rays,
+        mesh,
+        grid,
+        "mt",
+        case="intersect='mt' (not callable)",
+    )
 
 
 def boundary_scene():
     """Two tiny triangles in opposite corners of the unit cube (the grid's bounds) and a
     big one in the plane x = 0.8 covering only y, z in [0.6, 1]."""
-    tiny = torch.tensor([[[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]],
-                         [[1.0, 1.0, 1.0], [0.99, 1.0, 1.0], [1.0, 0.99, 1.0]],
-                         [[0.8, 0.6, 0.6], [0.8, 1.0, 0.6], [0.8, 0.6, 1.0]]], dtype=F64)
+    tiny = torch.tensor(
+        [
+            [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]],
+            [[1.0, 1.0, 1.0], [0.99, 1.0, 1.0], [1.0, 0.99, 1.0]],
+            [[0.8, 0.6, 0.6], [0.8, 1.0, 0.6], [0.8, 0.6, 1.0]],
+        ],
+        dtype=F64,
+    )
     return mesh_of(tiny)
 
 
@@ -824,15 +1027,39 @@ def test_grid_dda_extremes(impl, device):
     # every triangle), with -0.0 and +0.0 in the zero components.
     mesh = on(boundary_scene(), device)
     grid = uniform_grid(mesh, (8, 8, 8))
-    o = torch.tensor([[-1.0, 0.47, 0.53], [2.0, 0.47, 0.53], [0.4, 0.47, 0.53],
-                      [0.4, 0.47, 0.53], [0.47, -1.0, 0.53], [0.47, 0.53, 2.0],
-                      [-1.0, 2.0, 0.5], [0.4, 0.47, 0.53]])
-    d = torch.tensor([[1.0, 0.0, -0.0], [-1.0, -0.0, 0.0], [1.0, -0.0, -0.0], [-1.0, 0.0, 0.0],
-                      [0.0, 1.0, -0.0], [-0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    o = torch.tensor(
+        [
+            [-1.0, 0.47, 0.53],
+            [2.0, 0.47, 0.53],
+            [0.4, 0.47, 0.53],
+            [0.4, 0.47, 0.53],
+            [0.47, -1.0, 0.53],
+            [0.47, 0.53, 2.0],
+            [-1.0, 2.0, 0.5],
+            [0.4, 0.47, 0.53],
+        ]
+    )
+    d = torch.tensor(
+        [
+            [1.0, 0.0, -0.0],
+            [-1.0, -0.0, 0.0],
+            [1.0, -0.0, -0.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, 1.0, -0.0],
+            [-0.0, 0.0, -1.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+        ]
+    )
     t_max = torch.tensor([INF] * 7 + [0.2])  # the last stops at x = 0.6: cells 3 and 4
     rays = Rays.create(o, d, 0.0, t_max).to(device)
-    hits, count = check_result(impl.grid_closest_hit(rays, mesh, grid, mt64), len(rays), F32,
-                               device, "grid_closest_hit (axis rays, 8^3 grid)")
+    hits, count = check_result(
+        impl.grid_closest_hit(rays, mesh, grid, mt64),
+        len(rays),
+        F32,
+        device,
+        "grid_closest_hit (axis rays, 8^3 grid)",
+    )
     want = [8, 8, 5, 4, 8, 8, 0, 2]  # cells 0..7; 7..0; 3..7; 3..0; ...; misses the grid; 3..4
     got = count["steps"].tolist()
     if got != want:
@@ -842,7 +1069,8 @@ def test_grid_dda_extremes(impl, device):
             f"of the 8 x 8 x 8 grid over the unit cube and must visit {want[i]} cells, visited "
             f"{got[i]} (all steps: {got}, expected {want}). Check the first cell, t_next for "
             f"step +1 (the cell's upper face) and -1 (its lower face), t_next = inf for zero "
-            f"components (+0.0 and -0.0), and the exit at t_max / the grid's far side.")
+            f"components (+0.0 and -0.0), and the exit at t_max / the grid's far side."
+        )
     assert (hits.triangle.cpu() == -1).all(), "grid_closest_hit: these rays hit nothing"
     assert (count["tests"] == 0).all(), "grid_closest_hit: empty cells hold nothing to test"
     # Rays starting exactly on cell boundaries, in the plane of the big triangle, and
@@ -860,17 +1088,25 @@ def test_grid_dda_extremes(impl, device):
     d[::4] += torch.rand(10, 3, generator=g) * 0.2  # some slanted
     boundary = Rays.create(p, d)
     rays = cat_rays(boundary, axis_rays(mesh, 52, 8), bad_rays())
-    compare(impl.grid_closest_hit(rays.to(device), mesh, grid, mt64), rays.to(device), mesh,
-            "grid_closest_hit (rays on cell boundaries, axis-parallel, NaN/inf)",
-            counters=("steps", "tests", "skipped"))
+    compare(
+        impl.grid_closest_hit(rays.to(device), mesh, grid, mt64),
+        rays.to(device),
+        mesh,
+        "grid_closest_hit (rays on cell boundaries, axis-parallel, NaN/inf)",
+        counters=("steps", "tests", "skipped"),
+    )
     # Axis-parallel rays in a real scene, a single flat triangle, far from the origin,
     # coincident triangles.
     for name in ("shards", "single", "far", "coincident"):
         mesh = on(scene(name), device)
         rays = cat_rays(axis_rays(mesh, 53, 6), rays_around(mesh, 80, 54)).to(device)
-        compare(impl.grid_closest_hit(rays, mesh, uniform_grid(mesh), mt64), rays, mesh,
-                f"grid_closest_hit({name}: axis-parallel and random rays)",
-                counters=("steps", "tests", "skipped"))
+        compare(
+            impl.grid_closest_hit(rays, mesh, uniform_grid(mesh), mt64),
+            rays,
+            mesh,
+            f"grid_closest_hit({name}: axis-parallel and random rays)",
+            counters=("steps", "tests", "skipped"),
+        )
 
 
 @pytest.mark.task(1)
@@ -882,23 +1118,44 @@ def test_grid_mailboxing(impl, device):
     grid = uniform_grid(mesh, (12, 12, 12))
     rays = rays_around(mesh, 300, 61, clip=0.0).to(device)
     ref = reference(rays.to("cpu"), on(mesh, "cpu"))
-    with_box = compare(impl.grid_closest_hit(rays, mesh, grid, mt64, mailbox=True), rays, mesh,
-                       "grid_closest_hit(mailbox=True)", ("steps", "tests", "skipped"), ref)
-    without = compare(impl.grid_closest_hit(rays, mesh, grid, mt64, mailbox=False), rays, mesh,
-                      "grid_closest_hit(mailbox=False)", ("steps", "tests", "skipped"), ref)
+    with_box = compare(
+        impl.grid_closest_hit(rays, mesh, grid, mt64, mailbox=True),
+        rays,
+        mesh,
+        "grid_closest_hit(mailbox=True)",
+        ("steps", "tests", "skipped"),
+        ref,
+    )
+    without = compare(
+        impl.grid_closest_hit(rays, mesh, grid, mt64, mailbox=False),
+        rays,
+        mesh,
+        "grid_closest_hit(mailbox=False)",
+        ("steps", "tests", "skipped"),
+        ref,
+    )
     most = int(with_box["tests"].max())
     assert most <= mesh.num_faces, (
         f"grid_closest_hit(mailbox=True): a ray ran {most} triangle tests in a scene of "
-        f"{mesh.num_faces} triangles: the mailbox must stop every repeated test of a triangle")
+        f"{mesh.num_faces} triangles: the mailbox must stop every repeated test of a triangle"
+    )
     assert int(without["tests"].sum()) > 2 * int(with_box["tests"].sum()), (
         "grid_closest_hit(mailbox=False) should repeat tests of triangles that span cells: "
         f"{int(without['tests'].sum())} tests without the mailbox, "
-        f"{int(with_box['tests'].sum())} with it")
-    assert_equal(with_box["steps"], without["steps"], name="grid_closest_hit: steps with and "
-                 "without the mailbox (it must not change the walk)", where="ray")
-    assert_equal(with_box["tests"] + with_box["skipped"], without["tests"],
-                 name="grid_closest_hit: tests + skipped with the mailbox == tests without it",
-                 where="ray")
+        f"{int(with_box['tests'].sum())} with it"
+    )
+    assert_equal(
+        with_box["steps"],
+        without["steps"],
+        name="grid_closest_hit: steps with and without the mailbox (it must not change the walk)",
+        where="ray",
+    )
+    assert_equal(
+        with_box["tests"] + with_box["skipped"],
+        without["tests"],
+        name="grid_closest_hit: tests + skipped with the mailbox == tests without it",
+        where="ray",
+    )
     assert (without["skipped"] == 0).all(), "grid_closest_hit(mailbox=False) skipped tests"
 
 
@@ -925,25 +1182,39 @@ def test_morton_codes(impl, device):
         lo = torch.tensor([-2.0, 0.5, 10.0], dtype=F64)
         size = torch.tensor([4.0, 1.0, 0.25], dtype=F64)
         points = lo + (q.double() + 0.5) / 2**bits * size  # cell centres: no rounding doubt
-        codes = impl.morton_codes(points.float().to(device), lo.float().to(device),
-                                  (lo + size).float().to(device), bits)
-        check_tensor(codes, f"morton_codes(bits={bits})", shape=(300,), dtype=torch.int64,
-                     device=device)
-        assert_equal(codes.cpu(), interleave(q, bits), name=f"morton_codes(bits={bits}) of cell "
-                     "centres (x's bit i at code bit 3i+2, y's at 3i+1, z's at 3i)", where="point")
+        codes = impl.morton_codes(
+            points.float().to(device), lo.float().to(device), (lo + size).float().to(device), bits
+        )
+        check_tensor(
+            codes, f"morton_codes(bits={bits})", shape=(300,), dtype=torch.int64, device=device
+        )
+        assert_equal(
+            codes.cpu(),
+            interleave(q, bits),
+            name=f"morton_codes(bits={bits}) of cell "
+            "centres (x's bit i at code bit 3i+2, y's at 3i+1, z's at 3i)",
+            where="point",
+        )
     # The box's corners and beyond clamp; a flat axis quantises to 0.
     lo, hi = torch.zeros(3, device=device), torch.ones(3, device=device)
     edge = torch.tensor([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [-5.0, 2.0, 0.5]], device=device)
     codes = impl.morton_codes(edge, lo, hi, 10).cpu()
     assert codes.tolist()[:2] == [0, 2**30 - 1], (
         f"morton_codes: the box's corners lo and hi must get codes 0 and 2^30 - 1, got "
-        f"{codes.tolist()[:2]} (clamp q to [0, 2^bits - 1])")
-    assert codes[2] == interleave(torch.tensor([[0, 1023, 512]]), 10)[0], \
+        f"{codes.tolist()[:2]} (clamp q to [0, 2^bits - 1])"
+    )
+    assert codes[2] == interleave(torch.tensor([[0, 1023, 512]]), 10)[0], (
         "morton_codes: points outside the box clamp to its faces"
-    flat = impl.morton_codes(torch.tensor([[0.3, 0.7, 5.0]], device=device), lo,
-                             torch.tensor([1.0, 1.0, 0.0], device=device), 10).cpu()
-    assert flat[0] == interleave(torch.tensor([[307, 716, 0]]), 10)[0], \
+    )
+    flat = impl.morton_codes(
+        torch.tensor([[0.3, 0.7, 5.0]], device=device),
+        lo,
+        torch.tensor([1.0, 1.0, 0.0], device=device),
+        10,
+    ).cpu()
+    assert flat[0] == interleave(torch.tensor([[307, 716, 0]]), 10)[0], (
         "morton_codes: an axis with hi == lo quantises to 0"
+    )
     expect_error("bits", impl.morton_codes, edge, lo, hi, 22, case="bits=22 (66-bit codes)")
     expect_error("points", impl.morton_codes, edge[:, :2], lo, hi, case="points of shape (3, 2)")
 
@@ -963,7 +1234,8 @@ def test_lbvh_structure_and_quality(impl, device):
         got, median = sah_cost(impl.build_lbvh(mesh, 4)), sah_cost(median_bvh(mesh, 4))
         assert got <= 1.25 * median, (
             f"build_lbvh({name}): SAH cost {got:.1f}, an object-median BVH costs {median:.1f}: "
-            f"split each range where the highest differing bit of its Morton codes flips")
+            f"split each range where the highest differing bit of its Morton codes flips"
+        )
     expect_error("leaf_size", impl.build_lbvh, on(scene("soup"), device), 0, case="leaf_size=0")
 
 
@@ -974,8 +1246,9 @@ def test_sah_bvh_structure_and_quality(impl, device):
         mesh = on(scene(name), device)
         for leaf_size, bins in ((1, 8), (4, 16)):
             bvh = impl.build_sah_bvh(mesh, leaf_size, bins)
-            check_bvh(bvh, mesh, f"build_sah_bvh({name}, leaf_size={leaf_size}, bins={bins})",
-                      leaf_size)
+            check_bvh(
+                bvh, mesh, f"build_sah_bvh({name}, leaf_size={leaf_size}, bins={bins})", leaf_size
+            )
     # Quality: the SAH beats the object median, by far in the teapot in a stadium.
     for name, factor in (("soup", 1.0), ("ico", 1.0), ("teapot", 0.5)):
         mesh = on(scene(name), device)
@@ -983,7 +1256,8 @@ def test_sah_bvh_structure_and_quality(impl, device):
         assert got <= factor * median, (
             f"build_sah_bvh({name}): SAH cost {got:.1f}, expected at most {factor} x the "
             f"{median:.1f} of an object-median BVH. The cost of a split is A(left) N(left) + "
-            f"A(right) N(right) with A the area of the union of the *triangle* bounds per side")
+            f"A(right) N(right) with A the area of the union of the *triangle* bounds per side"
+        )
     mesh = on(scene("soup"), device)
     expect_error("leaf_size", impl.build_sah_bvh, mesh, 0, case="leaf_size=0")
     expect_error("bins", impl.build_sah_bvh, mesh, 4, 1, case="bins=1")
@@ -998,11 +1272,15 @@ def test_sah_bvh_structure_and_quality(impl, device):
 def test_bvh_stack_traversal(impl, device):
     for name, leaf_size in (("soup", 1), ("shards", 3), ("ico", 2), ("teapot", 4)):
         mesh = on(scene(name), device)
-        rays = (teapot_rays(200, 81) if name == "teapot" else rays_around(mesh, 240, 82))
+        rays = teapot_rays(200, 81) if name == "teapot" else rays_around(mesh, 240, 82)
         rays = rays.to(device)
         bvh = median_bvh(mesh, leaf_size)
-        count = compare(impl.bvh_closest_hit(rays, mesh, bvh, mt64), rays, mesh,
-                        f"bvh_closest_hit({name}, median BVH, leaf_size={leaf_size})")
+        count = compare(
+            impl.bvh_closest_hit(rays, mesh, bvh, mt64),
+            rays,
+            mesh,
+            f"bvh_closest_hit({name}, median BVH, leaf_size={leaf_size})",
+        )
         if name == "ico":
             # From outside a closed sphere, the near side holds the hit: near child first
             # tests about 4 triangles per ray here; far child first about 9.
@@ -1010,12 +1288,18 @@ def test_bvh_stack_traversal(impl, device):
             assert mean <= 6.0, (
                 f"bvh_closest_hit: {mean:.2f} triangle tests per ray into a closed icosphere; "
                 f"visiting the near child first (pop it first: push it last) and culling nodes "
-                f"beyond the closest hit needs about 4")
+                f"beyond the closest hit needs about 4"
+            )
     # Rays that miss the root box visit nothing.
     mesh = on(scene("soup"), device)
     away = Rays.create(torch.full((5, 3), 3.0), torch.tensor([[1.0, 0, 0]] * 5)).to(device)
-    _, count = check_result(impl.bvh_closest_hit(away, mesh, median_bvh(mesh), mt64), 5, F32,
-                            device, "bvh_closest_hit (rays away from the scene)")
+    _, count = check_result(
+        impl.bvh_closest_hit(away, mesh, median_bvh(mesh), mt64),
+        5,
+        F32,
+        device,
+        "bvh_closest_hit (rays away from the scene)",
+    )
     assert (count["tests"] == 0).all(), "bvh_closest_hit: rays that miss the root test nothing"
 
 
@@ -1045,8 +1329,9 @@ def leaf_tests_bound(rays: Rays, bvh) -> torch.Tensor:
     near, far = torch.minimum(t0, t1), torch.maximum(t0, t1)
     near = torch.where(near.isnan(), -INF, near).amax(-1)
     far = torch.where(far.isnan(), INF, far).amin(-1)
-    crossed = (torch.maximum(near, rays.t_min.double()[:, None])
-               <= torch.minimum(far, rays.t_max.double()[:, None]))
+    crossed = torch.maximum(near, rays.t_min.double()[:, None]) <= torch.minimum(
+        far, rays.t_max.double()[:, None]
+    )
     return (crossed.long() * bvh["count"].cpu()[leaf]).sum(1)
 
 
@@ -1054,23 +1339,31 @@ def leaf_tests_bound(rays: Rays, bvh) -> torch.Tensor:
 @pytest.mark.points(1)
 def test_bvh_stackless_traversal(impl, device):
     # A hand-made tree: 0 -> (1, 4), 1 -> (2, 3), 4 -> (5, 6).
-    tree = {"left": torch.tensor([1, 2, -1, -1, 5, -1, -1], device=device),
-            "right": torch.tensor([4, 3, -1, -1, 6, -1, -1], device=device)}
+    tree = {
+        "left": torch.tensor([1, 2, -1, -1, 5, -1, -1], device=device),
+        "right": torch.tensor([4, 3, -1, -1, 6, -1, -1], device=device),
+    }
     got = impl.bvh_skip_indices(tree)
     check_tensor(got, "bvh_skip_indices", shape=(7,), dtype=torch.int64, device=device)
     assert got.tolist() == [7, 4, 3, 4, 7, 6, 7], (
         f"bvh_skip_indices of the tree 0 -> (1, 4), 1 -> (2, 3), 4 -> (5, 6): expected "
         f"[7, 4, 3, 4, 7, 6, 7] (the node after each subtree, 7 = past the end), got "
-        f"{got.tolist()}")
+        f"{got.tolist()}"
+    )
     for name, leaf_size in (("soup", 1), ("shards", 3), ("ico", 2), ("teapot", 4)):
         mesh = on(scene(name), device)
         bvh = median_bvh(mesh, leaf_size)
-        assert impl.bvh_skip_indices(bvh).tolist() == skip_reference(bvh), \
+        assert impl.bvh_skip_indices(bvh).tolist() == skip_reference(bvh), (
             f"bvh_skip_indices({name}): wrong links"
-        rays = (teapot_rays(200, 91) if name == "teapot" else rays_around(mesh, 240, 92))
+        )
+        rays = teapot_rays(200, 91) if name == "teapot" else rays_around(mesh, 240, 92)
         rays = rays.to(device)
-        stackless = compare(impl.bvh_closest_hit_stackless(rays, mesh, bvh, mt64), rays, mesh,
-                            f"bvh_closest_hit_stackless({name}, median BVH)")
+        stackless = compare(
+            impl.bvh_closest_hit_stackless(rays, mesh, bvh, mt64),
+            rays,
+            mesh,
+            f"bvh_closest_hit_stackless({name}, median BVH)",
+        )
         hit_root = stackless["steps"] >= 1
         assert hit_root.any(), "bvh_closest_hit_stackless: count a step per node visited"
         # A leaf whose box the ray misses is skipped: its triangles are never tested.
@@ -1082,7 +1375,8 @@ def test_bvh_stackless_traversal(impl, device):
                 f"bvh_closest_hit_stackless({name}, median BVH): {int(over.sum())} rays test "
                 f"triangles of leaves whose box they miss. First: ray {i} ({describe(rays.to('cpu'), i)}) "
                 f"ran {int(stackless['tests'][i])} tests, its segment crosses leaf boxes of "
-                f"{int(most[i])} triangles: test a leaf's triangles only if its box is hit")
+                f"{int(most[i])} triangles: test a leaf's triangles only if its box is hit"
+            )
 
 
 @pytest.mark.task(3)
@@ -1102,13 +1396,20 @@ def test_bvh_traversal_extremes(impl, device):
     d = torch.randn(30, 3, generator=g, dtype=F64)
     d[:10, 0], d[10:20, 1], d[20:, 2] = 0.0, -0.0, 0.0
     faces = Rays.create(p.float(), d.float())
-    cases.append(("soup, rays in the root's face planes", mesh, median_bvh(mesh, 2),
-                  cat_rays(faces, axis_rays(mesh, 104, 6))))
+    cases.append(
+        (
+            "soup, rays in the root's face planes",
+            mesh,
+            median_bvh(mesh, 2),
+            cat_rays(faces, axis_rays(mesh, 104, 6)),
+        )
+    )
     # float64 rays and mesh.
-    m64 = Mesh(vertices=scene("shards").vertices.double().to(device),
-               faces=scene("shards").faces.to(device))
-    cases.append(("shards, float64", m64, median_bvh(m64, 3), rays_around(m64, 80, 105,
-                                                                          dtype=F64)))
+    m64 = Mesh(
+        vertices=scene("shards").vertices.double().to(device),
+        faces=scene("shards").faces.to(device),
+    )
+    cases.append(("shards, float64", m64, median_bvh(m64, 3), rays_around(m64, 80, 105, dtype=F64)))
     for name, mesh, bvh, rays in cases:
         rays = rays.to(device)
         ref = reference(rays.to("cpu"), on(mesh, "cpu"))
@@ -1119,27 +1420,53 @@ def test_bvh_traversal_extremes(impl, device):
     mesh = on(scene("shards"), device)
     rays = rays_around(mesh, 8, 106).to(device)
     m64 = Mesh(vertices=mesh.vertices.double(), faces=mesh.faces)
-    expect_error("mesh", impl.bvh_closest_hit, rays, m64, median_bvh(m64), mt64,
-                 case="a float64 mesh with float32 rays")
-    expect_error("bvh", impl.bvh_closest_hit, rays, mesh, uniform_grid(mesh), mt64,
-                 case="a grid passed as the bvh")
+    expect_error(
+        "mesh",
+        impl.bvh_closest_hit,
+        rays,
+        m64,
+        median_bvh(m64),
+        mt64,
+        case="a float64 mesh with float32 rays",
+    )
+    expect_error(
+        "bvh",
+        impl.bvh_closest_hit,
+        rays,
+        mesh,
+        uniform_grid(mesh),
+        mt64,
+        case="a grid passed as the bvh",
+    )
     # Coincident triangles: the tie goes to the lowest index, whatever leaf it sits in.
     mesh = on(scene("coincident"), device)
-    rays = Rays.create(torch.tensor([[0.4, 0.4, -1.0], [0.45, 0.4, 2.0]]),
-                       torch.tensor([[0.0, 0.0, 1.0], [-0.0, 0.0, -1.0]]))
+    rays = Rays.create(
+        torch.tensor([[0.4, 0.4, -1.0], [0.45, 0.4, 2.0]]),
+        torch.tensor([[0.0, 0.0, 1.0], [-0.0, 0.0, -1.0]]),
+    )
     for fn in (impl.bvh_closest_hit, impl.bvh_closest_hit_stackless):
         hits, _ = fn(rays.to(device), mesh, median_bvh(mesh, 3), mt64)
         assert hits.triangle.tolist() == [0, 0], (
             f"BVH traversal: 40 coincident triangles, the rays hit all at the same t: the "
-            f"lowest index (0) must win for both rays, got {hits.triangle.tolist()}")
+            f"lowest index (0) must win for both rays, got {hits.triangle.tolist()}"
+        )
     # Two overlapping triangles in the plane z = 0.5, triangle 1 in the left leaf: the ray
     # hits it at t = 1.5, and the right leaf (triangle 0), flat, is entered at t = 1.5 too:
     # a node is culled only if its entry t is *beyond* the closest hit, so triangle 0 wins.
-    flat = mesh_of(torch.tensor([[[0.25, 0.25, 0.5], [1.0, 0.25, 0.5], [0.25, 1.0, 0.5]],
-                                 [[0.0, 0.0, 0.5], [0.75, 0.0, 0.5], [0.0, 0.75, 0.5]]],
-                                dtype=F64), device=device)
-    rays = Rays.create(torch.tensor([[0.3125, 0.3125, -1.0], [0.3125, 0.3125, 2.0]]),
-                       torch.tensor([[0.0, -0.0, 1.0], [-0.0, 0.0, -1.0]])).to(device)
+    flat = mesh_of(
+        torch.tensor(
+            [
+                [[0.25, 0.25, 0.5], [1.0, 0.25, 0.5], [0.25, 1.0, 0.5]],
+                [[0.0, 0.0, 0.5], [0.75, 0.0, 0.5], [0.0, 0.75, 0.5]],
+            ],
+            dtype=F64,
+        ),
+        device=device,
+    )
+    rays = Rays.create(
+        torch.tensor([[0.3125, 0.3125, -1.0], [0.3125, 0.3125, 2.0]]),
+        torch.tensor([[0.0, -0.0, 1.0], [-0.0, 0.0, -1.0]]),
+    ).to(device)
     bvh = median_bvh(flat, 1)
     assert bvh["triangles"].tolist() == [1, 0], "test set-up: triangle 1 in the left leaf"
     for fn in (impl.bvh_closest_hit, impl.bvh_closest_hit_stackless):
@@ -1149,7 +1476,8 @@ def test_bvh_traversal_extremes(impl, device):
             f"{label}: two overlapping triangles in the plane z = 0.5, both hit at t = 1.5, "
             f"triangle 1's leaf first; the other leaf's box (flat) is entered at t = 1.5, "
             f"not beyond the closest hit: visit it, the lowest index (0) must win; got "
-            f"triangles {hits.triangle.tolist()} at t = {hits.t.tolist()}")
+            f"triangles {hits.triangle.tolist()} at t = {hits.t.tolist()}"
+        )
 
 
 # ---------------------------------------------------------------------------------------
@@ -1161,47 +1489,63 @@ def test_bvh_traversal_extremes(impl, device):
 def test_kd_pack_unpack(impl, device):
     # Node 0 splits x at 0.25 (children 1, 2); node 1 is a leaf of 3 triangles from 0; node
     # 2 splits z at -1.5 (children 3, 4); leaves 3 and 4 hold 2 and 0 triangles from 3.
-    tree = {"split": torch.tensor([0.25, 0.0, -1.5, 0.0, 0.0], device=device),
-            "axis": torch.tensor([0, -1, 2, -1, -1], device=device),
-            "left": torch.tensor([1, -1, 3, -1, -1], device=device),
-            "first": torch.tensor([0, 0, 0, 3, 5], device=device),
-            "count": torch.tensor([0, 3, 0, 2, 0], device=device)}
+    tree = {
+        "split": torch.tensor([0.25, 0.0, -1.5, 0.0, 0.0], device=device),
+        "axis": torch.tensor([0, -1, 2, -1, -1], device=device),
+        "left": torch.tensor([1, -1, 3, -1, -1], device=device),
+        "first": torch.tensor([0, 0, 0, 3, 5], device=device),
+        "count": torch.tensor([0, 3, 0, 2, 0], device=device),
+    }
     packed = impl.kd_pack(tree)
     check_tensor(packed, "kd_pack", shape=(5, 2), dtype=torch.int32, device=device)
     words = packed.cpu().long() & 0xFFFFFFFF
     split_bits = torch.tensor([0.25, -1.5]).view(torch.int32).long() & 0xFFFFFFFF
     assert words[[0, 2], 0].tolist() == split_bits.tolist(), (
         "kd_pack: word 0 of an inner node must hold the float32 bits of split "
-        "(split.view(torch.int32))")
+        "(split.view(torch.int32))"
+    )
     assert words[[1, 3, 4], 0].tolist() == [3, 2, 0], "kd_pack: word 0 of a leaf is its count"
     want = [1 | 0 << 29, 0 | 1 << 31, 1 | 2 << 29, 3 | 1 << 31, 5 | 1 << 31]
     got = words[:, 1].tolist()
     assert got == want, (
         "kd_pack: word 1 = leftOffset (bits 0-28) | splitAxis << 29 | leaf << 31, with "
         "leftOffset = left - i for inner nodes and first for leaves: expected "
-        f"{[hex(w) for w in want]}, got {[hex(w) for w in got]}")
-    assert (packed[:, 1].cpu() < 0).tolist() == [False, True, False, True, True], \
+        f"{[hex(w) for w in want]}, got {[hex(w) for w in got]}"
+    )
+    assert (packed[:, 1].cpu() < 0).tolist() == [False, True, False, True, True], (
         "kd_pack: the leaf bit is the sign bit of word 1 as int32"
+    )
     back = impl.kd_unpack(packed)
-    for key, dtype in (("split", F32), ("axis", torch.int64), ("left", torch.int64),
-                       ("first", torch.int64), ("count", torch.int64)):
-        check_tensor(back[key], f"kd_unpack(...)[{key!r}]", shape=(5,), dtype=dtype,
-                     device=device)
+    for key, dtype in (
+        ("split", F32),
+        ("axis", torch.int64),
+        ("left", torch.int64),
+        ("first", torch.int64),
+        ("count", torch.int64),
+    ):
+        check_tensor(back[key], f"kd_unpack(...)[{key!r}]", shape=(5,), dtype=dtype, device=device)
     leaf = tree["axis"].cpu() < 0
     assert_equal(back["axis"].cpu(), tree["axis"].cpu(), name="kd_unpack: axis", where="node")
     assert_equal(back["left"].cpu(), tree["left"].cpu(), name="kd_unpack: left", where="node")
-    assert_equal(back["split"].cpu()[~leaf], tree["split"].cpu()[~leaf],
-                 name="kd_unpack: split", where="inner node")
-    assert_equal(back["first"].cpu()[leaf], tree["first"].cpu()[leaf], name="kd_unpack: first",
-                 where="leaf")
-    assert_equal(back["count"].cpu()[leaf], tree["count"].cpu()[leaf], name="kd_unpack: count",
-                 where="leaf")
+    assert_equal(
+        back["split"].cpu()[~leaf],
+        tree["split"].cpu()[~leaf],
+        name="kd_unpack: split",
+        where="inner node",
+    )
+    assert_equal(
+        back["first"].cpu()[leaf], tree["first"].cpu()[leaf], name="kd_unpack: first", where="leaf"
+    )
+    assert_equal(
+        back["count"].cpu()[leaf], tree["count"].cpu()[leaf], name="kd_unpack: count", where="leaf"
+    )
     # A round trip through a real tree, and an offset too big for 29 bits.
     kd = median_kdtree(on(scene("soup"), device))
     back = impl.kd_unpack(impl.kd_pack(kd))
     for key in ("axis", "left"):
-        assert_equal(back[key].cpu(), kd[key].cpu(), name=f"kd_unpack(kd_pack(tree))[{key!r}]",
-                     where="node")
+        assert_equal(
+            back[key].cpu(), kd[key].cpu(), name=f"kd_unpack(kd_pack(tree))[{key!r}]", where="node"
+        )
     big = dict(tree, first=torch.tensor([0, 2**29, 0, 3, 5], device=device))
     expect_error("tree", impl.kd_pack, big, case="a leaf starting at 2^29 (needs 30 bits)")
 
@@ -1211,14 +1555,17 @@ def test_kd_pack_unpack(impl, device):
 def test_kd_closest_hit(impl, device):
     # Trees built here: spatial-median planes, straddling triangles in both children. A hit
     # found in a leaf may lie beyond it; only a hit inside the leaf's interval ends the walk.
-    for name, depth in (("shards", 10), ("soup", 8), ("ico", 10), ("teapot", 12),
-                        ("slabs", 6)):
+    for name, depth in (("shards", 10), ("soup", 8), ("ico", 10), ("teapot", 12), ("slabs", 6)):
         mesh = on(scene(name), device)
-        rays = (teapot_rays(200, 111) if name == "teapot" else rays_around(mesh, 240, 112))
+        rays = teapot_rays(200, 111) if name == "teapot" else rays_around(mesh, 240, 112)
         rays = cat_rays(rays, axis_rays(mesh, 113, 4)).to(device)
         tree = median_kdtree(mesh, depth)
-        compare(impl.kd_closest_hit(rays, mesh, tree, mt64), rays, mesh,
-                f"kd_closest_hit({name}, spatial-median tree of depth {depth})")
+        compare(
+            impl.kd_closest_hit(rays, mesh, tree, mt64),
+            rays,
+            mesh,
+            f"kd_closest_hit({name}, spatial-median tree of depth {depth})",
+        )
     # Rays lying in the root's split plane with a zero component there (0 * inf = NaN).
     mesh = on(scene("shards"), device)
     tree = median_kdtree(mesh, 10)
@@ -1229,8 +1576,12 @@ def test_kd_closest_hit(impl, device):
     d = torch.randn(40, 3, generator=g)
     d[:, a] = torch.where(torch.arange(40) % 2 == 0, 0.0, -0.0)
     rays = cat_rays(Rays.create(p, d), bad_rays()).to(device)
-    compare(impl.kd_closest_hit(rays, mesh, tree, mt64), rays, mesh,
-            "kd_closest_hit (rays in the root's split plane, NaN/inf rays)")
+    compare(
+        impl.kd_closest_hit(rays, mesh, tree, mt64),
+        rays,
+        mesh,
+        "kd_closest_hit (rays in the root's split plane, NaN/inf rays)",
+    )
 
 
 @pytest.mark.task(4)
@@ -1241,18 +1592,23 @@ def test_kdtree_build(impl, device):
         tree = impl.build_kdtree(mesh)
         what = f"build_kdtree({name})"
         check_kdtree(tree, mesh, what)
-        rays = (teapot_rays(150, 121) if name == "teapot" else
-                cat_rays(rays_around(mesh, 150, 122), axis_rays(mesh, 123, 3)))
+        rays = (
+            teapot_rays(150, 121)
+            if name == "teapot"
+            else cat_rays(rays_around(mesh, 150, 122), axis_rays(mesh, 123, 3))
+        )
         rays = rays.to(device)
-        count = compare(impl.kd_closest_hit(rays, mesh, tree, mt64), rays, mesh,
-                        f"kd_closest_hit on {what}")
+        count = compare(
+            impl.kd_closest_hit(rays, mesh, tree, mt64), rays, mesh, f"kd_closest_hit on {what}"
+        )
         if name == "teapot":
             at_teapot = torch.arange(len(rays)) % 4 != 3
             mean = count["tests"][at_teapot].double().mean().item()
             assert mean <= 0.05 * mesh.num_faces, (
                 f"{what}: rays at the teapot run {mean:.1f} triangle tests on average, "
                 f"{mean / mesh.num_faces:.1%} of the scene: the SAH should cut the empty "
-                f"stadium away and the teapot into small leaves")
+                f"stadium away and the teapot into small leaves"
+            )
     mesh = on(scene("soup"), device)
     leaf = impl.build_kdtree(mesh, max_depth=0)
     check_kdtree(leaf, mesh, "build_kdtree(max_depth=0)")
@@ -1270,48 +1626,105 @@ def test_closest_hit_entry_point(impl, device):
     mesh = on(scene("shards"), device)
     rays = rays_around(mesh, 150, 131).to(device)
     ref = reference(rays.to("cpu"), on(mesh, "cpu"))
-    count = compare(impl.brute_force_closest_hit(rays, mesh, mt64), rays, mesh,
-                    "brute_force_closest_hit", ref=ref, walks=False)
-    assert (count["tests"] == mesh.num_faces).all(), \
+    count = compare(
+        impl.brute_force_closest_hit(rays, mesh, mt64),
+        rays,
+        mesh,
+        "brute_force_closest_hit",
+        ref=ref,
+        walks=False,
+    )
+    assert (count["tests"] == mesh.num_faces).all(), (
         "brute_force_closest_hit: every ray tests every triangle (counters['tests'] == F)"
-    compare(impl.brute_force_closest_hit(rays, mesh, mt64, 2**12), rays, mesh,
-            "brute_force_closest_hit(memory_budget_bytes=4096)", ref=ref, walks=False)
+    )
+    compare(
+        impl.brute_force_closest_hit(rays, mesh, mt64, 2**12),
+        rays,
+        mesh,
+        "brute_force_closest_hit(memory_budget_bytes=4096)",
+        ref=ref,
+        walks=False,
+    )
     # Structures built here, and the walks given (brute force standing in for the lab's own
     # walks of tasks 1, 3, 4 and 6): closest_hit is graded on its dispatch alone. A walk it
     # calls must be the structure's own, with the option passed on.
-    structures = {"grid": uniform_grid(mesh), "grid2": simple_two_level(mesh),
-                  "bvh": median_bvh(mesh, 2), "kd": median_kdtree(mesh)}
-    walk_of = {"grid": "grid_closest_hit", "grid2": "two_level_closest_hit",
-               "bvh": "bvh_closest_hit", "kd": "kd_closest_hit"}
-    for kind, options in (("grid", {}), ("grid", {"mailbox": False}), ("grid2", {}),
-                          ("grid2", {"mailbox": False}), ("bvh", {}),
-                          ("bvh", {"stackless": True}), ("kd", {})):
+    structures = {
+        "grid": uniform_grid(mesh),
+        "grid2": simple_two_level(mesh),
+        "bvh": median_bvh(mesh, 2),
+        "kd": median_kdtree(mesh),
+    }
+    walk_of = {
+        "grid": "grid_closest_hit",
+        "grid2": "two_level_closest_hit",
+        "bvh": "bvh_closest_hit",
+        "kd": "kd_closest_hit",
+    }
+    for kind, options in (
+        ("grid", {}),
+        ("grid", {"mailbox": False}),
+        ("grid2", {}),
+        ("grid2", {"mailbox": False}),
+        ("bvh", {}),
+        ("bvh", {"stackless": True}),
+        ("kd", {}),
+    ):
         what = f"closest_hit({kind}, {options})"
-        result, calls = impl.probe(with_given, GIVEN_WALKS, "closest_hit", rays, mesh,
-                                   structures[kind], mt64, **options)
+        result, calls = impl.probe(
+            with_given, GIVEN_WALKS, "closest_hit", rays, mesh, structures[kind], mt64, **options
+        )
         walk = "bvh_closest_hit_stackless" if options.get("stackless") else walk_of[kind]
-        want = (walk, {"mailbox": options.get("mailbox", True)} if kind.startswith("grid")
-                else {})
+        want = (walk, {"mailbox": options.get("mailbox", True)} if kind.startswith("grid") else {})
         calls = [(name, dict(opts)) for name, opts in calls]
         assert calls in ([], [want]), (
             f"{what}: the structure must go to {walk}"
             f"{'(..., mailbox=' + str(want[1]['mailbox']) + ')' if want[1] else ''}, once; "
-            f"closest_hit called {calls or 'no walk'}")
+            f"closest_hit called {calls or 'no walk'}"
+        )
         compare(result, rays, mesh, f"{what} (with the walks given)", ref=ref)
-    compare(impl.closest_hit(rays, mesh, None, mt64), rays, mesh, "closest_hit(None)", ref=ref,
-            walks=False)
+    compare(
+        impl.closest_hit(rays, mesh, None, mt64),
+        rays,
+        mesh,
+        "closest_hit(None)",
+        ref=ref,
+        walks=False,
+    )
     # Bad input, named.
-    expect_error("structure", impl.closest_hit, rays, mesh, {"kind": "octree"}, mt64,
-                 case="structure={'kind': 'octree'}")
-    expect_error("rays", impl.closest_hit, (rays.origins, rays.directions), mesh, None, mt64,
-                 case="a tuple instead of Rays")
+    expect_error(
+        "structure",
+        impl.closest_hit,
+        rays,
+        mesh,
+        {"kind": "octree"},
+        mt64,
+        case="structure={'kind': 'octree'}",
+    )
+    expect_error(
+        "rays",
+        impl.closest_hit,
+        (rays.origins, rays.directions),
+        mesh,
+        None,
+        mt64,
+        case="a tuple instead of Rays",
+    )
     m64 = Mesh(vertices=mesh.vertices.double(), faces=mesh.faces)
-    expect_error("mesh", impl.closest_hit, rays, m64, None, mt64,
-                 case="a float64 mesh with float32 rays")
-    expect_error("intersect", impl.closest_hit, rays, mesh, None, "mt",
-                 case="intersect='mt' (not callable)")
-    expect_error("memory_budget_bytes", impl.brute_force_closest_hit, rays, mesh, mt64, 0,
-                 case="memory_budget_bytes=0")
+    expect_error(
+        "mesh", impl.closest_hit, rays, m64, None, mt64, case="a float64 mesh with float32 rays"
+    )
+    expect_error(
+        "intersect", impl.closest_hit, rays, mesh, None, "mt", case="intersect='mt' (not callable)"
+    )
+    expect_error(
+        "memory_budget_bytes",
+        impl.brute_force_closest_hit,
+        rays,
+        mesh,
+        mt64,
+        0,
+        case="memory_budget_bytes=0",
+    )
 
 
 @pytest.mark.task(END_TO_END)
@@ -1331,18 +1744,23 @@ def test_counters_show_the_trade(impl, device):
         the_trade(impl, mesh, rays, ref, grid, bvh)
     except AssertionError as error:
         wrong = []
-        for name, given in (("build_grid", (uniform_grid(mesh), bvh)),
-                            ("build_sah_bvh", (grid, median_bvh(mesh, 4)))):
+        for name, given in (
+            ("build_grid", (uniform_grid(mesh), bvh)),
+            ("build_sah_bvh", (grid, median_bvh(mesh, 4))),
+        ):
             try:
                 the_trade(impl, mesh, rays, ref, *given)
                 wrong.append(name)
             except AssertionError:
                 pass
-        hint = (f"the step that is wrong: {' or '.join(wrong)} (with a structure built by the "
-                f"grader in its place the run is right)" if wrong else
-                "the builders are not the cause (structures built by the grader in their place "
-                "fail too): see the walks' tests (grid_closest_hit, bvh_closest_hit, "
-                "bvh_closest_hit_stackless, bvh_closest_hit_fast) and closest_hit's")
+        hint = (
+            f"the step that is wrong: {' or '.join(wrong)} (with a structure built by the "
+            f"grader in its place the run is right)"
+            if wrong
+            else "the builders are not the cause (structures built by the grader in their place "
+            "fail too): see the walks' tests (grid_closest_hit, bvh_closest_hit, "
+            "bvh_closest_hit_stackless, bvh_closest_hit_fast) and closest_hit's"
+        )
         raise AssertionError(f"the teapot in a stadium, end to end: {hint}.\n{error}") from None
 
 
@@ -1351,27 +1769,42 @@ def the_trade(impl, mesh: Mesh, rays: Rays, ref, grid: dict, bvh: dict) -> None:
     and counters that show what each structure buys on the teapot in a stadium."""
     at_teapot = torch.arange(len(rays)) % 4 != 3
     mean = {}
-    for kind, structure, options in (("grid", grid, {}), ("bvh", bvh, {}),
-                                     ("bvh stackless", bvh, {"stackless": True})):
-        count = compare(impl.closest_hit(rays, mesh, structure, mt64, **options), rays, mesh,
-                        f"closest_hit on the {kind} (build_grid / build_sah_bvh) of the teapot "
-                        f"in a stadium", ref=ref)
+    for kind, structure, options in (
+        ("grid", grid, {}),
+        ("bvh", bvh, {}),
+        ("bvh stackless", bvh, {"stackless": True}),
+    ):
+        count = compare(
+            impl.closest_hit(rays, mesh, structure, mt64, **options),
+            rays,
+            mesh,
+            f"closest_hit on the {kind} (build_grid / build_sah_bvh) of the teapot in a stadium",
+            ref=ref,
+        )
         mean[kind] = {k: count[k][at_teapot].double().mean().item() for k in ("steps", "tests")}
     f = mesh.num_faces
     assert mean["grid"]["tests"] >= 0.1 * f, (
         f"grid: rays at the teapot run {mean['grid']['tests']:.1f} tests on average; with "
         f"about 2 cells per triangle over the whole stadium the teapot fills one or two "
-        f"cells, so they should test a good part of its {f - 12} triangles. Count every test.")
+        f"cells, so they should test a good part of its {f - 12} triangles. Count every test."
+    )
     for kind in ("bvh", "bvh stackless"):
         assert mean[kind]["tests"] <= 0.05 * f, (
             f"{kind}: rays at the teapot run {mean[kind]['tests']:.1f} triangle tests on average "
-            f"(of {f} triangles); a tree adapts to the teapot and needs far fewer")
+            f"(of {f} triangles); a tree adapts to the teapot and needs far fewer"
+        )
     assert mean["bvh stackless"]["steps"] > mean["bvh"]["steps"], (
         "BVH: the stackless walk (always left first, no culling by a near hit) should visit "
         f"more nodes than the stack traversal: {mean['bvh stackless']['steps']:.1f} vs "
-        f"{mean['bvh']['steps']:.1f}")
-    compare_fast(impl.bvh_closest_hit_fast(rays, mesh, bvh), rays, mesh,
-                 "bvh_closest_hit_fast on the build_sah_bvh(teapot)", ref=ref)
+        f"{mean['bvh']['steps']:.1f}"
+    )
+    compare_fast(
+        impl.bvh_closest_hit_fast(rays, mesh, bvh),
+        rays,
+        mesh,
+        "bvh_closest_hit_fast on the build_sah_bvh(teapot)",
+        ref=ref,
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -1387,8 +1820,9 @@ def simple_two_level(mesh: Mesh, top_res=(3, 3, 3), sub_res=(5, 4, 3), min_trian
     eps = torch.finfo(dtype).eps
 
     def padding(lo, hi):
-        pad = 1e-3 * float((hi - lo).amax()) + 64 * eps * float(torch.maximum(lo.abs(),
-                                                                              hi.abs()).amax())
+        pad = 1e-3 * float((hi - lo).amax()) + 64 * eps * float(
+            torch.maximum(lo.abs(), hi.abs()).amax()
+        )
         return pad if pad > 0 else 1.0
 
     pad = padding(tri_lo.amin(0), tri_hi.amax(0))
@@ -1416,12 +1850,16 @@ def simple_two_level(mesh: Mesh, top_res=(3, 3, 3), sub_res=(5, 4, 3), min_trian
         blo, bhi = blo - spad, bhi + spad
         boxes.append((blo, bhi))
         sw = (bhi - blo) / sres
-        s_lo = torch.minimum(torch.floor((tri_lo[small] - spad - blo) / sw).long().clamp(min=0),
-                             sres - 1)
-        s_hi = torch.minimum(torch.floor((tri_hi[small] + spad - blo) / sw).long().clamp(min=0),
-                             sres - 1)
+        s_lo = torch.minimum(
+            torch.floor((tri_lo[small] - spad - blo) / sw).long().clamp(min=0), sres - 1
+        )
+        s_hi = torch.minimum(
+            torch.floor((tri_hi[small] + spad - blo) / sw).long().clamp(min=0), sres - 1
+        )
         for sid in range(math.prod(sub_res)):
-            q = torch.tensor([sid % sres[0], (sid // sres[0]) % sres[1], sid // (sres[0] * sres[1])])
+            q = torch.tensor(
+                [sid % sres[0], (sid // sres[0]) % sres[1], sid // (sres[0] * sres[1])]
+            )
             inside = ((s_lo <= q) & (s_hi >= q)).all(1)
             cell_lists.append(small[inside])
             entry_lo.append(s_lo[inside])
@@ -1431,18 +1869,30 @@ def simple_two_level(mesh: Mesh, top_res=(3, 3, 3), sub_res=(5, 4, 3), min_trian
     n_sub = len(boxes)
     dev = mesh.device
     empty3 = torch.zeros((0, 3), dtype=torch.int64)
-    out = {"kind": "grid2", "lo": lo, "hi": hi, "resolution": res,
-           "cell_start": torch.cumsum(count, 0) - count, "cell_count": count,
-           "triangles": torch.cat(direct).long(), "tri_cell_lo": c_lo, "tri_cell_hi": c_hi,
-           "big": big, "sub_of": torch.tensor(sub_of, dtype=torch.int64),
-           "sub_lo": torch.stack([b[0] for b in boxes]) if n_sub else torch.zeros((0, 3), dtype=dtype),
-           "sub_hi": torch.stack([b[1] for b in boxes]) if n_sub else torch.zeros((0, 3), dtype=dtype),
-           "sub_resolution": sres.expand(n_sub, 3).clone(),
-           "sub_cell_base": torch.arange(n_sub, dtype=torch.int64) * math.prod(sub_res),
-           "sub_cell_start": torch.cumsum(sub_count, 0) - sub_count, "sub_cell_count": sub_count,
-           "sub_triangles": torch.cat(cell_lists).long() if cell_lists else torch.zeros(0, dtype=torch.int64),
-           "sub_tri_cell_lo": torch.cat(entry_lo) if entry_lo else empty3,
-           "sub_tri_cell_hi": torch.cat(entry_hi) if entry_hi else empty3}
+    out = {
+        "kind": "grid2",
+        "lo": lo,
+        "hi": hi,
+        "resolution": res,
+        "cell_start": torch.cumsum(count, 0) - count,
+        "cell_count": count,
+        "triangles": torch.cat(direct).long(),
+        "tri_cell_lo": c_lo,
+        "tri_cell_hi": c_hi,
+        "big": big,
+        "sub_of": torch.tensor(sub_of, dtype=torch.int64),
+        "sub_lo": torch.stack([b[0] for b in boxes]) if n_sub else torch.zeros((0, 3), dtype=dtype),
+        "sub_hi": torch.stack([b[1] for b in boxes]) if n_sub else torch.zeros((0, 3), dtype=dtype),
+        "sub_resolution": sres.expand(n_sub, 3).clone(),
+        "sub_cell_base": torch.arange(n_sub, dtype=torch.int64) * math.prod(sub_res),
+        "sub_cell_start": torch.cumsum(sub_count, 0) - sub_count,
+        "sub_cell_count": sub_count,
+        "sub_triangles": torch.cat(cell_lists).long()
+        if cell_lists
+        else torch.zeros(0, dtype=torch.int64),
+        "sub_tri_cell_lo": torch.cat(entry_lo) if entry_lo else empty3,
+        "sub_tri_cell_hi": torch.cat(entry_hi) if entry_hi else empty3,
+    }
     return {k: v.to(dev) if isinstance(v, torch.Tensor) else v for k, v in out.items()}
 
 
@@ -1455,17 +1905,20 @@ def check_two_level(g, mesh: Mesh, what: str, density: float, min_triangles: int
     than ``min_triangles`` small triangles, sub-grids sit in their cells and cover their
     triangles, and each sub-grid's resolution follows the density heuristic."""
     device, f = mesh.device, mesh.num_faces
-    assert isinstance(g, dict) and g.get("kind") == "grid2", \
+    assert isinstance(g, dict) and g.get("kind") == "grid2", (
         f"{what}: expected a dict with kind 'grid2'"
+    )
     lo = field(g, "lo", what, (3,), mesh.dtype, device).double()
     hi = field(g, "hi", what, (3,), mesh.dtype, device).double()
     res = field(g, "resolution", what, (3,), torch.int64, device)
     c = int(res.prod())
-    start, count = (field(g, k, what, (c,), torch.int64, device) for k in ("cell_start",
-                                                                          "cell_count"))
+    start, count = (
+        field(g, k, what, (c,), torch.int64, device) for k in ("cell_start", "cell_count")
+    )
     tris = field(g, "triangles", what, (None,), torch.int64, device)
-    c_lo, c_hi = (field(g, k, what, (f, 3), torch.int64, device) for k in ("tri_cell_lo",
-                                                                           "tri_cell_hi"))
+    c_lo, c_hi = (
+        field(g, k, what, (f, 3), torch.int64, device) for k in ("tri_cell_lo", "tri_cell_hi")
+    )
     big = field(g, "big", what, (f,), torch.bool, device)
     sub_of = field(g, "sub_of", what, (c,), torch.int64, device)
     s = int((sub_of >= 0).sum())
@@ -1474,42 +1927,64 @@ def check_two_level(g, mesh: Mesh, what: str, density: float, min_triangles: int
     sres = field(g, "sub_resolution", what, (s, 3), torch.int64, device)
     base = field(g, "sub_cell_base", what, (s,), torch.int64, device)
     sc = int(sres.prod(1).sum()) if s else 0
-    s_start, s_count = (field(g, k, what, (sc,), torch.int64, device) for k in
-                        ("sub_cell_start", "sub_cell_count"))
+    s_start, s_count = (
+        field(g, k, what, (sc,), torch.int64, device) for k in ("sub_cell_start", "sub_cell_count")
+    )
     s_tris = field(g, "sub_triangles", what, (None,), torch.int64, device)
     k2 = len(s_tris)
-    e_lo, e_hi = (field(g, k, what, (k2, 3), torch.int64, device) for k in ("sub_tri_cell_lo",
-                                                                            "sub_tri_cell_hi"))
-    assert_equal(sub_of[sub_of >= 0].sort().values, torch.arange(s), name=f"{what}: sub_of "
-                 "(each sub-grid belongs to exactly one top cell)", where="position")
-    assert_equal(base, torch.cumsum(sres.prod(1), 0) - sres.prod(1), name=f"{what}: "
-                 "sub_cell_base (the exclusive prefix sum of the sub-grids' cell counts)",
-                 where="sub-grid")
+    e_lo, e_hi = (
+        field(g, k, what, (k2, 3), torch.int64, device)
+        for k in ("sub_tri_cell_lo", "sub_tri_cell_hi")
+    )
+    assert_equal(
+        sub_of[sub_of >= 0].sort().values,
+        torch.arange(s),
+        name=f"{what}: sub_of (each sub-grid belongs to exactly one top cell)",
+        where="position",
+    )
+    assert_equal(
+        base,
+        torch.cumsum(sres.prod(1), 0) - sres.prod(1),
+        name=f"{what}: sub_cell_base (the exclusive prefix sum of the sub-grids' cell counts)",
+        where="sub-grid",
+    )
     assert_equal(start, torch.cumsum(count, 0) - count, name=f"{what}: cell_start", where="cell")
-    assert_equal(s_start, torch.cumsum(s_count, 0) - s_count, name=f"{what}: sub_cell_start",
-                 where="sub cell")
-    assert int(count.sum()) == len(tris) and int(s_count.sum()) == k2, \
+    assert_equal(
+        s_start,
+        torch.cumsum(s_count, 0) - s_count,
+        name=f"{what}: sub_cell_start",
+        where="sub cell",
+    )
+    assert int(count.sum()) == len(tris) and int(s_count.sum()) == k2, (
         f"{what}: the cell counts must sum to the lengths of the triangle lists"
+    )
     width = (hi - lo) / res
     corners = mesh.triangles().cpu().double()
     t_lo, t_hi = corners.amin(1), corners.amax(1)
-    assert ((lo <= t_lo.amin(0)) & (hi >= t_hi.amax(0))).all(), \
+    assert ((lo <= t_lo.amin(0)) & (hi >= t_hi.amax(0))).all(), (
         f"{what}: the top grid's box must contain the scene"
+    )
     first = torch.floor((t_lo - lo) / width).long().clamp(min=0)
     last = torch.minimum(torch.floor((t_hi - lo) / width).long(), res - 1)
     assert ((c_lo <= first) & (c_hi >= last) & (c_lo >= first - 1) & (c_hi <= last + 1)).all(), (
         f"{what}: tri_cell_lo/hi must be each triangle's box of top cells (all the cells its "
-        f"bounds overlap, at most one more)")
+        f"bounds overlap, at most one more)"
+    )
     wide = (t_hi - t_lo).amax(1) >= 1.001 * width.amin()
-    assert big[wide].all(), (f"{what}: a triangle at least one top cell wide must be big "
-                             f"(listed directly, never in a sub-grid): {int((wide & ~big).sum())} "
-                             f"are not")
+    assert big[wide].all(), (
+        f"{what}: a triangle at least one top cell wide must be big "
+        f"(listed directly, never in a sub-grid): {int((wide & ~big).sum())} "
+        f"are not"
+    )
     # Every (triangle, top cell) overlap: in the cell's direct list, or (small triangles of
     # a cell with a sub-grid) in that sub-grid.
     cell_of = torch.repeat_interleave(torch.arange(c), count)
     listed = set(zip(cell_of.tolist(), tris.tolist()))
-    sub_cell_owner = torch.repeat_interleave(torch.arange(s), sres.prod(1)) if s else \
-        torch.zeros(0, dtype=torch.int64)
+    sub_cell_owner = (
+        torch.repeat_interleave(torch.arange(s), sres.prod(1))
+        if s
+        else torch.zeros(0, dtype=torch.int64)
+    )
     entry_sub_cell = torch.repeat_interleave(torch.arange(sc), s_count)
     entry_sub = sub_cell_owner[entry_sub_cell]
     in_sub = set(zip(entry_sub.tolist(), s_tris.tolist()))
@@ -1525,56 +2000,72 @@ def check_two_level(g, mesh: Mesh, what: str, density: float, min_triangles: int
                     if not ok:
                         raise AssertionError(
                             f"{what}: triangle {t} overlaps top cell {(x, y, z)} but is neither "
-                            f"in its direct list nor in its sub-grid")
+                            f"in its direct list nor in its sub-grid"
+                        )
     wrong = [i for i in range(c) if (n_small[i] > min_triangles) != (int(sub_of[i]) >= 0)]
     if wrong:
         i = wrong[0]
         raise AssertionError(
             f"{what}: top cell {i} holds {n_small[i]} small triangles and "
             f"{'has' if int(sub_of[i]) >= 0 else 'lacks'} a sub-grid: a cell gets one iff it "
-            f"holds more than min_triangles={min_triangles} ({len(wrong)} cells wrong)")
+            f"holds more than min_triangles={min_triangles} ({len(wrong)} cells wrong)"
+        )
     dense_direct = sub_of[cell_of] >= 0
     assert big[tris[dense_direct]].all(), (
         f"{what}: a cell with a sub-grid lists only its big triangles directly (the small ones "
-        f"are in the sub-grid)")
+        f"are in the sub-grid)"
+    )
     assert not big[s_tris].any(), f"{what}: a big triangle sits in a sub-grid"
     # Sub-grids: inside their top cell (to within padding), covering their triangles.
     if s == 0:
         return
     owner_cell = torch.zeros(s, dtype=torch.int64)
     owner_cell[sub_of[sub_of >= 0]] = (sub_of >= 0).nonzero()[:, 0]
-    cc = torch.stack((owner_cell % res[0], (owner_cell // res[0]) % res[1],
-                      owner_cell // (res[0] * res[1])), 1)
+    cc = torch.stack(
+        (owner_cell % res[0], (owner_cell // res[0]) % res[1], owner_cell // (res[0] * res[1])), 1
+    )
     slack = 1e-3 * width.amax() + 64 * torch.finfo(mesh.dtype).eps * float(
-        torch.maximum(lo.abs(), hi.abs()).amax())  # the padding: relative, and a few ulps
+        torch.maximum(lo.abs(), hi.abs()).amax()
+    )  # the padding: relative, and a few ulps
     cell_lo, cell_hi = lo + cc * width, lo + (cc + 1) * width
     assert ((sub_lo >= cell_lo - slack) & (sub_hi <= cell_hi + slack) & (sub_lo < sub_hi)).all(), (
         f"{what}: a sub-grid's box must lie inside its top cell: it holds what of its "
-        f"triangles lies in that cell")
+        f"triangles lies in that cell"
+    )
     sw = (sub_hi - sub_lo) / sres
     clip_lo = torch.maximum(t_lo[s_tris], cell_lo[entry_sub])
     clip_hi = torch.minimum(t_hi[s_tris], cell_hi[entry_sub])
     box_first = torch.floor((clip_lo - sub_lo[entry_sub]) / sw[entry_sub]).long()
     box_last = torch.floor((clip_hi - sub_lo[entry_sub]) / sw[entry_sub]).long()
-    ok = ((box_first >= -1) & (box_last <= sres[entry_sub]))
+    ok = (box_first >= -1) & (box_last <= sres[entry_sub])
     assert ok.all(), f"{what}: a sub-grid's box does not cover its triangles (clipped to the cell)"
     top_cell = sres[entry_sub] - 1
     box_first = torch.minimum(box_first.clamp(min=0), top_cell)
     box_last = torch.minimum(box_last.clamp(min=0), top_cell)
     # Tight: at most one cell, or the padding (a few ulps: many cells far from the origin), more.
-    loose_first = torch.minimum(torch.floor((clip_lo - slack - sub_lo[entry_sub]) /
-                                            sw[entry_sub]).long().clamp(min=0), top_cell)
-    loose_last = torch.minimum(torch.floor((clip_hi + slack - sub_lo[entry_sub]) /
-                                           sw[entry_sub]).long().clamp(min=0), top_cell)
-    assert ((e_lo <= box_first) & (e_hi >= box_last) & (e_lo >= loose_first - 1)
-            & (e_hi <= loose_last + 1)).all(), (
+    loose_first = torch.minimum(
+        torch.floor((clip_lo - slack - sub_lo[entry_sub]) / sw[entry_sub]).long().clamp(min=0),
+        top_cell,
+    )
+    loose_last = torch.minimum(
+        torch.floor((clip_hi + slack - sub_lo[entry_sub]) / sw[entry_sub]).long().clamp(min=0),
+        top_cell,
+    )
+    assert (
+        (e_lo <= box_first)
+        & (e_hi >= box_last)
+        & (e_lo >= loose_first - 1)
+        & (e_hi <= loose_last + 1)
+    ).all(), (
         f"{what}: sub_tri_cell_lo/hi must be each entry's box of sub cells (the cells its "
-        f"bounds overlap inside the sub-grid, no more than padding needs)")
+        f"bounds overlap inside the sub-grid, no more than padding needs)"
+    )
     local = entry_sub_cell - base[entry_sub]
     rx, ry = sres[entry_sub, 0], sres[entry_sub, 1]
     q = torch.stack((local % rx, (local // rx) % ry, local // (rx * ry)), 1)
-    assert ((e_lo <= q) & (q <= e_hi)).all(), \
+    assert ((e_lo <= q) & (q <= e_hi)).all(), (
         f"{what}: an entry of a sub cell's list lies outside its own sub_tri_cell_lo..hi box"
+    )
     pairs = (e_hi - e_lo + 1).prod(1)
     per = {}
     for sg, t, p in zip(entry_sub.tolist(), s_tris.tolist(), pairs.tolist()):
@@ -1584,21 +2075,25 @@ def check_two_level(g, mesh: Mesh, what: str, density: float, min_triangles: int
     for sg, _ in per:
         counts[sg] += 1
     cells = sres.prod(1).double()
-    ok = (cells <= density * counts * 2.5 + 8) & ((cells >= density * counts / 2.5)
-                                                 | (density * counts < 8))
+    ok = (cells <= density * counts * 2.5 + 8) & (
+        (cells >= density * counts / 2.5) | (density * counts < 8)
+    )
     if not ok.all():
         i = int((~ok).nonzero()[0, 0])
-        raise AssertionError(f"{what}: sub-grid {i} holds {int(counts[i])} triangles in "
-                             f"{sres[i].tolist()} cells: expected about density x n = "
-                             f"{density * int(counts[i]):g} (the heuristic of grid_resolution)")
+        raise AssertionError(
+            f"{what}: sub-grid {i} holds {int(counts[i])} triangles in "
+            f"{sres[i].tolist()} cells: expected about density x n = "
+            f"{density * int(counts[i]):g} (the heuristic of grid_resolution)"
+        )
 
 
 def two_level_of(impl, mesh: Mesh, *args, **kwargs) -> dict:
     """The lab's ``build_two_level_grid`` with the top grid built by this module's
     ``uniform_grid`` in place of the lab's ``build_grid`` (task 1), so that a mistake in
     the uniform grid does not cost the two-level grid's points."""
-    grid, _ = impl.probe(with_given, {"build_grid": "uniform_grid"}, "build_two_level_grid",
-                         mesh, *args, **kwargs)
+    grid, _ = impl.probe(
+        with_given, {"build_grid": "uniform_grid"}, "build_two_level_grid", mesh, *args, **kwargs
+    )
     return grid
 
 
@@ -1617,24 +2112,30 @@ def test_two_level_build(impl, device):
     teapot = int((in_sub < 968).sum())
     assert teapot >= 0.95 * 968, (
         f"build_two_level_grid(teapot in a stadium): only {teapot} of the teapot's 968 "
-        f"triangles are in sub-grids: its top cells are crowded and need them")
+        f"triangles are in sub-grids: its top cells are crowded and need them"
+    )
     extent = (g["sub_hi"] - g["sub_lo"]).cpu().double().amax(1)
     assert float(extent.max()) <= 1.0, (
         f"build_two_level_grid(teapot in a stadium): a sub-grid {float(extent.max()):.3g} "
         f"across, for a teapot 0.2 across: bound each sub-grid by its *small* triangles "
-        f"(the stadium's floor runs under the teapot: keep it out as a big triangle)")
+        f"(the stadium's floor runs under the teapot: keep it out as a big triangle)"
+    )
     g8 = two_level_of(impl, mesh, density=8.0)
     check_two_level(g8, mesh, "build_two_level_grid(teapot, density=8)", 8.0)
     # Stretched: a top grid of three different resolutions, so a cell's coordinates from its
     # index x + rx (y + ry z) go wrong if two of them are confused.
-    stretched = on(Mesh(scene("teapot").vertices * torch.tensor([3.0, 1.0, 0.5]),
-                        scene("teapot").faces), device)
+    stretched = on(
+        Mesh(scene("teapot").vertices * torch.tensor([3.0, 1.0, 0.5]), scene("teapot").faces),
+        device,
+    )
     g = two_level_of(impl, stretched)
-    assert len(set(g["resolution"].tolist())) == 3 and int((g["sub_of"] >= 0).sum()) > 0, \
+    assert len(set(g["resolution"].tolist())) == 3 and int((g["sub_of"] >= 0).sum()) > 0, (
         f"test set-up: resolution {g['resolution'].tolist()} and some sub-grids wanted"
+    )
     check_two_level(g, stretched, "build_two_level_grid(teapot stretched 3 x 1 x 0.5)", 2.0)
-    expect_error("min_triangles", impl.build_two_level_grid, mesh, 1 / 16, 2.0, -1,
-                 case="min_triangles=-1")
+    expect_error(
+        "min_triangles", impl.build_two_level_grid, mesh, 1 / 16, 2.0, -1, case="min_triangles=-1"
+    )
     expect_error("density", impl.build_two_level_grid, mesh, 1 / 16, 0.0, case="density=0")
     expect_error("top_density", impl.build_two_level_grid, mesh, -1.0, case="top_density=-1")
 
@@ -1643,10 +2144,15 @@ def test_two_level_build(impl, device):
 @pytest.mark.points(2)
 def test_two_level_matches_brute_force(impl, device):
     # Two-level grids built here (fixed resolutions), so the traversal is graded on its own.
-    cases = [("teapot", (3, 3, 3), (6, 5, 4), 6), ("shards", (2, 3, 2), (5, 4, 3), 6),
-             ("soup", (3, 3, 3), (4, 4, 4), 4), ("ico", (2, 2, 2), (5, 5, 5), 8),
-             ("far", (2, 2, 3), (4, 3, 5), 4), ("coincident", (2, 2, 2), (3, 3, 3), 4),
-             ("single", (2, 2, 2), (3, 3, 3), 0)]
+    cases = [
+        ("teapot", (3, 3, 3), (6, 5, 4), 6),
+        ("shards", (2, 3, 2), (5, 4, 3), 6),
+        ("soup", (3, 3, 3), (4, 4, 4), 4),
+        ("ico", (2, 2, 2), (5, 5, 5), 8),
+        ("far", (2, 2, 3), (4, 3, 5), 4),
+        ("coincident", (2, 2, 2), (3, 3, 3), 4),
+        ("single", (2, 2, 2), (3, 3, 3), 0),
+    ]
     for name, top, sub, min_tri in cases:
         mesh = on(scene(name), device)
         g = simple_two_level(mesh, top, sub, min_tri)
@@ -1655,9 +2161,13 @@ def test_two_level_matches_brute_force(impl, device):
         else:
             rays = cat_rays(rays_around(mesh, 160, 153), axis_rays(mesh, 154, 4), bad_rays())
         rays = rays.to(device)
-        compare(impl.two_level_closest_hit(rays, mesh, g, mt64), rays, mesh,
-                f"two_level_closest_hit({name}, top {top}, sub-grids {sub})",
-                counters=GRID2_COUNTERS)
+        compare(
+            impl.two_level_closest_hit(rays, mesh, g, mt64),
+            rays,
+            mesh,
+            f"two_level_closest_hit({name}, top {top}, sub-grids {sub})",
+            counters=GRID2_COUNTERS,
+        )
     # Rays along the top cells' boundary planes and through their corners.
     mesh = on(scene("shards"), device)
     g = simple_two_level(mesh, (3, 3, 3), (4, 4, 4), 4)
@@ -1671,20 +2181,32 @@ def test_two_level_matches_brute_force(impl, device):
     d[torch.arange(60), axis] = torch.where(torch.arange(60) % 2 == 0, 0.0, -0.0).double()
     corner = lo + w * torch.tensor([1.0, 2.0, 1.0], dtype=F64)  # a corner of 8 top cells
     through = corner - torch.randn(20, 3, generator=gen, dtype=F64).abs() * 2
-    rays = cat_rays(Rays.create(p.float(), d.float()),
-                    Rays.create(through.float(), (corner - through).float())).to(device)
-    compare(impl.two_level_closest_hit(rays, mesh, g, mt64), rays, mesh,
-            "two_level_closest_hit (rays in top-cell boundary planes and through corners)",
-            counters=GRID2_COUNTERS)
+    rays = cat_rays(
+        Rays.create(p.float(), d.float()), Rays.create(through.float(), (corner - through).float())
+    ).to(device)
+    compare(
+        impl.two_level_closest_hit(rays, mesh, g, mt64),
+        rays,
+        mesh,
+        "two_level_closest_hit (rays in top-cell boundary planes and through corners)",
+        counters=GRID2_COUNTERS,
+    )
     # The lab's own build, far from the origin and on the teapot.
     for name in ("far", "teapot"):
         mesh = on(scene(name), device)
-        rays = (teapot_rays(160, 156) if name == "teapot" else
-                cat_rays(rays_around(mesh, 120, 157), axis_rays(mesh, 158, 4)))
+        rays = (
+            teapot_rays(160, 156)
+            if name == "teapot"
+            else cat_rays(rays_around(mesh, 120, 157), axis_rays(mesh, 158, 4))
+        )
         rays = rays.to(device)
-        compare(impl.two_level_closest_hit(rays, mesh, two_level_of(impl, mesh), mt64),
-                rays, mesh, f"two_level_closest_hit on build_two_level_grid({name})",
-                counters=GRID2_COUNTERS)
+        compare(
+            impl.two_level_closest_hit(rays, mesh, two_level_of(impl, mesh), mt64),
+            rays,
+            mesh,
+            f"two_level_closest_hit on build_two_level_grid({name})",
+            counters=GRID2_COUNTERS,
+        )
 
 
 @pytest.mark.task(6)
@@ -1695,32 +2217,58 @@ def test_two_level_mailboxing_and_work(impl, device):
     g = simple_two_level(mesh, (3, 3, 3), (6, 6, 6), 4)
     rays = rays_around(mesh, 200, 161, clip=0.0).to(device)
     ref = reference(rays.to("cpu"), on(mesh, "cpu"))
-    with_box = compare(impl.two_level_closest_hit(rays, mesh, g, mt64, mailbox=True), rays,
-                       mesh, "two_level_closest_hit(mailbox=True)", GRID2_COUNTERS, ref)
-    without = compare(impl.two_level_closest_hit(rays, mesh, g, mt64, mailbox=False), rays,
-                      mesh, "two_level_closest_hit(mailbox=False)", GRID2_COUNTERS, ref)
-    assert_equal(with_box["steps"], without["steps"], name="two_level_closest_hit: steps with "
-                 "and without the mailbox (it must not change the walk)", where="ray")
-    assert_equal(with_box["tests"] + with_box["skipped"], without["tests"],
-                 name="two_level_closest_hit: tests + skipped with the mailbox == tests "
-                 "without it", where="ray")
+    with_box = compare(
+        impl.two_level_closest_hit(rays, mesh, g, mt64, mailbox=True),
+        rays,
+        mesh,
+        "two_level_closest_hit(mailbox=True)",
+        GRID2_COUNTERS,
+        ref,
+    )
+    without = compare(
+        impl.two_level_closest_hit(rays, mesh, g, mt64, mailbox=False),
+        rays,
+        mesh,
+        "two_level_closest_hit(mailbox=False)",
+        GRID2_COUNTERS,
+        ref,
+    )
+    assert_equal(
+        with_box["steps"],
+        without["steps"],
+        name="two_level_closest_hit: steps with "
+        "and without the mailbox (it must not change the walk)",
+        where="ray",
+    )
+    assert_equal(
+        with_box["tests"] + with_box["skipped"],
+        without["tests"],
+        name="two_level_closest_hit: tests + skipped with the mailbox == tests without it",
+        where="ray",
+    )
     assert int(without["tests"].sum()) > 1.3 * int(with_box["tests"].sum()), (
         "two_level_closest_hit(mailbox=True): big triangles span top cells and sub cells; "
         f"the mailbox should avoid their repeats: {int(with_box['tests'].sum())} tests with "
-        f"it, {int(without['tests'].sum())} without")
+        f"it, {int(without['tests'].sum())} without"
+    )
     # The point of it all: rays at the teapot test a few triangles, not the whole teapot.
     mesh = on(scene("teapot"), device)
     rays = teapot_rays(160, 162).to(device)
     at_teapot = torch.arange(len(rays)) % 4 != 3
-    count = compare(impl.two_level_closest_hit(rays, mesh, two_level_of(impl, mesh), mt64),
-                    rays, mesh, "two_level_closest_hit(build_two_level_grid(teapot in a "
-                    "stadium))", GRID2_COUNTERS)
+    count = compare(
+        impl.two_level_closest_hit(rays, mesh, two_level_of(impl, mesh), mt64),
+        rays,
+        mesh,
+        "two_level_closest_hit(build_two_level_grid(teapot in a stadium))",
+        GRID2_COUNTERS,
+    )
     mean = count["tests"][at_teapot].double().mean().item()
     steps = count["steps"][at_teapot].double().mean().item()
     assert mean <= 0.05 * mesh.num_faces, (
         f"two-level grid: rays at the teapot run {mean:.1f} triangle tests on average "
         f"({mean / mesh.num_faces:.1%} of the scene): the teapot's sub-grids should give it "
-        f"cells its own size (a uniform grid tests most of it)")
+        f"cells its own size (a uniform grid tests most of it)"
+    )
     assert steps <= 100, f"two-level grid: {steps:.0f} cells per ray at the teapot: too many"
 
 
@@ -1754,8 +2302,9 @@ def compare_fast(result, rays: Rays, mesh: Mesh, what: str, ref=None, any_hit=Fa
     ref_t, ref_i, _, _ = reference(rays, mesh) if ref is None else ref
     t, tri = hits.t.cpu(), hits.triangle.cpu()
     # float32 rounds t by about eps * (coordinates) / |d|: an absolute part, and a relative one.
-    reach = (rays.origins.abs().amax(1).double() + float(mesh.vertices.abs().amax())) / \
-        rays.directions.double().norm(dim=1)
+    reach = (
+        rays.origins.abs().amax(1).double() + float(mesh.vertices.abs().amax())
+    ) / rays.directions.double().norm(dim=1)
     slack = 1e-6 * reach.nan_to_num(0.0, posinf=0.0)
     if any_hit:
         differ = (tri >= 0) != (ref_i >= 0)
@@ -1771,21 +2320,33 @@ def compare_fast(result, rays: Rays, mesh: Mesh, what: str, ref=None, any_hit=Fa
         raise AssertionError(
             f"{what}: {len(bad)} of {len(rays)} rays disagree with brute force (not at an edge). "
             f"First: ray {i} ({describe(rays, i)}): brute force: triangle {int(ref_i[i])} at "
-            f"t={ref_t[i].item():.9g}; you: triangle {int(tri[i])} at t={t[i].item():.9g}")
-    assert len(idx) <= max(2, 0.02 * len(rays)), \
+            f"t={ref_t[i].item():.9g}; you: triangle {int(tri[i])} at t={t[i].item():.9g}"
+        )
+    assert len(idx) <= max(2, 0.02 * len(rays)), (
         f"{what}: {len(idx)} of {len(rays)} rays disagree with brute force (edges): too many"
+    )
     # A reported hit must be real: that triangle, at that t, inside [t_min, t_max].
     hit = (tri >= 0).nonzero()[:, 0]
     corners = mesh.triangles()[tri[hit]]
-    t_check, _, _ = mt64(rays.origins[hit], rays.directions[hit], corners[:, 0], corners[:, 1],
-                         corners[:, 2], rays.t_min[hit], rays.t_max[hit])
-    fake = ~((t_check - t[hit]).abs() <= 1e-5 * t[hit].abs() + slack[hit]) & \
-        ~grazed(rays, mesh, hit, tri[hit])
+    t_check, _, _ = mt64(
+        rays.origins[hit],
+        rays.directions[hit],
+        corners[:, 0],
+        corners[:, 1],
+        corners[:, 2],
+        rays.t_min[hit],
+        rays.t_max[hit],
+    )
+    fake = ~((t_check - t[hit]).abs() <= 1e-5 * t[hit].abs() + slack[hit]) & ~grazed(
+        rays, mesh, hit, tri[hit]
+    )
     if fake.any():
         i = int(hit[fake][0])
-        raise AssertionError(f"{what}: ray {i} reports triangle {int(tri[i])} at "
-                             f"t={t[i].item():.9g}, but the ray hits it at "
-                             f"t={t_check[fake][0].item():.9g} (inf: not at all in [t_min, t_max])")
+        raise AssertionError(
+            f"{what}: ray {i} reports triangle {int(tri[i])} at "
+            f"t={t[i].item():.9g}, but the ray hits it at "
+            f"t={t_check[fake][0].item():.9g} (inf: not at all in [t_min, t_max])"
+        )
     if (count["tests"][tri >= 0] < 1).any():
         raise AssertionError(f"{what}: rays with a hit but counters['tests'] == 0")
     if (count["steps"][count["tests"] > 0] < 1).any():
@@ -1810,9 +2371,16 @@ def shadow_rays(mesh: Mesh, seed: int, n: int = 160) -> Rays:
 @pytest.mark.task(7)
 @pytest.mark.points(2)
 def test_fast_bvh_matches_brute_force(impl, device):
-    for name, leaf_size, k in (("soup", 1, 1), ("shards", 3, 4), ("ico", 2, 8), ("teapot", 4, 3),
-                               ("far", 2, 16), ("coincident", 3, 2), ("single", 1, 1),
-                               ("slabs", 2, 64)):
+    for name, leaf_size, k in (
+        ("soup", 1, 1),
+        ("shards", 3, 4),
+        ("ico", 2, 8),
+        ("teapot", 4, 3),
+        ("far", 2, 16),
+        ("coincident", 3, 2),
+        ("single", 1, 1),
+        ("slabs", 2, 64),
+    ):
         mesh = on(scene(name), device)
         bvh = median_bvh(mesh, leaf_size)
         if name == "teapot":
@@ -1820,33 +2388,47 @@ def test_fast_bvh_matches_brute_force(impl, device):
         else:
             rays = cat_rays(rays_around(mesh, 160, 173), axis_rays(mesh, 174, 4), bad_rays())
         rays = rays.to(device)
-        count = compare_fast(impl.bvh_closest_hit_fast(rays, mesh, bvh, check_every=k), rays,
-                             mesh, f"bvh_closest_hit_fast({name}, median BVH, leaf_size="
-                             f"{leaf_size}, check_every={k})")
+        count = compare_fast(
+            impl.bvh_closest_hit_fast(rays, mesh, bvh, check_every=k),
+            rays,
+            mesh,
+            f"bvh_closest_hit_fast({name}, median BVH, leaf_size={leaf_size}, check_every={k})",
+        )
         if name == "ico":
             mean = count["tests"].double().mean().item()
             assert mean <= 6.0, (
                 f"bvh_closest_hit_fast: {mean:.2f} triangle tests per ray into a closed "
-                f"icosphere; visit the near child first and cull nodes beyond the closest hit")
+                f"icosphere; visit the near child first and cull nodes beyond the closest hit"
+            )
             nodes = count["steps"].double().mean().item()
             assert nodes <= 45.0, (
                 f"bvh_closest_hit_fast: {nodes:.1f} node visits per ray into a closed icosphere "
                 f"(an ordered walk needs about 30): skip the subtree of a missed box, and cull "
-                f"boxes beyond the closest hit")
+                f"boxes beyond the closest hit"
+            )
     # Coincident triangles: the tie goes to the lowest index.
     mesh = on(scene("coincident"), device)
-    rays = Rays.create(torch.tensor([[0.4, 0.4, -1.0], [0.45, 0.4, 2.0]]),
-                       torch.tensor([[0.0, 0.0, 1.0], [-0.0, 0.0, -1.0]])).to(device)
+    rays = Rays.create(
+        torch.tensor([[0.4, 0.4, -1.0], [0.45, 0.4, 2.0]]),
+        torch.tensor([[0.0, 0.0, 1.0], [-0.0, 0.0, -1.0]]),
+    ).to(device)
     hits, _ = impl.bvh_closest_hit_fast(rays, mesh, median_bvh(mesh, 3))
     assert hits.triangle.tolist() == [0, 0], (
         f"bvh_closest_hit_fast: 40 coincident triangles hit at the same t: the lowest index "
-        f"(0) must win, got {hits.triangle.tolist()}")
+        f"(0) must win, got {hits.triangle.tolist()}"
+    )
     # float64 in, float64 out.
-    m64 = Mesh(vertices=scene("shards").vertices.double().to(device),
-               faces=scene("shards").faces.to(device))
+    m64 = Mesh(
+        vertices=scene("shards").vertices.double().to(device),
+        faces=scene("shards").faces.to(device),
+    )
     rays = rays_around(m64, 80, 175, dtype=F64).to(device)
-    compare_fast(impl.bvh_closest_hit_fast(rays, m64, median_bvh(m64, 3)), rays, m64,
-                 "bvh_closest_hit_fast (float64)")
+    compare_fast(
+        impl.bvh_closest_hit_fast(rays, m64, median_bvh(m64, 3)),
+        rays,
+        m64,
+        "bvh_closest_hit_fast (float64)",
+    )
 
 
 @pytest.mark.task(7)
@@ -1857,15 +2439,26 @@ def test_fast_bvh_any_hit_and_knobs(impl, device):
         bvh = median_bvh(mesh, 2)
         rays = cat_rays(shadow_rays(mesh, 181), rays_around(mesh, 80, 182)).to(device)
         ref = reference(rays.to("cpu"), on(mesh, "cpu"))
-        any_count = compare_fast(impl.bvh_closest_hit_fast(rays, mesh, bvh, any_hit=True), rays,
-                                 mesh, f"bvh_closest_hit_fast({name}, any_hit=True)", ref=ref,
-                                 any_hit=True)
-        closest = compare_fast(impl.bvh_closest_hit_fast(rays, mesh, bvh), rays, mesh,
-                               f"bvh_closest_hit_fast({name})", ref=ref)
+        any_count = compare_fast(
+            impl.bvh_closest_hit_fast(rays, mesh, bvh, any_hit=True),
+            rays,
+            mesh,
+            f"bvh_closest_hit_fast({name}, any_hit=True)",
+            ref=ref,
+            any_hit=True,
+        )
+        closest = compare_fast(
+            impl.bvh_closest_hit_fast(rays, mesh, bvh),
+            rays,
+            mesh,
+            f"bvh_closest_hit_fast({name})",
+            ref=ref,
+        )
         assert int(any_count["steps"].sum()) < int(closest["steps"].sum()), (
             f"bvh_closest_hit_fast({name}, any_hit=True): {int(any_count['steps'].sum())} node "
             f"visits, as many as the closest-hit search ({int(closest['steps'].sum())}): a "
-            f"shadow ray is done at its first hit")
+            f"shadow ray is done at its first hit"
+        )
     # The knobs change when the host looks, never what the rays find or do.
     mesh = on(scene("soup"), device)
     bvh = median_bvh(mesh, 3)
@@ -1874,32 +2467,80 @@ def test_fast_bvh_any_hit_and_knobs(impl, device):
     for k, compact in ((2, True), (7, False), (1000, True)):
         hits, count = impl.bvh_closest_hit_fast(rays, mesh, bvh, check_every=k, compact=compact)
         for key in ("steps", "tests"):
-            assert_equal(count[key].cpu(), base[key].cpu(), name=f"bvh_closest_hit_fast("
-                         f"check_every={k}, compact={compact}): counters[{key!r}] (the same as "
-                         f"check_every=1)", where="ray")
-        assert_equal(hits.triangle.cpu(), base_hits.triangle.cpu(), name=f"bvh_closest_hit_fast("
-                     f"check_every={k}, compact={compact}): triangles", where="ray")
+            assert_equal(
+                count[key].cpu(),
+                base[key].cpu(),
+                name=f"bvh_closest_hit_fast("
+                f"check_every={k}, compact={compact}): counters[{key!r}] (the same as "
+                f"check_every=1)",
+                where="ray",
+            )
+        assert_equal(
+            hits.triangle.cpu(),
+            base_hits.triangle.cpu(),
+            name=f"bvh_closest_hit_fast(check_every={k}, compact={compact}): triangles",
+            where="ray",
+        )
     # A tree packed once and reused gives the same walk; one packed for other octants is
     # refused, naming the argument.
     hits, count = impl.bvh_closest_hit_fast(rays, mesh, bvh, walk=pack_bvh(bvh, mesh))
-    assert_equal(count["steps"].cpu(), base["steps"].cpu(), name="bvh_closest_hit_fast(walk="
-                 "pack_bvh(bvh, mesh)): counters['steps'] (the same as packing inside)",
-                 where="ray")
-    assert_equal(hits.triangle.cpu(), base_hits.triangle.cpu(), name="bvh_closest_hit_fast("
-                 "walk=pack_bvh(bvh, mesh)): triangles", where="ray")
+    assert_equal(
+        count["steps"].cpu(),
+        base["steps"].cpu(),
+        name="bvh_closest_hit_fast(walk="
+        "pack_bvh(bvh, mesh)): counters['steps'] (the same as packing inside)",
+        where="ray",
+    )
+    assert_equal(
+        hits.triangle.cpu(),
+        base_hits.triangle.cpu(),
+        name="bvh_closest_hit_fast(walk=pack_bvh(bvh, mesh)): triangles",
+        where="ray",
+    )
     other = int(ray_octants(rays.directions[:1].cpu())[0]) ^ 7
-    expect_error("walk", impl.bvh_closest_hit_fast, rays, mesh, bvh,
-                 walk=pack_bvh(bvh, mesh, octants=[other]), case="a walk without the rays' octants")
-    expect_error("walk", impl.bvh_closest_hit_fast, rays, mesh, bvh, walk=bvh,
-                 case="a BVH dict passed as the walk")
-    expect_error("fuse_steps", impl.bvh_closest_hit_fast, rays, mesh, bvh, fuse_steps=0,
-                 case="fuse_steps=0")
-    expect_error("check_every", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 0,
-                 case="check_every=0")
-    expect_error("compile", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 8, "fast",
-                 case="compile='fast'")
-    expect_error("bvh", impl.bvh_closest_hit_fast, rays, mesh, uniform_grid(mesh),
-                 case="a grid passed as the bvh")
+    expect_error(
+        "walk",
+        impl.bvh_closest_hit_fast,
+        rays,
+        mesh,
+        bvh,
+        walk=pack_bvh(bvh, mesh, octants=[other]),
+        case="a walk without the rays' octants",
+    )
+    expect_error(
+        "walk",
+        impl.bvh_closest_hit_fast,
+        rays,
+        mesh,
+        bvh,
+        walk=bvh,
+        case="a BVH dict passed as the walk",
+    )
+    expect_error(
+        "fuse_steps", impl.bvh_closest_hit_fast, rays, mesh, bvh, fuse_steps=0, case="fuse_steps=0"
+    )
+    expect_error(
+        "check_every", impl.bvh_closest_hit_fast, rays, mesh, bvh, False, 0, case="check_every=0"
+    )
+    expect_error(
+        "compile",
+        impl.bvh_closest_hit_fast,
+        rays,
+        mesh,
+        bvh,
+        False,
+        8,
+        "fast",
+        case="compile='fast'",
+    )
+    expect_error(
+        "bvh",
+        impl.bvh_closest_hit_fast,
+        rays,
+        mesh,
+        uniform_grid(mesh),
+        case="a grid passed as the bvh",
+    )
 
 
 def test_pack_bvh_lays_out_each_octant_near_first():
@@ -1909,13 +2550,21 @@ def test_pack_bvh_lays_out_each_octant_near_first():
     mesh = scene("teapot")
     bvh = median_bvh(mesh, 3)
     m = len(bvh["left"])
-    perm = torch.cat((torch.zeros(1, dtype=torch.int64), 1 + torch.randperm(
-        m - 1, generator=generator(190))))  # the root stays node 0
+    perm = torch.cat(
+        (torch.zeros(1, dtype=torch.int64), 1 + torch.randperm(m - 1, generator=generator(190)))
+    )  # the root stays node 0
     new_id = torch.empty_like(perm).scatter_(0, perm, torch.arange(m))
-    shuffled = dict(bvh, lo=bvh["lo"][perm], hi=bvh["hi"][perm], first=bvh["first"][perm],
-                    count=bvh["count"][perm],
-                    **{k: torch.where(bvh[k][perm] >= 0, new_id[bvh[k][perm].clamp(min=0)], -1)
-                       for k in ("left", "right")})
+    shuffled = dict(
+        bvh,
+        lo=bvh["lo"][perm],
+        hi=bvh["hi"][perm],
+        first=bvh["first"][perm],
+        count=bvh["count"][perm],
+        **{
+            k: torch.where(bvh[k][perm] >= 0, new_id[bvh[k][perm].clamp(min=0)], -1)
+            for k in ("left", "right")
+        },
+    )
     for tree in (bvh, shuffled):
         walk = pack_bvh(tree, mesh)
         assert walk["nodes"] == m and walk["base"].tolist() == [o * m for o in range(8)]
@@ -1952,21 +2601,27 @@ def test_pack_bvh_lays_out_each_octant_near_first():
 # ---------------------------------------------------------------------------------------
 # Task 5 (continued): closest_hit(structure="auto") builds what the chooser picks, only that
 
+
 def builds_of_auto(lab, rays, mesh, intersect):
     """Run ``closest_hit(rays, mesh, "auto", intersect)`` next to the lab with its builders
     and walks given (this module's, recorded); returns ``(builder names called, hit
     triangles)``."""
-    (hits, _), calls = with_given(lab, {**GIVEN_BUILDERS, **GIVEN_WALKS}, "closest_hit", rays,
-                                  mesh, "auto", intersect)
+    (hits, _), calls = with_given(
+        lab, {**GIVEN_BUILDERS, **GIVEN_WALKS}, "closest_hit", rays, mesh, "auto", intersect
+    )
     return [name for name, _ in calls if name in GIVEN_BUILDERS], hits.triangle.cpu().tolist()
 
 
 @pytest.mark.task(5)
 @pytest.mark.points(1)
 def test_auto_builds_only_its_choice(impl, device):
-    want_builder = {("grid", None): "build_grid", ("grid2", None): "build_two_level_grid",
-                    ("bvh", "sah"): "build_sah_bvh", ("bvh", "lbvh"): "build_lbvh",
-                    ("kd", None): "build_kdtree"}
+    want_builder = {
+        ("grid", None): "build_grid",
+        ("grid2", None): "build_two_level_grid",
+        ("bvh", "sah"): "build_sah_bvh",
+        ("bvh", "lbvh"): "build_lbvh",
+        ("kd", None): "build_kdtree",
+    }
     seen = set()
     for name, n_rays in (("ico", 400), ("teapot", 200), ("soup", 300), ("soup", 1000)):
         mesh = on(scene(name), device)
@@ -1974,35 +2629,45 @@ def test_auto_builds_only_its_choice(impl, device):
         assert kind in STRUCTURES and isinstance(knobs, dict) and len(reason) > 20
         seen.add(kind)
         # The chooser sees len(rays) as its hint.
-        rays = (teapot_rays(n_rays, 191) if name == "teapot" else rays_around(mesh, n_rays, 192))
+        rays = teapot_rays(n_rays, 191) if name == "teapot" else rays_around(mesh, n_rays, 192)
         rays = rays.to(device)
         called, triangles = impl.probe(builds_of_auto, rays, mesh, mt64)
         builder = want_builder[(kind, knobs.get("method", "sah") if kind == "bvh" else None)]
         assert called == [builder], (
             f"closest_hit(structure='auto') on {name} with {len(rays)} rays: the chooser picks "
             f"{kind} {knobs} ({reason}); expected exactly one call of {builder}, got {called}: "
-            f"build only what the chooser picked, and nothing it will not use")
+            f"build only what the chooser picked, and nothing it will not use"
+        )
         ref_i = reference(rays.to("cpu"), on(mesh, "cpu"))[1]
-        assert triangles == ref_i.tolist(), \
+        assert triangles == ref_i.tolist(), (
             f"closest_hit(structure='auto') on {name}: hits differ from brute force"
+        )
     assert {"grid", "grid2", "bvh"} <= seen, f"the chooser's picks: {seen}"
     assert choose_structure(on(scene("soup"), device), 300)[1] == {"method": "lbvh"}
     assert choose_structure(on(scene("soup"), device), 1000)[1] == {"method": "sah"}
     # The chooser's judgement on the lecture's cases.
-    assert choose_structure(on(scene("teapot"), device))[0] == "bvh", \
+    assert choose_structure(on(scene("teapot"), device))[0] == "bvh", (
         "choose_structure: the teapot in a stadium, many rays: an SAH BVH"
-    assert choose_structure(on(scene("ico"), device))[0] == "grid", \
+    )
+    assert choose_structure(on(scene("ico"), device))[0] == "grid", (
         "choose_structure: a small, evenly tessellated sphere: a uniform grid"
-    expect_error("structure", impl.closest_hit, rays_around(on(scene("soup"), device), 4, 193)
-                 .to(device), on(scene("soup"), device), "octree", mt64, case="structure='octree'")
+    )
+    expect_error(
+        "structure",
+        impl.closest_hit,
+        rays_around(on(scene("soup"), device), 4, 193).to(device),
+        on(scene("soup"), device),
+        "octree",
+        mt64,
+        case="structure='octree'",
+    )
 
 
 def test_builders_reject_nonfinite_vertices(impl, device):
     """Ungraded (the check is the provided ``check_mesh(mesh, finite=True)``): every builder
     rejects a mesh with a NaN or inf vertex with the same ValueError naming ``mesh``."""
     mesh = on(scene("ico"), device)
-    builders = ("build_grid", "build_lbvh", "build_sah_bvh", "build_kdtree",
-                "build_two_level_grid")
+    builders = ("build_grid", "build_lbvh", "build_sah_bvh", "build_kdtree", "build_two_level_grid")
     for bad in (math.nan, math.inf, -math.inf):
         vertices = mesh.vertices.clone()
         vertices[3, 1] = bad
@@ -2014,12 +2679,15 @@ def test_builders_reject_nonfinite_vertices(impl, device):
             except ValueError as error:
                 messages.add(str(error).splitlines()[0])
                 continue
-            raise AssertionError(f"{name} accepted a mesh with a vertex coordinate {bad}: "
-                                 f"expected ValueError naming 'mesh' (keep the provided "
-                                 f"check_mesh(mesh, finite=True))")
+            raise AssertionError(
+                f"{name} accepted a mesh with a vertex coordinate {bad}: "
+                f"expected ValueError naming 'mesh' (keep the provided "
+                f"check_mesh(mesh, finite=True))"
+            )
         assert len(messages) == 1 and next(iter(messages)).startswith("mesh: "), (
             f"builders given a vertex coordinate {bad}: expected one and the same error "
-            f"naming 'mesh' from all of {', '.join(builders)}, got {sorted(messages)}")
+            f"naming 'mesh' from all of {', '.join(builders)}, got {sorted(messages)}"
+        )
 
 
 # ---------------------------------------------------------------------------------------
@@ -2052,8 +2720,16 @@ def vertex_scene(name: str, shift: float) -> Mesh:
     an aligned grid, and of boxes and splits at triangle bounds, pass through its vertices)."""
     if name == "terrain":
         g = generator(61)
-        xy = torch.stack(torch.meshgrid(torch.arange(LATTICE + 1.0), torch.arange(LATTICE + 1.0),
-                                        indexing="ij"), -1).reshape(-1, 2).to(F64)
+        xy = (
+            torch.stack(
+                torch.meshgrid(
+                    torch.arange(LATTICE + 1.0), torch.arange(LATTICE + 1.0), indexing="ij"
+                ),
+                -1,
+            )
+            .reshape(-1, 2)
+            .to(F64)
+        )
         z = torch.rand(len(xy), 1, generator=g, dtype=F64).float().double()
         vertices = torch.cat((xy, z), 1)
         q = torch.arange(LATTICE)
@@ -2086,8 +2762,15 @@ def _vertex_case(name: str, shift: float, device: str, kernel: str):
     mesh = on(mesh, device)
     fn = mt64 if kernel == "mt64" else mt_rows
     tri = mesh.triangles()
-    t, _, _ = fn(rays.origins[:, None], rays.directions[:, None], tri[None, :, 0],
-                 tri[None, :, 1], tri[None, :, 2], rays.t_min[:, None], rays.t_max[:, None])
+    t, _, _ = fn(
+        rays.origins[:, None],
+        rays.directions[:, None],
+        tri[None, :, 0],
+        tri[None, :, 1],
+        tri[None, :, 2],
+        rays.t_min[:, None],
+        rays.t_max[:, None],
+    )
     best = t.argmin(dim=1)  # the first of equal minima: the lowest index
     t_best = t.gather(1, best[:, None])[:, 0]
     return mesh, rays, (torch.where(t_best < INF, best, -1).cpu(), t_best.cpu())
@@ -2119,7 +2802,8 @@ def compare_at_vertices(result, rays: Rays, ref, what: str, counters=("steps", "
             f"that rounds on its own: comparing the two without slack drops the triangle brute "
             f"force picks (the smallest t, ties to the lowest index). Keep a node or cell "
             f"entered up to reach(closest t), and end at a cell or leaf only if reach(closest "
-            f"t) < its exit (reach: course.given.lab2_robust).")
+            f"t) < its exit (reach: course.given.lab2_robust)."
+        )
 
 
 @pytest.mark.task(1)
@@ -2127,16 +2811,24 @@ def compare_at_vertices(result, rays: Rays, ref, what: str, counters=("steps", "
 def test_grid_exact_at_vertices_and_edges(impl, device):
     for label, mesh, rays, ref in vertex_cases(device):
         grid = uniform_grid(mesh)
-        compare_at_vertices(impl.grid_closest_hit(rays, mesh, grid, mt64), rays, ref,
-                            f"grid_closest_hit({label}, a grid built by the grader)",
-                            GRID2_COUNTERS)
+        compare_at_vertices(
+            impl.grid_closest_hit(rays, mesh, grid, mt64),
+            rays,
+            ref,
+            f"grid_closest_hit({label}, a grid built by the grader)",
+            GRID2_COUNTERS,
+        )
         if label.startswith("terrain"):
             # Cells on the lattice, unpadded: rays through cell corners, and triangles
             # listed only in the cell above the boundary their vertex lies on.
             grid = uniform_grid(mesh, (LATTICE, LATTICE, 1), pad=0.0)
-            compare_at_vertices(impl.grid_closest_hit(rays, mesh, grid, mt64), rays, ref,
-                                f"grid_closest_hit({label}, unpadded cells on its lattice)",
-                                GRID2_COUNTERS)
+            compare_at_vertices(
+                impl.grid_closest_hit(rays, mesh, grid, mt64),
+                rays,
+                ref,
+                f"grid_closest_hit({label}, unpadded cells on its lattice)",
+                GRID2_COUNTERS,
+            )
 
 
 @pytest.mark.task(3)
@@ -2145,8 +2837,12 @@ def test_bvh_walks_exact_at_vertices_and_edges(impl, device):
     for label, mesh, rays, ref in vertex_cases(device):
         bvh = median_bvh(mesh, 2)
         for walk in ("bvh_closest_hit", "bvh_closest_hit_stackless"):
-            compare_at_vertices(getattr(impl, walk)(rays, mesh, bvh, mt64), rays, ref,
-                                f"{walk}({label}, median BVH, leaf_size=2)")
+            compare_at_vertices(
+                getattr(impl, walk)(rays, mesh, bvh, mt64),
+                rays,
+                ref,
+                f"{walk}({label}, median BVH, leaf_size=2)",
+            )
 
 
 @pytest.mark.task(4)
@@ -2154,17 +2850,25 @@ def test_bvh_walks_exact_at_vertices_and_edges(impl, device):
 def test_kd_exact_at_vertices_and_edges(impl, device):
     for label, mesh, rays, ref in vertex_cases(device):
         tree = median_kdtree(mesh, 10, at_vertices=True)
-        compare_at_vertices(impl.kd_closest_hit(rays, mesh, tree, mt64), rays, ref,
-                            f"kd_closest_hit({label}, planes at triangle bounds)")
+        compare_at_vertices(
+            impl.kd_closest_hit(rays, mesh, tree, mt64),
+            rays,
+            ref,
+            f"kd_closest_hit({label}, planes at triangle bounds)",
+        )
 
 
 @pytest.mark.task(6)
 @pytest.mark.points(0.5)
 def test_two_level_exact_at_vertices_and_edges(impl, device):
     for label, mesh, rays, ref in vertex_cases(device):
-        compare_at_vertices(impl.two_level_closest_hit(rays, mesh, simple_two_level(mesh), mt64),
-                            rays, ref, f"two_level_closest_hit({label}, built by the grader)",
-                            GRID2_COUNTERS)
+        compare_at_vertices(
+            impl.two_level_closest_hit(rays, mesh, simple_two_level(mesh), mt64),
+            rays,
+            ref,
+            f"two_level_closest_hit({label}, built by the grader)",
+            GRID2_COUNTERS,
+        )
 
 
 @pytest.mark.task(7)
@@ -2173,6 +2877,9 @@ def test_fast_bvh_exact_at_vertices_and_edges(impl, device):
     # Brute force with the walk's own kernel, moller_trumbore_rows: the same bits per pair
     # (compile=False: no fused rounding), so the same triangle is required.
     for label, mesh, rays, ref in vertex_cases(device, "rows"):
-        compare_at_vertices(impl.bvh_closest_hit_fast(rays, mesh, median_bvh(mesh, 2),
-                                                      check_every=4),
-                            rays, ref, f"bvh_closest_hit_fast({label}, median BVH, leaf_size=2)")
+        compare_at_vertices(
+            impl.bvh_closest_hit_fast(rays, mesh, median_bvh(mesh, 2), check_every=4),
+            rays,
+            ref,
+            f"bvh_closest_hit_fast({label}, median BVH, leaf_size=2)",
+        )

@@ -56,12 +56,20 @@ def _nvidia_backend() -> bool:
     return (Path(triton.__file__).parent / "backends" / "nvidia" / "bin" / "ptxas").exists()
 
 
-@pytest.mark.skipif(not _nvidia_backend(),
-                    reason="needs Triton with its NVIDIA backend (ptxas), as on Linux")
+@pytest.mark.skipif(
+    not _nvidia_backend(), reason="needs Triton with its NVIDIA backend (ptxas), as on Linux"
+)
 def test_triton_walk_loops_stay_lean():
     env = {k: v for k, v in os.environ.items() if k != "TRITON_INTERPRET"}
-    out = subprocess.run([sys.executable, str(SCRIPT), "--json"], check=False, cwd=ROOT, env=env,
-                         capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, str(SCRIPT), "--json"],
+        check=False,
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     found = json.loads(out.stdout.strip().splitlines()[-1])
     for name in ("triton_walk.sass", "triton_refill.sass"):
@@ -72,4 +80,5 @@ def test_triton_walk_loops_stay_lean():
         assert intersect <= 92 and traverse <= 104, (
             f"{name}: the walk's inner loops are {intersect} and {traverse} instructions "
             f"(at most 92 and 104 expected: 85 and 97 measured, 110 and 118 before one "
-            f"address per row and the one-min inside test); see bench/sass_loops.py")
+            f"address per row and the one-min inside test); see bench/sass_loops.py"
+        )

@@ -37,13 +37,13 @@ from course.grading.testing import (
 )
 
 HAVE_TRITON = importlib.util.find_spec("triton") is not None
-needs_triton = pytest.mark.skipif(not HAVE_TRITON, reason="triton is not installed "
-                                  "(pip install triton); the kernel cannot run without it")
+needs_triton = pytest.mark.skipif(
+    not HAVE_TRITON,
+    reason="triton is not installed (pip install triton); the kernel cannot run without it",
+)
 F64 = torch.float64
 
-old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(),
-                                     reason=OLD_INTERPRETER_REASON)
-
+old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(), reason=OLD_INTERPRETER_REASON)
 
 
 def make_case(seed: int, n: int = 61, offset: float = 0.0, channels: int = 3) -> dict:
@@ -56,32 +56,48 @@ def make_case(seed: int, n: int = 61, offset: float = 0.0, channels: int = 3) ->
     origins[:6] = lo + size * torch.rand(6, 3, generator=g, dtype=F64)  # inside the box
     directions = target - origins
     directions[6:9] = torch.tensor([[1.0, 0.0, -0.0], [-0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
-    origins[6:9] = lo + size * torch.tensor([[-0.5, 0.3, 0.6], [0.2, 1.7, 0.4],
-                                             [0.7, 0.5, -2.0]], dtype=F64)
+    origins[6:9] = lo + size * torch.tensor(
+        [[-0.5, 0.3, 0.6], [0.2, 1.7, 0.4], [0.7, 0.5, -2.0]], dtype=F64
+    )
     origins[9] = lo + size * torch.tensor([0.0, 0.5, 0.5], dtype=F64)  # on the x slab plane
-    directions[9] = torch.tensor([0.0, 1.0, 0.0])                      # ... and parallel to it
-    directions[10] = -directions[10]   # pointing away: most of these miss
+    directions[9] = torch.tensor([0.0, 1.0, 0.0])  # ... and parallel to it
+    directions[10] = -directions[10]  # pointing away: most of these miss
     origins[11, 1] = math.nan
     directions[12] = 0.0
     directions[13, 2] = math.inf
     density = 3.0 * torch.rand(5, 4, 6, generator=g)
     density[1] = 0.0  # vacuum cells: the small-x series
     density[3, 2] = 400.0  # nearly opaque cells: early termination has something to stop
-    source = torch.rand(5, 4, 6, channels, generator=g) if channels > 1 else \
-        torch.rand(5, 4, 6, generator=g)
-    return {"origins": origins.float(), "directions": directions.float(),
-            "box_min": lo.tolist(), "box_max": (lo + size).tolist(), "density": density,
-            "source": source}
+    source = (
+        torch.rand(5, 4, 6, channels, generator=g)
+        if channels > 1
+        else torch.rand(5, 4, 6, generator=g)
+    )
+    return {
+        "origins": origins.float(),
+        "directions": directions.float(),
+        "box_min": lo.tolist(),
+        "box_max": (lo + size).tolist(),
+        "density": density,
+        "source": source,
+    }
 
 
 def all_cases() -> dict:
-    return {"rgb": make_case(0), "scalar": make_case(1, channels=1, n=40),
-            "far": make_case(2, n=40, offset=1e5)}
+    return {
+        "rgb": make_case(0),
+        "scalar": make_case(1, channels=1, n=40),
+        "far": make_case(2, n=40, offset=1e5),
+    }
 
 
 # Small step counts: the interpreter runs every operation of every step in Python.
-RUNS = {"steps1": {"steps": 1}, "steps6": {"steps": 6}, "steps0": {"steps": 0},
-        "early": {"steps": 6, "min_transmittance": 0.3}}
+RUNS = {
+    "steps1": {"steps": 1},
+    "steps6": {"steps": 6},
+    "steps0": {"steps": 0},
+    "early": {"steps": 6, "min_transmittance": 0.3},
+}
 
 
 def run_kernel(cases: dict, device: str) -> dict:
@@ -90,9 +106,14 @@ def run_kernel(cases: dict, device: str) -> dict:
     out = {}
     for name, case in cases.items():
         for run, knobs in RUNS.items():
-            args = [case["origins"].to(device), case["directions"].to(device),
-                    case["box_min"], case["box_max"], case["density"].to(device),
-                    case["source"].to(device)]
+            args = [
+                case["origins"].to(device),
+                case["directions"].to(device),
+                case["box_min"],
+                case["box_max"],
+                case["density"].to(device),
+                case["source"].to(device),
+            ]
             result = march_grid_triton(*args, block_rays=64, num_warps=1, **knobs)
             kernel = result.pop("kernel")
             out[name, run] = {k: v.cpu() for k, v in result.items()}
@@ -103,13 +124,25 @@ def run_kernel(cases: dict, device: str) -> dict:
     for name, case in cases.items():
         for light, steps, scale in BAKES:
             out["bake", name, light, steps, scale] = bake_light_triton(
-                case["density"].to(device), case["box_min"], case["box_max"], light, steps,
-                scale=scale, block=32, num_warps=1).cpu()
+                case["density"].to(device),
+                case["box_min"],
+                case["box_max"],
+                light,
+                steps,
+                scale=scale,
+                block=32,
+                num_warps=1,
+            ).cpu()
     empty = torch.zeros(0, 3)
     case = cases["rgb"]
-    out["empty"] = march_grid_triton(empty.to(device), empty.to(device), case["box_min"],
-                                     case["box_max"], case["density"].to(device),
-                                     case["source"].to(device))["radiance"].shape
+    out["empty"] = march_grid_triton(
+        empty.to(device),
+        empty.to(device),
+        case["box_min"],
+        case["box_max"],
+        case["density"].to(device),
+        case["source"].to(device),
+    )["radiance"].shape
     return out
 
 
@@ -127,12 +160,14 @@ def run_interpreted(tmp_path: Path) -> tuple[dict, dict]:
 # The float64 reference
 # --------------------------------------------------------------------------------------
 
+
 def sample(grid: torch.Tensor, uvw: torch.Tensor) -> torch.Tensor:
     """Cell-centred trilinear lookup with border clamping via grid_sample: (N, C)."""
     volume = (grid if grid.ndim == 4 else grid[..., None]).to(F64).permute(3, 2, 1, 0)[None]
     coords = (2 * uvw - 1).reshape(1, -1, 1, 1, 3)  # x, y, z order: (W=X, H=Y, D=Z)
-    values = F.grid_sample(volume, coords, mode="bilinear", padding_mode="border",
-                           align_corners=False)
+    values = F.grid_sample(
+        volume, coords, mode="bilinear", padding_mode="border", align_corners=False
+    )
     return values.reshape(volume.shape[1], -1).T
 
 
@@ -143,11 +178,17 @@ def reference(case: dict, steps: int, min_transmittance: float = 0.0) -> dict:
     rel = o - lo
     with torch.no_grad():
         t0, t1 = (0 - rel) / d, (size - rel) / d
-        t_near = torch.fmax(torch.minimum(t0, t1).nan_to_num(nan=-math.inf).amax(1),
-                            torch.zeros(()))
+        t_near = torch.fmax(
+            torch.minimum(t0, t1).nan_to_num(nan=-math.inf).amax(1), torch.zeros(())
+        )
         t_far = torch.maximum(t0, t1).nan_to_num(nan=math.inf).amin(1)
-    hit = (torch.isfinite(o).all(1) & torch.isfinite(d).all(1) & (d != 0).any(1)
-           & (t_near <= t_far) & torch.isfinite(t_far))
+    hit = (
+        torch.isfinite(o).all(1)
+        & torch.isfinite(d).all(1)
+        & (d != 0).any(1)
+        & (t_near <= t_far)
+        & torch.isfinite(t_far)
+    )
     t_near = torch.where(hit, t_near, 0)
     dt = torch.where(hit, t_far - t_near, 0) / max(steps, 1)
     ds = dt * d.norm(dim=1)
@@ -177,8 +218,9 @@ def bake_reference(case: dict, light, steps: int, scale) -> torch.Tensor:
     lo, hi = torch.tensor(case["box_min"], dtype=F64), torch.tensor(case["box_max"], dtype=F64)
     size = hi - lo
     n = torch.tensor(density.shape, dtype=F64)
-    idx = torch.stack(torch.meshgrid(*(torch.arange(k, dtype=F64) for k in density.shape),
-                                     indexing="ij"), -1).reshape(-1, 3)
+    idx = torch.stack(
+        torch.meshgrid(*(torch.arange(k, dtype=F64) for k in density.shape), indexing="ij"), -1
+    ).reshape(-1, 3)
     rel = (idx + 0.5) / n * size
     d = torch.tensor(light, dtype=F64)
     d = d / d.norm()
@@ -201,8 +243,14 @@ def check_bakes(cases: dict, out: dict, where: str) -> None:
             assert got.dtype == torch.float32 and got.shape == want.shape, where
             # float32 sample positions (an FMA apart when compiled) in grids with 0 -> 400
             # jumps between neighbouring cells: as for the march, ~1e-4 of optical depth.
-            assert_close(got.double(), want, name=f"bake ({where}, {name}, light {light}, "
-                         f"{steps} steps, scale {scale})", atol=2e-5, rtol=1e-3, where="voxel")
+            assert_close(
+                got.double(),
+                want,
+                name=f"bake ({where}, {name}, light {light}, {steps} steps, scale {scale})",
+                atol=2e-5,
+                rtol=1e-3,
+                where="voxel",
+            )
 
 
 def check_all(cases: dict, out: dict, where: str) -> None:
@@ -217,17 +265,28 @@ def check_all(cases: dict, out: dict, where: str) -> None:
             # apart: compare those rays only for the bound the contract gives.
             same = got["samples"] == want["samples"]
             if "min_transmittance" not in knobs:
-                assert_equal(got["samples"], want["samples"], name=f"samples ({what})",
-                             where="ray")
+                assert_equal(got["samples"], want["samples"], name=f"samples ({what})", where="ray")
             assert same.float().mean() >= 0.97, f"{what}: samples differ on too many rays"
             rows = same.nonzero()[:, 0]
             # The grids jump from 0 to 400 between neighbouring cells: a sample position
             # that rounds one ulp apart (an FMA contraction in the compiled kernel) moves
             # sigma by up to ~1e-4 there, so the optical depth carries that much.
-            assert_close(got["radiance"][rows].double(), want["radiance"][rows],
-                         name=f"radiance ({what})", atol=2e-5, rtol=1e-3, where="ray")
-            assert_close(got["transmittance"][rows].double(), want["transmittance"][rows],
-                         name=f"transmittance ({what})", atol=2e-6, rtol=1e-3, where="ray")
+            assert_close(
+                got["radiance"][rows].double(),
+                want["radiance"][rows],
+                name=f"radiance ({what})",
+                atol=2e-5,
+                rtol=1e-3,
+                where="ray",
+            )
+            assert_close(
+                got["transmittance"][rows].double(),
+                want["transmittance"][rows],
+                name=f"transmittance ({what})",
+                atol=2e-6,
+                rtol=1e-3,
+                where="ray",
+            )
             assert torch.isfinite(got["radiance"]).all(), f"{what}: non-finite radiance"
     assert out["empty"] == torch.Size([0, 3])
 
@@ -240,10 +299,13 @@ def test_interpreted_matches_float64_reference(tmp_path):
     # Misses and NaN/inf/zero-direction rays: nothing sampled, T = 1.
     for run in RUNS:
         got = out["rgb", run]
-        assert_equal(got["samples"][11:14], torch.zeros(3, dtype=torch.int64),
-                     name=f"samples of NaN/inf/zero rays ({run})", where="ray")
-        assert_equal(got["transmittance"][11:14], torch.ones(3), name="transmittance",
-                     where="ray")
+        assert_equal(
+            got["samples"][11:14],
+            torch.zeros(3, dtype=torch.int64),
+            name=f"samples of NaN/inf/zero rays ({run})",
+            where="ray",
+        )
+        assert_equal(got["transmittance"][11:14], torch.ones(3), name="transmittance", where="ray")
 
 
 @needs_triton
@@ -252,19 +314,45 @@ def test_bad_input_is_named():
     from course.kernels import triton_march as tm
 
     case = make_case(0, n=20)
-    args = [case["origins"], case["directions"], case["box_min"], case["box_max"],
-            case["density"], case["source"]]
+    args = [
+        case["origins"],
+        case["directions"],
+        case["box_min"],
+        case["box_max"],
+        case["density"],
+        case["source"],
+    ]
     expect_error(["steps"], tm.march_grid_triton, *args, steps=-1)
     expect_error(["source"], tm.march_grid_triton, *args[:5], case["source"][:2])
-    expect_error(["box_min"], tm.march_grid_triton, args[0], args[1], [0, 0, 0], [0, 1, 1],
-                 *args[4:])
+    expect_error(
+        ["box_min"], tm.march_grid_triton, args[0], args[1], [0, 0, 0], [0, 1, 1], *args[4:]
+    )
     expect_error(["origins"], tm.march_grid_triton, case["origins"][:, :2], *args[1:])
-    expect_error(["light_direction"], tm.bake_light_triton, case["density"], case["box_min"],
-                 case["box_max"], (0.0, 0.0, 0.0))
-    expect_error(["steps"], tm.bake_light_triton, case["density"], case["box_min"],
-                 case["box_max"], (0.0, 1.0, 0.0), -2)
-    expect_error(["density"], tm.bake_light_triton, case["source"], case["box_min"],
-                 case["box_max"], (0.0, 1.0, 0.0))
+    expect_error(
+        ["light_direction"],
+        tm.bake_light_triton,
+        case["density"],
+        case["box_min"],
+        case["box_max"],
+        (0.0, 0.0, 0.0),
+    )
+    expect_error(
+        ["steps"],
+        tm.bake_light_triton,
+        case["density"],
+        case["box_min"],
+        case["box_max"],
+        (0.0, 1.0, 0.0),
+        -2,
+    )
+    expect_error(
+        ["density"],
+        tm.bake_light_triton,
+        case["source"],
+        case["box_min"],
+        case["box_max"],
+        (0.0, 1.0, 0.0),
+    )
 
 
 @needs_triton

@@ -72,42 +72,75 @@ def run_kernels(case: dict, renders: dict, device: str) -> dict:
     out["deep"] = tt.trace_flat_triton(deep, *args).to("cpu")
     out["depth"] = deep.depth
     out["variants"] = {
-        (regs, tris, spec): tt.trace_flat_triton(deep, *args, stack_regs=regs,
-                                                 tris_per_step=tris, speculate=spec).to("cpu")
-        for regs, tris, spec in ((0, 1, False), (4, 1, False), (4, 2, False), (0, 2, True),
-                                 (4, 2, True))}
+        (regs, tris, spec): tt.trace_flat_triton(
+            deep, *args, stack_regs=regs, tris_per_step=tris, speculate=spec
+        ).to("cpu")
+        for regs, tris, spec in (
+            (0, 1, False),
+            (4, 1, False),
+            (4, 2, False),
+            (0, 2, True),
+            (4, 2, True),
+        )
+    }
     for spec in (False, True):
-        out["any", spec] = tt.trace_flat_triton(deep, *args, any_hit=True,
-                                                speculate=spec).to("cpu")
+        out["any", spec] = tt.trace_flat_triton(deep, *args, any_hit=True, speculate=spec).to("cpu")
     # Every loop shape and stack place (the local stack compiled only; the interpreter,
     # whose default walk is the while-while loop, runs the if-if loop once more): the
     # same results as the default walk.
-    loops = ([("if", "global", 4, True)] if tt.interpreting() else
-             [(loop, stack, regs, spec) for loop in ("if", "while") for stack in ("global", "local")
-              for regs in (0, 4) for spec in (False, True) if not (stack == "local" and regs)])
-    out["loops"] = {key: tt.trace_flat_triton(deep, *args, loop=key[0], stack=key[1],
-                                              stack_regs=key[2], speculate=key[3]).to("cpu")
-                    for key in loops}
-    out["loops_any"] = {key: tt.trace_flat_triton(deep, *args, loop=key[0], stack=key[1],
-                                                  stack_regs=key[2], speculate=key[3],
-                                                  any_hit=True).to("cpu")
-                        for key in loops}
+    loops = (
+        [("if", "global", 4, True)]
+        if tt.interpreting()
+        else [
+            (loop, stack, regs, spec)
+            for loop in ("if", "while")
+            for stack in ("global", "local")
+            for regs in (0, 4)
+            for spec in (False, True)
+            if not (stack == "local" and regs)
+        ]
+    )
+    out["loops"] = {
+        key: tt.trace_flat_triton(
+            deep, *args, loop=key[0], stack=key[1], stack_regs=key[2], speculate=key[3]
+        ).to("cpu")
+        for key in loops
+    }
+    out["loops_any"] = {
+        key: tt.trace_flat_triton(
+            deep,
+            *args,
+            loop=key[0],
+            stack=key[1],
+            stack_regs=key[2],
+            speculate=key[3],
+            any_hit=True,
+        ).to("cpu")
+        for key in loops
+    }
     # Persistent programs that take new rays as lanes free up (the default walk): one
     # program, so that every lane is refilled (whole batches, a quarter of the lanes free,
     # any free lane), and none (refill=0: a program per block of rays).
-    out["refill"] = {(refill, any_hit): tt.trace_flat_triton(
-        deep, *args, refill=refill, programs=1 if refill else None, any_hit=any_hit).to("cpu")
-        for refill in (32, 8, 1, 0) for any_hit in (False, True)}
+    out["refill"] = {
+        (refill, any_hit): tt.trace_flat_triton(
+            deep, *args, refill=refill, programs=1 if refill else None, any_hit=any_hit
+        ).to("cpu")
+        for refill in (32, 8, 1, 0)
+        for any_hit in (False, True)
+    }
     # Fewer rays than a program's lanes, and one more: the counter runs out at the first
     # take and within the second.
-    out["refill_few"] = {n: (tt.trace_flat_triton(deep, *[a[:n] for a in args], refill=8,
-                                                  programs=1).to("cpu"),
-                             tt.trace_flat_triton(deep, *[a[:n] for a in args],
-                                                  refill=0).to("cpu"))
-                         for n in (1, 33)}
+    out["refill_few"] = {
+        n: (
+            tt.trace_flat_triton(deep, *[a[:n] for a in args], refill=8, programs=1).to("cpu"),
+            tt.trace_flat_triton(deep, *[a[:n] for a in args], refill=0).to("cpu"),
+        )
+        for n in (1, 33)
+    }
     v, f, o, d = axis_parallel_case()
-    out["axis"] = tt.trace_flat_triton(build_flat_bvh(v.to(device), f.to(device), leaf_size=1),
-                                       o.to(device), d.to(device)).to("cpu")
+    out["axis"] = tt.trace_flat_triton(
+        build_flat_bvh(v.to(device), f.to(device), leaf_size=1), o.to(device), d.to(device)
+    ).to("cpu")
     out["render"] = {}
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device=device)
@@ -127,12 +160,14 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
     check_hits(case, out["any"], f"{label} any hit", any_hit=True, ref=ref)
     assert torch.equal(out["any"].hit, out["closest"].hit), (
         f"{label}: any hit and closest hit disagree on occlusion for rays "
-        f"{(out['any'].hit != out['closest'].hit).nonzero()[:, 0].tolist()}")
+        f"{(out['any'].hit != out['closest'].hit).nonzero()[:, 0].tolist()}"
+    )
     check_axis_parallel(out["axis"], label)
     for field in ("t", "triangle", "u", "v"):
         assert torch.equal(getattr(out["masked_only"], field), getattr(out["closest"], field)), (
             f"{label}: uniform_branches=False changed {field}: the stages must be skipped "
-            f"only where no lane needs them")
+            f"only where no lane needs them"
+        )
     assert out["empty"] == 0
     check_hits(case, out["deep"], f"{label} closest hit, leaves of 1", ref=ref)
     assert out["depth"] > 6, "the deep tree must need more than the four register entries"
@@ -140,19 +175,27 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
                 f"{label}: stack_regs={regs}, tris_per_step={tris}, speculate={spec} "
-                f"changed {field}")
+                f"changed {field}"
+            )
     for spec in (False, True):
-        check_hits(case, out["any", spec], f"{label} any hit, speculate={spec}", any_hit=True,
-                   ref=ref)
+        check_hits(
+            case, out["any", spec], f"{label} any hit, speculate={spec}", any_hit=True, ref=ref
+        )
         assert torch.equal(out["any", spec].hit, out["deep"].hit)
     for (loop, stack, regs, spec), hits in out["loops"].items():
         what = f"{label}: loop={loop!r}, stack={stack!r}, stack_regs={regs}, speculate={spec}"
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
                 f"{what} changed {field} on rays "
-                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0]}")
-        check_hits(case, out["loops_any"][loop, stack, regs, spec], f"{what} any hit",
-                   any_hit=True, ref=ref)
+                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0]}"
+            )
+        check_hits(
+            case,
+            out["loops_any"][loop, stack, regs, spec],
+            f"{what} any hit",
+            any_hit=True,
+            ref=ref,
+        )
     for (refill, any_hit), hits in out["refill"].items():
         what = f"{label}: refill={refill}" + (", one program" if refill else "")
         if any_hit:
@@ -161,25 +204,29 @@ def check_all(case: dict, renders: dict, out: dict, label: str) -> None:
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(hits, field), getattr(out["deep"], field)), (
                 f"{what} changed {field} on rays "
-                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0]}")
+                f"{(getattr(hits, field) != getattr(out['deep'], field)).nonzero()[:8, 0]}"
+            )
     for n, (got, want) in out["refill_few"].items():
         for field in ("t", "triangle", "u", "v"):
             assert torch.equal(getattr(got, field), getattr(want, field)), (
-                f"{label}: refill=8 on {n} ray(s) changed {field}")
+                f"{label}: refill=8 on {n} ray(s) changed {field}"
+            )
     for name, (o, d) in renders.items():
         scene = whitted_scene(name, device="cpu")
         want = render_reference(scene, o, d)
         got = out["render"][name].double()
         assert torch.isfinite(got).all(), f"{label} {name}: non-finite radiance"
         assert torch.equal(got[0], scene.background.double()), (
-            f"{label} {name}: a NaN primary ray must see the background, got {got[0].tolist()}")
+            f"{label} {name}: a NaN primary ray must see the background, got {got[0].tolist()}"
+        )
         err = (got - want).abs().amax(1) / want.abs().amax(1).clamp(min=1e-3)
         # float32 vs float64: pixels may differ where a shadow or a mirror edge falls
         # between the two roundings; everywhere else they agree to ~1e-5.
         bad = (err > 1e-3).float().mean().item()
         assert bad <= 0.02, (
             f"{label} {name}: {bad:.1%} of the pixels differ from render_reference by more "
-            f"than 0.1% (worst {err.max().item():.3g} at pixel {int(err.argmax())})")
+            f"than 0.1% (worst {err.max().item():.3g} at pixel {int(err.argmax())})"
+        )
 
 
 @needs_triton
@@ -202,10 +249,13 @@ def run_vertex_case(case: dict, device: str) -> dict:
 
     rays = [case[k].to(device) for k in ("origins", "directions")]
     faces = len(case["faces"])
-    return {leaf: tt.trace_flat_triton(build_flat_bvh(case["vertices"].to(device),
-                                                      case["faces"].to(device),
-                                                      leaf_size=leaf), *rays).to("cpu")
-            for leaf in (1, 4, faces)}
+    return {
+        leaf: tt.trace_flat_triton(
+            build_flat_bvh(case["vertices"].to(device), case["faces"].to(device), leaf_size=leaf),
+            *rays,
+        ).to("cpu")
+        for leaf in (1, 4, faces)
+    }
 
 
 @needs_triton
@@ -218,8 +268,7 @@ def test_interpreted_walk_at_shared_vertices_hits_as_brute_force(tmp_path):
     brute = out.pop(len(case["faces"]))
     assert brute.hit.any() and not brute.hit.all(), "a mesh's vertices: hits and misses"
     for leaf, hits in out.items():
-        check_vertex_hits(case, hits, f"interpreted trace_flat_triton, leaves of {leaf}",
-                          ref=brute)
+        check_vertex_hits(case, hits, f"interpreted trace_flat_triton, leaves of {leaf}", ref=brute)
 
 
 @needs_triton
@@ -230,8 +279,7 @@ def test_compiled_walk_at_shared_vertices_hits_as_brute_force():
     out = run_vertex_case(case, "cuda")
     brute = out.pop(len(case["faces"]))
     for leaf, hits in out.items():
-        check_vertex_hits(case, hits, f"compiled trace_flat_triton, leaves of {leaf}",
-                          ref=brute)
+        check_vertex_hits(case, hits, f"compiled trace_flat_triton, leaves of {leaf}", ref=brute)
 
 
 def _compiled_tracer():
@@ -256,11 +304,14 @@ def test_compiled_kernels_follow_the_contract():
         assert isinstance(info.local_bytes, int) and info.local_bytes >= 4 * info.n_spills
         if info.name in ("closest_hit", "any_hit"):  # the default walk: the local stack
             assert info.local_bytes >= 4 * 64, (
-                f"{info.name}: {info.local_bytes} B of local memory, less than its stack")
+                f"{info.name}: {info.local_bytes} B of local memory, less than its stack"
+            )
         occ = info.occupancy()
-        print(f"{info.name}: {info.n_regs} registers, {info.n_spills} spills, "
-              f"{info.local_bytes} B local, "
-              f"occupancy {occ.occupancy:.0%} ({occ.limiter})")
+        print(
+            f"{info.name}: {info.n_regs} registers, {info.n_spills} spills, "
+            f"{info.local_bytes} B local, "
+            f"occupancy {occ.occupancy:.0%} ({occ.limiter})"
+        )
 
 
 @needs_triton
@@ -302,7 +353,8 @@ def test_compiled_local_stack_allocates_only_the_outputs():
     assert peaks["local"] <= outputs + 4 * 512, (
         f"stack='local' allocated {peaks['local']} bytes for {len(o)} rays; the outputs "
         f"need {outputs}: a stack buffer ({peaks['global'] - peaks['local']} more bytes "
-        "with stack='global') is allocated that the kernel never reads")
+        "with stack='global') is allocated that the kernel never reads"
+    )
 
 
 @needs_triton
@@ -313,21 +365,30 @@ def test_bad_arguments_raise_clear_errors():
     case = make_case(n_tris=20, n_rays=64, seed=1)
     bvh = build_flat_bvh(case["vertices"], case["faces"])
     o, d = case["origins"], case["directions"]
-    for kwargs, word in [({"origins": o[:, :2]}, "origins"), ({"directions": d[:2]}, "directions"),
-                         ({"block": 48}, "block"), ({"num_warps": 3}, "num_warps"),
-                         ({"block": 32, "num_warps": 2}, "block"), ({"bvh": "x"}, "bvh"),
-                         ({"stack_regs": 2}, "stack_regs"), ({"tris_per_step": 3}, "tris_per"),
-                         ({"loop": "do"}, "loop"), ({"stack": "shared"}, "stack"),
-                         ({"stack": "local", "stack_regs": 4}, "stack_regs"),
-                         ({"refill": -1}, "refill"), ({"refill": 33}, "refill"),
-                         ({"refill": 8, "loop": "if"}, "refill"),
-                         ({"refill": 0, "programs": 4}, "programs"),
-                         ({"refill": 8, "programs": 0}, "programs"),
-                         ({"t_min": torch.zeros(7)}, "t_min")]:
+    for kwargs, word in [
+        ({"origins": o[:, :2]}, "origins"),
+        ({"directions": d[:2]}, "directions"),
+        ({"block": 48}, "block"),
+        ({"num_warps": 3}, "num_warps"),
+        ({"block": 32, "num_warps": 2}, "block"),
+        ({"bvh": "x"}, "bvh"),
+        ({"stack_regs": 2}, "stack_regs"),
+        ({"tris_per_step": 3}, "tris_per"),
+        ({"loop": "do"}, "loop"),
+        ({"stack": "shared"}, "stack"),
+        ({"stack": "local", "stack_regs": 4}, "stack_regs"),
+        ({"refill": -1}, "refill"),
+        ({"refill": 33}, "refill"),
+        ({"refill": 8, "loop": "if"}, "refill"),
+        ({"refill": 0, "programs": 4}, "programs"),
+        ({"refill": 8, "programs": 0}, "programs"),
+        ({"t_min": torch.zeros(7)}, "t_min"),
+    ]:
         args = {"bvh": bvh, "origins": o, "directions": d, **kwargs}
         with pytest.raises((ValueError, TypeError), match=word):
-            tt.trace_flat_triton(args.pop("bvh"), args.pop("origins"), args.pop("directions"),
-                                 **args)
+            tt.trace_flat_triton(
+                args.pop("bvh"), args.pop("origins"), args.pop("directions"), **args
+            )
     if not tt.interpreting():
         with pytest.raises(ValueError, match="CUDA"):
             tt.trace_flat_triton(bvh, o, d)  # CPU tensors, compiled kernels

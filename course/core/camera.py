@@ -38,13 +38,17 @@ def _camera_axes(eye, target, up) -> tuple[torch.Tensor, torch.Tensor, torch.Ten
         raise ValueError(f"target: must differ from eye, both are {eye.tolist()}")
     forward = forward / forward.norm()
     if up.norm() == 0:
-        raise ValueError(f"up: the vector is zero, {up.tolist()}; give the direction that "
-                         f"should point up in the image, e.g. (0, 1, 0)")
+        raise ValueError(
+            f"up: the vector is zero, {up.tolist()}; give the direction that "
+            f"should point up in the image, e.g. (0, 1, 0)"
+        )
     right = torch.linalg.cross(forward, up)
     # A near-zero cross product means up is (anti)parallel to the view direction: no roll.
     if right.norm() <= 1e-12 * up.norm():
-        raise ValueError(f"up: must not be parallel to the view direction "
-                         f"{forward.tolist()} (target - eye, normalised), got {up.tolist()}")
+        raise ValueError(
+            f"up: must not be parallel to the view direction "
+            f"{forward.tolist()} (target - eye, normalised), got {up.tolist()}"
+        )
     right = right / right.norm()
     return right, torch.linalg.cross(right, forward), -forward
 
@@ -64,8 +68,9 @@ def look_at(eye, target, up, dtype: torch.dtype = torch.float64) -> torch.Tensor
     return view.to(dtype)
 
 
-def perspective(fov_y_deg: float, aspect: float, near: float, far: float,
-                dtype: torch.dtype = torch.float64) -> torch.Tensor:
+def perspective(
+    fov_y_deg: float, aspect: float, near: float, far: float, dtype: torch.dtype = torch.float64
+) -> torch.Tensor:
     """The (4, 4) camera-to-clip matrix of ``gluPerspective``.
 
     fov_y_deg: vertical field of view in degrees, in (0, 180); aspect: width / height;
@@ -80,10 +85,15 @@ def perspective(fov_y_deg: float, aspect: float, near: float, far: float,
     # The far = inf limit of (far + near) / (near - far) and 2 far near / (near - far).
     z_scale = -1.0 if math.isinf(far) else (far + near) / (near - far)
     z_offset = -2.0 * near if math.isinf(far) else 2.0 * far * near / (near - far)
-    return torch.tensor([[f / aspect, 0.0, 0.0, 0.0],
-                         [0.0, f, 0.0, 0.0],
-                         [0.0, 0.0, z_scale, z_offset],
-                         [0.0, 0.0, -1.0, 0.0]], dtype=torch.float64).to(dtype)
+    return torch.tensor(
+        [
+            [f / aspect, 0.0, 0.0, 0.0],
+            [0.0, f, 0.0, 0.0],
+            [0.0, 0.0, z_scale, z_offset],
+            [0.0, 0.0, -1.0, 0.0],
+        ],
+        dtype=torch.float64,
+    ).to(dtype)
 
 
 def _check_fov(fov: float, name: str) -> None:
@@ -144,8 +154,9 @@ class Camera:
         return (self.projection() @ self.view()).to(dtype)
 
 
-def primary_rays(camera: Camera, device: str | torch.device | None = None,
-                 dtype: torch.dtype = torch.float32) -> Rays:
+def primary_rays(
+    camera: Camera, device: str | torch.device | None = None, dtype: torch.dtype = torch.float32
+) -> Rays:
     """One ray per pixel, ``height * width`` rays in row-major order (row 0 at the top).
 
     Ray ``row * width + col`` leaves the eye through the centre of pixel (row, col);
@@ -153,15 +164,16 @@ def primary_rays(camera: Camera, device: str | torch.device | None = None,
     computed in float64 and then cast, so low-precision rays are correctly rounded.
     """
     device = default_device(device)
-    right, true_up, back = (a.to(device) for a in _camera_axes(camera.eye, camera.target,
-                                                               camera.up))
+    right, true_up, back = (
+        a.to(device) for a in _camera_axes(camera.eye, camera.target, camera.up)
+    )
     half_h = math.tan(math.radians(camera.fov_y) / 2)
     half_w = half_h * camera.aspect
     cols = torch.arange(camera.width, dtype=torch.float64, device=device)
     rows = torch.arange(camera.height, dtype=torch.float64, device=device)
     # Pixel centres on the image plane at distance 1 in front of the eye.
-    x = (2 * (cols + 0.5) / camera.width - 1) * half_w    # (W,) left to right
-    y = (1 - 2 * (rows + 0.5) / camera.height) * half_h   # (H,) top to bottom
+    x = (2 * (cols + 0.5) / camera.width - 1) * half_w  # (W,) left to right
+    y = (1 - 2 * (rows + 0.5) / camera.height) * half_h  # (H,) top to bottom
     directions = x[None, :, None] * right + y[:, None, None] * true_up - back  # (H, W, 3)
     directions = directions.reshape(-1, 3)
     directions = directions / directions.norm(dim=1, keepdim=True)

@@ -75,8 +75,9 @@ def _checked(spec: str | torch.device, name: str) -> torch.device:
     try:
         device = torch.device(spec)
     except (RuntimeError, TypeError) as err:
-        raise ValueError(f"{name}={spec!r} is not a device; expected 'cpu', 'cuda' or 'cuda:N'") \
-            from err
+        raise ValueError(
+            f"{name}={spec!r} is not a device; expected 'cpu', 'cuda' or 'cuda:N'"
+        ) from err
     if device.type not in ("cpu", "cuda"):
         raise ValueError(f"{name}={spec!r}: the course supports 'cpu' and 'cuda' devices only")
     if device.type == "cuda":
@@ -84,6 +85,7 @@ def _checked(spec: str | torch.device, name: str) -> torch.device:
         if count == 0:
             raise ValueError(f"{name}={spec!r}: CUDA is not available on this machine; use 'cpu'")
         if device.index is not None and device.index >= count:
-            raise ValueError(f"{name}={spec!r}: only {count} CUDA device(s) present "
-                             f"(cuda:0..cuda:{count - 1})")
+            raise ValueError(
+                f"{name}={spec!r}: only {count} CUDA device(s) present (cuda:0..cuda:{count - 1})"
+            )
     return device

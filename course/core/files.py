@@ -27,8 +27,10 @@ def repo_root(command: str = "rtcourse") -> Path:
     for folder in (here, *here.parents):
         if (folder / "tests").is_dir() and (folder / "pyproject.toml").is_file():
             return folder
-    raise SystemExit(f"{command}: run this inside the course folder (no tests/ and "
-                     f"pyproject.toml in {here} or above it)")
+    raise SystemExit(
+        f"{command}: run this inside the course folder (no tests/ and "
+        f"pyproject.toml in {here} or above it)"
+    )
 
 
 def lab_source(folder, name: str) -> Path | None:
@@ -72,7 +74,8 @@ def import_file(path, name=None):
         return module
     _drop(name)
     spec = importlib.util.spec_from_file_location(
-        name, init, submodule_search_locations=[str(package)] if package else None)
+        name, init, submodule_search_locations=[str(package)] if package else None
+    )
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
@@ -90,15 +93,21 @@ def module_files(path) -> list[Path]:
     package = _package(path)
     if package is None:
         return [path]
-    files = sorted(p for p in package.rglob("*.py")
-                   if p.is_file() and "__pycache__" not in p.relative_to(package).parts)
+    files = sorted(
+        p
+        for p in package.rglob("*.py")
+        if p.is_file() and "__pycache__" not in p.relative_to(package).parts
+    )
     return sorted(files, key=lambda p: p.relative_to(package) != Path("__init__.py"))
 
 
 def _top_level_names(path: Path) -> set[str]:
     tree = ast.parse(path.read_text(), filename=str(path))
-    return {node.name for node in tree.body
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))}
+    return {
+        node.name
+        for node in tree.body
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))
+    }
 
 
 def defining_file(path, name: str) -> Path:
@@ -108,8 +117,7 @@ def defining_file(path, name: str) -> Path:
     files = [f for f in module_files(path) if top in _top_level_names(f)]
     if len(files) != 1:
         where = "none" if not files else " and ".join(str(f) for f in files)
-        raise ValueError(f"{name!r}: expected one file of {path} defining {top!r}, found "
-                         f"{where}")
+        raise ValueError(f"{name!r}: expected one file of {path} defining {top!r}, found {where}")
     return files[0]
 
 

@@ -21,8 +21,9 @@ def _require_float(x: torch.Tensor, name: str) -> None:
 
 def _require_image(img: torch.Tensor, name: str) -> None:
     if not isinstance(img, torch.Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor of shape (H, W, 3), "
-                        f"got {type(img).__name__}")
+        raise TypeError(
+            f"{name}: expected a torch.Tensor of shape (H, W, 3), got {type(img).__name__}"
+        )
     if img.ndim != 3 or img.shape[2] != 3:
         raise ValueError(f"{name}: expected shape (H, W, 3), got {tuple(img.shape)}")
 

@@ -22,15 +22,23 @@ def progress_enabled(stream=None) -> bool:
         return False
 
 
-def progress(iterable=None, *, total=None, desc: str = "", unit: str = "it", leave=False,
-             file=None):
+def progress(
+    iterable=None, *, total=None, desc: str = "", unit: str = "it", leave=False, file=None
+):
     """A tqdm bar on ``file`` (stderr by default) over ``iterable`` (or one to update by
     hand with ``total``), drawn only when :func:`progress_enabled` for that stream."""
     from tqdm import tqdm
 
     stream = file if file is not None else (sys.__stderr__ or sys.stderr)
-    return tqdm(iterable, total=total, desc=desc, unit=unit, leave=leave, file=stream,
-                disable=not progress_enabled(stream))
+    return tqdm(
+        iterable,
+        total=total,
+        desc=desc,
+        unit=unit,
+        leave=leave,
+        file=stream,
+        disable=not progress_enabled(stream),
+    )
 
 
 def terminal_stream():

@@ -67,34 +67,44 @@ def check_inputs(vectors: dict, scalars: dict | None = None):
     for name, (x, trailing) in vectors.items():
         want = "(..., " + ", ".join(map(str, trailing)) + ")"
         if not isinstance(x, torch.Tensor):
-            raise TypeError(f"{name}: expected a torch.Tensor of shape {want}, "
-                            f"got {type(x).__name__}")
+            raise TypeError(
+                f"{name}: expected a torch.Tensor of shape {want}, got {type(x).__name__}"
+            )
         if not x.is_floating_point():
-            raise TypeError(f"{name}: expected a floating-point tensor (float16, bfloat16, "
-                            f"float32 or float64), got {x.dtype}")
-        if x.ndim < len(trailing) or tuple(x.shape[x.ndim - len(trailing):]) != trailing:
+            raise TypeError(
+                f"{name}: expected a floating-point tensor (float16, bfloat16, "
+                f"float32 or float64), got {x.dtype}"
+            )
+        if x.ndim < len(trailing) or tuple(x.shape[x.ndim - len(trailing) :]) != trailing:
             raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
         if first is None:
             first = (name, x)
         elif x.dtype != first[1].dtype:
-            raise TypeError(f"{name}: expected dtype {first[1].dtype} like {first[0]}, "
-                            f"got {x.dtype}")
+            raise TypeError(
+                f"{name}: expected dtype {first[1].dtype} like {first[0]}, got {x.dtype}"
+            )
         elif x.device != first[1].device:
-            raise ValueError(f"{name}: expected a tensor on {first[1].device} like {first[0]}, "
-                             f"got one on {x.device}")
-        shape = _broadcast(shape, x.shape[:x.ndim - len(trailing)], name, vectors)
+            raise ValueError(
+                f"{name}: expected a tensor on {first[1].device} like {first[0]}, "
+                f"got one on {x.device}"
+            )
+        shape = _broadcast(shape, x.shape[: x.ndim - len(trailing)], name, vectors)
     converted = {}
     for name, value in (scalars or {}).items():
         if isinstance(value, torch.Tensor):
             if not value.is_floating_point():
-                raise TypeError(f"{name}: expected a number or a floating-point tensor, "
-                                f"got {value.dtype}")
+                raise TypeError(
+                    f"{name}: expected a number or a floating-point tensor, got {value.dtype}"
+                )
             if value.device != first[1].device:
-                raise ValueError(f"{name}: expected a tensor on {first[1].device} like "
-                                 f"{first[0]}, got one on {value.device}")
+                raise ValueError(
+                    f"{name}: expected a tensor on {first[1].device} like "
+                    f"{first[0]}, got one on {value.device}"
+                )
         elif not isinstance(value, (int, float)) or isinstance(value, bool):
-            raise TypeError(f"{name}: expected a number or a float tensor, "
-                            f"got {type(value).__name__}")
+            raise TypeError(
+                f"{name}: expected a number or a float tensor, got {type(value).__name__}"
+            )
         value = torch.as_tensor(value, dtype=first[1].dtype, device=first[1].device)
         shape = _broadcast(shape, value.shape, name, vectors)
         converted[name] = value
@@ -105,19 +115,28 @@ def _broadcast(shape, other, name, vectors):
     try:
         return torch.broadcast_shapes(shape, other)
     except RuntimeError:
-        before = list(vectors)[:list(vectors).index(name)] if name in vectors else list(vectors)
-        raise ValueError(f"{name}: leading shape {tuple(other)} does not broadcast with "
-                         f"{tuple(shape)}, the broadcast of {', '.join(before)}; rays "
-                         f"(N, 1, 3) against triangles (1, M, 3) give (N, M) results") from None
+        before = list(vectors)[: list(vectors).index(name)] if name in vectors else list(vectors)
+        raise ValueError(
+            f"{name}: leading shape {tuple(other)} does not broadcast with "
+            f"{tuple(shape)}, the broadcast of {', '.join(before)}; rays "
+            f"(N, 1, 3) against triangles (1, M, 3) give (N, M) results"
+        ) from None
 
 
 def check_triangle_inputs(origins, directions, v0, v1, v2, t_min, t_max):
     """``check_inputs`` for a triangle kernel's arguments; returns ``t_min, t_max`` as
     tensors of the kernel's dtype and device."""
     p3 = (3,)
-    _, s = check_inputs({"origins": (origins, p3), "directions": (directions, p3),
-                         "v0": (v0, p3), "v1": (v1, p3), "v2": (v2, p3)},
-                        {"t_min": t_min, "t_max": t_max})
+    _, s = check_inputs(
+        {
+            "origins": (origins, p3),
+            "directions": (directions, p3),
+            "v0": (v0, p3),
+            "v1": (v1, p3),
+            "v2": (v2, p3),
+        },
+        {"t_min": t_min, "t_max": t_max},
+    )
     return s["t_min"], s["t_max"]
 
 
@@ -150,4 +169,5 @@ def check_mesh(mesh, finite: bool = False, dtypes=None, name: str = "mesh") -> N
             raise ValueError(
                 f"{name}: expected finite vertices to build a structure over, got "
                 f"{int(bad.sum())} of {len(bad)} with NaN or inf coordinates (first: vertex "
-                f"{first} = {mesh.vertices[first].tolist()}); repair or drop those triangles")
+                f"{first} = {mesh.vertices[first].tolist()}); repair or drop those triangles"
+            )

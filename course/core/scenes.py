@@ -42,8 +42,11 @@ _ASSET_FILES = {"suzanne": "suzanne.glb", "bunny": "bunny.obj"}
 # Meshes from files
 
 
-def load_mesh(path_or_name: str | Path, device: str | torch.device | None = None,
-              dtype: torch.dtype = torch.float32) -> Mesh:
+def load_mesh(
+    path_or_name: str | Path,
+    device: str | torch.device | None = None,
+    dtype: torch.dtype = torch.float32,
+) -> Mesh:
     """A triangle mesh from a file (OBJ, PLY, glTF/GLB, ...) or a bundled asset name.
 
     path_or_name: a file path, or ``"suzanne"`` / ``"bunny"`` for the bundled assets.
@@ -59,11 +62,13 @@ def load_mesh(path_or_name: str | Path, device: str | torch.device | None = None
     except Exception as exc:  # trimesh's loaders raise anything on bad bytes
         supported = trimesh.available_formats()
         if path.suffix.lstrip(".").lower() not in supported:
-            raise ValueError(f"path_or_name: {path}: the {kind} format is not supported "
-                             f"(trimesh reads {', '.join(sorted(supported)[:12])}, ...)") \
-                from exc
-        raise ValueError(f"path_or_name: {path} is not a readable {kind} file: "
-                         f"{type(exc).__name__}: {exc}") from exc
+            raise ValueError(
+                f"path_or_name: {path}: the {kind} format is not supported "
+                f"(trimesh reads {', '.join(sorted(supported)[:12])}, ...)"
+            ) from exc
+        raise ValueError(
+            f"path_or_name: {path} is not a readable {kind} file: {type(exc).__name__}: {exc}"
+        ) from exc
     parts = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
     parts = [p for p in parts if isinstance(p, trimesh.Trimesh) and len(p.faces) > 0]
     if not parts:
@@ -78,16 +83,19 @@ def _resolve(path_or_name: str | Path) -> Path:
         return ASSETS / _ASSET_FILES[str(path_or_name)]
     path = Path(path_or_name)
     if not path.is_file():
-        raise FileNotFoundError(f"path_or_name: no file {str(path)!r}; bundled meshes: "
-                                f"{', '.join(_ASSET_FILES)}")
+        raise FileNotFoundError(
+            f"path_or_name: no file {str(path)!r}; bundled meshes: {', '.join(_ASSET_FILES)}"
+        )
     return path
 
 
 def _mesh(vertices, faces, device, dtype: torch.dtype) -> Mesh:
     """A Mesh from array-likes; positions pass through float64 before the final cast."""
     device = default_device(device)
-    return Mesh(vertices=torch.as_tensor(np.asarray(vertices, dtype=np.float64)).to(device, dtype),
-                faces=torch.as_tensor(np.asarray(faces, dtype=np.int64)).to(device))
+    return Mesh(
+        vertices=torch.as_tensor(np.asarray(vertices, dtype=np.float64)).to(device, dtype),
+        faces=torch.as_tensor(np.asarray(faces, dtype=np.int64)).to(device),
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -150,6 +158,7 @@ def _builtin(name: str):
     def register(build: Callable[..., Scene]) -> Callable[..., Scene]:
         _BUILTINS[name] = build
         return build
+
     return register
 
 
@@ -158,8 +167,12 @@ def list_scenes() -> list[str]:
     return sorted(_BUILTINS)
 
 
-def load_scene(name: str, device: str | torch.device | None = None,
-               dtype: torch.dtype = torch.float32, **params) -> Scene:
+def load_scene(
+    name: str,
+    device: str | torch.device | None = None,
+    dtype: torch.dtype = torch.float32,
+    **params,
+) -> Scene:
     """Build the built-in scene ``name`` (see ``list_scenes()``), or frame a mesh file.
 
     params: the scene's own knobs, e.g. ``load_scene("icosphere", level=4)``,
@@ -169,13 +182,21 @@ def load_scene(name: str, device: str | torch.device | None = None,
         if Path(name).is_file():
             mesh = load_mesh(name, device, dtype)
             return Scene(mesh=mesh, camera=_framing_camera(mesh.vertices), name=Path(name).stem)
-        raise ValueError(f"name: unknown scene {name!r}; built-in scenes are "
-                         f"{', '.join(list_scenes())} (or pass a mesh file path)")
+        raise ValueError(
+            f"name: unknown scene {name!r}; built-in scenes are "
+            f"{', '.join(list_scenes())} (or pass a mesh file path)"
+        )
     return _BUILTINS[name](device=default_device(device), dtype=dtype, **params)
 
 
-def _framing_camera(vertices, view_from=(0.0, 0.0, 1.0), up=(0.0, 1.0, 0.0),
-                    fov_y: float = 40.0, width: int = 256, height: int = 256) -> Camera:
+def _framing_camera(
+    vertices,
+    view_from=(0.0, 0.0, 1.0),
+    up=(0.0, 1.0, 0.0),
+    fov_y: float = 40.0,
+    width: int = 256,
+    height: int = 256,
+) -> Camera:
     """A camera looking at ``vertices`` from direction ``view_from``, just far enough that
     their bounding sphere (centred on the bounding box) fits the view with a small margin."""
     points = torch.as_tensor(vertices).detach().to("cpu", torch.float64)
@@ -184,8 +205,16 @@ def _framing_camera(vertices, view_from=(0.0, 0.0, 1.0), up=(0.0, 1.0, 0.0),
     distance = 1.1 * radius / math.sin(math.radians(fov_y) / 2)
     direction = torch.tensor(view_from, dtype=torch.float64)
     eye = center + distance * direction / direction.norm()
-    return Camera(eye=tuple(eye.tolist()), target=tuple(center.tolist()), up=up, fov_y=fov_y,
-                  width=width, height=height, near=0.01 * distance, far=10 * (distance + radius))
+    return Camera(
+        eye=tuple(eye.tolist()),
+        target=tuple(center.tolist()),
+        up=up,
+        fov_y=fov_y,
+        width=width,
+        height=height,
+        near=0.01 * distance,
+        far=10 * (distance + radius),
+    )
 
 
 @_builtin("triangle")
@@ -211,11 +240,13 @@ def _random_soup(device, dtype, n: int = 1000, seed: int = 0) -> Scene:
     if n < 1:
         raise ValueError(f"n: expected at least one triangle, got {n}")
     g = torch.Generator().manual_seed(seed)
-    size = torch.exp(torch.empty(n, dtype=torch.float64).uniform_(math.log(1e-3), math.log(0.25),
-                                                                 generator=g))
+    size = torch.exp(
+        torch.empty(n, dtype=torch.float64).uniform_(math.log(1e-3), math.log(0.25), generator=g)
+    )
     # Centres at least `size` from the cube's faces keep every corner inside the cube.
-    centre = size[:, None] + (1 - 2 * size[:, None]) * torch.rand(n, 3, dtype=torch.float64,
-                                                                  generator=g)
+    centre = size[:, None] + (1 - 2 * size[:, None]) * torch.rand(
+        n, 3, dtype=torch.float64, generator=g
+    )
     offsets = (2 * torch.rand(n, 3, 3, dtype=torch.float64, generator=g) - 1) * size[:, None, None]
     vertices = (centre[:, None, :] + offsets).reshape(-1, 3)
     mesh = _mesh(vertices, torch.arange(3 * n).reshape(n, 3), device, dtype)
@@ -237,17 +268,27 @@ def _cornell_box(device, dtype) -> Scene:
     """The classic box [-1, 1] x [0, 2] x [-1, 1] with a short and a tall box and a quad light
     just below the ceiling, extended to z = 3 and closed there (every ray hits something), so
     the camera stands inside the room with the classic view."""
-    parts = [_box((2.0, 2.0, 4.0), (0.0, 1.0, 1.0), inward=True),
-             _box((0.6, 0.6, 0.6), (0.35, 0.3, 0.3), angle_y_deg=-18.0),
-             _box((0.6, 1.2, 0.6), (-0.35, 0.6, -0.3), angle_y_deg=17.0)]
+    parts = [
+        _box((2.0, 2.0, 4.0), (0.0, 1.0, 1.0), inward=True),
+        _box((0.6, 0.6, 0.6), (0.35, 0.3, 0.3), angle_y_deg=-18.0),
+        _box((0.6, 1.2, 0.6), (-0.35, 0.6, -0.3), angle_y_deg=17.0),
+    ]
     room = trimesh.util.concatenate(parts)
     # 1 mm below the ceiling, facing down: a shadow ray ending on the light is not blocked
     # by the ceiling it is mounted on.
-    light = QuadLight(corner=(-0.25, 1.999, -0.2), edge_u=(0.5, 0.0, 0.0), edge_v=(0.0, 0.0, 0.4),
-                      radiance=(17.0, 12.0, 4.0))
+    light = QuadLight(
+        corner=(-0.25, 1.999, -0.2),
+        edge_u=(0.5, 0.0, 0.0),
+        edge_v=(0.0, 0.0, 0.4),
+        radiance=(17.0, 12.0, 4.0),
+    )
     camera = Camera(eye=(0.0, 1.0, 2.9), target=(0.0, 1.0, 0.0), fov_y=40.0, near=0.01, far=10.0)
-    return Scene(mesh=_mesh(room.vertices, room.faces, device, dtype), camera=camera,
-                 lights=[light], name="cornell_box")
+    return Scene(
+        mesh=_mesh(room.vertices, room.faces, device, dtype),
+        camera=camera,
+        lights=[light],
+        name="cornell_box",
+    )
 
 
 @_builtin("suzanne")
@@ -279,15 +320,17 @@ def _bunny_scene(iterations: int, device, dtype) -> Scene:
         mesh = load_mesh("bunny", device, dtype)
     else:
         mesh = _mesh(*_subdivided_bunny(iterations), device, dtype)
-    name = "bunny" if iterations == 0 else f"bunny_x{4 ** iterations}"
+    name = "bunny" if iterations == 0 else f"bunny_x{4**iterations}"
     return Scene(mesh=mesh, camera=_framing_camera(mesh.vertices), name=name)
 
 
 def _subdivided_bunny(iterations: int) -> tuple[np.ndarray, np.ndarray]:
     def build():
         bunny = load_mesh("bunny", device="cpu", dtype=torch.float64)
-        return trimesh.remesh.subdivide_loop(bunny.vertices.numpy(), bunny.faces.numpy(),
-                                             iterations=iterations)
+        return trimesh.remesh.subdivide_loop(
+            bunny.vertices.numpy(), bunny.faces.numpy(), iterations=iterations
+        )
+
     return _cached(f"bunny_loop{iterations}", build)
 
 
@@ -297,8 +340,9 @@ def _teapot_in_stadium(device, dtype, subdivisions: int = 2) -> Scene:
     sitting on the floor of a closed room 200 across: nearly all triangles fill a tiny part of
     the scene's bounds, the case that defeats a uniform grid."""
     suzanne = load_mesh("suzanne", device="cpu", dtype=torch.float64)
-    vertices, faces = trimesh.remesh.subdivide_loop(suzanne.vertices.numpy(), suzanne.faces.numpy(),
-                                                    iterations=subdivisions)
+    vertices, faces = trimesh.remesh.subdivide_loop(
+        suzanne.vertices.numpy(), suzanne.faces.numpy(), iterations=subdivisions
+    )
     vertices = vertices @ np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # z-up to y-up, face +z
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     vertices = (vertices - (lo + hi) / 2) * (0.2 / (hi - lo).max())
@@ -307,8 +351,11 @@ def _teapot_in_stadium(device, dtype, subdivisions: int = 2) -> Scene:
     teapot = trimesh.Trimesh(vertices, faces, process=False)
     world = trimesh.util.concatenate([teapot, stadium])
     camera = dataclasses.replace(_framing_camera(vertices, view_from=(0.3, 0.2, 1.0)), far=1000.0)
-    return Scene(mesh=_mesh(world.vertices, world.faces, device, dtype), camera=camera,
-                 name="teapot_in_stadium")
+    return Scene(
+        mesh=_mesh(world.vertices, world.faces, device, dtype),
+        camera=camera,
+        name="teapot_in_stadium",
+    )
 
 
 # ---------------------------------------------------------------------------------------

@@ -31,16 +31,20 @@ def _validate(obj: object, specs: tuple[_Spec, ...]) -> None:
     for name, dims, kind in specs:
         x = getattr(obj, name)
         if not isinstance(x, torch.Tensor):
-            raise TypeError(f"{name}: expected a torch.Tensor of shape {_shape_str(dims)}, "
-                            f"got {type(x).__name__}")
+            raise TypeError(
+                f"{name}: expected a torch.Tensor of shape {_shape_str(dims)}, "
+                f"got {type(x).__name__}"
+            )
         if x.ndim != len(dims) or any(isinstance(d, int) and d != s for d, s in zip(dims, x.shape)):
             raise ValueError(f"{name}: expected shape {_shape_str(dims)}, got {tuple(x.shape)}")
         for d, s in zip(dims, x.shape):
             if isinstance(d, str):
                 size, owner = sizes.setdefault(d, (s, name))
                 if s != size:
-                    raise ValueError(f"{name}: expected shape {_shape_str(dims)} with {d}={size} "
-                                     f"as in {owner}, got {tuple(x.shape)}")
+                    raise ValueError(
+                        f"{name}: expected shape {_shape_str(dims)} with {d}={size} "
+                        f"as in {owner}, got {tuple(x.shape)}"
+                    )
         if kind == "float":
             if not x.is_floating_point():
                 raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
@@ -76,16 +80,21 @@ class _Tensors:
         """The dtype of the floating-point fields."""
         return getattr(self, self._SPEC[0][0]).dtype
 
-    def to(self, device: str | torch.device | torch.dtype | None = None,
-           dtype: torch.dtype | None = None):
+    def to(
+        self,
+        device: str | torch.device | torch.dtype | None = None,
+        dtype: torch.dtype | None = None,
+    ):
         """A copy on ``device`` with float fields cast to ``dtype`` (index fields stay int64).
 
         ``x.to(torch.float64)`` casts only, like ``Tensor.to``.
         """
         if isinstance(device, torch.dtype):
             device, dtype = None, device
-        moved = {name: getattr(self, name).to(device=device, dtype=dtype if kind == "float" else None)
-                 for name, _, kind in self._SPEC}
+        moved = {
+            name: getattr(self, name).to(device=device, dtype=dtype if kind == "float" else None)
+            for name, _, kind in self._SPEC
+        }
         return dataclasses.replace(self, **moved)
 
 
@@ -100,8 +109,9 @@ class _Batch(_Tensors):
         an index tensor (gather) or an int (a batch of one)."""
         if isinstance(index, int):
             index = [index]
-        return dataclasses.replace(self, **{name: getattr(self, name)[index]
-                                            for name, _, _ in self._SPEC})
+        return dataclasses.replace(
+            self, **{name: getattr(self, name)[index] for name, _, _ in self._SPEC}
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,12 +127,24 @@ class Rays(_Batch):
     t_min: torch.Tensor
     t_max: torch.Tensor
 
-    _SPEC: ClassVar = (("origins", ("N", 3), "float"), ("directions", ("N", 3), "float"),
-                       ("t_min", ("N",), "float"), ("t_max", ("N",), "float"))
+    _SPEC: ClassVar = (
+        ("origins", ("N", 3), "float"),
+        ("directions", ("N", 3), "float"),
+        ("t_min", ("N",), "float"),
+        ("t_max", ("N",), "float"),
+    )
 
     @classmethod
-    def create(cls, origins, directions, t_min=0.0, t_max=math.inf, *,
-               dtype: torch.dtype | None = None, device: str | torch.device | None = None) -> Rays:
+    def create(
+        cls,
+        origins,
+        directions,
+        t_min=0.0,
+        t_max=math.inf,
+        *,
+        dtype: torch.dtype | None = None,
+        device: str | torch.device | None = None,
+    ) -> Rays:
         """Rays from ``directions`` (N, 3), broadcasting the rest.
 
         origins: (N, 3) or (3,) (one shared origin); t_min, t_max: (N,) or scalars.
@@ -132,15 +154,19 @@ class Rays(_Batch):
         """
         directions = torch.as_tensor(directions, device=device)
         if dtype is None:
-            dtype = directions.dtype if directions.is_floating_point() else torch.get_default_dtype()
+            dtype = (
+                directions.dtype if directions.is_floating_point() else torch.get_default_dtype()
+            )
         directions = directions.to(dtype)
         if directions.ndim != 2 or directions.shape[1] != 3:
             raise ValueError(f"directions: expected shape (N, 3), got {tuple(directions.shape)}")
         n = directions.shape[0]
-        return cls(origins=_broadcast(origins, "origins", (n, 3), directions),
-                   directions=directions,
-                   t_min=_broadcast(t_min, "t_min", (n,), directions),
-                   t_max=_broadcast(t_max, "t_max", (n,), directions))
+        return cls(
+            origins=_broadcast(origins, "origins", (n, 3), directions),
+            directions=directions,
+            t_min=_broadcast(t_min, "t_min", (n,), directions),
+            t_max=_broadcast(t_max, "t_max", (n,), directions),
+        )
 
     def at(self, t: torch.Tensor) -> torch.Tensor:
         """Points ``origins + t * directions``: t (N,) -> (N, 3)."""
@@ -154,8 +180,10 @@ def _broadcast(x, name: str, shape: tuple[int, ...], like: torch.Tensor) -> torc
     x = torch.as_tensor(x, dtype=like.dtype, device=like.device)
     trailing = shape[1:]
     if x.shape not in (torch.Size(shape), torch.Size(trailing)):
-        raise ValueError(f"{name}: expected shape {_shape_str(shape)} or "
-                         f"{_shape_str(trailing) if trailing else 'a scalar'}, got {tuple(x.shape)}")
+        raise ValueError(
+            f"{name}: expected shape {_shape_str(shape)} or "
+            f"{_shape_str(trailing) if trailing else 'a scalar'}, got {tuple(x.shape)}"
+        )
     return x.expand(shape).contiguous()
 
 
@@ -173,17 +201,24 @@ class Hits(_Batch):
     u: torch.Tensor
     v: torch.Tensor
 
-    _SPEC: ClassVar = (("t", ("N",), "float"), ("triangle", ("N",), "int64"),
-                       ("u", ("N",), "float"), ("v", ("N",), "float"))
+    _SPEC: ClassVar = (
+        ("t", ("N",), "float"),
+        ("triangle", ("N",), "int64"),
+        ("u", ("N",), "float"),
+        ("v", ("N",), "float"),
+    )
 
     @classmethod
-    def miss(cls, n: int, dtype: torch.dtype = torch.float32,
-             device: str | torch.device | None = None) -> Hits:
+    def miss(
+        cls, n: int, dtype: torch.dtype = torch.float32, device: str | torch.device | None = None
+    ) -> Hits:
         """N misses: the starting value of a nearest-hit search."""
-        return cls(t=torch.full((n,), math.inf, dtype=dtype, device=device),
-                   triangle=torch.full((n,), -1, dtype=torch.int64, device=device),
-                   u=torch.zeros(n, dtype=dtype, device=device),
-                   v=torch.zeros(n, dtype=dtype, device=device))
+        return cls(
+            t=torch.full((n,), math.inf, dtype=dtype, device=device),
+            triangle=torch.full((n,), -1, dtype=torch.int64, device=device),
+            u=torch.zeros(n, dtype=dtype, device=device),
+            v=torch.zeros(n, dtype=dtype, device=device),
+        )
 
     @property
     def hit(self) -> torch.Tensor:
@@ -196,10 +231,13 @@ def closest(h1: Hits, h2: Hits) -> Hits:
     if len(h1) != len(h2):
         raise ValueError(f"h2: expected {len(h1)} hits like h1, got {len(h2)}")
     if (h1.device, h1.dtype) != (h2.device, h2.dtype):
-        raise ValueError(f"h2: expected {h1.dtype} on {h1.device} like h1, "
-                         f"got {h2.dtype} on {h2.device}")
+        raise ValueError(
+            f"h2: expected {h1.dtype} on {h1.device} like h1, got {h2.dtype} on {h2.device}"
+        )
     take = h2.t < h1.t
-    return Hits(*(torch.where(take, getattr(h2, f), getattr(h1, f)) for f in ("t", "triangle", "u", "v")))
+    return Hits(
+        *(torch.where(take, getattr(h2, f), getattr(h1, f)) for f in ("t", "triangle", "u", "v"))
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,8 +259,10 @@ class Mesh(_Tensors):
             raise ValueError("faces: expected at least one face, got shape (0, 3) (empty mesh)")
         lo, hi = torch.stack(torch.aminmax(self.faces)).tolist()  # one host sync, not two
         if lo < 0 or hi >= self.num_vertices:
-            raise ValueError(f"faces: expected indices in [0, {self.num_vertices}) "
-                             f"(V={self.num_vertices} vertices), got values in [{lo}, {hi}]")
+            raise ValueError(
+                f"faces: expected indices in [0, {self.num_vertices}) "
+                f"(V={self.num_vertices} vertices), got values in [{lo}, {hi}]"
+            )
         return self
 
     @property

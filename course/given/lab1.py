@@ -41,14 +41,16 @@ def check_closest_hit_inputs(rays, mesh, variant, memory_budget_bytes) -> None:
     rays.validate()
     mesh.validate()
     if mesh.dtype != rays.dtype:
-        raise TypeError(f"mesh: expected vertices of dtype {rays.dtype} like rays, "
-                        f"got {mesh.dtype}")
+        raise TypeError(
+            f"mesh: expected vertices of dtype {rays.dtype} like rays, got {mesh.dtype}"
+        )
     if mesh.device != rays.device:
         raise ValueError(f"mesh: expected a mesh on {rays.device} like rays, got {mesh.device}")
     check_variant(variant)
     if not isinstance(memory_budget_bytes, int) or memory_budget_bytes <= 0:
-        raise ValueError(f"memory_budget_bytes: expected a positive int, "
-                         f"got {memory_budget_bytes!r}")
+        raise ValueError(
+            f"memory_budget_bytes: expected a positive int, got {memory_budget_bytes!r}"
+        )
 
 
 def accounting_inputs(variant: str) -> tuple:
@@ -65,6 +67,9 @@ def accounting_inputs(variant: str) -> tuple:
     o, d = torch.tensor([[0.25, 0.2, -1.0]]), torch.tensor([[0.1, 0.05, 1.0]])
     if variant == "woop_unit":
         return o, d, torch.eye(3, 4)[None]  # rows [r_i | c_i]: x' = x
-    v0, v1, v2 = (torch.tensor([[0.0, 0.0, 0.0]]), torch.tensor([[1.0, 0.0, 0.0]]),
-                  torch.tensor([[0.0, 1.0, 0.0]]))
+    v0, v1, v2 = (
+        torch.tensor([[0.0, 0.0, 0.0]]),
+        torch.tensor([[1.0, 0.0, 0.0]]),
+        torch.tensor([[0.0, 1.0, 0.0]]),
+    )
     return o, d, v0, v1, v2

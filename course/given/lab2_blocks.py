@@ -46,8 +46,9 @@ def slab_test(origins, inv_directions, lo, hi, t_lo, t_hi):
     far = torch.maximum(t0, t1) * (1 + 2 * gamma(3, t0.dtype))
     t_near = torch.fmax(t_lo, torch.fmax(torch.fmax(near[..., 0], near[..., 1]), near[..., 2]))
     t_far = torch.fmin(t_hi, torch.fmin(torch.fmin(far[..., 0], far[..., 1]), far[..., 2]))
-    valid = (torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1)
-             & (lo <= hi).all(-1))
+    valid = (
+        torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1) & (lo <= hi).all(-1)
+    )
     return t_near, t_far, (t_near <= t_far) & (t_near < math.inf) & valid
 
 
@@ -65,8 +66,9 @@ def expand_ranges(first: torch.Tensor, count: torch.Tensor):
     return owner, index
 
 
-def grid_resolutions(extent: torch.Tensor, num_triangles: torch.Tensor, density: float = 2.0,
-                     max_cells: int = 2**22) -> torch.Tensor:
+def grid_resolutions(
+    extent: torch.Tensor, num_triangles: torch.Tensor, density: float = 2.0, max_cells: int = 2**22
+) -> torch.Tensor:
     """Provided: Lab 2's ``grid_resolution`` heuristic for many boxes at once (sub-grids).
 
     extent: (S, 3) float, non-negative box sizes; num_triangles: (S,) int64 >= 1.
@@ -103,9 +105,17 @@ def pair_chunks(first: torch.Tensor, count: torch.Tensor, max_pairs: int = MAX_P
         yield owner, first[owner] + j - (end - count)[owner]
 
 
-def test_ranges(intersect, rays: Rays, corners: torch.Tensor, ray: torch.Tensor,
-                first: torch.Tensor, count: torch.Tensor, triangles: torch.Tensor,
-                closest: dict, counters: dict) -> None:
+def test_ranges(
+    intersect,
+    rays: Rays,
+    corners: torch.Tensor,
+    ray: torch.Tensor,
+    first: torch.Tensor,
+    count: torch.Tensor,
+    triangles: torch.Tensor,
+    closest: dict,
+    counters: dict,
+) -> None:
     """Provided: test ray ``ray[i]`` against ``triangles[first[i] : first[i] + count[i]]``
     for every ``i`` (its leaf's list), in chunks, with :func:`intersect_pairs`."""
     for owner, k in pair_chunks(first, count):
@@ -118,8 +128,15 @@ def new_closest(n: int, like: torch.Tensor) -> dict:
     return {"t": miss.t, "triangle": miss.triangle, "u": miss.u, "v": miss.v}
 
 
-def intersect_pairs(intersect, rays: Rays, corners: torch.Tensor, ray: torch.Tensor,
-               tri: torch.Tensor, closest: dict, counters: dict) -> None:
+def intersect_pairs(
+    intersect,
+    rays: Rays,
+    corners: torch.Tensor,
+    ray: torch.Tensor,
+    tri: torch.Tensor,
+    closest: dict,
+    counters: dict,
+) -> None:
     """Provided: run ``intersect`` on the (ray, triangle) pairs and keep each ray's closest.
 
     ray, tri: (P,) int64 indices into ``rays`` and ``corners`` (F, 3, 3). Updates
@@ -130,8 +147,15 @@ def intersect_pairs(intersect, rays: Rays, corners: torch.Tensor, ray: torch.Ten
     if len(ray) == 0:
         return
     tri_corners = corners[tri]
-    t, u, v = intersect(rays.origins[ray], rays.directions[ray], tri_corners[:, 0],
-                        tri_corners[:, 1], tri_corners[:, 2], rays.t_min[ray], rays.t_max[ray])
+    t, u, v = intersect(
+        rays.origins[ray],
+        rays.directions[ray],
+        tri_corners[:, 0],
+        tri_corners[:, 1],
+        tri_corners[:, 2],
+        rays.t_min[ray],
+        rays.t_max[ray],
+    )
     counters["tests"].index_add_(0, ray, torch.ones_like(ray))
     best_t, best_tri = closest["t"], closest["triangle"]
     hit = t < math.inf

@@ -102,8 +102,7 @@ class TreeLevels:
         left, right = torch.full_like(start, -1), torch.full_like(start, -1)
         for parents, a, b in self.children:
             left[parents], right[parents] = a, b
-        return assemble_bvh(order, start, end, left, right, torch.cat(self.depths), tri_lo,
-                            tri_hi)
+        return assemble_bvh(order, start, end, left, right, torch.cat(self.depths), tri_lo, tri_hi)
 
 
 def ray_octants(directions: torch.Tensor) -> torch.Tensor:
@@ -171,8 +170,9 @@ def pack_bvh(bvh: dict, mesh: Mesh, octants=None) -> dict:
     gap = (lo[safe_r] + hi[safe_r]) - (lo[safe_l] + hi[safe_l])
     axis = gap.abs().argmax(1)
     left_low = gap.gather(1, axis[:, None])[:, 0] >= 0
-    down = torch.tensor([[(o >> a) & 1 for a in range(3)] for o in octants], dtype=torch.bool,
-                        device=device)                                        # (R, 3)
+    down = torch.tensor(
+        [[(o >> a) & 1 for a in range(3)] for o in octants], dtype=torch.bool, device=device
+    )  # (R, 3)
     left_first = left_low[None] ^ down[:, axis]
     near = torch.where(left_first, left[None], right[None])
     far = torch.where(left_first, right[None], left[None])
@@ -189,13 +189,19 @@ def pack_bvh(bvh: dict, mesh: Mesh, octants=None) -> dict:
     base = torch.full((8,), -1, dtype=torch.int64, device=device)
     base[torch.tensor(octants, device=device)] = torch.arange(len(octants), device=device) * m
     corners = mesh.triangles()[bvh["triangles"]]
-    return {"kind": "bvh_walk",
-            "boxes": torch.cat((lo[order], hi[order]), 2).reshape(-1, 6),
-            "links": torch.stack((skip, first, count), 2).reshape(-1, 3).int(),
-            "base": base,
-            "slots": torch.cat((corners[:, 0], corners[:, 1] - corners[:, 0],
-                                corners[:, 2] - corners[:, 0]), 1),
-            "tri": bvh["triangles"].int(), "lo": lo[0], "hi": hi[0], "nodes": m}
+    return {
+        "kind": "bvh_walk",
+        "boxes": torch.cat((lo[order], hi[order]), 2).reshape(-1, 6),
+        "links": torch.stack((skip, first, count), 2).reshape(-1, 3).int(),
+        "base": base,
+        "slots": torch.cat(
+            (corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), 1
+        ),
+        "tri": bvh["triangles"].int(),
+        "lo": lo[0],
+        "hi": hi[0],
+        "nodes": m,
+    }
 
 
 def check_walk(walk, mesh: Mesh, rays) -> None:
@@ -203,20 +209,25 @@ def check_walk(walk, mesh: Mesh, rays) -> None:
     for every octant the ``rays`` go in (ValueError/TypeError naming ``walk``)."""
     if not isinstance(walk, dict) or walk.get("kind") != "bvh_walk":
         got = walk.get("kind") if isinstance(walk, dict) else type(walk).__name__
-        raise ValueError(f"walk: expected pack_bvh(bvh, mesh)'s dict (kind 'bvh_walk'), "
-                         f"got {got!r}")
+        raise ValueError(
+            f"walk: expected pack_bvh(bvh, mesh)'s dict (kind 'bvh_walk'), got {got!r}"
+        )
     for key in ("boxes", "links", "base", "slots", "tri"):
         x = walk.get(key)
         if not isinstance(x, torch.Tensor) or x.device != mesh.device:
             raise ValueError(f"walk: expected a tensor on {mesh.device} under {key!r}")
     if walk["slots"].dtype != mesh.dtype or len(walk["tri"]) != mesh.num_faces:
-        raise ValueError(f"walk: packed for {len(walk['tri'])} {walk['slots'].dtype} "
-                         f"triangles, the mesh has {mesh.num_faces} {mesh.dtype}")
+        raise ValueError(
+            f"walk: packed for {len(walk['tri'])} {walk['slots'].dtype} "
+            f"triangles, the mesh has {mesh.num_faces} {mesh.dtype}"
+        )
     # The octants in use marked in 8 flags (no sort, one host sync), the missing ones
     # listed only for the error.
     need = torch.zeros(8, dtype=torch.bool, device=rays.device)
     need.index_fill_(0, ray_octants(rays.directions), True)
     missing = need & (walk["base"] < 0)
     if bool(missing.any()):
-        raise ValueError(f"walk: not packed for octant(s) {missing.nonzero()[:, 0].tolist()} "
-                         f"of these rays: pack_bvh(bvh, mesh, octants=...) with them, or all 8")
+        raise ValueError(
+            f"walk: not packed for octant(s) {missing.nonzero()[:, 0].tolist()} "
+            f"of these rays: pack_bvh(bvh, mesh, octants=...) with them, or all 8"
+        )

@@ -18,12 +18,37 @@ STRUCTURES = ("grid", "grid2", "bvh", "kd")
 COUNTERS = ("steps", "tests")
 """The per-ray work counters every traversal returns (the grid adds ``"skipped"``)."""
 STRUCTURE_KEYS = {
-    "grid": ("lo", "hi", "resolution", "cell_start", "cell_count", "triangles",
-             "tri_cell_lo", "tri_cell_hi"),
-    "grid2": ("lo", "hi", "resolution", "cell_start", "cell_count", "triangles",
-              "tri_cell_lo", "tri_cell_hi", "big", "sub_of", "sub_lo", "sub_hi",
-              "sub_resolution", "sub_cell_base", "sub_cell_start", "sub_cell_count",
-              "sub_triangles", "sub_tri_cell_lo", "sub_tri_cell_hi"),
+    "grid": (
+        "lo",
+        "hi",
+        "resolution",
+        "cell_start",
+        "cell_count",
+        "triangles",
+        "tri_cell_lo",
+        "tri_cell_hi",
+    ),
+    "grid2": (
+        "lo",
+        "hi",
+        "resolution",
+        "cell_start",
+        "cell_count",
+        "triangles",
+        "tri_cell_lo",
+        "tri_cell_hi",
+        "big",
+        "sub_of",
+        "sub_lo",
+        "sub_hi",
+        "sub_resolution",
+        "sub_cell_base",
+        "sub_cell_start",
+        "sub_cell_count",
+        "sub_triangles",
+        "sub_tri_cell_lo",
+        "sub_tri_cell_hi",
+    ),
     "bvh": ("lo", "hi", "left", "right", "first", "count", "triangles"),
     "kd": ("lo", "hi", "split", "axis", "left", "first", "count", "triangles"),
 }
@@ -47,13 +72,16 @@ def check_trace_inputs(rays, mesh, intersect) -> None:
     check_mesh(mesh)
     rays.validate()
     if mesh.dtype != rays.dtype:
-        raise TypeError(f"mesh: expected vertices of dtype {rays.dtype} like rays, "
-                        f"got {mesh.dtype}")
+        raise TypeError(
+            f"mesh: expected vertices of dtype {rays.dtype} like rays, got {mesh.dtype}"
+        )
     if mesh.device != rays.device:
         raise ValueError(f"mesh: expected a mesh on {rays.device} like rays, got {mesh.device}")
     if not callable(intersect):
-        raise TypeError("intersect: expected a callable intersect(origins, directions, v0, v1, "
-                        f"v2, t_min, t_max) -> (t, u, v), got {type(intersect).__name__}")
+        raise TypeError(
+            "intersect: expected a callable intersect(origins, directions, v0, v1, "
+            f"v2, t_min, t_max) -> (t, u, v), got {type(intersect).__name__}"
+        )
 
 
 def check_structure(structure, kind: str, name: str, mesh: Mesh) -> None:
@@ -63,8 +91,9 @@ def check_structure(structure, kind: str, name: str, mesh: Mesh) -> None:
     """
     if not isinstance(structure, dict) or structure.get("kind") != kind:
         got = structure.get("kind") if isinstance(structure, dict) else type(structure).__name__
-        raise ValueError(f"{name}: expected a dict with kind={kind!r} (from build_...), "
-                         f"got {got!r}")
+        raise ValueError(
+            f"{name}: expected a dict with kind={kind!r} (from build_...), got {got!r}"
+        )
     for key in STRUCTURE_KEYS[kind]:
         x = structure.get(key)
         if not isinstance(x, torch.Tensor):
@@ -72,13 +101,19 @@ def check_structure(structure, kind: str, name: str, mesh: Mesh) -> None:
         if x.device != mesh.device:
             raise ValueError(f"{name}: {key!r} is on {x.device}, the mesh on {mesh.device}")
     if structure["triangles"].numel() and int(structure["triangles"].max()) >= mesh.num_faces:
-        raise ValueError(f"{name}: refers to triangle {int(structure['triangles'].max())}, "
-                         f"but the mesh has {mesh.num_faces}: built for another mesh?")
+        raise ValueError(
+            f"{name}: refers to triangle {int(structure['triangles'].max())}, "
+            f"but the mesh has {mesh.num_faces}: built for another mesh?"
+        )
 
 
 def _positive_int(value, name: str, lo: int = 1, hi: int | None = None) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (
-            hi is not None and value > hi):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int)
+        or value < lo
+        or (hi is not None and value > hi)
+    ):
         span = f"in {lo}..{hi}" if hi is not None else f">= {lo}"
         raise ValueError(f"{name}: expected an int {span}, got {value!r}")
 
@@ -101,8 +136,9 @@ def check_grid_inputs(extent, num_triangles, density) -> list[float]:
 def check_two_level_knobs(top_density, density, min_triangles) -> None:
     """Provided: validate ``build_two_level_grid``'s knobs (ValueError naming the knob)."""
     for name, value in (("top_density", top_density), ("density", density)):
-        if isinstance(value, bool) or not (isinstance(value, (int, float))
-                                           and math.isfinite(value) and value > 0):
+        if isinstance(value, bool) or not (
+            isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+        ):
             raise ValueError(f"{name}: expected a positive number, got {value!r}")
     _positive_int(min_triangles, "min_triangles", 0)
 
@@ -110,23 +146,27 @@ def check_two_level_knobs(top_density, density, min_triangles) -> None:
 def check_resolution(resolution) -> None:
     """Provided: ``resolution`` must be None or 3 positive ints."""
     if resolution is not None and (
-            not isinstance(resolution, (tuple, list)) or len(resolution) != 3
-            or not all(isinstance(r, int) and not isinstance(r, bool) and r >= 1
-                       for r in resolution)):
+        not isinstance(resolution, (tuple, list))
+        or len(resolution) != 3
+        or not all(isinstance(r, int) and not isinstance(r, bool) and r >= 1 for r in resolution)
+    ):
         raise ValueError(f"resolution: expected 3 positive ints (rx, ry, rz), got {resolution!r}")
 
 
 def check_morton_inputs(points, lo, hi, bits) -> None:
     """Provided: validate :func:`morton_codes`'s arguments."""
     if not isinstance(points, torch.Tensor) or not points.is_floating_point():
-        raise TypeError(f"points: expected a float tensor of shape (N, 3), got "
-                        f"{getattr(points, 'dtype', type(points).__name__)}")
+        raise TypeError(
+            f"points: expected a float tensor of shape (N, 3), got "
+            f"{getattr(points, 'dtype', type(points).__name__)}"
+        )
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points: expected shape (N, 3), got {tuple(points.shape)}")
     for name, x in (("lo", lo), ("hi", hi)):
         if not isinstance(x, torch.Tensor) or x.shape != (3,):
-            raise ValueError(f"{name}: expected a (3,) tensor, got "
-                             f"{getattr(x, 'shape', type(x).__name__)}")
+            raise ValueError(
+                f"{name}: expected a (3,) tensor, got {getattr(x, 'shape', type(x).__name__)}"
+            )
     _positive_int(bits, "bits", 1, 21)  # 3 * 21 = 63 bits fit an int64
 
 
@@ -142,8 +182,9 @@ def check_bins(bins) -> None:
 
 def check_links(bvh) -> None:
     """Provided: ``bvh`` must hold ``left`` and ``right`` (M,) int64 tensors."""
-    if not isinstance(bvh, dict) or not all(isinstance(bvh.get(k), torch.Tensor)
-                                            for k in ("left", "right")):
+    if not isinstance(bvh, dict) or not all(
+        isinstance(bvh.get(k), torch.Tensor) for k in ("left", "right")
+    ):
         raise ValueError("bvh: expected a BVH dict with 'left' and 'right' tensors")
 
 
@@ -173,8 +214,10 @@ def check_kd_fields(tree) -> None:
 def check_packed(packed) -> None:
     """Provided: ``packed`` must be an (M, 2) int32 tensor."""
     if not isinstance(packed, torch.Tensor) or packed.dtype != torch.int32:
-        raise TypeError(f"packed: expected an int32 tensor of shape (M, 2), got "
-                        f"{getattr(packed, 'dtype', type(packed).__name__)}")
+        raise TypeError(
+            f"packed: expected an int32 tensor of shape (M, 2), got "
+            f"{getattr(packed, 'dtype', type(packed).__name__)}"
+        )
     if packed.ndim != 2 or packed.shape[1] != 2:
         raise ValueError(f"packed: expected shape (M, 2), got {tuple(packed.shape)}")
 

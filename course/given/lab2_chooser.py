@@ -43,16 +43,24 @@ def scene_statistics(mesh: Mesh) -> dict:
     counts = torch.bincount(cid, minlength=int(res.prod())).double()
     counts = counts[counts > 0]
     size = (tri_hi - tri_lo).double().norm(dim=1)
-    q = torch.quantile(size[torch.randperm(f, device=size.device)[:100_000]]
-                       if f > 100_000 else size, torch.tensor([0.05, 0.95], dtype=size.dtype,
-                                                              device=size.device))
-    return {"triangles": f, "occupancy": len(counts) / float(res.prod()),
-            "crowding": float((counts * counts).sum() / counts.sum()),
-            "size_spread": float(q[1] / q[0]) if q[0] > 0 else math.inf}
+    q = torch.quantile(
+        size[torch.randperm(f, device=size.device)[:100_000]] if f > 100_000 else size,
+        torch.tensor([0.05, 0.95], dtype=size.dtype, device=size.device),
+    )
+    return {
+        "triangles": f,
+        "occupancy": len(counts) / float(res.prod()),
+        "crowding": float((counts * counts).sum() / counts.sum()),
+        "size_spread": float(q[1] / q[0]) if q[0] > 0 else math.inf,
+    }
 
 
-CHOOSER_LIMITS = {"grid_max_triangles": 50_000, "even_crowding": 32.0, "even_spread": 30.0,
-                  "cheap_build_rays_per_triangle": 4.0}
+CHOOSER_LIMITS = {
+    "grid_max_triangles": 50_000,
+    "even_crowding": 32.0,
+    "even_spread": 30.0,
+    "cheap_build_rays_per_triangle": 4.0,
+}
 """The chooser's thresholds, from ``bench/lab2_accel.py``: a uniform grid only pays for
 itself up to about 50K evenly spread triangles (the lecture's 1-50K); crowding above about
 32 triangles per occupied cell (the bunny: 9, the teapot in a stadium: 960 and more) means
@@ -89,28 +97,55 @@ def choose_structure(mesh: Mesh, rays_hint: int | None = None):
         _positive_int(rays_hint, "rays_hint")
     lim = CHOOSER_LIMITS
     few_rays = rays_hint is not None and rays_hint < lim["cheap_build_rays_per_triangle"] * f
-    facts = (f"{f:,} triangles, crowding {crowd:.1f} triangles per occupied cell, "
-             f"{stats['occupancy']:.1%} of the cells occupied, size spread {spread:.0f}x"
-             + (f", {rays_hint:,} rays" if rays_hint is not None else ", many rays"))
+    facts = (
+        f"{f:,} triangles, crowding {crowd:.1f} triangles per occupied cell, "
+        f"{stats['occupancy']:.1%} of the cells occupied, size spread {spread:.0f}x"
+        + (f", {rays_hint:,} rays" if rays_hint is not None else ", many rays")
+    )
     even = crowd <= lim["even_crowding"]
     if even and spread <= lim["even_spread"] and f <= lim["grid_max_triangles"]:
-        return "grid", {"density": 2.0}, (
-            f"{facts}: small and evenly spread, so a uniform grid (lambda = 2) fits it: the "
-            f"fastest build and a short walk; the kd-tree never pays its build here")
+        return (
+            "grid",
+            {"density": 2.0},
+            (
+                f"{facts}: small and evenly spread, so a uniform grid (lambda = 2) fits it: the "
+                f"fastest build and a short walk; the kd-tree never pays its build here"
+            ),
+        )
     if not even:
         if few_rays:
-            return "grid2", {}, (
-                f"{facts}: most triangles crowd into a few cells of a uniform grid, and few "
-                f"rays will be traced: a two-level grid gives the crowded cells their own "
-                f"grids at the cost of a few sorts")
-        return "bvh", {"method": "sah"}, (
-            f"{facts}: most triangles crowd into a few cells, and many rays will be traced: "
-            f"a binned-SAH BVH adapts at every level (the LBVH's Morton grid spans the whole "
-            f"scene and would not)")
+            return (
+                "grid2",
+                {},
+                (
+                    f"{facts}: most triangles crowd into a few cells of a uniform grid, and few "
+                    f"rays will be traced: a two-level grid gives the crowded cells their own "
+                    f"grids at the cost of a few sorts"
+                ),
+            )
+        return (
+            "bvh",
+            {"method": "sah"},
+            (
+                f"{facts}: most triangles crowd into a few cells, and many rays will be traced: "
+                f"a binned-SAH BVH adapts at every level (the LBVH's Morton grid spans the whole "
+                f"scene and would not)"
+            ),
+        )
     if few_rays:
-        return "bvh", {"method": "lbvh"}, (
-            f"{facts}: too large or uneven for a uniform grid; with few rays per triangle the "
-            f"build dominates, so the LBVH (one sort)")
-    return "bvh", {"method": "sah"}, (
-        f"{facts}: too large or uneven for a uniform grid; many rays repay the binned-SAH "
-        f"build (fewer nodes per ray than the LBVH)")
+        return (
+            "bvh",
+            {"method": "lbvh"},
+            (
+                f"{facts}: too large or uneven for a uniform grid; with few rays per triangle the "
+                f"build dominates, so the LBVH (one sort)"
+            ),
+        )
+    return (
+        "bvh",
+        {"method": "sah"},
+        (
+            f"{facts}: too large or uneven for a uniform grid; many rays repay the binned-SAH "
+            f"build (fewer nodes per ray than the LBVH)"
+        ),
+    )

@@ -19,12 +19,15 @@ def check_scene(scene) -> None:
     """``scene`` must be a valid WhittedScene (TypeError/ValueError naming the problem:
     ``scene``, a field, ``lights`` or ``material``)."""
     if not isinstance(scene, WhittedScene):
-        raise TypeError(f"scene: expected course.given.lab3.WhittedScene, got "
-                        f"{type(scene).__name__}")
+        raise TypeError(
+            f"scene: expected course.given.lab3.WhittedScene, got {type(scene).__name__}"
+        )
     scene.validate()
     if scene.dtype not in DTYPES:
-        raise TypeError(f"scene: expected float32 or float64 geometry, got {scene.dtype} "
-                        f"(half precision cannot hold the {OFFSET:g} secondary-ray offset)")
+        raise TypeError(
+            f"scene: expected float32 or float64 geometry, got {scene.dtype} "
+            f"(half precision cannot hold the {OFFSET:g} secondary-ray offset)"
+        )
 
 
 def check_vectors(like: torch.Tensor | None, **vectors) -> int:
@@ -33,12 +36,15 @@ def check_vectors(like: torch.Tensor | None, **vectors) -> int:
     n = None
     for name, x in vectors.items():
         if not isinstance(x, torch.Tensor):
-            raise TypeError(f"{name}: expected a torch.Tensor of shape (N, 3), "
-                            f"got {type(x).__name__}")
+            raise TypeError(
+                f"{name}: expected a torch.Tensor of shape (N, 3), got {type(x).__name__}"
+            )
         if x.dtype not in DTYPES:
-            raise TypeError(f"{name}: expected float32 or float64, got {x.dtype} (half "
-                            f"precision cannot hold the {OFFSET:g} secondary-ray offset: "
-                            f"its spacing near 1 is 1e-3)")
+            raise TypeError(
+                f"{name}: expected float32 or float64, got {x.dtype} (half "
+                f"precision cannot hold the {OFFSET:g} secondary-ray offset: "
+                f"its spacing near 1 is 1e-3)"
+            )
         if x.ndim != 2 or x.shape[1] != 3 or (n is not None and x.shape[0] != n):
             want = "(N, 3)" if n is None else f"({n}, 3)"
             raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
@@ -46,8 +52,9 @@ def check_vectors(like: torch.Tensor | None, **vectors) -> int:
         if like is not None and x.dtype != like.dtype:
             raise TypeError(f"{name}: expected dtype {like.dtype} like the scene, got {x.dtype}")
         if like is not None and x.device != like.device:
-            raise ValueError(f"{name}: expected device {like.device} like the scene, "
-                             f"got {x.device}")
+            raise ValueError(
+                f"{name}: expected device {like.device} like the scene, got {x.device}"
+            )
         like = x
     return n or 0
 
@@ -56,8 +63,10 @@ def check_trace(trace) -> None:
     """``trace`` must be callable as ``trace(scene, origins, directions, t_min, t_max,
     any_hit) -> Hits``."""
     if not callable(trace):
-        raise TypeError("trace: expected a callable trace(scene, origins, directions, t_min, "
-                        f"t_max, any_hit) -> Hits, got {type(trace).__name__}")
+        raise TypeError(
+            "trace: expected a callable trace(scene, origins, directions, t_min, "
+            f"t_max, any_hit) -> Hits, got {type(trace).__name__}"
+        )
 
 
 def _int_at_least(value, name: str, lo: int) -> None:
@@ -89,13 +98,17 @@ def check_surface_inputs(scene, points, normals, directions, material, trace) ->
     check_scene(scene)
     n = check_vectors(scene.vertices, points=points, normals=normals, directions=directions)
     if not isinstance(material, torch.Tensor) or material.dtype != torch.int64:
-        raise TypeError(f"material: expected an int64 tensor of shape ({n},), got "
-                        f"{getattr(material, 'dtype', type(material).__name__)}")
+        raise TypeError(
+            f"material: expected an int64 tensor of shape ({n},), got "
+            f"{getattr(material, 'dtype', type(material).__name__)}"
+        )
     if material.shape != (n,):
         raise ValueError(f"material: expected shape ({n},), got {tuple(material.shape)}")
     if n and (int(material.min()) < 0 or int(material.max()) >= scene.kd.shape[0]):
-        raise ValueError(f"material: expected indices in [0, {scene.kd.shape[0]}), got values "
-                         f"in [{int(material.min())}, {int(material.max())}]")
+        raise ValueError(
+            f"material: expected indices in [0, {scene.kd.shape[0]}), got values "
+            f"in [{int(material.min())}, {int(material.max())}]"
+        )
     check_trace(trace)
     return n
 

@@ -23,9 +23,11 @@ def check_order(order, mesh: Mesh) -> torch.Tensor:
     if order is None:
         return torch.arange(f, device=mesh.device)
     if not isinstance(order, torch.Tensor) or order.dtype != torch.int64 or order.shape != (f,):
-        raise ValueError(f"order: expected an int64 permutation of shape ({f},), got "
-                         f"{getattr(order, 'dtype', type(order).__name__)} of shape "
-                         f"{tuple(getattr(order, 'shape', ()))}")
+        raise ValueError(
+            f"order: expected an int64 permutation of shape ({f},), got "
+            f"{getattr(order, 'dtype', type(order).__name__)} of shape "
+            f"{tuple(getattr(order, 'shape', ()))}"
+        )
     if not torch.equal(torch.sort(order).values.cpu(), torch.arange(f)):
         raise ValueError(f"order: expected a permutation of 0..{f - 1}")
     return order.to(mesh.device)
@@ -35,8 +37,10 @@ def check_layout_inputs(layout, origins, directions, t_min, t_max) -> tuple[str,
     """Provided: validate :func:`intersect_layout`'s arguments; returns ``(kind, F)``."""
     if not isinstance(layout, dict) or layout.get("kind") not in LAYOUTS:
         got = layout.get("kind") if isinstance(layout, dict) else type(layout).__name__
-        raise ValueError(f"layout: expected a dict from layout_indexed/layout_float4/"
-                         f"layout_woop (kind {'/'.join(LAYOUTS)}), got {got!r}")
+        raise ValueError(
+            f"layout: expected a dict from layout_indexed/layout_float4/"
+            f"layout_woop (kind {'/'.join(LAYOUTS)}), got {got!r}"
+        )
     kind = layout["kind"]
     like = layout.get(LAYOUTS[kind])
     if not isinstance(like, torch.Tensor):
@@ -44,9 +48,11 @@ def check_layout_inputs(layout, origins, directions, t_min, t_max) -> tuple[str,
     n = check_vectors(like, origins=origins, directions=directions)
     for name, x in (("t_min", t_min), ("t_max", t_max)):
         if not isinstance(x, torch.Tensor) or x.shape != (n,) or x.dtype != like.dtype:
-            raise ValueError(f"{name}: expected a ({n},) {like.dtype} tensor, got "
-                             f"{getattr(x, 'dtype', type(x).__name__)} of shape "
-                             f"{tuple(getattr(x, 'shape', ()))}")
+            raise ValueError(
+                f"{name}: expected a ({n},) {like.dtype} tensor, got "
+                f"{getattr(x, 'dtype', type(x).__name__)} of shape "
+                f"{tuple(getattr(x, 'shape', ()))}"
+            )
     f = len(layout["faces"]) if kind == "indexed" else len(like)
     return kind, f
 

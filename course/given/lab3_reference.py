@@ -35,8 +35,14 @@ def pair_tiles(n: int, f: int):
         yield slice(r0, r0 + ray_tile), (slice(f0, f0 + tri_tile) for f0 in range(0, f, tri_tile))
 
 
-def trace_brute_force(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-                      t_min: torch.Tensor, t_max: torch.Tensor, any_hit: bool = False) -> Hits:
+def trace_brute_force(
+    scene: WhittedScene,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    t_min: torch.Tensor,
+    t_max: torch.Tensor,
+    any_hit: bool = False,
+) -> Hits:
     """Every ray against every triangle (Möller-Trumbore in the scene's dtype), in tiles.
 
     origins, directions: (N, 3); t_min, t_max: (N,); all of the scene's dtype and device.
@@ -54,8 +60,12 @@ def trace_brute_force(scene: WhittedScene, origins: torch.Tensor, directions: to
     corners = scene.vertices[scene.faces]
     v0, e1, e2 = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     hits = Hits.miss(n, dtype=origins.dtype, device=origins.device)
-    valid = (torch.isfinite(origins).all(1) & torch.isfinite(directions).all(1)
-             & (directions != 0).any(1) & ~(t_min > t_max))
+    valid = (
+        torch.isfinite(origins).all(1)
+        & torch.isfinite(directions).all(1)
+        & (directions != 0).any(1)
+        & ~(t_min > t_max)
+    )
     t_out, i_out, u_out, v_out = hits.t, hits.triangle, hits.u, hits.v
     for rows, tiles in pair_tiles(n, f):
         o, d = origins[rows, None], directions[rows, None]
@@ -88,8 +98,9 @@ def trace_brute_force(scene: WhittedScene, origins: torch.Tensor, directions: to
 # The reference renderer
 
 
-def render_reference(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-                     max_depth: int = MAX_DEPTH) -> torch.Tensor:
+def render_reference(
+    scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor, max_depth: int = MAX_DEPTH
+) -> torch.Tensor:
     """The slow, obvious Whitted renderer every organisation is compared with.
 
     scene: float32 or float64; origins, directions: (N, 3), directions unit. Returns (N, 3)
@@ -103,8 +114,14 @@ def render_reference(scene: WhittedScene, origins: torch.Tensor, directions: tor
     check_max_depth(max_depth)
     eps = offset_scale(scene.dtype)
     scene = scene.to(torch.float64)
-    return _radiance(scene, origins.to(scene.device, torch.float64),
-                     directions.to(scene.device, torch.float64), 0, max_depth, eps)
+    return _radiance(
+        scene,
+        origins.to(scene.device, torch.float64),
+        directions.to(scene.device, torch.float64),
+        0,
+        max_depth,
+        eps,
+    )
 
 
 def _radiance(scene: WhittedScene, o, d, depth: int, max_depth: int, eps: float):
@@ -124,11 +141,18 @@ def _radiance(scene: WhittedScene, o, d, depth: int, max_depth: int, eps: float)
     v = -d
     kd, ks, s, kr = scene.kd[m], scene.ks[m], scene.shininess[m], scene.kr[m]
     radiance = scene.ambient * kd
-    lights = [(scene.point_positions[i] - p_off, scene.point_intensities[i],
-               eps * max(1.0, scene.point_positions[i].abs().max().item()))
-              for i in range(scene.num_point_lights)]
-    lights += [(scene.dir_directions[j].expand_as(p_off), scene.dir_irradiance[j], None)
-               for j in range(scene.num_dir_lights)]
+    lights = [
+        (
+            scene.point_positions[i] - p_off,
+            scene.point_intensities[i],
+            eps * max(1.0, scene.point_positions[i].abs().max().item()),
+        )
+        for i in range(scene.num_point_lights)
+    ]
+    lights += [
+        (scene.dir_directions[j].expand_as(p_off), scene.dir_irradiance[j], None)
+        for j in range(scene.num_dir_lights)
+    ]
     for to, power, light_offset in lights:
         if light_offset is None:  # directional: arrives everywhere with the same irradiance
             dist = torch.full_like(t, math.inf)

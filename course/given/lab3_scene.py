@@ -69,12 +69,20 @@ class WhittedScene:
     background: torch.Tensor
 
     _SPEC: ClassVar = (
-        ("vertices", ("V", 3), "float"), ("faces", ("F", 3), "int64"),
-        ("material", ("F",), "int64"), ("kd", ("M", 3), "float"), ("ks", ("M", 3), "float"),
-        ("shininess", ("M",), "float"), ("kr", ("M", 3), "float"),
-        ("point_positions", ("P", 3), "float"), ("point_intensities", ("P", 3), "float"),
-        ("dir_directions", ("D", 3), "float"), ("dir_irradiance", ("D", 3), "float"),
-        ("ambient", (3,), "float"), ("background", (3,), "float"))
+        ("vertices", ("V", 3), "float"),
+        ("faces", ("F", 3), "int64"),
+        ("material", ("F",), "int64"),
+        ("kd", ("M", 3), "float"),
+        ("ks", ("M", 3), "float"),
+        ("shininess", ("M",), "float"),
+        ("kr", ("M", 3), "float"),
+        ("point_positions", ("P", 3), "float"),
+        ("point_intensities", ("P", 3), "float"),
+        ("dir_directions", ("D", 3), "float"),
+        ("dir_irradiance", ("D", 3), "float"),
+        ("ambient", (3,), "float"),
+        ("background", (3,), "float"),
+    )
 
     def __post_init__(self) -> None:
         self.validate()
@@ -84,14 +92,18 @@ class WhittedScene:
         _validate(self, self._SPEC)
         Mesh(self.vertices, self.faces)  # faces: at least one, indices in range
         if self.num_point_lights == 0 and self.num_dir_lights == 0:
-            raise ValueError("lights: the scene has no point light (point_positions is (0, 3)) "
-                             "and no directional light (dir_directions is (0, 3)); "
-                             "a Whitted scene needs at least one light")
+            raise ValueError(
+                "lights: the scene has no point light (point_positions is (0, 3)) "
+                "and no directional light (dir_directions is (0, 3)); "
+                "a Whitted scene needs at least one light"
+            )
         m = self.kd.shape[0]
         lo, hi = int(self.material.min()), int(self.material.max())
         if lo < 0 or hi >= m:
-            raise ValueError(f"material: expected indices in [0, {m}) (M={m} materials), got "
-                             f"values in [{lo}, {hi}]")
+            raise ValueError(
+                f"material: expected indices in [0, {m}) (M={m} materials), got "
+                f"values in [{lo}, {hi}]"
+            )
         return self
 
     @property
@@ -126,13 +138,26 @@ class WhittedScene:
         """A copy on ``device`` with the float fields cast to ``dtype`` (like ``Tensor.to``)."""
         if isinstance(device, torch.dtype):
             device, dtype = None, device
-        return dataclasses.replace(self, **{
-            name: getattr(self, name).to(device=device, dtype=dtype if kind == "float" else None)
-            for name, _, kind in self._SPEC})
+        return dataclasses.replace(
+            self,
+            **{
+                name: getattr(self, name).to(
+                    device=device, dtype=dtype if kind == "float" else None
+                )
+                for name, _, kind in self._SPEC
+            },
+        )
 
 
-def make_scene(mesh: Mesh, material, materials: dict, point_lights=(), dir_lights=(),
-               ambient=(0.0, 0.0, 0.0), background=(0.0, 0.0, 0.0)) -> WhittedScene:
+def make_scene(
+    mesh: Mesh,
+    material,
+    materials: dict,
+    point_lights=(),
+    dir_lights=(),
+    ambient=(0.0, 0.0, 0.0),
+    background=(0.0, 0.0, 0.0),
+) -> WhittedScene:
     """A WhittedScene from plain numbers, on the mesh's device and dtype.
 
     material: (F,) indices; materials: ``{"kd": [[r, g, b], ...], "ks": ..., "shininess":
@@ -151,14 +176,20 @@ def make_scene(mesh: Mesh, material, materials: dict, point_lights=(), dir_light
     if len(directions_64):
         directions = (directions_64 / directions_64.norm(dim=1, keepdim=True)).to(device, dtype)
     return WhittedScene(
-        vertices=mesh.vertices, faces=mesh.faces,
+        vertices=mesh.vertices,
+        faces=mesh.faces,
         material=torch.as_tensor(material, dtype=torch.int64).to(device),
-        kd=rows(materials["kd"]), ks=rows(materials["ks"]),
-        shininess=rows(materials["shininess"], 1).reshape(-1), kr=rows(materials["kr"]),
+        kd=rows(materials["kd"]),
+        ks=rows(materials["ks"]),
+        shininess=rows(materials["shininess"], 1).reshape(-1),
+        kr=rows(materials["kr"]),
         point_positions=rows([p for p, _ in point_lights]),
         point_intensities=rows([i for _, i in point_lights]),
-        dir_directions=directions, dir_irradiance=rows([e for _, e in dir_lights]),
-        ambient=rows(ambient).reshape(3), background=rows(background).reshape(3))
+        dir_directions=directions,
+        dir_irradiance=rows([e for _, e in dir_lights]),
+        ambient=rows(ambient).reshape(3),
+        background=rows(background).reshape(3),
+    )
 
 
 def whitted_scene(name: str, device=None, dtype: torch.dtype = torch.float32) -> WhittedScene:
@@ -179,65 +210,132 @@ def whitted_scene(name: str, device=None, dtype: torch.dtype = torch.float32) ->
         mesh = load_scene("cornell_box", device=device, dtype=dtype).mesh
         x = mesh.vertices[mesh.faces][..., 0].to("cpu", torch.float64)  # (F, 3)
         material = torch.zeros(mesh.num_faces, dtype=torch.int64)
-        material[:12][(x[:12] == -1).all(1)] = 1   # the room's left wall: red
-        material[:12][(x[:12] == 1).all(1)] = 2    # the right wall: green
-        material[12:24] = 3                        # the short box: glossy white
-        material[24:36] = 4                        # the tall box: a mirror
-        materials = {"kd": [[0.73, 0.73, 0.73], [0.65, 0.05, 0.05], [0.12, 0.45, 0.15],
-                            [0.6, 0.6, 0.6], [0.05, 0.05, 0.05]],
-                     "ks": [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0.3, 0.3, 0.3], [0, 0, 0]],
-                     "shininess": [1.0, 1.0, 1.0, 40.0, 1.0],
-                     "kr": [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0.85, 0.85, 0.85]]}
-        return make_scene(mesh, material, materials,
-                          point_lights=[((0.0, 1.8, 1.0), (6.0, 5.4, 4.6))],
-                          ambient=(0.03, 0.03, 0.03))
+        material[:12][(x[:12] == -1).all(1)] = 1  # the room's left wall: red
+        material[:12][(x[:12] == 1).all(1)] = 2  # the right wall: green
+        material[12:24] = 3  # the short box: glossy white
+        material[24:36] = 4  # the tall box: a mirror
+        materials = {
+            "kd": [
+                [0.73, 0.73, 0.73],
+                [0.65, 0.05, 0.05],
+                [0.12, 0.45, 0.15],
+                [0.6, 0.6, 0.6],
+                [0.05, 0.05, 0.05],
+            ],
+            "ks": [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0.3, 0.3, 0.3], [0, 0, 0]],
+            "shininess": [1.0, 1.0, 1.0, 40.0, 1.0],
+            "kr": [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0.85, 0.85, 0.85]],
+        }
+        return make_scene(
+            mesh,
+            material,
+            materials,
+            point_lights=[((0.0, 1.8, 1.0), (6.0, 5.4, 4.6))],
+            ambient=(0.03, 0.03, 0.03),
+        )
     if name == "bunny_mirror":
         bunny = load_mesh("bunny", device="cpu", dtype=torch.float64)
         v, f = bunny.vertices, bunny.faces
         lo, hi = v.amin(0), v.amax(0)
         c, r = (lo + hi) / 2, float((hi - lo).max())
         floor_y = float(lo[1])
-        quad = torch.tensor([[-1.5, floor_y, -1.5], [1.5, floor_y, -1.5], [1.5, floor_y, 1.5],
-                             [-1.5, floor_y, 1.5]], dtype=torch.float64)
+        quad = torch.tensor(
+            [
+                [-1.5, floor_y, -1.5],
+                [1.5, floor_y, -1.5],
+                [1.5, floor_y, 1.5],
+                [-1.5, floor_y, 1.5],
+            ],
+            dtype=torch.float64,
+        )
         quad[:, [0, 2]] = quad[:, [0, 2]] * r + c[[0, 2]]
         vertices = torch.cat((v, quad))
         n = len(v)
         faces = torch.cat((f, torch.tensor([[n, n + 3, n + 2], [n, n + 2, n + 1]])))
-        material = torch.cat((torch.zeros(len(f), dtype=torch.int64),
-                              torch.ones(2, dtype=torch.int64)))
-        materials = {"kd": [[0.75, 0.55, 0.42], [0.08, 0.08, 0.1]],
-                     "ks": [[0.25, 0.25, 0.25], [0.0, 0.0, 0.0]], "shininess": [24.0, 1.0],
-                     "kr": [[0, 0, 0], [0.6, 0.6, 0.65]]}
+        material = torch.cat(
+            (torch.zeros(len(f), dtype=torch.int64), torch.ones(2, dtype=torch.int64))
+        )
+        materials = {
+            "kd": [[0.75, 0.55, 0.42], [0.08, 0.08, 0.1]],
+            "ks": [[0.25, 0.25, 0.25], [0.0, 0.0, 0.0]],
+            "shininess": [24.0, 1.0],
+            "kr": [[0, 0, 0], [0.6, 0.6, 0.65]],
+        }
         light = (c + torch.tensor([-0.9, 1.2, 1.0], dtype=torch.float64) * r).tolist()
-        return make_scene(Mesh(vertices.to(device, dtype), faces.to(device)), material, materials,
-                          point_lights=[(light, (0.03, 0.028, 0.025))],
-                          dir_lights=[((0.5, 0.8, 0.35), (1.6, 1.5, 1.3))],
-                          ambient=(0.06, 0.07, 0.09), background=(0.45, 0.6, 0.85))
+        return make_scene(
+            Mesh(vertices.to(device, dtype), faces.to(device)),
+            material,
+            materials,
+            point_lights=[(light, (0.03, 0.028, 0.025))],
+            dir_lights=[((0.5, 0.8, 0.35), (1.6, 1.5, 1.3))],
+            ambient=(0.06, 0.07, 0.09),
+            background=(0.45, 0.6, 0.85),
+        )
     if name == "mirror_corridor":
         w = 10.0
-        vertices = torch.tensor([[-w, -w, -1.0], [w, -w, -1.0], [w, w, -1.0], [-w, w, -1.0],
-                                 [-w, -w, 1.0], [w, -w, 1.0], [w, w, 1.0], [-w, w, 1.0]],
-                                dtype=torch.float64)
+        vertices = torch.tensor(
+            [
+                [-w, -w, -1.0],
+                [w, -w, -1.0],
+                [w, w, -1.0],
+                [-w, w, -1.0],
+                [-w, -w, 1.0],
+                [w, -w, 1.0],
+                [w, w, 1.0],
+                [-w, w, 1.0],
+            ],
+            dtype=torch.float64,
+        )
         faces = torch.tensor([[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6]])
-        materials = {"kd": [[0.2, 0.2, 0.2]], "ks": [[0.0, 0.0, 0.0]], "shininess": [1.0],
-                     "kr": [[0.9, 0.7, 0.5]]}
-        return make_scene(Mesh(vertices.to(device, dtype), faces.to(device)), [0, 0, 0, 0],
-                          materials, dir_lights=[((1.0, 0.0, 0.0), (1.0, 1.0, 1.0))],
-                          ambient=(0.5, 0.5, 0.5), background=(0.0, 0.0, 1.0))
+        materials = {
+            "kd": [[0.2, 0.2, 0.2]],
+            "ks": [[0.0, 0.0, 0.0]],
+            "shininess": [1.0],
+            "kr": [[0.9, 0.7, 0.5]],
+        }
+        return make_scene(
+            Mesh(vertices.to(device, dtype), faces.to(device)),
+            [0, 0, 0, 0],
+            materials,
+            dir_lights=[((1.0, 0.0, 0.0), (1.0, 1.0, 1.0))],
+            ambient=(0.5, 0.5, 0.5),
+            background=(0.0, 0.0, 1.0),
+        )
     raise ValueError(f"name: unknown Whitted scene {name!r}; built-in: {', '.join(SCENES)}")
 
 
 def whitted_camera(name: str, width: int = 256, height: int = 256) -> Camera:
     """The default view of a built-in Whitted scene at ``width x height`` pixels."""
     if name == "cornell_mirror":
-        return Camera(eye=(0.0, 1.0, 2.9), target=(0.0, 1.0, 0.0), fov_y=40.0, width=width,
-                      height=height, near=0.01, far=10.0)
+        return Camera(
+            eye=(0.0, 1.0, 2.9),
+            target=(0.0, 1.0, 0.0),
+            fov_y=40.0,
+            width=width,
+            height=height,
+            near=0.01,
+            far=10.0,
+        )
     if name == "bunny_mirror":
-        return Camera(eye=(-0.04, 0.2, 0.4), target=(-0.015, 0.06, 0.0), fov_y=40.0,
-                      width=width, height=height, near=0.01, far=10.0)
+        return Camera(
+            eye=(-0.04, 0.2, 0.4),
+            target=(-0.015, 0.06, 0.0),
+            fov_y=40.0,
+            width=width,
+            height=height,
+            near=0.01,
+            far=10.0,
+        )
     if name == "mirror_corridor":
-        return Camera(eye=(0.0, 0.0, 0.5), target=(0.3, 0.1, -1.0), fov_y=60.0, width=width,
-                      height=height, near=0.01, far=100.0)
+        return Camera(
+            eye=(0.0, 0.0, 0.5),
+            target=(0.3, 0.1, -1.0),
+            fov_y=60.0,
+            width=width,
+            height=height,
+            near=0.01,
+            far=100.0,
+        )
     raise ValueError(f"name: unknown Whitted scene {name!r}; built-in: {', '.join(SCENES)}")
 
 
@@ -249,8 +347,10 @@ def translated(scene: WhittedScene, offset) -> WhittedScene:
     """
     shift = torch.as_tensor(offset, dtype=torch.float64).expand(3).to(scene.device)
     return dataclasses.replace(
-        scene, vertices=(scene.vertices.double() + shift).to(scene.dtype),
-        point_positions=(scene.point_positions.double() + shift).to(scene.dtype))
+        scene,
+        vertices=(scene.vertices.double() + shift).to(scene.dtype),
+        point_positions=(scene.point_positions.double() + shift).to(scene.dtype),
+    )
 
 
 def face_normals(scene: WhittedScene) -> torch.Tensor:

@@ -17,14 +17,21 @@ def field_values(field, name: str, points: torch.Tensor, channels: bool = False)
     ``"density"`` (an extinction coefficient is >= 0: the transmittance would exceed 1).
     """
     values = field(points)
-    if not isinstance(values, torch.Tensor) or values.shape[:1] != points.shape[:1] \
-            or values.ndim > (2 if channels else 1):
+    if (
+        not isinstance(values, torch.Tensor)
+        or values.shape[:1] != points.shape[:1]
+        or values.ndim > (2 if channels else 1)
+    ):
         got = tuple(values.shape) if isinstance(values, torch.Tensor) else type(values).__name__
         want = "(N,) or (N, C)" if channels else "(N,)"
-        raise ValueError(f"{name}: the callable must return a tensor of shape {want} for "
-                         f"points of shape {tuple(points.shape)}, got {got}")
+        raise ValueError(
+            f"{name}: the callable must return a tensor of shape {want} for "
+            f"points of shape {tuple(points.shape)}, got {got}"
+        )
     if name == "density" and bool((values < 0).any()):
-        raise ValueError(f"density: the callable returned {int((values < 0).sum())} negative "
-                         f"values (an extinction coefficient is >= 0; the transmittance would "
-                         f"exceed 1)")
+        raise ValueError(
+            f"density: the callable returned {int((values < 0).sum())} negative "
+            f"values (an extinction coefficient is >= 0; the transmittance would "
+            f"exceed 1)"
+        )
     return values.to(points.dtype)

@@ -31,8 +31,10 @@ and transmittance products need more than 11 bits of mantissa)."""
 
 def check_dtype(dtype, name: str = "dtype") -> torch.dtype:
     if dtype not in FLOATS:
-        raise TypeError(f"{name}: expected torch.float32 or torch.float64, got {dtype} "
-                        f"(float16/bfloat16 lose the exponential slicing and transmittance)")
+        raise TypeError(
+            f"{name}: expected torch.float32 or torch.float64, got {dtype} "
+            f"(float16/bfloat16 lose the exponential slicing and transmittance)"
+        )
     return dtype
 
 
@@ -44,16 +46,17 @@ def check_grid(grid) -> FroxelGrid:
 
 def check_scene(scene) -> Scene:
     if not isinstance(scene, Scene):
-        raise TypeError(f"scene: expected a course.given.lab5.Scene, got "
-                        f"{type(scene).__name__}")
+        raise TypeError(f"scene: expected a course.given.lab5.Scene, got {type(scene).__name__}")
     return scene
 
 
 def check_volume(x, name: str, shape, dtype=None, device=None) -> torch.Tensor:
     """A float tensor of exactly ``shape`` (and ``dtype``/``device`` when given)."""
     if not isinstance(x, torch.Tensor) or not x.is_floating_point():
-        raise TypeError(f"{name}: expected a float tensor of shape {tuple(shape)}, got "
-                        f"{getattr(x, 'dtype', type(x).__name__)}")
+        raise TypeError(
+            f"{name}: expected a float tensor of shape {tuple(shape)}, got "
+            f"{getattr(x, 'dtype', type(x).__name__)}"
+        )
     check_dtype(x.dtype, name)
     if tuple(x.shape) != tuple(shape):
         raise ValueError(f"{name}: expected shape {tuple(shape)}, got {tuple(x.shape)}")
@@ -73,8 +76,7 @@ def check_depths(near, far, slices) -> None:
 
 def check_choice(value, name: str, choices) -> str:
     if value not in choices:
-        raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, "
-                         f"got {value!r}")
+        raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, got {value!r}")
     return value
 
 
@@ -87,38 +89,43 @@ def check_images(camera: Camera, depth_image, opaque_image):
     float32/float64 of one dtype and device; returns their dtype."""
     h, w = camera.height, camera.width
     check_volume(depth_image, "depth_image", (h, w))
-    check_volume(opaque_image, "opaque_image", (h, w, 3), dtype=depth_image.dtype,
-                 device=depth_image.device)
+    check_volume(
+        opaque_image, "opaque_image", (h, w, 3), dtype=depth_image.dtype, device=depth_image.device
+    )
     if bool((torch.isnan(depth_image) | (depth_image < 0)).any()):
-        raise ValueError("depth_image: expected view depths >= 0 (+inf for the sky), got "
-                         "NaN or negative values")
+        raise ValueError(
+            "depth_image: expected view depths >= 0 (+inf for the sky), got NaN or negative values"
+        )
     return depth_image.dtype
 
 
 def check_volume_resolution(value):
     """``volume_resolution``: None (:func:`auto_volume_resolution`) or an int >= 2."""
-    if value is not None and (isinstance(value, bool) or not isinstance(value, int)
-                              or value < 2):
-        raise ValueError(f"volume_resolution: expected None (chosen from the media's size) "
-                         f"or an int >= 2, got {value!r}")
+    if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 2):
+        raise ValueError(
+            f"volume_resolution: expected None (chosen from the media's size) "
+            f"or an int >= 2, got {value!r}"
+        )
     return value
 
 
 def check_phase_inputs(cos_theta, g):
     """``g`` as a tensor of ``cos_theta``'s dtype and device, all values in (-1, 1)."""
-    check_volume(cos_theta, "cos_theta", cos_theta.shape if isinstance(cos_theta, torch.Tensor)
-                 else ())
+    check_volume(
+        cos_theta, "cos_theta", cos_theta.shape if isinstance(cos_theta, torch.Tensor) else ()
+    )
     if isinstance(g, torch.Tensor):
         if g.dtype != cos_theta.dtype or g.device != cos_theta.device:
-            raise TypeError(f"g: expected dtype {cos_theta.dtype} on {cos_theta.device} like "
-                            f"cos_theta, got {g.dtype} on {g.device}")
+            raise TypeError(
+                f"g: expected dtype {cos_theta.dtype} on {cos_theta.device} like "
+                f"cos_theta, got {g.dtype} on {g.device}"
+            )
     elif isinstance(g, (int, float)) and not isinstance(g, bool):
         g = torch.tensor(float(g), dtype=cos_theta.dtype, device=cos_theta.device)
     else:
         raise TypeError(f"g: expected a number or a float tensor, got {type(g).__name__}")
     if not bool((g.abs() < 1).all()):
-        raise ValueError("g: expected values in (-1, 1) (|g| = 1 is a delta, not a phase "
-                         "function)")
+        raise ValueError("g: expected values in (-1, 1) (|g| = 1 is a delta, not a phase function)")
     return g
 
 
@@ -126,6 +133,8 @@ def check_lights(lights):
     lights = tuple(lights)
     for i, light in enumerate(lights):
         if not isinstance(light, LIGHTS):
-            raise TypeError(f"lights[{i}]: expected a DirectionalLight, PointLight or "
-                            f"SpotLight, got {type(light).__name__}")
+            raise TypeError(
+                f"lights[{i}]: expected a DirectionalLight, PointLight or "
+                f"SpotLight, got {type(light).__name__}"
+            )
     return lights

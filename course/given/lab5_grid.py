@@ -36,8 +36,9 @@ class FroxelGrid:
 
     def __post_init__(self):
         if not isinstance(self.camera, Camera):
-            raise TypeError(f"camera: expected a course.core.camera.Camera, got "
-                            f"{type(self.camera).__name__}")
+            raise TypeError(
+                f"camera: expected a course.core.camera.Camera, got {type(self.camera).__name__}"
+            )
         for name in ("tile", "slices"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -61,8 +62,10 @@ class FroxelGrid:
     def axes(self, dtype=torch.float64, device="cpu"):
         """The camera's ``(eye, right, up, forward)`` (3,) each, and ``(half_w, half_h)``:
         the image plane's half extents at unit view depth."""
-        right, up, back = (a.to(device, dtype) for a in _camera_axes(
-            self.camera.eye, self.camera.target, self.camera.up))
+        right, up, back = (
+            a.to(device, dtype)
+            for a in _camera_axes(self.camera.eye, self.camera.target, self.camera.up)
+        )
         eye = torch.tensor(self.camera.eye, dtype=dtype, device=device)
         half_h = math.tan(math.radians(self.camera.fov_y) / 2)
         return eye, right, up, -back, (half_h * self.camera.aspect, half_h)
@@ -118,15 +121,15 @@ def sample_texture(volume: torch.Tensor, coords: torch.Tensor) -> torch.Tensor:
 def ray_boxes(origins: torch.Tensor, directions: torch.Tensor, boxes) -> torch.Tensor:
     """Distance along unit ``directions`` (N, 3) from ``origins`` (N, 3) to the first of the
     axis-aligned ``boxes`` (a sequence of :class:`Box`) hit at t > 0; inf where none is."""
-    t_hit = torch.full(origins.shape[:-1], math.inf, dtype=origins.dtype,
-                       device=origins.device)
+    t_hit = torch.full(origins.shape[:-1], math.inf, dtype=origins.dtype, device=origins.device)
     inv = torch.reciprocal(directions)
     for box in boxes:
         lo = torch.tensor(box.lo, dtype=origins.dtype, device=origins.device)
         hi = torch.tensor(box.hi, dtype=origins.dtype, device=origins.device)
         t0, t1 = (lo - origins) * inv, (hi - origins) * inv
-        near = torch.fmax(torch.minimum(t0, t1).nan_to_num(nan=-math.inf).amax(-1),
-                          torch.zeros_like(t_hit))
+        near = torch.fmax(
+            torch.minimum(t0, t1).nan_to_num(nan=-math.inf).amax(-1), torch.zeros_like(t_hit)
+        )
         far = torch.maximum(t0, t1).nan_to_num(nan=math.inf).amin(-1)
         hit = (near <= far) & (far > 0)
         t_hit = torch.where(hit, torch.minimum(t_hit, near), t_hit)
@@ -193,16 +196,19 @@ def lights_in_media(scene: Scene, camera: Camera) -> bool:
                 continue
             if not isinstance(m, FogVolume):
                 return True
-            local = [sum(r * (x - c) for r, x, c in zip(axis, light.position, m.center))
-                     for axis in m.rotation]
+            local = [
+                sum(r * (x - c) for r, x, c in zip(axis, light.position, m.center))
+                for axis in m.rotation
+            ]
             q = [abs(a / h) for a, h in zip(local, m.half_size)]
             if (max(q) if m.shape == "box" else math.sqrt(sum(x * x for x in q))) <= 1:
                 return True
     return False
 
 
-def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None,
-               far=None) -> FroxelGrid:
+def scene_grid(
+    scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None, far=None
+) -> FroxelGrid:
     """The ``FroxelGrid`` for ``scene`` seen by ``camera``; None picks what the scene needs.
 
     ``near``/``far`` None: the view-depth range of the media (the corners of every fog
@@ -230,8 +236,9 @@ def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None
             center = torch.tensor(m.center, dtype=torch.float64)
             rotation = torch.tensor(m.rotation, dtype=torch.float64)
             half = torch.tensor(m.half_size, dtype=torch.float64)
-            signs = torch.tensor([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
-                                 dtype=torch.float64)
+            signs = torch.tensor(
+                [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=torch.float64
+            )
             if depths is not None:
                 depths += (((signs * half) @ rotation + center - eye) @ fwd).tolist()
             inside = bool((((eye - center) @ rotation.T).abs() <= half).all())
@@ -248,8 +255,12 @@ def scene_grid(scene: Scene, camera: Camera, tile=None, slices=SLICES, near=None
         if tile is None:
             tile = TILE
             lamps = lights_in_media(scene, camera)
-            while tile > 1 and (lamps or any(s < TILES_PER_VOLUME * tile for s in sizes)) and (
-                    -(-camera.width // (tile // 2)) * -(-camera.height // (tile // 2))
-                    <= MAX_TILES):
+            while (
+                tile > 1
+                and (lamps or any(s < TILES_PER_VOLUME * tile for s in sizes))
+                and (
+                    -(-camera.width // (tile // 2)) * -(-camera.height // (tile // 2)) <= MAX_TILES
+                )
+            ):
                 tile //= 2
     return FroxelGrid(camera, tile, slices, near, far)

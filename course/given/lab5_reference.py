@@ -34,7 +34,7 @@ F64 = torch.float64
 def phase_value(cos_theta: torch.Tensor, g: torch.Tensor, phase: str = "hg") -> torch.Tensor:
     """Henyey–Greenstein (or Schlick's approximation) per steradian, float64."""
     if phase == "schlick":
-        k = (1.55 * g - 0.55 * g ** 3).clamp(-SCHLICK_K_MAX, SCHLICK_K_MAX)
+        k = (1.55 * g - 0.55 * g**3).clamp(-SCHLICK_K_MAX, SCHLICK_K_MAX)
         return (1 - k * k) / (4 * math.pi * (1 - k * cos_theta) ** 2)
     return (1 - g * g) / (4 * math.pi * (1 + g * g - 2 * g * cos_theta) ** 1.5)
 
@@ -42,8 +42,12 @@ def phase_value(cos_theta: torch.Tensor, g: torch.Tensor, phase: str = "hg") -> 
 def media(scene, p: torch.Tensor):
     """``(sigma_s (N, 3), sigma_t (N,), emissive (N, 3), g (N,))`` at points (N, 3), float64."""
     n = len(p)
-    s, t, e, gw = (torch.zeros(n, 3, dtype=F64), torch.zeros(n, dtype=F64),
-                   torch.zeros(n, 3, dtype=F64), torch.zeros(n, dtype=F64))
+    s, t, e, gw = (
+        torch.zeros(n, 3, dtype=F64),
+        torch.zeros(n, dtype=F64),
+        torch.zeros(n, 3, dtype=F64),
+        torch.zeros(n, dtype=F64),
+    )
     for m in scene.media:
         if isinstance(m, ConstantFog):
             w = torch.ones(n, dtype=F64)
@@ -51,8 +55,11 @@ def media(scene, p: torch.Tensor):
             w = torch.exp(-m.falloff * (p[:, 1] - m.base))
         else:
             rot = torch.tensor(m.rotation, dtype=F64)
-            q = (p - torch.tensor(m.center, dtype=F64)) @ rot.T / torch.tensor(m.half_size,
-                                                                              dtype=F64)
+            q = (
+                (p - torch.tensor(m.center, dtype=F64))
+                @ rot.T
+                / torch.tensor(m.half_size, dtype=F64)
+            )
             w = ((q.abs().amax(-1) <= 1) if m.shape == "box" else (q.norm(dim=-1) <= 1)).to(F64)
             if m.density is not None:
                 tex = m.density.detach().to("cpu", F64)
@@ -114,14 +121,28 @@ def _in_light(scene, light, p, view, g, phase, bounds, shadow_steps, point_light
         march = bounds is not None and (isinstance(light, SpotLight) or point_light_shadows)
     e = e * phase_value((view * to_light).sum(-1), g, phase)[:, None]
     if march:
-        e = e * torch.exp(-_optical_depth(scene, p, to_light, t_max, bounds,
-                                          shadow_steps))[:, None]
+        e = e * torch.exp(-_optical_depth(scene, p, to_light, t_max, bounds, shadow_steps))[:, None]
     return e
 
 
-def reference_render(scene, camera, depth_image, opaque_image, *, near=0.1, far=100.0,
-                     tile=8, slices=64, samples=256, shadow_steps=64, pixels=None, phase="hg",
-                     volumetric_shadows=True, point_light_shadows=True, chunk=2048):
+def reference_render(
+    scene,
+    camera,
+    depth_image,
+    opaque_image,
+    *,
+    near=0.1,
+    far=100.0,
+    tile=8,
+    slices=64,
+    samples=256,
+    shadow_steps=64,
+    pixels=None,
+    phase="hg",
+    volumetric_shadows=True,
+    point_light_shadows=True,
+    chunk=2048,
+):
     """Single scattering per pixel, by brute force, in float64 on the CPU.
 
     depth_image (H, W) view depths (+inf: sky), opaque_image (H, W, 3); pixels: None (all,
@@ -142,13 +163,16 @@ def reference_render(scene, camera, depth_image, opaque_image, *, near=0.1, far=
     ambient = torch.tensor(scene.ambient, dtype=F64)
     out_l, out_t = [], []
     for start in range(0, len(pixels), chunk):
-        idx = pixels[start:start + chunk]
+        idx = pixels[start : start + chunk]
         row, col = (idx // w).to(F64), (idx % w).to(F64)
-        d = fwd + ((2 * (col + 0.5) / w - 1) * hw)[:, None] * right \
-            + ((1 - 2 * (row + 0.5) / h) * hh)[:, None] * up  # unit view depth
+        d = (
+            fwd
+            + ((2 * (col + 0.5) / w - 1) * hw)[:, None] * right
+            + ((1 - 2 * (row + 0.5) / h) * hh)[:, None] * up
+        )  # unit view depth
         stretch = d.norm(dim=-1)
         view = d / stretch[:, None]
-        z_end = depth[start:start + len(idx)].clamp(min=near, max=far)
+        z_end = depth[start : start + len(idx)].clamp(min=near, max=far)
         dz = (z_end - near) / samples
         radiance = torch.zeros(len(idx), 3, dtype=F64)
         transmittance = torch.ones(len(idx), dtype=F64)
@@ -159,17 +183,20 @@ def reference_render(scene, camera, depth_image, opaque_image, *, near=0.1, far=
             if scene.lights and bool((s > 0).any()):
                 light_sum = torch.zeros_like(src)
                 for light in scene.lights:
-                    light_sum = light_sum + _in_light(scene, light, p, view, g, phase, bounds,
-                                                      shadow_steps, point_light_shadows)
+                    light_sum = light_sum + _in_light(
+                        scene, light, p, view, g, phase, bounds, shadow_steps, point_light_shadows
+                    )
                 src = src + s * light_sum
             ds = dz * stretch
             tau = t * ds
-            phi = torch.where(tau > 1e-8, -torch.expm1(-tau) / tau.clamp(min=1e-300),
-                              1 - tau / 2)
+            phi = torch.where(tau > 1e-8, -torch.expm1(-tau) / tau.clamp(min=1e-300), 1 - tau / 2)
             radiance = radiance + transmittance[:, None] * src * (ds * phi)[:, None]
             transmittance = transmittance * torch.exp(-tau)
         out_l.append(radiance)
         out_t.append(transmittance)
     inscatter, transmittance = torch.cat(out_l), torch.cat(out_t)
-    return {"image": opaque * transmittance[:, None] + inscatter, "inscatter": inscatter,
-            "transmittance": transmittance}
+    return {
+        "image": opaque * transmittance[:, None] + inscatter,
+        "inscatter": inscatter,
+        "transmittance": transmittance,
+    }

@@ -30,14 +30,22 @@ def _vec(value, name: str, size: int = 3, nonneg: bool = False) -> tuple:
     return values
 
 
-def _num(value, name: str, lo: float = -math.inf, hi: float = math.inf,
-         open_lo: bool = False, open_hi: bool = False) -> float:
+def _num(
+    value,
+    name: str,
+    lo: float = -math.inf,
+    hi: float = math.inf,
+    open_lo: bool = False,
+    open_hi: bool = False,
+) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise TypeError(f"{name}: expected a number, got {type(value).__name__}")
     ok = (lo < value if open_lo else lo <= value) and (value < hi if open_hi else value <= hi)
     if not ok or math.isnan(value):
-        raise ValueError(f"{name}: expected a number in {'(' if open_lo else '['}{lo}, {hi}"
-                         f"{')' if open_hi else ']'}, got {value!r}")
+        raise ValueError(
+            f"{name}: expected a number in {'(' if open_lo else '['}{lo}, {hi}"
+            f"{')' if open_hi else ']'}, got {value!r}"
+        )
     return float(value)
 
 
@@ -54,8 +62,10 @@ def _optics(obj) -> None:
     object.__setattr__(obj, "emissive", _vec(obj.emissive, "emissive", nonneg=True))
     object.__setattr__(obj, "extinction", _num(obj.extinction, "extinction", 0.0))
     if max(obj.scattering) > obj.extinction * (1 + 1e-12):
-        raise ValueError(f"scattering: expected every channel <= extinction={obj.extinction} "
-                         f"(albedo <= 1), got {obj.scattering}")
+        raise ValueError(
+            f"scattering: expected every channel <= extinction={obj.extinction} "
+            f"(albedo <= 1), got {obj.scattering}"
+        )
     object.__setattr__(obj, "g", _num(obj.g, "g", -1.0, 1.0, open_lo=True, open_hi=True))
 
 
@@ -128,15 +138,18 @@ class FogVolume:
             raise ValueError(f"shape: expected 'box' or 'ellipsoid', got {self.shape!r}")
         rows = tuple(_vec(r, "rotation") for r in self.rotation)
         m = torch.tensor(rows, dtype=torch.float64)
-        if m.shape != (3, 3) or not torch.allclose(m @ m.T, torch.eye(3, dtype=torch.float64),
-                                                   atol=1e-6):
+        if m.shape != (3, 3) or not torch.allclose(
+            m @ m.T, torch.eye(3, dtype=torch.float64), atol=1e-6
+        ):
             raise ValueError("rotation: expected a 3x3 orthonormal matrix (rows: local axes)")
         object.__setattr__(self, "rotation", rows)
         d = self.density
         if d is not None:
             if not isinstance(d, torch.Tensor) or not d.is_floating_point():
-                raise TypeError(f"density: expected None or a float tensor (X, Y, Z), got "
-                                f"{getattr(d, 'dtype', type(d).__name__)}")
+                raise TypeError(
+                    f"density: expected None or a float tensor (X, Y, Z), got "
+                    f"{getattr(d, 'dtype', type(d).__name__)}"
+                )
             if d.ndim != 3 or min(d.shape) < 1:
                 raise ValueError(f"density: expected a grid (X, Y, Z), got {tuple(d.shape)}")
             if not bool(torch.isfinite(d).all()) or bool((d < 0).any()):
@@ -235,8 +248,10 @@ class Scene:
             items = tuple(getattr(self, name))
             for i, item in enumerate(items):
                 if not isinstance(item, kinds):
-                    raise TypeError(f"{name}[{i}]: expected one of "
-                                    f"{', '.join(k.__name__ for k in kinds)}, got "
-                                    f"{type(item).__name__}")
+                    raise TypeError(
+                        f"{name}[{i}]: expected one of "
+                        f"{', '.join(k.__name__ for k in kinds)}, got "
+                        f"{type(item).__name__}"
+                    )
             object.__setattr__(self, name, items)
         object.__setattr__(self, "ambient", _vec(self.ambient, "ambient", nonneg=True))

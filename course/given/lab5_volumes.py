@@ -55,8 +55,9 @@ def light_frame(direction) -> tuple:
     """Rows ``(u, v, w)``: an orthonormal frame with ``w = direction`` (unit, 3 numbers)."""
     w = torch.tensor(direction, dtype=torch.float64)
     w = w / w.norm()
-    other = torch.tensor([0.0, 1.0, 0.0] if abs(float(w[1])) < 0.9 else [1.0, 0.0, 0.0],
-                         dtype=torch.float64)
+    other = torch.tensor(
+        [0.0, 1.0, 0.0] if abs(float(w[1])) < 0.9 else [1.0, 0.0, 0.0], dtype=torch.float64
+    )
     u = torch.linalg.cross(other, w)
     u = u / u.norm()
     v = torch.linalg.cross(w, u)
@@ -102,8 +103,11 @@ def media_bounds(scene: Scene):
     for m in scene.media:
         for axis in range(3):
             terms = [m.rotation[i][axis] * m.half_size[i] for i in range(3)]
-            reach = (math.sqrt(sum(t * t for t in terms)) if m.shape == "ellipsoid"
-                     else sum(abs(t) for t in terms))
+            reach = (
+                math.sqrt(sum(t * t for t in terms))
+                if m.shape == "ellipsoid"
+                else sum(abs(t) for t in terms)
+            )
             lo[axis] = min(lo[axis], m.center[axis] - reach)
             hi[axis] = max(hi[axis], m.center[axis] + reach)
     return tuple(lo), tuple(hi)

@@ -35,11 +35,14 @@ def check_tensor(x, name: str, shape: tuple, kind: str = "float", like=None) -> 
     """Provided: ``x`` must be a tensor of ``shape`` (``None`` = any size); ``kind`` is
     ``"float"`` (float32/float64), ``"int64"`` or ``"any"``; ``like``: a tensor whose device
     ``x`` must share. Raises TypeError/ValueError naming ``name`` and what was expected."""
-    want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + \
-        ("," if len(shape) == 1 else "") + ")"
+    want = (
+        "("
+        + ", ".join("N" if s is None else str(s) for s in shape)
+        + ("," if len(shape) == 1 else "")
+        + ")"
+    )
     if not isinstance(x, torch.Tensor):
-        raise TypeError(f"{name}: expected a torch.Tensor of shape {want}, "
-                        f"got {type(x).__name__}")
+        raise TypeError(f"{name}: expected a torch.Tensor of shape {want}, got {type(x).__name__}")
     if x.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, x.shape)):
         raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
     if kind == "float" and x.dtype not in (torch.float32, torch.float64):
@@ -56,8 +59,9 @@ def check_size(width, height) -> None:
     pixel centres and ``row * width + col`` exact)."""
     for name, size in (("width", width), ("height", height)):
         if isinstance(size, bool) or not isinstance(size, int) or not 0 < size <= 2**15:
-            raise ValueError(f"{name}: expected a positive integer pixel count <= 32768, "
-                             f"got {size!r}")
+            raise ValueError(
+                f"{name}: expected a positive integer pixel count <= 32768, got {size!r}"
+            )
 
 
 def any_shape(x) -> tuple:
@@ -67,8 +71,9 @@ def any_shape(x) -> tuple:
 def check_screen(screen, name="screen") -> torch.Tensor:
     check_tensor(screen, name, (None, 3, None))
     if screen.shape[2] < 2:
-        raise ValueError(f"{name}: expected shape (K, 3, C) with C >= 2 (x, y first), "
-                         f"got {tuple(screen.shape)}")
+        raise ValueError(
+            f"{name}: expected shape (K, 3, C) with C >= 2 (x, y first), got {tuple(screen.shape)}"
+        )
     return screen
 
 
@@ -113,10 +118,16 @@ def traced_hits(trace, origins, directions, t_min, t_max):
     hits = trace(origins, directions, t_min, t_max)
     t, triangle = getattr(hits, "t", None), getattr(hits, "triangle", None)
     n = origins.shape[0]
-    if not isinstance(t, torch.Tensor) or not isinstance(triangle, torch.Tensor) \
-            or t.shape != (n,) or triangle.shape != (n,):
-        raise TypeError(f"trace: expected a result with t ({n},) and triangle ({n},) "
-                        f"tensors, got {type(hits).__name__}")
+    if (
+        not isinstance(t, torch.Tensor)
+        or not isinstance(triangle, torch.Tensor)
+        or t.shape != (n,)
+        or triangle.shape != (n,)
+    ):
+        raise TypeError(
+            f"trace: expected a result with t ({n},) and triangle ({n},) "
+            f"tensors, got {type(hits).__name__}"
+        )
     return t.to(origins.device), triangle.to(origins.device, torch.int64)
 
 

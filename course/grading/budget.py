@@ -50,16 +50,20 @@ class LabSetting:
 
     @property
     def is_default(self) -> bool:
-        return (self.memory_mb <= DEFAULT_MEMORY_MB and self.cpus <= DEFAULT_CPUS
-                and self.timeout_minutes <= DEFAULT_TIMEOUT_MINUTES)
+        return (
+            self.memory_mb <= DEFAULT_MEMORY_MB
+            and self.cpus <= DEFAULT_CPUS
+            and self.timeout_minutes <= DEFAULT_TIMEOUT_MINUTES
+        )
 
 
 def setting_for(lab: int, peak_mb: float, cpu_seconds: float) -> LabSetting:
     """The settings for a measured autograder: memory with headroom in steps of 256 MB
     (768 MB at least), half a CPU while that keeps the run within the default timeout,
     else one (grading is sequential: more CPUs do not shorten it), and the timeout."""
-    memory = max(DEFAULT_MEMORY_MB,
-                 math.ceil(peak_mb * MEMORY_HEADROOM / MEMORY_STEP_MB) * MEMORY_STEP_MB)
+    memory = max(
+        DEFAULT_MEMORY_MB, math.ceil(peak_mb * MEMORY_HEADROOM / MEMORY_STEP_MB) * MEMORY_STEP_MB
+    )
     needed = cpu_seconds * TIME_HEADROOM / 60  # minutes at one full CPU
     cpus = DEFAULT_CPUS if needed / DEFAULT_CPUS <= DEFAULT_TIMEOUT_MINUTES else 1.0
     timeout = max(DEFAULT_TIMEOUT_MINUTES, math.ceil(needed / min(cpus, 1.0)))
@@ -92,23 +96,31 @@ def settings_text(labs=None) -> str:
         return text + (" (default)" if value <= default else "")
 
     measured = f" ({MEASURED_WITH})" if MEASURED_WITH else ""
-    lines = [("Gradescope settings for the assignment's Autograder Settings, from the "
-              f"references\ngraded at one core{measured}:"),
-             (f"{'lab':>5}  {'peak memory':>11}  {'CPU time':>8}   {'memory':<16} "
-              f"{'CPUs':<15} timeout")]
+    lines = [
+        (
+            "Gradescope settings for the assignment's Autograder Settings, from the "
+            f"references\ngraded at one core{measured}:"
+        ),
+        (f"{'lab':>5}  {'peak memory':>11}  {'CPU time':>8}   {'memory':<16} {'CPUs':<15} timeout"),
+    ]
     combined = autograder_setting(labs) if len(rows) > 1 else None
     for row in rows + ([combined] if combined else []):
         name = "all" if row.lab < 0 else str(row.lab)
-        lines.append(f"{name:>5}  {row.peak_mb:8.0f} MB  {row.cpu_seconds:6.0f} s   "
-                     f"{mark(row.memory_mb, DEFAULT_MEMORY_MB, f'{row.memory_mb} MB'):<16} "
-                     f"{mark(row.cpus, DEFAULT_CPUS, f'{row.cpus:g}'):<15} "
-                     + mark(row.timeout_minutes, DEFAULT_TIMEOUT_MINUTES,
-                            f"{row.timeout_minutes} min"))
+        lines.append(
+            f"{name:>5}  {row.peak_mb:8.0f} MB  {row.cpu_seconds:6.0f} s   "
+            f"{mark(row.memory_mb, DEFAULT_MEMORY_MB, f'{row.memory_mb} MB'):<16} "
+            f"{mark(row.cpus, DEFAULT_CPUS, f'{row.cpus:g}'):<15} "
+            + mark(row.timeout_minutes, DEFAULT_TIMEOUT_MINUTES, f"{row.timeout_minutes} min")
+        )
     over = [r for r in rows if not r.is_default]
     if combined:
-        lines.append("  (all: one autograder grading these labs one after another, estimated\n"
-                     "  from their rows; one autograder per lab is what was measured)")
+        lines.append(
+            "  (all: one autograder grading these labs one after another, estimated\n"
+            "  from their rows; one autograder per lab is what was measured)"
+        )
     if over:
-        lines.append("Set these where they differ from the defaults: over its memory the "
-                     "container is\nkilled, and the student sees 'Killed' and 0 points.")
+        lines.append(
+            "Set these where they differ from the defaults: over its memory the "
+            "container is\nkilled, and the student sees 'Killed' and 0 points."
+        )
     return "\n".join(lines)

@@ -45,8 +45,13 @@ class LabInfo:
         return sum(t.points for t in self.graded(task, hidden=hidden))
 
     def graded(self, task=None, *, hidden=None) -> list[GradedTest]:
-        return [t for t in self.tests if not t.needs and (task is None or t.task == task)
-                and (hidden is None or (t.visibility != "visible") == hidden)]
+        return [
+            t
+            for t in self.tests
+            if not t.needs
+            and (task is None or t.task == task)
+            and (hidden is None or (t.visibility != "visible") == hidden)
+        ]
 
 
 def _mark(node) -> tuple[str, list] | None:
@@ -57,7 +62,8 @@ def _mark(node) -> tuple[str, list] | None:
         return None
     owner = target.value
     if (isinstance(owner, ast.Attribute) and owner.attr == "mark") or (
-            isinstance(owner, ast.Name) and owner.id == "mark"):
+        isinstance(owner, ast.Name) and owner.id == "mark"
+    ):
         return target.attr, (call.args if call else [])
     return None
 
@@ -79,17 +85,22 @@ def _value(node, constants):
     try:
         return ast.literal_eval(node)
     except ValueError:
-        raise ValueError(f"line {node.lineno}: a marker's argument {ast.unparse(node)!r} must "
-                         f"be a number or a module-level constant (NAME = literal, or one "
-                         f"imported from another grader)") from None
+        raise ValueError(
+            f"line {node.lineno}: a marker's argument {ast.unparse(node)!r} must "
+            f"be a number or a module-level constant (NAME = literal, or one "
+            f"imported from another grader)"
+        ) from None
 
 
 def _constants(tree) -> dict[str, object]:
     """Module-level ``NAME = literal`` assignments."""
     constants = {}
     for node in tree.body:
-        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(
-                node.targets[0], ast.Name):
+        if (
+            isinstance(node, ast.Assign)
+            and len(node.targets) == 1
+            and isinstance(node.targets[0], ast.Name)
+        ):
             try:
                 constants[node.targets[0].id] = ast.literal_eval(node.value)
             except ValueError:
@@ -100,7 +111,8 @@ def _constants(tree) -> dict[str, object]:
 def _module_marks(tree, constants) -> dict[str, object]:
     for node in tree.body:
         if isinstance(node, ast.Assign) and any(
-                isinstance(t, ast.Name) and t.id == "pytestmark" for t in node.targets):
+            isinstance(t, ast.Name) and t.id == "pytestmark" for t in node.targets
+        ):
             value = node.value
             items = value.elts if isinstance(value, (ast.List, ast.Tuple)) else [value]
             return _marks(items, constants)
@@ -119,8 +131,13 @@ def _imported_constants(tree, path: Path) -> dict[str, object]:
             source = folder / f"{stem}.py"
             if stem.startswith("test_") and source.is_file() and source != path:
                 theirs = _constants(ast.parse(source.read_text(), filename=str(source)))
-                found.update({alias.asname or alias.name: theirs[alias.name]
-                              for alias in node.names if alias.name in theirs})
+                found.update(
+                    {
+                        alias.asname or alias.name: theirs[alias.name]
+                        for alias in node.names
+                        if alias.name in theirs
+                    }
+                )
                 break
     return found
 
@@ -133,33 +150,47 @@ def read_grader(path) -> LabInfo:
     module = constants.get("LAB_MODULE")
     if lab_number(module) is None:
         raise ValueError(f"{path}: LAB_MODULE must name a module labN_topic, got {module!r}")
-    info = LabInfo(number=lab_number(module), module=module,
-                   tasks=dict(constants.get("TASKS", {})), files=[path])
+    info = LabInfo(
+        number=lab_number(module),
+        module=module,
+        tasks=dict(constants.get("TASKS", {})),
+        files=[path],
+    )
     base = _module_marks(tree, constants)
 
     def visit(nodes, inherited):
         for node in nodes:
             if isinstance(node, ast.ClassDef) and node.name.startswith("Test"):
                 visit(node.body, {**inherited, **_marks(node.decorator_list, constants)})
-            elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) \
-                    and node.name.startswith("test"):
+            elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name.startswith(
+                "test"
+            ):
                 marks = {**inherited, **_marks(node.decorator_list, constants)}
                 if "points" not in marks:
                     continue
                 try:
                     points = float(marks["points"])
                 except (TypeError, ValueError):
-                    raise ValueError(f"{path}:{node.lineno}: points({marks['points']!r}) "
-                                     f"must be a number") from None
-                info.tests.append(GradedTest(
-                    name=node.name, task=marks.get("task"), points=points,
-                    visibility=marks.get("visibility", "visible"),
-                    needs=tuple(m for m in ("gpu", "slow") if m in marks),
-                    calls=frozenset(_impl_calls(node, helpers))))
+                    raise ValueError(
+                        f"{path}:{node.lineno}: points({marks['points']!r}) must be a number"
+                    ) from None
+                info.tests.append(
+                    GradedTest(
+                        name=node.name,
+                        task=marks.get("task"),
+                        points=points,
+                        visibility=marks.get("visibility", "visible"),
+                        needs=tuple(m for m in ("gpu", "slow") if m in marks),
+                        calls=frozenset(_impl_calls(node, helpers)),
+                    )
+                )
 
-    helpers = {node.name: node for node in tree.body
-               if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
-               and not node.name.startswith("test")}
+    helpers = {
+        node.name: node
+        for node in tree.body
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+        and not node.name.startswith("test")
+    }
     try:
         visit(tree.body, base)
     except ValueError as exc:
@@ -175,8 +206,7 @@ def _impl_calls(node, helpers, seen=None) -> set[str]:
     seen = set() if seen is None else seen
     found = set()
     for n in ast.walk(node):
-        if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) \
-                and n.value.id == "impl":
+        if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) and n.value.id == "impl":
             found.add(n.attr)
         elif isinstance(n, ast.Name) and n.id in helpers and n.id not in seen:
             seen.add(n.id)
@@ -188,9 +218,15 @@ def _impl_calls(node, helpers, seen=None) -> set[str]:
 def _dispatches(helper) -> bool:
     """Whether a grader helper picks its kernel by name (``getattr(impl, variant)``): what
     it calls depends on the caller's arguments, so it says nothing about one test."""
-    return any(isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
-               and n.func.id == "getattr" and n.args and isinstance(n.args[0], ast.Name)
-               and n.args[0].id == "impl" for n in ast.walk(helper))
+    return any(
+        isinstance(n, ast.Call)
+        and isinstance(n.func, ast.Name)
+        and n.func.id == "getattr"
+        and n.args
+        and isinstance(n.args[0], ast.Name)
+        and n.args[0].id == "impl"
+        for n in ast.walk(helper)
+    )
 
 
 def lab_catalog(test_files) -> dict[int, LabInfo]:
@@ -203,8 +239,9 @@ def lab_catalog(test_files) -> dict[int, LabInfo]:
             continue
         lab = labs[info.number]
         if lab.module != info.module:
-            raise ValueError(f"{path}: LAB_MODULE {info.module!r} differs from "
-                             f"{lab.module!r} of {lab.files[0]}")
+            raise ValueError(
+                f"{path}: LAB_MODULE {info.module!r} differs from {lab.module!r} of {lab.files[0]}"
+            )
         lab.tasks = {**info.tasks, **lab.tasks}
         lab.tests += info.tests
         lab.files.append(path)
@@ -222,12 +259,18 @@ def skeleton_functions(lab_file) -> list[str]:
     name)."""
 
     def unfinished(node) -> bool:
-        return any(isinstance(n, ast.Raise) and "NotImplementedError" in ast.unparse(n)
-                   for n in ast.walk(node))
+        return any(
+            isinstance(n, ast.Raise) and "NotImplementedError" in ast.unparse(n)
+            for n in ast.walk(node)
+        )
 
-    return [node.name for node in _module_body(lab_file)
-            if isinstance(node, (ast.FunctionDef, ast.ClassDef))
-            and not node.name.startswith("_") and unfinished(node)]
+    return [
+        node.name
+        for node in _module_body(lab_file)
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef))
+        and not node.name.startswith("_")
+        and unfinished(node)
+    ]
 
 
 def named_functions(test: GradedTest, functions) -> list[str]:
@@ -277,10 +320,16 @@ def skeleton_stubs(lab_file) -> list[Stub]:
 
     def scan(node, owner: str, qualname: str):
         for n in ast.walk(node):
-            if isinstance(n, ast.Raise) and n.exc is not None \
-                    and "NotImplementedError" in ast.unparse(n.exc):
-                text = " ".join(c.value for c in ast.walk(n.exc)
-                                if isinstance(c, ast.Constant) and isinstance(c.value, str))
+            if (
+                isinstance(n, ast.Raise)
+                and n.exc is not None
+                and "NotImplementedError" in ast.unparse(n.exc)
+            ):
+                text = " ".join(
+                    c.value
+                    for c in ast.walk(n.exc)
+                    if isinstance(c, ast.Constant) and isinstance(c.value, str)
+                )
                 stubs.append(Stub(owner, qualname, parse_not_implemented(text)[1], n.lineno))
 
     for node in _module_body(lab_file):
@@ -335,8 +384,9 @@ def lab_tasks(lab: LabInfo, lab_file, runs=None) -> list[TaskInfo]:
         for f, task in owners.items():  # in the skeleton's order
             if f in used and task is not None and task != number:
                 needs.setdefault(task, []).append(f)
-        tasks.append(TaskInfo(number, str(title), lab.points(number), mine,
-                              dict(sorted(needs.items()))))
+        tasks.append(
+            TaskInfo(number, str(title), lab.points(number), mine, dict(sorted(needs.items())))
+        )
     return tasks
 
 
@@ -373,9 +423,10 @@ def read_manifest(folder) -> dict | None:
         return None
     if not isinstance(data, dict) or not isinstance(data.get("files"), dict):
         return None
-    return {"files": {str(k): v if isinstance(v, str) else None
-                      for k, v in data["files"].items()},
-            "handed_in": [str(p) for p in data.get("handed_in", ()) if isinstance(p, str)]}
+    return {
+        "files": {str(k): v if isinstance(v, str) else None for k, v in data["files"].items()},
+        "handed_in": [str(p) for p in data.get("handed_in", ()) if isinstance(p, str)],
+    }
 
 
 def near_misses(folder, module: str) -> list[Path]:
@@ -383,5 +434,4 @@ def near_misses(folder, module: str) -> list[Path]:
     folder = Path(folder)
     if not folder.is_dir():
         return []
-    return sorted(p for p in folder.iterdir() if p.is_file()
-                  and lab_file_rank(p.name, module) == 1)
+    return sorted(p for p in folder.iterdir() if p.is_file() and lab_file_rank(p.name, module) == 1)

@@ -61,8 +61,12 @@ DEFAULT_STUDENT_TIMEOUT = 1800.0  # seconds: past the sandbox's own caps, a grad
 def _safe_member(name: str) -> str | None:
     """A zip member's path made relative and safe, or None for one to skip."""
     parts = [p for p in name.replace("\\", "/").split("/") if p not in ("", ".")]
-    if not parts or ".." in parts or ":" in parts[0] or any(
-            p.startswith(".") or p == "__MACOSX" for p in parts):
+    if (
+        not parts
+        or ".." in parts
+        or ":" in parts[0]
+        or any(p.startswith(".") or p == "__MACOSX" for p in parts)
+    ):
         return None
     return "/".join(parts)
 
@@ -79,8 +83,12 @@ def extract_zip(path: Path, dest: Path, suffixes=(".py",)) -> int:
             for info in archive.infolist()[:_MAX_MEMBERS]:
                 name = _safe_member(info.filename)
                 limit = _MAX_ZIP if name and name.lower().endswith(".zip") else _MAX_FILE
-                if (info.is_dir() or name is None or info.file_size > limit
-                        or not name.lower().endswith(suffixes)):
+                if (
+                    info.is_dir()
+                    or name is None
+                    or info.file_size > limit
+                    or not name.lower().endswith(suffixes)
+                ):
                     continue
                 target = dest / name
                 target.parent.mkdir(parents=True, exist_ok=True)
@@ -120,12 +128,13 @@ def stage(sub: Submission, work: Path, module: str, skeletons: Path, collect) ->
 def _problems(output: str) -> list[str]:
     """The submission problems a score table lists first (results.ScoreKeeper.table)."""
     lines = output.splitlines()
-    start = next((i for i, line in enumerate(lines)
-                  if line.startswith("submission problems")), None)
+    start = next(
+        (i for i, line in enumerate(lines) if line.startswith("submission problems")), None
+    )
     if start is None:
         return []
     found = []
-    for line in lines[start + 1:]:
+    for line in lines[start + 1 :]:
         if not line.startswith("  "):
             break
         found.append(line.strip())
@@ -186,8 +195,14 @@ def grade_job(spec: dict) -> dict:
     data, error = None, ""
     with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
         try:
-            data = grade(spec["impl"], labs=[spec["lab"]], keyword=spec.get("keyword"),
-                         tasks=spec.get("tasks"), quiet=True, extra_args=spec.get("extra", ()))
+            data = grade(
+                spec["impl"],
+                labs=[spec["lab"]],
+                keyword=spec.get("keyword"),
+                tasks=spec.get("tasks"),
+                quiet=True,
+                extra_args=spec.get("extra", ()),
+            )
         except GradeError as exc:
             error = str(exc)
         except Exception as exc:  # noqa: BLE001 (a grader fault costs this row only)
@@ -195,9 +210,15 @@ def grade_job(spec: dict) -> dict:
     seconds = round(time.monotonic() - started, 2)
     record = dict(spec["meta"], seconds=seconds, version=RESULT_VERSION)
     if data is None or "ended abnormally" in data.get("output", ""):
-        record.update(status="error", score=0.0, max_score=0.0, tasks={}, problems=[],
-                      output=error or (data or {}).get("output", "") or log.getvalue()[-2000:],
-                      tests=[])
+        record.update(
+            status="error",
+            score=0.0,
+            max_score=0.0,
+            tasks={},
+            problems=[],
+            output=error or (data or {}).get("output", "") or log.getvalue()[-2000:],
+            tests=[],
+        )
         return {"status": "error", "record": record}
     problems = _problems(data["output"])
     if not any(spec["meta"]["found"].values()):
@@ -208,9 +229,16 @@ def grade_job(spec: dict) -> dict:
         status = "crashed"  # e.g. os._exit at import: every call ended the process
     else:
         status = "graded"
-    record.update(status=status, score=data["score"], max_score=data["max_score"],
-                  tasks=_tasks(data), problems=problems, output=data["output"],
-                  tests=data["tests"], graded_by=imported_files(Path.cwd().resolve()))
+    record.update(
+        status=status,
+        score=data["score"],
+        max_score=data["max_score"],
+        tasks=_tasks(data),
+        problems=problems,
+        output=data["output"],
+        tests=data["tests"],
+        graded_by=imported_files(Path.cwd().resolve()),
+    )
     write_json_atomically(spec["result"], record)
     return {"status": status, "seconds": seconds}
 
@@ -238,8 +266,9 @@ def _class_folder(submissions: Path, work: Path) -> Path:
         folder = work / "class"
         shutil.rmtree(folder, ignore_errors=True)
         extract_zip(submissions, folder, _KEPT)
-        tops = [p for p in folder.iterdir() if not p.name.startswith(".")] \
-            if folder.is_dir() else []
+        tops = (
+            [p for p in folder.iterdir() if not p.name.startswith(".")] if folder.is_dir() else []
+        )
         return tops[0] if len(tops) == 1 and tops[0].is_dir() else folder
     raise ValueError(f"{submissions}: no such folder or zip of submissions")
 
@@ -260,10 +289,20 @@ def worker_env(device: str, jobs: int) -> dict:
     return env
 
 
-def grade_class(submissions, lab: int, *, collect, out=None, jobs: int | None = None,
-                device: str = "cpu", tasks=None, keyword: str | None = None,
-                time_limit: float | None = None,
-                student_timeout: float = DEFAULT_STUDENT_TIMEOUT, say=print) -> dict:
+def grade_class(
+    submissions,
+    lab: int,
+    *,
+    collect,
+    out=None,
+    jobs: int | None = None,
+    device: str = "cpu",
+    tasks=None,
+    keyword: str | None = None,
+    time_limit: float | None = None,
+    student_timeout: float = DEFAULT_STUDENT_TIMEOUT,
+    say=print,
+) -> dict:
     """Grade every submission of lab ``lab`` in the class folder (or zip) ``submissions``;
     write the gradebook, feedback and results into ``out`` (default ``grades/labN``) and
     return the summary (:func:`course.grading.classroom_report.write_reports`).
@@ -295,12 +334,19 @@ def grade_class(submissions, lab: int, *, collect, out=None, jobs: int | None = 
     subs, ignored = find_submissions(folder)
     say(f"layout: {describe(subs)} ({len(subs)} submissions in {folder})")
     if ignored:
-        say(f"ignored {len(ignored)} entries that name no student: "
-            f"{', '.join(ignored[:5])}{' ...' if len(ignored) > 5 else ''}")
+        say(
+            f"ignored {len(ignored)} entries that name no student: "
+            f"{', '.join(ignored[:5])}{' ...' if len(ignored) > 5 else ''}"
+        )
     module = lab_module(root, lab)
     extra = ["--time-limit", str(time_limit)] if time_limit else []
-    options = {"lab": lab, "tasks": task_specs([lab], tasks), "keyword": keyword,
-               "time_limit": time_limit, "device": device}
+    options = {
+        "lab": lab,
+        "tasks": task_specs([lab], tasks),
+        "keyword": keyword,
+        "time_limit": time_limit,
+        "device": device,
+    }
     graders = graders_hash(root, lab, module, options)
 
     records, specs, hashes = {}, [], {}
@@ -310,19 +356,40 @@ def grade_class(submissions, lab: int, *, collect, out=None, jobs: int | None = 
         key = hashlib.sha256((submission_hash(sub) + graders).encode()).hexdigest()
         try:
             kept = json.loads(result.read_text())
-            if kept.get("key") == key and kept.get("version") == RESULT_VERSION \
-                    and unchanged(root, kept.get("graded_by", {}), hashes):
+            if (
+                kept.get("key") == key
+                and kept.get("version") == RESULT_VERSION
+                and unchanged(root, kept.get("graded_by", {}), hashes)
+            ):
                 records[name] = dict(kept, kept=True)
                 continue
         except (OSError, ValueError):
             pass
-        meta = {"student": sub.student, "sid": sub.sid, "kind": sub.kind,
-                "source": sub.source, "key": key, "file": name}
-        specs.append({"id": name, "result": str(result), "lab": lab, "keyword": keyword,
-                      "tasks": tasks, "extra": extra, "meta": meta, "sub": sub})
+        meta = {
+            "student": sub.student,
+            "sid": sub.sid,
+            "kind": sub.kind,
+            "source": sub.source,
+            "key": key,
+            "file": name,
+        }
+        specs.append(
+            {
+                "id": name,
+                "result": str(result),
+                "lab": lab,
+                "keyword": keyword,
+                "tasks": tasks,
+                "extra": extra,
+                "meta": meta,
+                "sub": sub,
+            }
+        )
     if records:
-        say(f"kept {len(records)} students graded by an earlier run (same files, same "
-            f"graders); grading the other {len(specs)}")
+        say(
+            f"kept {len(records)} students graded by an earlier run (same files, same "
+            f"graders); grading the other {len(specs)}"
+        )
     for spec in specs:  # copies first: grading never reads the class folder
         sub = spec.pop("sub")
         spec["impl"] = str(work / spec["id"] / "impl")
@@ -334,16 +401,21 @@ def grade_class(submissions, lab: int, *, collect, out=None, jobs: int | None = 
     interrupted = False
     outcomes = []
     if specs:
-        say(f"grading {len(specs)} submissions of lab {lab} with {jobs} worker(s), "
-            f"device {device}")
+        say(f"grading {len(specs)} submissions of lab {lab} with {jobs} worker(s), device {device}")
         env = worker_env(device, jobs)
         bar = progress(total=len(specs), desc=f"lab {lab}", unit="student", leave=True)
         try:
             outcomes = run_pool(
-                specs, lambda j, r, tmp: [sys.executable, "-m", "course.grading.classroom",
-                                          j, r],
-                workers=jobs, cwd=root, env=env, deadline=student_timeout, lost=lost,
-                tick=bar.update, scratch_prefix="rtcourse-class-")
+                specs,
+                lambda j, r, tmp: [sys.executable, "-m", "course.grading.classroom", j, r],
+                workers=jobs,
+                cwd=root,
+                env=env,
+                deadline=student_timeout,
+                lost=lost,
+                tick=bar.update,
+                scratch_prefix="rtcourse-class-",
+            )
         except KeyboardInterrupt:
             interrupted = True
         finally:
@@ -353,9 +425,17 @@ def grade_class(submissions, lab: int, *, collect, out=None, jobs: int | None = 
         if outcome.get("record"):  # graded abnormally: shown, not kept
             records[spec["id"]] = outcome["record"]
         elif outcome["status"] == "error" or not result.is_file():
-            records[spec["id"]] = dict(spec["meta"], status="error", score=0.0,
-                                       max_score=0.0, tasks={}, problems=[], tests=[],
-                                       seconds=0.0, output=outcome.get("why", ""))
+            records[spec["id"]] = dict(
+                spec["meta"],
+                status="error",
+                score=0.0,
+                max_score=0.0,
+                tasks={},
+                problems=[],
+                tests=[],
+                seconds=0.0,
+                output=outcome.get("why", ""),
+            )
         else:
             records[spec["id"]] = json.loads(result.read_text())
     if interrupted:  # whatever finished before the interrupt was written: show it
@@ -364,13 +444,22 @@ def grade_class(submissions, lab: int, *, collect, out=None, jobs: int | None = 
             if spec["id"] not in records and result.is_file():
                 records[spec["id"]] = json.loads(result.read_text())
     shutil.rmtree(work, ignore_errors=True)
-    summary = write_reports(out, [records[k] for k in sorted(records)], lab=lab,
-                            total=len(subs), seconds=time.monotonic() - started,
-                            graded_now=len(outcomes), jobs=jobs, layout=describe(subs),
-                            say=say)
+    summary = write_reports(
+        out,
+        [records[k] for k in sorted(records)],
+        lab=lab,
+        total=len(subs),
+        seconds=time.monotonic() - started,
+        graded_now=len(outcomes),
+        jobs=jobs,
+        layout=describe(subs),
+        say=say,
+    )
     if interrupted:
-        say(f"interrupted: {len(records)} of {len(subs)} students graded and kept; run the "
-            f"same command again to grade the rest")
+        say(
+            f"interrupted: {len(records)} of {len(subs)} students graded and kept; run the "
+            f"same command again to grade the rest"
+        )
         raise KeyboardInterrupt
     return summary
 

@@ -51,8 +51,7 @@ def graders_hash(root: Path, lab: int, module: str, options: dict) -> str:
     from course.core.files import lab_source, module_files
     from course.grading.runner import lab_test_files
 
-    files = [*lab_test_files(root, [lab]), root / "tests" / "conftest.py",
-             root / "pyproject.toml"]
+    files = [*lab_test_files(root, [lab]), root / "tests" / "conftest.py", root / "pyproject.toml"]
     files += sorted(p for p in (root / "course" / "assets").glob("*") if p.is_file())
     for folder in ("labs", "solutions"):
         source = lab_source(root / folder, module)

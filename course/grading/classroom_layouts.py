@@ -26,14 +26,26 @@ from pathlib import Path
 
 GRADESCOPE_METADATA = "submission_metadata.yml"
 
-CANVAS = re.compile(r"^(?P<student>[A-Za-z0-9.\-]+?)(?:_LATE)?_(?P<sid>\d+)_(?P<sub>\d+)_"
-                    r"(?P<name>.+)$")
-MOODLE = re.compile(r"^(?P<student>.+?)_(?P<sid>\d+)_assignsubmission_(?:file|onlinetext)_"
-                    r"(?P<name>.*)$")
-BLACKBOARD = re.compile(r"^(?P<assignment>.+?)_(?P<student>[^_]+)_attempt_"
-                        r"(?P<time>\d{4}-\d{2}-\d{2}-\d{2}-\d{2}-\d{2})(?:_(?P<name>.+))?$")
-KIND_NAMES = {"folder": "folders", "zip": "zips", "gradescope": "Gradescope export",
-              "canvas": "Canvas files", "moodle": "Moodle files", "blackboard": "Blackboard files"}
+CANVAS = re.compile(
+    r"^(?P<student>[A-Za-z0-9.\-]+?)(?:_LATE)?_(?P<sid>\d+)_(?P<sub>\d+)_"
+    r"(?P<name>.+)$"
+)
+MOODLE = re.compile(
+    r"^(?P<student>.+?)_(?P<sid>\d+)_assignsubmission_(?:file|onlinetext)_"
+    r"(?P<name>.*)$"
+)
+BLACKBOARD = re.compile(
+    r"^(?P<assignment>.+?)_(?P<student>[^_]+)_attempt_"
+    r"(?P<time>\d{4}-\d{2}-\d{2}-\d{2}-\d{2}-\d{2})(?:_(?P<name>.+))?$"
+)
+KIND_NAMES = {
+    "folder": "folders",
+    "zip": "zips",
+    "gradescope": "Gradescope export",
+    "canvas": "Canvas files",
+    "moodle": "Moodle files",
+    "blackboard": "Blackboard files",
+}
 
 
 @dataclass
@@ -77,9 +89,12 @@ def read_gradescope_metadata(path: Path) -> dict[str, tuple[str, str]]:
 
     data = yaml.load(path.read_text(errors="replace"), Loader=yaml.BaseLoader) or {}
     table = {}
-    for folder, entry in (data.items() if isinstance(data, dict) else ()):
-        entry = {str(k).lstrip(":"): v for k, v in (entry or {}).items()} \
-            if isinstance(entry, dict) else {}
+    for folder, entry in data.items() if isinstance(data, dict) else ():
+        entry = (
+            {str(k).lstrip(":"): v for k, v in (entry or {}).items()}
+            if isinstance(entry, dict)
+            else {}
+        )
         people = entry.get("submitters") or []
         names, sids = [], []
         for person in people if isinstance(people, list) else ():
@@ -98,9 +113,15 @@ def _gradescope(export: Path, class_folder: Path) -> list[Submission]:
         if not folder.name.startswith("submission_"):
             continue
         name, sid = table.get(folder.name, ("", ""))
-        found.append(Submission(student=name or folder.name, sid=sid, kind="gradescope",
-                                source=folder.relative_to(class_folder).as_posix(),
-                                files=_tree(folder)))
+        found.append(
+            Submission(
+                student=name or folder.name,
+                sid=sid,
+                kind="gradescope",
+                source=folder.relative_to(class_folder).as_posix(),
+                files=_tree(folder),
+            )
+        )
     return found
 
 
@@ -135,11 +156,25 @@ def find_submissions(folder) -> tuple[list[Submission], list[str]]:
                 continue
             match = _lms_match(entry.name)  # Moodle's folder per student
             if match and match[0] == "moodle":
-                subs.append(Submission(student=match[1], sid=match[2], kind="moodle",
-                                       source=entry.name, files=_tree(entry)))
+                subs.append(
+                    Submission(
+                        student=match[1],
+                        sid=match[2],
+                        kind="moodle",
+                        source=entry.name,
+                        files=_tree(entry),
+                    )
+                )
             else:
-                subs.append(Submission(student=entry.name, sid="", kind="folder",
-                                       source=entry.name, files=_tree(entry)))
+                subs.append(
+                    Submission(
+                        student=entry.name,
+                        sid="",
+                        kind="folder",
+                        source=entry.name,
+                        files=_tree(entry),
+                    )
+                )
             continue
         if not entry.is_file() or entry.is_symlink():
             ignored.append(entry.name)
@@ -152,23 +187,41 @@ def find_submissions(folder) -> tuple[list[Submission], list[str]]:
                 attempt = BLACKBOARD.match(entry.name).group("time")
             flat[(kind, student, sid)][f"{attempt}/{name}"] = (attempt, entry)
         elif entry.suffix.lower() == ".zip":
-            subs.append(Submission(student=entry.stem, sid="", kind="zip", source=entry.name,
-                                   files={entry.name: entry}))
+            subs.append(
+                Submission(
+                    student=entry.stem,
+                    sid="",
+                    kind="zip",
+                    source=entry.name,
+                    files={entry.name: entry},
+                )
+            )
         else:
             ignored.append(entry.name)
     for (kind, student, sid), files in sorted(flat.items()):
         latest = max(attempt for attempt, _ in files.values())
-        chosen = {name.split("/", 1)[1]: path for name, (attempt, path) in files.items()
-                  if attempt == latest}
-        subs.append(Submission(student=student, sid=sid, kind=kind,
-                               source=", ".join(sorted(p.name for p in chosen.values())),
-                               files=chosen))
+        chosen = {
+            name.split("/", 1)[1]: path
+            for name, (attempt, path) in files.items()
+            if attempt == latest
+        }
+        subs.append(
+            Submission(
+                student=student,
+                sid=sid,
+                kind=kind,
+                source=", ".join(sorted(p.name for p in chosen.values())),
+                files=chosen,
+            )
+        )
     if not subs:
         what = ", ".join(ignored[:5]) or "nothing"
-        raise ValueError(f"no submissions in {folder}: expected one folder or zip per "
-                         f"student, a Gradescope export ({GRADESCOPE_METADATA}) or files "
-                         f"named for their student by Canvas, Moodle or Blackboard; it holds "
-                         f"{what}")
+        raise ValueError(
+            f"no submissions in {folder}: expected one folder or zip per "
+            f"student, a Gradescope export ({GRADESCOPE_METADATA}) or files "
+            f"named for their student by Canvas, Moodle or Blackboard; it holds "
+            f"{what}"
+        )
     _disambiguate(subs)
     return sorted(subs, key=lambda s: (s.key, s.source)), ignored
 
@@ -188,5 +241,7 @@ def describe(subs: list[Submission]) -> str:
     counts: dict[str, int] = defaultdict(int)
     for sub in subs:
         counts[sub.kind] += 1
-    return ", ".join(f"{KIND_NAMES[kind]}: {n}" for kind, n in sorted(
-        counts.items(), key=lambda kv: list(KIND_NAMES).index(kv[0])))
+    return ", ".join(
+        f"{KIND_NAMES[kind]}: {n}"
+        for kind, n in sorted(counts.items(), key=lambda kv: list(KIND_NAMES).index(kv[0]))
+    )

@@ -57,11 +57,18 @@ def gradebook_csv(records: list[dict]) -> str:
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(["student", "sid", "score", "max", *tasks, "status", "seconds", "source"])
     for r in records:
-        writer.writerow([r["student"], r.get("sid", ""), f"{r['score']:g}",
-                         f"{r['max_score']:g}",
-                         *(f"{r['tasks'][t][0]:g}" if t in r.get("tasks", {}) else ""
-                           for t in tasks),
-                         r["status"], f"{r.get('seconds', 0.0):.1f}", r.get("source", "")])
+        writer.writerow(
+            [
+                r["student"],
+                r.get("sid", ""),
+                f"{r['score']:g}",
+                f"{r['max_score']:g}",
+                *(f"{r['tasks'][t][0]:g}" if t in r.get("tasks", {}) else "" for t in tasks),
+                r["status"],
+                f"{r.get('seconds', 0.0):.1f}",
+                r.get("source", ""),
+            ]
+        )
     return buffer.getvalue()
 
 
@@ -78,8 +85,10 @@ def histogram(scores: list[float], top: float) -> list[tuple[float, float, int]]
 
 def histogram_text(bins) -> list[str]:
     peak = max((n for *_, n in bins), default=0) or 1
-    return [f"  {low:6.2f} - {high:6.2f} | {'#' * round(n / peak * _BAR):<{_BAR}} {n}"
-            for low, high, n in bins]
+    return [
+        f"  {low:6.2f} - {high:6.2f} | {'#' * round(n / peak * _BAR):<{_BAR}} {n}"
+        for low, high, n in bins
+    ]
 
 
 def histogram_png(path: Path, scores: list[float], top: float, title: str) -> bool:
@@ -106,8 +115,18 @@ def histogram_png(path: Path, scores: list[float], top: float, title: str) -> bo
         return False
 
 
-def write_reports(out: Path, records: list[dict], *, lab: int, total: int, seconds: float,
-                  graded_now: int, jobs: int, layout: str, say=print) -> dict:
+def write_reports(
+    out: Path,
+    records: list[dict],
+    *,
+    lab: int,
+    total: int,
+    seconds: float,
+    graded_now: int,
+    jobs: int,
+    layout: str,
+    say=print,
+) -> dict:
     """Write every output of the module docstring for ``records`` (sorted by student) into
     ``out``, print the summary through ``say`` and return it as a dict."""
     from course.grading.results import write_json_atomically
@@ -117,47 +136,77 @@ def write_reports(out: Path, records: list[dict], *, lab: int, total: int, secon
     for r in records:
         head = f"{r['student']}" + (f" ({r['sid']})" if r.get("sid") else "")
         head += f": lab {lab}, {r['score']:g} / {r['max_score']:g} ({r['status']})"
-        write_atomically(out / "feedback" / f"{r['file']}.txt",
-                         f"{head}\n\n{r.get('output', '')}\n")
+        write_atomically(
+            out / "feedback" / f"{r['file']}.txt", f"{head}\n\n{r.get('output', '')}\n"
+        )
     top = max((r["max_score"] for r in records), default=0.0)
     scores = [r["score"] for r in records if r["status"] != "error"]
     bins = histogram(scores, top)
     failed = [r for r in records if r["status"] in ("import failed", "crashed")]
-    slowest = sorted((r for r in records if not r.get("kept")),
-                     key=lambda r: -r.get("seconds", 0.0))[:5]
+    slowest = sorted(
+        (r for r in records if not r.get("kept")), key=lambda r: -r.get("seconds", 0.0)
+    )[:5]
     rate = graded_now / seconds * 60 if seconds > 0 else 0.0
-    lines = [f"lab {lab}: {len(records)} of {total} students graded ({graded_now} in this "
-             f"run, {len(records) - graded_now} kept) in {seconds:.1f} s with {jobs} "
-             f"worker(s): {rate:.1f} students/minute",
-             f"layout: {layout}", f"scores (of {top:g}):", *histogram_text(bins)]
-    counts = {s: sum(r["status"] == s for r in records)
-              for s in ("graded", "import failed", "crashed", "missing", "error")}
+    lines = [
+        f"lab {lab}: {len(records)} of {total} students graded ({graded_now} in this "
+        f"run, {len(records) - graded_now} kept) in {seconds:.1f} s with {jobs} "
+        f"worker(s): {rate:.1f} students/minute",
+        f"layout: {layout}",
+        f"scores (of {top:g}):",
+        *histogram_text(bins),
+    ]
+    counts = {
+        s: sum(r["status"] == s for r in records)
+        for s in ("graded", "import failed", "crashed", "missing", "error")
+    }
     lines.append("status: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n))
     if failed:
         lines.append(f"failed to import or crashed on every call ({len(failed)}):")
-        lines += [f"  {r['student']}: " + (r["problems"] or [
-            "every call ended the sandbox's process (os._exit or a crash at import?)"])[0][:160]
-            for r in failed]
+        lines += [
+            f"  {r['student']}: "
+            + (
+                r["problems"]
+                or ["every call ended the sandbox's process (os._exit or a crash at import?)"]
+            )[0][:160]
+            for r in failed
+        ]
     errors = [r for r in records if r["status"] == "error"]
     if errors:
         lines.append(f"not graded, tried again next run ({len(errors)}):")
         lines += [f"  {r['student']}: {r.get('output', '')[:160]}" for r in errors]
     if slowest:
-        lines.append("slowest: " + ", ".join(f"{r['student']} {r.get('seconds', 0):.1f} s"
-                                             for r in slowest))
+        lines.append(
+            "slowest: " + ", ".join(f"{r['student']} {r.get('seconds', 0):.1f} s" for r in slowest)
+        )
     picture = histogram_png(out / "histogram.png", scores, top, f"lab {lab}: scores")
-    lines.append(f"wrote {out / 'gradebook.csv'}, {out / 'gradebook.json'}, "
-                 f"{out / 'feedback'}/ ({len(records)} files)"
-                 + (f", {out / 'histogram.png'}" if picture else ""))
+    lines.append(
+        f"wrote {out / 'gradebook.csv'}, {out / 'gradebook.json'}, "
+        f"{out / 'feedback'}/ ({len(records)} files)"
+        + (f", {out / 'histogram.png'}" if picture else "")
+    )
     text = "\n".join(lines)
     write_atomically(out / "summary.txt", text + "\n")
-    summary = {"lab": lab, "students": len(records), "total": total, "graded_now": graded_now,
-               "seconds": round(seconds, 2), "jobs": jobs, "students_per_minute": round(rate, 2),
-               "layout": layout, "histogram": bins, "status": counts,
-               "failed_to_import": [r["student"] for r in failed],
-               "slowest": [[r["student"], r.get("seconds", 0.0)] for r in slowest]}
-    write_json_atomically(out / "gradebook.json", {"summary": summary, "students": [
-        {k: v for k, v in r.items() if k != "kept"} for r in records]})
+    summary = {
+        "lab": lab,
+        "students": len(records),
+        "total": total,
+        "graded_now": graded_now,
+        "seconds": round(seconds, 2),
+        "jobs": jobs,
+        "students_per_minute": round(rate, 2),
+        "layout": layout,
+        "histogram": bins,
+        "status": counts,
+        "failed_to_import": [r["student"] for r in failed],
+        "slowest": [[r["student"], r.get("seconds", 0.0)] for r in slowest],
+    }
+    write_json_atomically(
+        out / "gradebook.json",
+        {
+            "summary": summary,
+            "students": [{k: v for k, v in r.items() if k != "kept"} for r in records],
+        },
+    )
     say(text)
     return summary
 

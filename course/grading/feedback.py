@@ -36,7 +36,7 @@ class Feedback:
 
 
 def _clip(line: str) -> str:
-    return line if len(line) <= _LINE_WIDTH else line[:_LINE_WIDTH - 3] + "..."
+    return line if len(line) <= _LINE_WIDTH else line[: _LINE_WIDTH - 3] + "..."
 
 
 def _wrap(line: str) -> str:
@@ -44,9 +44,16 @@ def _wrap(line: str) -> str:
     under the first), as one string: the caller counts it as one line."""
     if len(line) <= _WRAP:
         return line
-    indent = line[:len(line) - len(line.lstrip())]
-    return "\n".join(textwrap.wrap(line, _WRAP, subsequent_indent=indent + "  ",
-                                    break_long_words=False, break_on_hyphens=False))
+    indent = line[: len(line) - len(line.lstrip())]
+    return "\n".join(
+        textwrap.wrap(
+            line,
+            _WRAP,
+            subsequent_indent=indent + "  ",
+            break_long_words=False,
+            break_on_hyphens=False,
+        )
+    )
 
 
 def _message_lines(text: str) -> list[str]:
@@ -62,7 +69,7 @@ def _message_lines(text: str) -> list[str]:
         lines.append(_wrap(_clip(line.rstrip())))
     if len(lines) > _MESSAGE_LINES:
         more = len(lines) - _MESSAGE_LINES + 1
-        lines = lines[:_MESSAGE_LINES - 1] + [f"... ({more} more lines with -v)"]
+        lines = lines[: _MESSAGE_LINES - 1] + [f"... ({more} more lines with -v)"]
     return lines
 
 
@@ -88,8 +95,7 @@ def text_frames(text: str) -> list[tuple[str, int, str, str]]:
     for i, line in enumerate(lines):
         match = _FRAME.match(line)
         if match:
-            source = lines[i + 1] if i + 1 < len(lines) and not _FRAME.match(lines[i + 1]) \
-                else ""
+            source = lines[i + 1] if i + 1 < len(lines) and not _FRAME.match(lines[i + 1]) else ""
             frames.append((match["file"], int(match["line"]), match["name"], source))
     return frames
 
@@ -109,8 +115,17 @@ def import_problem(module: str, text: str, folder) -> str:
     return _clip(f"{module}.py failed to import: {head}{line}")
 
 
-def short_feedback(*, exc: BaseException, frames, test_file, folder, task, task_of,
-                   lab_module: str = "", header: str = "") -> Feedback:
+def short_feedback(
+    *,
+    exc: BaseException,
+    frames,
+    test_file,
+    folder,
+    task,
+    task_of,
+    lab_module: str = "",
+    header: str = "",
+) -> Feedback:
     """The short text of a failure.
 
     ``exc`` is the exception; ``frames`` the grader-side traceback as ``(file, line,
@@ -125,17 +140,19 @@ def short_feedback(*, exc: BaseException, frames, test_file, folder, task, task_
         if fn is not None:
             owner = stated if stated is not None else task_of(fn.split(".")[0])
             if owner is not None and task is not None and owner != task:
-                return Feedback(f"needs `{fn}` (task {owner}) first: this test of task {task} "
-                                f"calls it, and it is not implemented yet")
-            return Feedback(f"task {owner if owner is not None else task}: write `{fn}` "
-                            f"(not implemented yet)")
+                return Feedback(
+                    f"needs `{fn}` (task {owner}) first: this test of task {task} "
+                    f"calls it, and it is not implemented yet"
+                )
+            return Feedback(
+                f"task {owner if owner is not None else task}: write `{fn}` (not implemented yet)"
+            )
     if IMPORT_FAILED in text:
         problem = import_problem(lab_module or "the lab", text, folder)
         return Feedback(problem, problem=problem)
     own = _RAISED_IN.split(text, maxsplit=1)
     message = own[0]
-    if not isinstance(exc, AssertionError) and kind != "Failed" \
-            and not message.startswith(kind):
+    if not isinstance(exc, AssertionError) and kind != "Failed" and not message.startswith(kind):
         message = f"{kind}: {message}"
     lines = ([header] if header else []) + _message_lines(message)
     yours = frame_in(text_frames(text), folder) or frame_in(frames, folder)
@@ -145,9 +162,10 @@ def short_feedback(*, exc: BaseException, frames, test_file, folder, task, task_
         lines.append(f"raised in {own[1]}")
     grader = [f for f in frames if Path(f[0]).name == Path(test_file).name]
     if grader:
-        lines.append(f"checked at {Path(test_file).parent.name}/{Path(test_file).name}:"
-                     f"{grader[-1][1]}")
+        lines.append(
+            f"checked at {Path(test_file).parent.name}/{Path(test_file).name}:{grader[-1][1]}"
+        )
     lines.append(HINT)
     if len(lines) > MAX_LINES:  # keep the hint line; the message lines are each whole
-        lines = lines[:MAX_LINES - 1] + lines[-1:]
+        lines = lines[: MAX_LINES - 1] + lines[-1:]
     return Feedback("\n".join(lines))

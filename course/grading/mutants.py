@@ -51,14 +51,21 @@ def _function_span(source: str, qualname: str) -> tuple[int, int]:
     nodes = tree.body
     node = None
     for part in qualname.split("."):
-        node = next((n for n in nodes if isinstance(
-            n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and n.name == part), None)
+        node = next(
+            (
+                n
+                for n in nodes
+                if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))
+                and n.name == part
+            ),
+            None,
+        )
         if node is None:
             raise ValueError(f"mutant: no definition {qualname!r} in the solution")
         nodes = node.body
     lines = source.splitlines(keepends=True)
-    start = sum(len(line) for line in lines[:node.lineno - 1])
-    end = sum(len(line) for line in lines[:node.end_lineno])
+    start = sum(len(line) for line in lines[: node.lineno - 1])
+    end = sum(len(line) for line in lines[: node.end_lineno])
     return start, end
 
 
@@ -68,14 +75,18 @@ def apply_mutant(mutant: Mutant, source: str) -> str:
     body = source[start:end]
     count = body.count(mutant.find)
     if count != 1:
-        raise ValueError(f"mutant {mutant.name}: {mutant.find!r} occurs {count} times in "
-                         f"{mutant.function}, expected exactly once")
+        raise ValueError(
+            f"mutant {mutant.name}: {mutant.find!r} occurs {count} times in "
+            f"{mutant.function}, expected exactly once"
+        )
     mutated = source[:start] + body.replace(mutant.find, mutant.replace) + source[end:]
     try:  # a mistake a student makes, not a file that does not import
         ast.parse(mutated)
     except SyntaxError as error:
-        raise ValueError(f"mutant {mutant.name}: the mutated source does not parse "
-                         f"({error.msg}, line {error.lineno})") from None
+        raise ValueError(
+            f"mutant {mutant.name}: the mutated source does not parse "
+            f"({error.msg}, line {error.lineno})"
+        ) from None
     return mutated
 
 
@@ -92,18 +103,35 @@ def grade_mutant(mutant: Mutant, root, workdir, timeout: float = 600) -> dict:
     copy_module(solution, workdir, {name: apply_mutant(mutant, path.read_text())})
     out = workdir / "results.json"
     # The mutant is our own code: grade it in-process in the child for speed.
-    cmd = [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(workdir), "--trusted",
-           "--lab", str(mutant.lab), "-k", mutant.tests, "--json", str(out)]
-    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=timeout,
-                          check=False)
+    cmd = [
+        sys.executable,
+        "-m",
+        "course.tools.cli",
+        "grade",
+        "--impl",
+        str(workdir),
+        "--trusted",
+        "--lab",
+        str(mutant.lab),
+        "-k",
+        mutant.tests,
+        "--json",
+        str(out),
+    ]
+    proc = subprocess.run(
+        cmd, cwd=root, capture_output=True, text=True, timeout=timeout, check=False
+    )
     if not out.exists():
-        raise RuntimeError(f"grading mutant {mutant.name} wrote no results:\n"
-                           f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+        raise RuntimeError(
+            f"grading mutant {mutant.name} wrote no results:\n"
+            f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+        )
     return json.loads(out.read_text())
 
 
-def catch_mutants(mutants: list[Mutant], root, *, workers: int = 2,
-                  deadline: float = 300.0) -> dict[str, dict]:
+def catch_mutants(
+    mutants: list[Mutant], root, *, workers: int = 2, deadline: float = 300.0
+) -> dict[str, dict]:
     """Whether each mutant fails one of its tests: ``{name: outcome}`` with ``killed``,
     ``ran`` (tests run), ``by`` (the first failing test) and ``error`` when the run proves
     nothing (a broken grader, a ``-k`` that selects no test).
@@ -122,8 +150,14 @@ def catch_mutants(mutants: list[Mutant], root, *, workers: int = 2,
     for mutant in mutants:
         solution = lab_source(root / "solutions", mutant.module)
         path = defining_file(solution, mutant.function)
-        specs.append({"id": mutant.name, "module": mutant.module, "tests": [f"({mutant.tests})"],
-                      "file": relative_name(solution, path),
-                      "source": apply_mutant(mutant, path.read_text())})
+        specs.append(
+            {
+                "id": mutant.name,
+                "module": mutant.module,
+                "tests": [f"({mutant.tests})"],
+                "file": relative_name(solution, path),
+                "source": apply_mutant(mutant, path.read_text()),
+            }
+        )
     outcomes = run_specs(root, specs, workers=max(1, workers), deadline=deadline)
     return {spec["id"]: outcome for spec, outcome in zip(specs, outcomes)}

@@ -69,15 +69,27 @@ class Generated:
         return int(self.module.split("_")[0].removeprefix("lab"))
 
     def apply(self, source: str) -> str:
-        assert source[self.start:self.end] == self.original, self.id
-        return source[:self.start] + self.replacement + source[self.end:]
+        assert source[self.start : self.end] == self.original, self.id
+        return source[: self.start] + self.replacement + source[self.end :]
 
 
-_CMP_SWAP = {ast.Lt: ast.LtE, ast.LtE: ast.Lt, ast.Gt: ast.GtE, ast.GtE: ast.Gt,
-             ast.Eq: ast.NotEq, ast.NotEq: ast.Eq}
+_CMP_SWAP = {
+    ast.Lt: ast.LtE,
+    ast.LtE: ast.Lt,
+    ast.Gt: ast.GtE,
+    ast.GtE: ast.Gt,
+    ast.Eq: ast.NotEq,
+    ast.NotEq: ast.Eq,
+}
 _CMP_FLIP = {ast.Lt: ast.Gt, ast.LtE: ast.GtE, ast.Gt: ast.Lt, ast.GtE: ast.LtE}
-_BIN_SWAP = {ast.Add: ast.Sub, ast.Sub: ast.Add, ast.Mult: ast.Div, ast.Div: ast.Mult,
-             ast.BitAnd: ast.BitOr, ast.BitOr: ast.BitAnd}
+_BIN_SWAP = {
+    ast.Add: ast.Sub,
+    ast.Sub: ast.Add,
+    ast.Mult: ast.Div,
+    ast.Div: ast.Mult,
+    ast.BitAnd: ast.BitOr,
+    ast.BitOr: ast.BitAnd,
+}
 _ROUNDING = {"floor": "ceil", "ceil": "floor", "round": "floor", "trunc": "floor"}
 _DROPPED = {"abs", "clamp", "clamp_min", "clamp_max", "clip", "nan_to_num"}
 _SWAPPED = {"where": (1, 2), "cross": (0, 1), "atan2": (0, 1)}
@@ -85,14 +97,20 @@ _SWAPPED = {"where": (1, 2), "cross": (0, 1), "atan2": (0, 1)}
 
 def _call_name(node: ast.Call) -> str | None:
     func = node.func
-    return func.attr if isinstance(func, ast.Attribute) else (
-        func.id if isinstance(func, ast.Name) else None)
+    return (
+        func.attr
+        if isinstance(func, ast.Attribute)
+        else (func.id if isinstance(func, ast.Name) else None)
+    )
 
 
 def _is_docstring(node, parents) -> bool:
     parent = parents.get(node)
-    return isinstance(parent, ast.Expr) and isinstance(node, ast.Constant) and isinstance(
-        node.value, str)
+    return (
+        isinstance(parent, ast.Expr)
+        and isinstance(node, ast.Constant)
+        and isinstance(node.value, str)
+    )
 
 
 def _in_raise(node, parents) -> bool:
@@ -119,20 +137,34 @@ def _mutations(node: ast.AST) -> list[tuple[str, ast.AST]]:
     if isinstance(node, ast.Compare) and len(node.ops) == 1:
         op = type(node.ops[0])
         if op in _CMP_SWAP:
-            out.append((f"cmp_{op.__name__}_{_CMP_SWAP[op].__name__}", ast.Compare(
-                node.left, [_CMP_SWAP[op]()], node.comparators)))
+            out.append(
+                (
+                    f"cmp_{op.__name__}_{_CMP_SWAP[op].__name__}",
+                    ast.Compare(node.left, [_CMP_SWAP[op]()], node.comparators),
+                )
+            )
         if op in _CMP_FLIP:
-            out.append((f"cmp_{op.__name__}_{_CMP_FLIP[op].__name__}", ast.Compare(
-                node.left, [_CMP_FLIP[op]()], node.comparators)))
+            out.append(
+                (
+                    f"cmp_{op.__name__}_{_CMP_FLIP[op].__name__}",
+                    ast.Compare(node.left, [_CMP_FLIP[op]()], node.comparators),
+                )
+            )
     elif isinstance(node, ast.BinOp) and type(node.op) in _BIN_SWAP:
         new = _BIN_SWAP[type(node.op)]
-        out.append((f"op_{type(node.op).__name__}_{new.__name__}",
-                    ast.BinOp(node.left, new(), node.right)))
+        out.append(
+            (f"op_{type(node.op).__name__}_{new.__name__}", ast.BinOp(node.left, new(), node.right))
+        )
     elif isinstance(node, ast.BoolOp):
         new = ast.Or if isinstance(node.op, ast.And) else ast.And
-        out.append((f"bool_{type(node.op).__name__}_{new.__name__}", ast.BoolOp(new(), node.values)))
-    elif isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub) and not isinstance(
-            node.operand, ast.Constant):
+        out.append(
+            (f"bool_{type(node.op).__name__}_{new.__name__}", ast.BoolOp(new(), node.values))
+        )
+    elif (
+        isinstance(node, ast.UnaryOp)
+        and isinstance(node.op, ast.USub)
+        and not isinstance(node.operand, ast.Constant)
+    ):
         out.append(("drop_neg", node.operand))
     elif isinstance(node, ast.Constant) and type(node.value) in (int, float):
         value = node.value
@@ -148,15 +180,23 @@ def _mutations(node: ast.AST) -> list[tuple[str, ast.AST]]:
         name = _call_name(node)
         method = isinstance(node.func, ast.Attribute)
         if name == "double" and method and not node.args:
-            out.append(("narrow_double", ast.Call(ast.Attribute(node.func.value, "float"),
-                                                  [], [])))
+            out.append(("narrow_double", ast.Call(ast.Attribute(node.func.value, "float"), [], [])))
         if name in _ROUNDING and method:
-            out.append((f"round_{name}_{_ROUNDING[name]}", ast.Call(
-                ast.Attribute(node.func.value, _ROUNDING[name]), node.args, node.keywords)))
+            out.append(
+                (
+                    f"round_{name}_{_ROUNDING[name]}",
+                    ast.Call(
+                        ast.Attribute(node.func.value, _ROUNDING[name]), node.args, node.keywords
+                    ),
+                )
+            )
         if name in _DROPPED:
             # torch.abs(x) / x.abs(): keep x
-            is_torch = method and isinstance(node.func.value, ast.Name) and \
-                node.func.value.id in ("torch", "np", "math")
+            is_torch = (
+                method
+                and isinstance(node.func.value, ast.Name)
+                and node.func.value.id in ("torch", "np", "math")
+            )
             if is_torch and node.args:
                 out.append((f"drop_{name}", node.args[0]))
             elif method and not is_torch:
@@ -221,10 +261,20 @@ def generate(module: str, source: str, functions, file: str | None = None) -> li
                     replacement = f"({replacement})"
                 if replacement.strip("()") == original.strip("()"):
                     continue
-                found.append(Generated(
-                    id=f"{module}:{qualname}:{kind}:{n}", module=module, function=qualname,
-                    kind=kind, line=node.lineno, start=start, end=end, original=original,
-                    replacement=replacement, file=file or f"{module}.py"))
+                found.append(
+                    Generated(
+                        id=f"{module}:{qualname}:{kind}:{n}",
+                        module=module,
+                        function=qualname,
+                        kind=kind,
+                        line=node.lineno,
+                        start=start,
+                        end=end,
+                        original=original,
+                        replacement=replacement,
+                        file=file or f"{module}.py",
+                    )
+                )
     return found
 
 
@@ -234,8 +284,11 @@ def _called_helpers(tree) -> dict[str, set[str]]:
     graph = {}
     for node in tree.body:
         if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
-            graph[node.name] = {n.id for n in ast.walk(node) if isinstance(n, ast.Name)
-                                and n.id in tops and n.id != node.name}
+            graph[node.name] = {
+                n.id
+                for n in ast.walk(node)
+                if isinstance(n, ast.Name) and n.id in tops and n.id != node.name
+            }
     return graph
 
 
@@ -258,19 +311,26 @@ def plan(root, labs=None) -> list[LabPlan]:
         solution = lab_source(root / "solutions", info.module)
         if skeleton is None or solution is None:
             continue
-        sources = {relative_name(solution, f): f.read_text()
-                   for f in module_files(solution)}  # the module, or its package's files
+        sources = {
+            relative_name(solution, f): f.read_text() for f in module_files(solution)
+        }  # the module, or its package's files
         tree = ast.Module([n for text in sources.values() for n in ast.parse(text).body], [])
-        skeleton_body = [n for f in module_files(skeleton)
-                         for n in ast.parse(f.read_text()).body]
-        written = {n.name for n in skeleton_body
-                   if isinstance(n, (ast.FunctionDef, ast.ClassDef))
-                   and any(isinstance(r, ast.Raise) and "NotImplementedError" in ast.unparse(r)
-                           for r in ast.walk(n))}
+        skeleton_body = [n for f in module_files(skeleton) for n in ast.parse(f.read_text()).body]
+        written = {
+            n.name
+            for n in skeleton_body
+            if isinstance(n, (ast.FunctionDef, ast.ClassDef))
+            and any(
+                isinstance(r, ast.Raise) and "NotImplementedError" in ast.unparse(r)
+                for r in ast.walk(n)
+            )
+        }
         public = skeleton_functions(skeleton)
         graph = _called_helpers(tree)
-        direct = {f: sorted({t.name for t in info.graded() if f in functions_of(t, public)})
-                  for f in public}
+        direct = {
+            f: sorted({t.name for t in info.graded() if f in functions_of(t, public)})
+            for f in public
+        }
         tests = {}
         for name in sorted(written):
             if name in direct:
@@ -279,8 +339,9 @@ def plan(root, labs=None) -> list[LabPlan]:
                 users = [f for f in public if _reaches(graph, f, name)]
                 tests[name] = sorted({t for f in users for t in direct.get(f, [])})
         tests = {f: names for f, names in tests.items() if names}
-        mutants = [m for file, text in sources.items()
-                   for m in generate(info.module, text, tests, file)]
+        mutants = [
+            m for file, text in sources.items() for m in generate(info.module, text, tests, file)
+        ]
         plans.append(LabPlan(number, info.module, mutants, tests, sources))
     return plans
 
@@ -321,6 +382,7 @@ def sample(plans: list[LabPlan], per_lab: int | None, seed: int) -> list[Generat
 
 # -- running ------------------------------------------------------------------------------
 
+
 class _Outcome:
     """pytest plugin: did any selected graded test fail, and how many ran."""
 
@@ -344,24 +406,47 @@ def _grade_one(root: Path, spec: dict, scratch: Path) -> dict:
 
     folder = scratch / spec["id"].replace(":", "__")
     folder.mkdir(parents=True, exist_ok=True)
-    copy_module(lab_source(root / "solutions", spec["module"]), folder,
-                {spec["file"]: spec["source"]})
+    copy_module(
+        lab_source(root / "solutions", spec["module"]), folder, {spec["file"]: spec["source"]}
+    )
     keyword = " or ".join(spec["tests"])
     files = [str(f) for f in lab_test_files(root, [spec["module"].split("_")[0][3:]])]
     outcome = _Outcome()
-    args = files + ["-p", "no:cacheprovider", "-c", str(root / "pyproject.toml"), "--rootdir",
-                    str(root), "--impl", str(folder), "--trusted", "-q", "-x", "-k", keyword,
-                    "-p", "no:warnings"]
+    args = files + [
+        "-p",
+        "no:cacheprovider",
+        "-c",
+        str(root / "pyproject.toml"),
+        "--rootdir",
+        str(root),
+        "--impl",
+        str(folder),
+        "--trusted",
+        "-q",
+        "-x",
+        "-k",
+        keyword,
+        "-p",
+        "no:warnings",
+    ]
     log = io.StringIO()
     with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
         code = int(pytest.main(args, plugins=[outcome]))
     if code not in (0, 1) or not outcome.ran:
         # a broken grader or an empty selection proves nothing about the mutant
-        return {"id": spec["id"], "killed": False, "error": f"pytest exit {code}, "
-                f"{outcome.ran} tests ran: {log.getvalue()[-400:]}", "ran": outcome.ran,
-                "by": []}
-    return {"id": spec["id"], "killed": bool(outcome.failed), "ran": outcome.ran,
-            "by": outcome.failed[:1]}
+        return {
+            "id": spec["id"],
+            "killed": False,
+            "error": f"pytest exit {code}, {outcome.ran} tests ran: {log.getvalue()[-400:]}",
+            "ran": outcome.ran,
+            "by": [],
+        }
+    return {
+        "id": spec["id"],
+        "killed": bool(outcome.failed),
+        "ran": outcome.ran,
+        "by": outcome.failed[:1],
+    }
 
 
 def worker_main(root: str, jobs: str, results: str, scratch: str):
@@ -378,20 +463,36 @@ def _lost(mutant_id: str, why: str) -> dict:
     return {"id": mutant_id, "killed": True, "ran": 0, "by": [why]}
 
 
-def run(root, mutants: list[Generated], plans: list[LabPlan], *, workers: int = 1,
-        deadline: float = 300.0, progress: bool = False) -> list[dict]:
+def run(
+    root,
+    mutants: list[Generated],
+    plans: list[LabPlan],
+    *,
+    workers: int = 1,
+    deadline: float = 300.0,
+    progress: bool = False,
+) -> list[dict]:
     """Grade every mutant with ``workers`` parallel workers; one outcome dict each.
     ``progress`` shows a bar on a terminal."""
     root = Path(root)
     tests = {(p.module, f): names for p in plans for f, names in p.tests.items()}
     sources = {(p.module, file): text for p in plans for file, text in p.sources.items()}
-    specs = [{"id": m.id, "module": m.module, "tests": tests[(m.module, m.function)],
-              "file": m.file, "source": m.apply(sources[(m.module, m.file)])} for m in mutants]
+    specs = [
+        {
+            "id": m.id,
+            "module": m.module,
+            "tests": tests[(m.module, m.function)],
+            "file": m.file,
+            "source": m.apply(sources[(m.module, m.file)]),
+        }
+        for m in mutants
+    ]
     return run_specs(root, specs, workers=workers, deadline=deadline, progress=progress)
 
 
-def run_specs(root, specs: list[dict], *, workers: int = 1, deadline: float = 300.0,
-              progress: bool = False) -> list[dict]:
+def run_specs(
+    root, specs: list[dict], *, workers: int = 1, deadline: float = 300.0, progress: bool = False
+) -> list[dict]:
     """Grade mutated modules, one outcome dict each (``id``, ``killed``, ``ran``, ``by``,
     ``error`` when the run proves nothing), in ``workers`` warm worker processes. A spec is
     ``{"id", "module": "labN_name", "tests": [-k expressions, or-ed], "file": the mutated
@@ -402,20 +503,46 @@ def run_specs(root, specs: list[dict], *, workers: int = 1, deadline: float = 30
 
     root = Path(root)
     env = dict(os.environ, CUDA_VISIBLE_DEVICES="", OMP_NUM_THREADS="1")
-    with tqdm(total=len(specs), unit="mutant",
-              disable=not (progress and sys.stderr.isatty())) as bar:
-        return run_pool(specs, lambda jobs, results, tmp: [
-            sys.executable, "-m", "course.grading.mutate", str(root), jobs, results, tmp],
-            workers=workers, cwd=root, env=env, deadline=deadline, lost=_lost, shared=False,
-            tick=bar.update, scratch_prefix="rtcourse-mutate-")
+    with tqdm(
+        total=len(specs), unit="mutant", disable=not (progress and sys.stderr.isatty())
+    ) as bar:
+        return run_pool(
+            specs,
+            lambda jobs, results, tmp: [
+                sys.executable,
+                "-m",
+                "course.grading.mutate",
+                str(root),
+                jobs,
+                results,
+                tmp,
+            ],
+            workers=workers,
+            cwd=root,
+            env=env,
+            deadline=deadline,
+            lost=_lost,
+            shared=False,
+            tick=bar.update,
+            scratch_prefix="rtcourse-mutate-",
+        )
 
 
 def score_table(mutants: list[Generated], outcomes: list[dict], reviewed: dict[str, str]):
     """Per lab: generated, killed, equivalent (reviewed survivors), survivors, score."""
     rows = {}
     for m, o in zip(mutants, outcomes):
-        row = rows.setdefault(m.lab, {"lab": m.lab, "generated": 0, "killed": 0,
-                                      "equivalent": 0, "survived": [], "errors": []})
+        row = rows.setdefault(
+            m.lab,
+            {
+                "lab": m.lab,
+                "generated": 0,
+                "killed": 0,
+                "equivalent": 0,
+                "survived": [],
+                "errors": [],
+            },
+        )
         row["generated"] += 1
         if o.get("error"):
             row["errors"].append(m.id)
@@ -431,8 +558,9 @@ def score_table(mutants: list[Generated], outcomes: list[dict], reviewed: dict[s
     return [rows[k] for k in sorted(rows)]
 
 
-def main_cli(root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=None,
-             only=None) -> int:
+def main_cli(
+    root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=None, only=None
+) -> int:
     """``rtcourse mutants --generated``: print the score table; 1 if a lab is under 90 %."""
     root = Path(root)
     plans = plan(root, labs)
@@ -442,19 +570,26 @@ def main_cli(root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=N
     reviewed = load_reviewed(root)
     workers = workers or allowed_cpus()
     total = sum(len(p.mutants) for p in plans)
-    how = f"all {total}" if per_lab is None else f"{len(mutants)} of {total} (<= {per_lab} " \
-        f"per lab, seed {seed})"
+    how = (
+        f"all {total}"
+        if per_lab is None
+        else f"{len(mutants)} of {total} (<= {per_lab} per lab, seed {seed})"
+    )
     if only:
         how = f"{len(mutants)} of {total} (ids matching {only!r})"
     print(f"grading {how} generated mutants with {workers} worker(s)", flush=True)
     started = time.monotonic()
     outcomes = run(root, mutants, plans, workers=workers, progress=True)
     table = score_table(mutants, outcomes, reviewed)
-    print(f"\n{'lab':>3} {'generated':>9} {'killed':>6} {'equiv':>5} {'survived':>8} "
-          f"{'errors':>6} {'score':>6}")
+    print(
+        f"\n{'lab':>3} {'generated':>9} {'killed':>6} {'equiv':>5} {'survived':>8} "
+        f"{'errors':>6} {'score':>6}"
+    )
     for row in table:
-        print(f"{row['lab']:>3} {row['generated']:>9} {row['killed']:>6} {row['equivalent']:>5} "
-              f"{len(row['survived']):>8} {len(row['errors']):>6} {row['score']:>6.1%}")
+        print(
+            f"{row['lab']:>3} {row['generated']:>9} {row['killed']:>6} {row['equivalent']:>5} "
+            f"{len(row['survived']):>8} {len(row['errors']):>6} {row['score']:>6.1%}"
+        )
     errors = [o for o in outcomes if o.get("error")]
     for o in errors[:3]:
         print(f"  error {o['id']}: {o['error']}")
@@ -463,10 +598,17 @@ def main_cli(root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=N
             m = next(x for x in mutants if x.id == mid)
             print(f"  survived {mid} (line {m.line}): {m.original!r} -> {m.replacement!r}")
     if json_path:
-        Path(json_path).write_text(json.dumps({
-            "sampling": how, "seconds": round(time.monotonic() - started, 1),
-            "labs": table, "mutants": [dict(asdict(m), **o) for m, o in zip(mutants, outcomes)],
-        }, indent=1))
+        Path(json_path).write_text(
+            json.dumps(
+                {
+                    "sampling": how,
+                    "seconds": round(time.monotonic() - started, 1),
+                    "labs": table,
+                    "mutants": [dict(asdict(m), **o) for m, o in zip(mutants, outcomes)],
+                },
+                indent=1,
+            )
+        )
     return 1 if errors or any(row["score"] < 0.9 for row in table) else 0
 
 

@@ -56,7 +56,7 @@ def _cap(text: str, limit: int) -> str:
     """``text`` cut to ``limit`` characters from its start (the message comes first)."""
     if len(text) <= limit:
         return text
-    return text[:limit - 18].rstrip() + "\n... (cut short)"
+    return text[: limit - 18].rstrip() + "\n... (cut short)"
 
 
 def _properties(report) -> dict:
@@ -77,8 +77,10 @@ def _thumbnail_html(path: str) -> str:
     data = base64.b64encode(buffer.getvalue()).decode("ascii")
     title = html.escape(Path(path).stem)
     # Plain tags only: Gradescope sanitises HTML output and may drop styling.
-    return (f'<span>{title}: <img alt="{title}" width="{_THUMBNAIL}" '
-            f'src="data:image/png;base64,{data}"></span> ')
+    return (
+        f'<span>{title}: <img alt="{title}" width="{_THUMBNAIL}" '
+        f'src="data:image/png;base64,{data}"></span> '
+    )
 
 
 @dataclass(eq=False)  # hashable: pluggy keeps plugins in sets
@@ -115,8 +117,11 @@ class ScoreKeeper:
             titles = getattr(item.module, "TASKS", {})
             hidden = item.get_closest_marker("visibility")
             self.results[item.nodeid] = TestResult(
-                nodeid=item.nodeid, lab=_lab_number(lab_module), lab_module=lab_module,
-                task=task_no, task_title=titles.get(task_no, ""),
+                nodeid=item.nodeid,
+                lab=_lab_number(lab_module),
+                lab_module=lab_module,
+                task=task_no,
+                task_title=titles.get(task_no, ""),
                 max_score=marker.args[0] / counts[(item.module.__name__, item.originalname)],
                 visibility=hidden.args[0] if hidden else "visible",
             )
@@ -135,8 +140,10 @@ class ScoreKeeper:
         except (ImportError, ValueError, AttributeError):
             return {}
         found = {}
-        for module in sorted({r.lab_module for r in self.results.values() if r.lab_module},
-                             key=lambda m: (_lab_number(m) or 0, m)):
+        for module in sorted(
+            {r.lab_module for r in self.results.values() if r.lab_module},
+            key=lambda m: (_lab_number(m) or 0, m),
+        ):
             shown = graded_as(folder, module)
             if shown is not None:
                 found[module] = shown
@@ -182,9 +189,12 @@ class ScoreKeeper:
 
         if self._bar_lab != result.lab:
             self.close_progress()
-            self._bar = progress(total=self._left.get(result.lab, 0),
-                                 desc=f"lab {result.lab}", unit="test",
-                                 file=self.progress_stream)
+            self._bar = progress(
+                total=self._left.get(result.lab, 0),
+                desc=f"lab {result.lab}",
+                unit="test",
+                file=self.progress_stream,
+            )
             self._bar_lab = result.lab
         self._bar.update(1)
 
@@ -230,8 +240,13 @@ class ScoreKeeper:
                 row[5] = r.message
         lines = []
         if self.graded_files:
-            lines += ["files graded: " + "; ".join(
-                f"lab {_lab_number(m)}: {shown}" for m, shown in self.graded_files.items()), ""]
+            lines += [
+                "files graded: "
+                + "; ".join(
+                    f"lab {_lab_number(m)}: {shown}" for m, shown in self.graded_files.items()
+                ),
+                "",
+            ]
         if self.problems or self.collect_errors:
             lines += ["submission problems (each fails every test of its lab):"]
             lines += [f"  {text}" for text in self.problems.values()]
@@ -241,9 +256,12 @@ class ScoreKeeper:
         lines += [f"{'lab':>3}  {'task':>4}  {'title':<{width}} {'passed':>9}  {'score':>13}"]
         by_lab = defaultdict(lambda: [0.0, 0.0])
         for (lab, task), (score, top, passed, count, title, message) in sorted(
-                rows.items(), key=lambda kv: (kv[0][0] or 0, kv[0][1] or 0)):
-            lines.append(f"{lab!s:>3}  {task!s:>4}  {title:<{width}} {passed:>4}/{count:<4}  "
-                         f"{score:>6.2f}/{top:<6.2f}")
+            rows.items(), key=lambda kv: (kv[0][0] or 0, kv[0][1] or 0)
+        ):
+            lines.append(
+                f"{lab!s:>3}  {task!s:>4}  {title:<{width}} {passed:>4}/{count:<4}  "
+                f"{score:>6.2f}/{top:<6.2f}"
+            )
             if message:
                 body = [line for line in message.splitlines() if line != HINT]
                 lines += [f"{'':11}{line}" for line in body]  # bounded by feedback
@@ -266,23 +284,29 @@ class ScoreKeeper:
             if r.task_title:
                 label += f" ({r.task_title})"
             test = {
-                "name": f"{label}: {name}", "number": number,
+                "name": f"{label}: {name}",
+                "number": number,
                 # Unrounded: a task's points split over 66 parametrised tests (cpu and
                 # cuda) rounded one by one drift by 4e-4 from the task's points.
-                "score": r.score, "max_score": r.max_score,
+                "score": r.score,
+                "max_score": r.max_score,
                 "status": "passed" if r.status == "passed" else "failed",
-                "output": r.output, "visibility": r.visibility,
+                "output": r.output,
+                "visibility": r.visibility,
             }
             pictures = [_thumbnail_html(p) for p in r.pictures] if r.output else []
             if any(pictures):
-                test["output"] = (f"<pre>{html.escape(r.output)}</pre>"
-                                  f"<div>{''.join(pictures)}</div>")
+                test["output"] = f"<pre>{html.escape(r.output)}</pre><div>{''.join(pictures)}</div>"
                 test["output_format"] = "html"
             tests.append(test)
-        return {"score": round(score, 4), "max_score": round(top, 4),
-                "execution_time": round(time.monotonic() - self.started, 2),
-                "output": self.table(), "tests": tests,
-                "extra_data": {"graded_files": dict(self.graded_files)}}
+        return {
+            "score": round(score, 4),
+            "max_score": round(top, 4),
+            "execution_time": round(time.monotonic() - self.started, 2),
+            "output": self.table(),
+            "tests": tests,
+            "extra_data": {"graded_files": dict(self.graded_files)},
+        }
 
 
 def write_json_atomically(path, data: dict):
@@ -300,4 +324,3 @@ def write_json_atomically(path, data: dict):
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
-

@@ -49,9 +49,11 @@ def graded_files(root: Path, folder: Path, test_files) -> str:
             given = skeleton / rel
             unchanged = given.is_file() and given.read_bytes() == file.read_bytes()
             (same if unchanged else theirs).append(rel.as_posix())
-        lines.append(f"{lab.module}/: graded as handed in: {', '.join(theirs) or 'none'}; "
-                     f"as the skeleton gives them (left out or unchanged): "
-                     f"{', '.join(same) or 'none'}")
+        lines.append(
+            f"{lab.module}/: graded as handed in: {', '.join(theirs) or 'none'}; "
+            f"as the skeleton gives them (left out or unchanged): "
+            f"{', '.join(same) or 'none'}"
+        )
     return "".join(line + "\n" for line in lines) + ("\n" if lines else "")
 
 
@@ -76,8 +78,17 @@ def _selection(labs, keyword, tasks) -> str:
     return ", ".join(parts)
 
 
-def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, trusted=False,
-          quiet=True, extra_args=(), tasks=None) -> dict:
+def grade(
+    impl: str | None = None,
+    *,
+    labs=None,
+    json_path=None,
+    keyword=None,
+    trusted=False,
+    quiet=True,
+    extra_args=(),
+    tasks=None,
+) -> dict:
     """Grade ``impl`` and return the Gradescope dictionary (also written to ``json_path``).
 
     ``tasks``: task numbers K (of each lab in ``labs``) or ``"N.K"``; only the tests that
@@ -86,15 +97,20 @@ def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, t
     """
     root = repo_root("rtcourse grade")
     if impl and impl not in ("solutions", "labs") and not Path(impl).expanduser().is_dir():
-        raise GradeError(f"rtcourse grade: --impl {impl}: no such folder (give the folder "
-                         f"that holds your lab files, or labs / solutions)")
+        raise GradeError(
+            f"rtcourse grade: --impl {impl}: no such folder (give the folder "
+            f"that holds your lab files, or labs / solutions)"
+        )
     files = lab_test_files(root, labs)
     if not files:
-        raise GradeError(f"rtcourse grade: no graders found for lab {labs} in "
-                         f"{root / 'tests'}")
+        raise GradeError(f"rtcourse grade: no graders found for lab {labs} in {root / 'tests'}")
     user = os.environ.get("RTCOURSE_WORKER_USER")
-    if not trusted and impl != "solutions" and user \
-            and os.environ.get("RTCOURSE_WORKER_CHECKED") != user:  # run_autograder checked
+    if (
+        not trusted
+        and impl != "solutions"
+        and user
+        and os.environ.get("RTCOURSE_WORKER_CHECKED") != user
+    ):  # run_autograder checked
         from course.grading.sandbox import worker_python_problem
 
         try:
@@ -107,8 +123,14 @@ def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, t
 
     from course.grading.results import ScoreKeeper, write_json_atomically
 
-    args = [str(f) for f in files] + ["-p", "no:cacheprovider", "-c", str(root / "pyproject.toml"),
-                                      "--rootdir", str(root)]
+    args = [str(f) for f in files] + [
+        "-p",
+        "no:cacheprovider",
+        "-c",
+        str(root / "pyproject.toml"),
+        "--rootdir",
+        str(root),
+    ]
     if impl:
         args += ["--impl", impl]
     # Quiet: no pytest log at all, the table says it all; -v: pytest's log, long tracebacks.
@@ -131,11 +153,14 @@ def grade(impl: str | None = None, *, labs=None, json_path=None, keyword=None, t
         if stream is not None:
             stream.close()
     if code == 5:
-        raise GradeError(f"rtcourse grade: no graded test matches "
-                         f"{_selection(labs, keyword, tasks)}")
+        raise GradeError(
+            f"rtcourse grade: no graded test matches {_selection(labs, keyword, tasks)}"
+        )
     if code == 4:  # pytest printed why (e.g. --task names a task with no tests)
-        raise GradeError(f"rtcourse grade: nothing graded ({_selection(labs, keyword, tasks)}; "
-                         f"see the error above)")
+        raise GradeError(
+            f"rtcourse grade: nothing graded ({_selection(labs, keyword, tasks)}; "
+            f"see the error above)"
+        )
     data = keeper.to_gradescope()
     if impl and impl not in ("solutions", "labs"):
         folder = implementation_folder(root, impl, must_exist=False)

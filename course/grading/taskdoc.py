@@ -50,8 +50,7 @@ class _GraderWalk:
         self.optional = False  # inside ``try: ... except NotImplementedError:``
 
     def _found(self, function: str, cut: frozenset[str]) -> None:
-        self.found[LabCall(function, cut, runs=not self.checks,
-                           optional=self.optional)] = None
+        self.found[LabCall(function, cut, runs=not self.checks, optional=self.optional)] = None
 
     def test(self, node) -> tuple[LabCall, ...]:
         self.found, self.seen = {}, set()
@@ -78,20 +77,30 @@ class _GraderWalk:
             value = self._value(node, env, depth)
             return value if isinstance(value, frozenset) else None
         if isinstance(node, ast.Dict):
-            parts = [(v, True) if k is None else (k, False)
-                     for k, v in zip(node.keys, node.values)]
+            parts = [(v, True) if k is None else (k, False) for k, v in zip(node.keys, node.values)]
         elif isinstance(node, (ast.List, ast.Tuple, ast.Set)):
-            parts = [(e.value, True) if isinstance(e, ast.Starred) else (e, False)
-                     for e in node.elts]
+            parts = [
+                (e.value, True) if isinstance(e, ast.Starred) else (e, False) for e in node.elts
+            ]
         elif isinstance(node, (ast.DictComp, ast.ListComp, ast.SetComp, ast.GeneratorExp)):
             key = node.key if isinstance(node, ast.DictComp) else node.elt
             gen = node.generators[0]
-            if len(node.generators) != 1 or gen.ifs or not isinstance(gen.target, ast.Name) \
-                    or not isinstance(key, ast.Name) or key.id != gen.target.id:
+            if (
+                len(node.generators) != 1
+                or gen.ifs
+                or not isinstance(gen.target, ast.Name)
+                or not isinstance(key, ast.Name)
+                or key.id != gen.target.id
+            ):
                 return None
             parts = [(gen.iter, True)]
-        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
-                and node.func.id in _COLLECTIONS and len(node.args) == 1 and not node.keywords:
+        elif (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Name)
+            and node.func.id in _COLLECTIONS
+            and len(node.args) == 1
+            and not node.keywords
+        ):
             parts = [(node.args[0], True)]
         else:
             return None
@@ -121,10 +130,17 @@ class _GraderWalk:
         """A helper's parameters -> what the call's arguments (or the defaults) hold."""
         spec = self.helpers[name].args
         params = [a.arg for a in (*spec.posonlyargs, *spec.args)]
-        bound = dict(zip(params[len(params) - len(spec.defaults):],
-                         (self._value(d, {}) for d in spec.defaults)))
-        bound.update((a.arg, self._value(d, {})) for a, d in
-                     zip(spec.kwonlyargs, spec.kw_defaults) if d is not None)
+        bound = dict(
+            zip(
+                params[len(params) - len(spec.defaults) :],
+                (self._value(d, {}) for d in spec.defaults),
+            )
+        )
+        bound.update(
+            (a.arg, self._value(d, {}))
+            for a, d in zip(spec.kwonlyargs, spec.kw_defaults)
+            if d is not None
+        )
         if lab_first and params:
             bound[params.pop(0)] = _LAB
         for param, arg in zip(params, args):
@@ -150,8 +166,9 @@ class _GraderWalk:
         if isinstance(node, ast.Call) and self._call(node, env, cut):
             return
         if isinstance(node, ast.Try) and any(
-                h.type is not None and "NotImplementedError" in ast.unparse(h.type)
-                for h in node.handlers):  # what the submission may not have written yet
+            h.type is not None and "NotImplementedError" in ast.unparse(h.type)
+            for h in node.handlers
+        ):  # what the submission may not have written yet
             optional, self.optional = self.optional, True
             try:
                 self._body(node.body, env, cut)
@@ -170,11 +187,17 @@ class _GraderWalk:
                 if runs:
                     self._body(part if isinstance(part, list) else [part], env, cut)
             return
-        if isinstance(node, ast.Name) and node.id in self.helpers \
-                and isinstance(node.ctx, ast.Load):  # a helper passed on, called later
+        if (
+            isinstance(node, ast.Name)
+            and node.id in self.helpers
+            and isinstance(node.ctx, ast.Load)
+        ):  # a helper passed on, called later
             spec = self.helpers[node.id].args
-            self._helper(node.id, {a.arg: _LAB for a in (*spec.posonlyargs, *spec.args)
-                                   if a.arg in ("impl", "lab")}, cut)
+            self._helper(
+                node.id,
+                {a.arg: _LAB for a in (*spec.posonlyargs, *spec.args) if a.arg in ("impl", "lab")},
+                cut,
+            )
             return
         for child in ast.iter_child_nodes(node):
             self._visit(child, env, cut)
@@ -183,13 +206,22 @@ class _GraderWalk:
         """Follow a call into a helper or a probe, or read ``getattr(lab, name)``; False for
         any other call (the caller walks its parts)."""
         func, args, keywords = node.func, node.args, node.keywords
-        if isinstance(func, ast.Attribute) and func.attr == "probe" \
-                and self._is_lab(func.value, env) and args and isinstance(args[0], ast.Name) \
-                and args[0].id in self.helpers:
+        if (
+            isinstance(func, ast.Attribute)
+            and func.attr == "probe"
+            and self._is_lab(func.value, env)
+            and args
+            and isinstance(args[0], ast.Name)
+            and args[0].id in self.helpers
+        ):
             self._helper(args[0].id, self._bind(args[0].id, args[1:], keywords, env, True), cut)
             rest = args[1:]
-        elif isinstance(func, ast.Name) and func.id == "getattr" and len(args) >= 2 \
-                and self._is_lab(args[0], env):
+        elif (
+            isinstance(func, ast.Name)
+            and func.id == "getattr"
+            and len(args) >= 2
+            and self._is_lab(args[0], env)
+        ):
             name = self._value(args[1], env)
             if isinstance(name, str):
                 self._found(name, cut)
@@ -249,11 +281,19 @@ def lab_calls(lab_file) -> dict[str, set[str]]:
     the lab's own top-level functions and classes its body names (calls, and functions
     passed on): what running it runs of the lab."""
     body = [node for f in module_files(lab_file) for node in ast.parse(f.read_text()).body]
-    defs = {node.name: node for node in body
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))}
-    return {name: {n.id for n in ast.walk(node) if isinstance(n, ast.Name)
-                   and n.id in defs and n.id != name}
-            for name, node in defs.items()}
+    defs = {
+        node.name: node
+        for node in body
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))
+    }
+    return {
+        name: {
+            n.id
+            for n in ast.walk(node)
+            if isinstance(n, ast.Name) and n.id in defs and n.id != name
+        }
+        for name, node in defs.items()
+    }
 
 
 def needed_functions(test: GradedTest, uses, functions, calls: dict[str, set[str]]) -> set[str]:
@@ -287,13 +327,24 @@ def grader_uses(paths) -> dict[str, tuple[LabCall, ...]]:
     for path in paths:
         tree = ast.parse(Path(path).read_text(), filename=str(path))
         functions = (ast.FunctionDef, ast.AsyncFunctionDef)
-        helpers = {n.name: n for n in tree.body
-                   if isinstance(n, functions) and not n.name.startswith("test")}
-        values = {t.id: n.value for n in tree.body if isinstance(n, ast.Assign)
-                  for t in n.targets if isinstance(t, ast.Name)}
-        tests = [n for c in tree.body for n in (c.body if isinstance(c, ast.ClassDef)
-                                                and c.name.startswith("Test") else [c])
-                 if isinstance(n, functions) and n.name.startswith("test")]
+        helpers = {
+            n.name: n
+            for n in tree.body
+            if isinstance(n, functions) and not n.name.startswith("test")
+        }
+        values = {
+            t.id: n.value
+            for n in tree.body
+            if isinstance(n, ast.Assign)
+            for t in n.targets
+            if isinstance(t, ast.Name)
+        }
+        tests = [
+            n
+            for c in tree.body
+            for n in (c.body if isinstance(c, ast.ClassDef) and c.name.startswith("Test") else [c])
+            if isinstance(n, functions) and n.name.startswith("test")
+        ]
         for node in tests:
             found = _GraderWalk(helpers, values).test(node)
             uses[node.name] = tuple(dict.fromkeys(uses.get(node.name, ()) + found))
@@ -314,6 +365,7 @@ def runs_through_lab(lab: LabInfo, lab_file, reference=None):
 
     def runs(test: GradedTest, functions) -> set[str]:
         return needed_functions(test, uses.get(test.name, ()), functions, calls)
+
     return runs
 
 
@@ -341,10 +393,10 @@ def _you_write(functions: list[str], lab_file: Path) -> str:
         return ", ".join(f"`{f}`" for f in functions)
     files: dict[str, list[str]] = {}
     for f in functions:
-        files.setdefault(defining_file(lab_file, f).relative_to(lab_file).as_posix(),
-                         []).append(f)
-    return "; ".join(f"`{name}`: " + ", ".join(f"`{f}`" for f in fns)
-                     for name, fns in files.items())
+        files.setdefault(defining_file(lab_file, f).relative_to(lab_file).as_posix(), []).append(f)
+    return "; ".join(
+        f"`{name}`: " + ", ".join(f"`{f}`" for f in fns) for name, fns in files.items()
+    )
 
 
 def package_files(lab: LabInfo, lab_file: Path) -> list[str]:
@@ -352,22 +404,34 @@ def package_files(lab: LabInfo, lab_file: Path) -> list[str]:
     hands in), in task order; [] for a lab in one file."""
     if not Path(lab_file).is_dir():
         return []
-    return list(dict.fromkeys(defining_file(lab_file, f).relative_to(lab_file).as_posix()
-                              for task in lab_tasks(lab, lab_file) for f in task.functions))
+    return list(
+        dict.fromkeys(
+            defining_file(lab_file, f).relative_to(lab_file).as_posix()
+            for task in lab_tasks(lab, lab_file)
+            for f in task.functions
+        )
+    )
 
 
 def task_table(lab: LabInfo, lab_file: Path, test_file: str, reference=None) -> list[str]:
     """Markdown lines: the table of ``lab``'s tasks (``test_file``: the grader's path as the
     student types it; ``lab_file``: the skeleton, a file or a package folder; ``reference``:
     the solution, whose calls say what each task's tests run of the other tasks)."""
-    lines = ["| task | title | points | you write | needs first | run only its tests |",
-             "|---:|---|---:|---|---|---|"]
+    lines = [
+        "| task | title | points | you write | needs first | run only its tests |",
+        "|---:|---|---:|---|---|---|",
+    ]
     for task in lab_task_needs(lab, lab_file, reference):
         you_write = _you_write(task.functions, lab_file)
-        needs = "; ".join(f"task {k} (" + ", ".join(f"`{f}`" for f in fns) + ")"
-                          for k, fns in task.needs.items())
-        run = (f"`python -m pytest {test_file} --task {task.number}` or "
-               f"`rtcourse grade --lab {lab.number} --task {task.number}`")
-        lines.append(f"| {task.number} | {_cell(task.title)} | {_pts(task.points)} | "
-                     f"{you_write} | {needs} | {run} |")
+        needs = "; ".join(
+            f"task {k} (" + ", ".join(f"`{f}`" for f in fns) + ")" for k, fns in task.needs.items()
+        )
+        run = (
+            f"`python -m pytest {test_file} --task {task.number}` or "
+            f"`rtcourse grade --lab {lab.number} --task {task.number}`"
+        )
+        lines.append(
+            f"| {task.number} | {_cell(task.title)} | {_pts(task.points)} | "
+            f"{you_write} | {needs} | {run} |"
+        )
     return lines

@@ -81,8 +81,17 @@ def _fmt(v) -> str:
     return str(v)
 
 
-def assert_close(actual, expected, *, name: str, atol: float = 0.0, rtol: float = 0.0,
-                 equal_nan: bool = True, where: str = "element", mask=None) -> None:
+def assert_close(
+    actual,
+    expected,
+    *,
+    name: str,
+    atol: float = 0.0,
+    rtol: float = 0.0,
+    equal_nan: bool = True,
+    where: str = "element",
+    mask=None,
+) -> None:
     """Assert ``|actual - expected| <= atol + rtol * |expected|`` elementwise.
 
     Compared in float64 on the CPU. Infinities must match exactly; NaN matches NaN
@@ -173,8 +182,7 @@ def first_line(exc: BaseException) -> str:
 # Builtin errors a submission's own line raises by accident (an index past the end, a shape
 # torch refuses, a missing attribute): where a check was expected, they are a wrong answer
 # with a message, not a crash of the test.
-_ACCIDENTS = (LookupError, RuntimeError, TypeError, ValueError, ArithmeticError,
-              AttributeError)
+_ACCIDENTS = (LookupError, RuntimeError, TypeError, ValueError, ArithmeticError, AttributeError)
 _LIBRARY = ("site-packages", "dist-packages", "lib/python")
 
 
@@ -189,7 +197,8 @@ def _raising_line(exc: BaseException) -> str:
     course = Path(__file__).resolve().parents[1]
     frames = text_frames(str(exc)) or [
         (f.filename, f.lineno, f.name, f.line or "")
-        for f in traceback.extract_tb(exc.__traceback__)]
+        for f in traceback.extract_tb(exc.__traceback__)
+    ]
     found = ""
     for file, line, name, source in frames:
         path = Path(file)
@@ -216,12 +225,17 @@ def expect_error(names, fn, *args, kinds=(ValueError, TypeError), case: str = ""
     except kinds as exc:
         assert any(n in first_line(exc) for n in names), (
             f"{what} with {case} raised {type(exc).__name__}({first_line(exc)!r}); the message "
-            f"should name the argument {' or '.join(map(repr, names))} and say what was expected")
+            f"should name the argument {' or '.join(map(repr, names))} and say what was expected"
+        )
         return
     except _ACCIDENTS as exc:
         text = first_line(exc)
-        if (isinstance(exc, NotImplementedError) or type(exc).__module__ != "builtins"
-                or text.startswith("not implemented yet") or "failed to import" in text):
+        if (
+            isinstance(exc, NotImplementedError)
+            or type(exc).__module__ != "builtins"
+            or text.startswith("not implemented yet")
+            or "failed to import" in text
+        ):
             raise  # an unwritten function or a sandbox failure keeps its own message
         kind = type(exc).__name__
         text = text if text.startswith(kind) else f"{kind}: {text}"
@@ -229,7 +243,8 @@ def expect_error(names, fn, *args, kinds=(ValueError, TypeError), case: str = ""
         raise AssertionError(
             f"{what}: expected {expected} ({case}), got {text}"
             + (f" at {line}" if line else "")
-            + "; check the argument first and raise with a message that names it") from None
+            + "; check the argument first and raise with a message that names it"
+        ) from None
     raise AssertionError(f"{what} accepted {case} without complaint: expected {expected}")
 
 
@@ -249,8 +264,10 @@ def replaced(lab, functions: dict):
     module's own different function of that name is left alone), and all are restored."""
     module = sys.modules.get(getattr(lab, "__name__", None), lab)
     prefix = getattr(module, "__name__", "") + "."
-    modules = [module, *(m for key, m in list(sys.modules.items())
-                         if key.startswith(prefix) and m is not None)]
+    modules = [
+        module,
+        *(m for key, m in list(sys.modules.items()) if key.startswith(prefix) and m is not None),
+    ]
     saved = []  # (module, name, its own value), to put back
     try:
         for name, fn in functions.items():
@@ -265,8 +282,10 @@ def replaced(lab, functions: dict):
             setattr(m, name, value)
 
 
-OLD_INTERPRETER_REASON = ("Triton's interpreter before 3.9 cannot run these kernels (loop "
-                          "bounds from tensors); the compiled kernels are tested on CUDA")
+OLD_INTERPRETER_REASON = (
+    "Triton's interpreter before 3.9 cannot run these kernels (loop "
+    "bounds from tensors); the compiled kernels are tested on CUDA"
+)
 
 
 def triton_interpreter_too_old() -> bool:
@@ -301,13 +320,24 @@ def run_in_triton_interpreter(script, inputs, tmp_path, timeout: float = 300):
     repo = Path(__file__).resolve().parents[2]
     source, target = Path(tmp_path) / "inputs.pt", Path(tmp_path) / "outputs.pt"
     torch.save(inputs, source)
-    env = dict(os.environ, TRITON_INTERPRET="1",
-               PYTHONPATH=os.pathsep.join(filter(None, [str(repo), os.environ.get("PYTHONPATH")])))
-    proc = subprocess.run([sys.executable, str(script), str(source), str(target)], env=env,
-                          capture_output=True, text=True, timeout=timeout, check=False)
+    env = dict(
+        os.environ,
+        TRITON_INTERPRET="1",
+        PYTHONPATH=os.pathsep.join(filter(None, [str(repo), os.environ.get("PYTHONPATH")])),
+    )
+    proc = subprocess.run(
+        [sys.executable, str(script), str(source), str(target)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
     if proc.returncode != 0:
-        pytest.fail(f"the interpreter subprocess failed (exit {proc.returncode}):\n"
-                    f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+        pytest.fail(
+            f"the interpreter subprocess failed (exit {proc.returncode}):\n"
+            f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+        )
     return torch.load(target, weights_only=False)
 
 
@@ -336,10 +366,19 @@ def failure_dir() -> Path:
     base = os.environ.get("RTCOURSE_FAILURE_DIR")
     if not base:
         here = Path.cwd()
-        course = next((f for f in (here, *here.parents) if (f / "tests").is_dir()
-                       and (f / "pyproject.toml").is_file()), None)
-        base = course / "out" / "failures" if course else Path(
-            tempfile.gettempdir()) / "rtcourse-failures"
+        course = next(
+            (
+                f
+                for f in (here, *here.parents)
+                if (f / "tests").is_dir() and (f / "pyproject.toml").is_file()
+            ),
+            None,
+        )
+        base = (
+            course / "out" / "failures"
+            if course
+            else Path(tempfile.gettempdir()) / "rtcourse-failures"
+        )
     return Path(base) / _RUN
 
 
@@ -377,8 +416,11 @@ def _grid(x: torch.Tensor, image_shape) -> torch.Tensor:
         if side * side == x.shape[0] and (x.dim() == 1 or x.shape[1] <= 4):
             image_shape = (side, side)
     if image_shape is not None:
-        x = x.reshape(*image_shape, *x.shape[1:]) if x.dim() in (1, 2) and x.shape[0] == \
-            math.prod(image_shape) else x.reshape(*image_shape, -1)
+        x = (
+            x.reshape(*image_shape, *x.shape[1:])
+            if x.dim() in (1, 2) and x.shape[0] == math.prod(image_shape)
+            else x.reshape(*image_shape, -1)
+        )
     if x.dim() == 1:
         x = x[None]
     if x.dim() == 3 and x.shape[-1] == 1:
@@ -417,14 +459,17 @@ def _to_rgb(x: torch.Tensor, kind: str, lo: float, hi: float) -> np.ndarray:
     return rgb
 
 
-def write_pictures(actual, expected, bad, *, folder, kind: str = "color",
-                   image_shape=None) -> list[Path]:
+def write_pictures(
+    actual, expected, bad, *, folder, kind: str = "color", image_shape=None
+) -> list[Path]:
     """Write ``expected.png``, ``got.png`` and ``difference.png`` (the pixels out of
     tolerance in red over the expected picture, darkened) into ``folder``."""
     from PIL import Image
 
-    e, a = _grid(_as_tensor(expected, "expected"), image_shape), \
-        _grid(_as_tensor(actual, "actual"), image_shape)
+    e, a = (
+        _grid(_as_tensor(expected, "expected"), image_shape),
+        _grid(_as_tensor(actual, "actual"), image_shape),
+    )
     finite = e.to(torch.float64)
     finite = finite[torch.isfinite(finite)]
     lo, hi = (float(finite.min()), float(finite.max())) if finite.numel() else (0.0, 1.0)
@@ -436,13 +481,17 @@ def write_pictures(actual, expected, bad, *, folder, kind: str = "color",
     diff = pictures["expected"] // 3
     diff[b.numpy()] = (255, 32, 32)
     pictures["difference"] = diff
-    legends = {"expected": "expected", "got": "got (your result)",
-               "difference": "red: out of tolerance"}
+    legends = {
+        "expected": "expected",
+        "got": "got (your result)",
+        "difference": "red: out of tolerance",
+    }
     paths = []
     for title, rgb in pictures.items():
         path = folder / f"{title}.png"
         _legible(Image.fromarray(np.ascontiguousarray(rgb)), legends[title]).save(
-            path, format="PNG")
+            path, format="PNG"
+        )
         paths.append(path)
     return paths
 
@@ -464,9 +513,20 @@ def _legible(image, legend: str):
     return out
 
 
-def assert_image_close(actual, expected, *, name: str, atol: float = 0.0, rtol: float = 0.0,
-                       kind: str = "color", image_shape=None, where: str = "pixel",
-                       mask=None, exact: bool = False, folder=None) -> None:
+def assert_image_close(
+    actual,
+    expected,
+    *,
+    name: str,
+    atol: float = 0.0,
+    rtol: float = 0.0,
+    kind: str = "color",
+    image_shape=None,
+    where: str = "pixel",
+    mask=None,
+    exact: bool = False,
+    folder=None,
+) -> None:
     """Compare an image, depth buffer or id buffer like :func:`assert_close` (or, with
     ``exact``, :func:`assert_equal`); on a failure also write the expected, the submitted
     and a difference picture and name their folder in the message.
@@ -483,8 +543,7 @@ def assert_image_close(actual, expected, *, name: str, atol: float = 0.0, rtol: 
         if exact:
             assert_equal(actual, expected, name=name, where=where)
         else:
-            assert_close(actual, expected, name=name, atol=atol, rtol=rtol, where=where,
-                         mask=mask)
+            assert_close(actual, expected, name=name, atol=atol, rtol=rtol, where=where, mask=mask)
     except AssertionError as exc:
         a = _as_tensor(actual, name).detach().cpu()
         e = _as_tensor(expected, f"expected {name}").detach().cpu()
@@ -498,21 +557,36 @@ def assert_image_close(actual, expected, *, name: str, atol: float = 0.0, rtol: 
             bad = ~(diff <= atol + rtol * ed.abs()) & ~(torch.isnan(ad) & torch.isnan(ed))
             if mask is not None:
                 bad &= _as_tensor(mask, "mask").cpu().to(torch.bool)
-        raise image_mismatch(str(exc), a, e, bad, name=name, kind=kind,
-                             image_shape=image_shape, folder=folder) from None
+        raise image_mismatch(
+            str(exc), a, e, bad, name=name, kind=kind, image_shape=image_shape, folder=folder
+        ) from None
 
 
-def image_mismatch(message: str, actual, expected, bad, *, name: str, kind: str = "color",
-                   image_shape=None, folder=None) -> ImageMismatch:
+def image_mismatch(
+    message: str,
+    actual,
+    expected,
+    bad,
+    *,
+    name: str,
+    kind: str = "color",
+    image_shape=None,
+    folder=None,
+) -> ImageMismatch:
     """The :class:`ImageMismatch` to raise for a comparison a grader makes itself: writes
     the three pictures (``bad``: the pixels to mark, same leading shape) and names their
     folder after ``message``."""
-    target = Path(folder) if folder is not None else failure_dir() / _current_test() / \
-        _folder_name(name, "image")
+    target = (
+        Path(folder)
+        if folder is not None
+        else failure_dir() / _current_test() / _folder_name(name, "image")
+    )
     try:
-        paths = write_pictures(actual, expected, bad, folder=target, kind=kind,
-                               image_shape=image_shape)
+        paths = write_pictures(
+            actual, expected, bad, folder=target, kind=kind, image_shape=image_shape
+        )
     except (OSError, ValueError, RuntimeError) as why:  # the message matters more
         return ImageMismatch(f"{message}\n  (could not write the pictures: {why})")
-    return ImageMismatch(f"{message}\n  pictures: expected.png, got.png, difference.png in "
-                         f"{_shown(target)}", paths)
+    return ImageMismatch(
+        f"{message}\n  pictures: expected.png, got.png, difference.png in {_shown(target)}", paths
+    )

@@ -100,10 +100,19 @@ def _tail(path: Path, limit: int = 2000) -> str:
         return ""
 
 
-def run_queue(specs: list[dict], command: Callable[[str, str, str], list[str]], *, cwd,
-              env: dict, deadline: float, scratch, lost: Callable[[str, str], dict],
-              claims: str | None = None, tick: Callable[[int], None] = lambda n: None,
-              stop: threading.Event | None = None) -> list[dict]:
+def run_queue(
+    specs: list[dict],
+    command: Callable[[str, str, str], list[str]],
+    *,
+    cwd,
+    env: dict,
+    deadline: float,
+    scratch,
+    lost: Callable[[str, str], dict],
+    claims: str | None = None,
+    tick: Callable[[int], None] = lambda n: None,
+    stop: threading.Event | None = None,
+) -> list[dict]:
     """Parent side of one worker process: run it over ``specs``, restarting it after a job
     that ran past ``deadline`` seconds or a death, and return the outcomes of the jobs it
     ran (every job of ``specs`` without ``claims``), in the order they finished.
@@ -115,14 +124,23 @@ def run_queue(specs: list[dict], command: Callable[[str, str, str], list[str]], 
     remaining = list(specs)
     while remaining and not (stop and stop.is_set()):
         with tempfile.TemporaryDirectory(dir=scratch) as tmp:
-            jobs, results, log = Path(tmp, "jobs.jsonl"), Path(tmp, "results.jsonl"), \
-                Path(tmp, "worker.log")
+            jobs, results, log = (
+                Path(tmp, "jobs.jsonl"),
+                Path(tmp, "results.jsonl"),
+                Path(tmp, "worker.log"),
+            )
             jobs.write_text("".join(json.dumps(s) + "\n" for s in remaining))
             results.touch()
             with open(log, "wb") as log_file:
-                proc = subprocess.Popen(command(str(jobs), str(results), tmp), cwd=cwd, env=env,
-                                        stdin=subprocess.DEVNULL, stdout=log_file,
-                                        stderr=subprocess.STDOUT, start_new_session=True)
+                proc = subprocess.Popen(
+                    command(str(jobs), str(results), tmp),
+                    cwd=cwd,
+                    env=env,
+                    stdin=subprocess.DEVNULL,
+                    stdout=log_file,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                )
             current, since, offset, killed = None, time.monotonic(), 0, False
 
             def read(results=results):
@@ -162,8 +180,10 @@ def run_queue(specs: list[dict], command: Callable[[str, str, str], list[str]], 
                 started_none = not any(s["id"] in done for s in remaining)
                 if claims:
                     if started_none:
-                        raise RuntimeError(f"a warm worker exited {proc.returncode} before "
-                                           f"its first job:\n{_tail(log)}")
+                        raise RuntimeError(
+                            f"a warm worker exited {proc.returncode} before "
+                            f"its first job:\n{_tail(log)}"
+                        )
                 else:  # blame the next job, so the queue always moves on
                     first = next(s for s in remaining if s["id"] not in done)
                     done[first["id"]] = lost(first["id"], f"worker exited {proc.returncode}")
@@ -171,8 +191,12 @@ def run_queue(specs: list[dict], command: Callable[[str, str, str], list[str]], 
                     tick(1)
         if claims:
             taken = {p.name for p in Path(claims).iterdir()}
-            remaining = [s for s in remaining if s["id"] not in done
-                         and hashlib.sha256(s["id"].encode()).hexdigest()[:32] not in taken]
+            remaining = [
+                s
+                for s in remaining
+                if s["id"] not in done
+                and hashlib.sha256(s["id"].encode()).hexdigest()[:32] not in taken
+            ]
         else:
             remaining = [s for s in remaining if s["id"] not in done]
     return [done[i] for i in order]
@@ -187,10 +211,19 @@ def _kill(proc: subprocess.Popen):
     proc.wait()
 
 
-def run_pool(specs: list[dict], command: Callable[[str, str, str], list[str]], *,
-             workers: int, cwd, env: dict, deadline: float, lost: Callable[[str, str], dict],
-             shared: bool = True, tick: Callable[[int], None] = lambda n: None,
-             scratch_prefix: str = "rtcourse-warm-") -> list[dict]:
+def run_pool(
+    specs: list[dict],
+    command: Callable[[str, str, str], list[str]],
+    *,
+    workers: int,
+    cwd,
+    env: dict,
+    deadline: float,
+    lost: Callable[[str, str], dict],
+    shared: bool = True,
+    tick: Callable[[int], None] = lambda n: None,
+    scratch_prefix: str = "rtcourse-warm-",
+) -> list[dict]:
     """Run ``specs`` in ``workers`` warm workers; one outcome per job, in ``specs``' order.
 
     ``shared``: every worker takes the next unclaimed job (a slow job holds up only its own
@@ -207,14 +240,27 @@ def run_pool(specs: list[dict], command: Callable[[str, str, str], list[str]], *
             os.mkdir(claims)
         shards = [specs] * workers if shared else [specs[i::workers] for i in range(workers)]
         with ThreadPoolExecutor(max_workers=workers) as pool:
-            futures = [pool.submit(run_queue, shard, command, cwd=cwd, env=env,
-                                   deadline=deadline, scratch=scratch, lost=lost, claims=claims,
-                                   tick=tick, stop=stop) for shard in shards if shard]
+            futures = [
+                pool.submit(
+                    run_queue,
+                    shard,
+                    command,
+                    cwd=cwd,
+                    env=env,
+                    deadline=deadline,
+                    scratch=scratch,
+                    lost=lost,
+                    claims=claims,
+                    tick=tick,
+                    stop=stop,
+                )
+                for shard in shards
+                if shard
+            ]
             try:
                 parts = [f.result() for f in futures]
             except BaseException:
                 stop.set()  # before the pool waits for its threads: they kill their workers
                 raise
     by_id = {row["id"]: row for part in parts for row in part}
-    return [by_id.get(s["id"]) or lost(s["id"], "not run (its worker ended first)")
-            for s in specs]
+    return [by_id.get(s["id"]) or lost(s["id"], "not run (its worker ended first)") for s in specs]

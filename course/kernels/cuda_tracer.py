@@ -282,8 +282,9 @@ def kernel_source() -> str:
 
 def cuda_source() -> str:
     """The CUDA C source as compiled (the walk and its torch binding)."""
-    return (_BINDING_SOURCE.replace("__KERNEL__", kernel_source())
-            .replace("__MIN_BLOCKS__", str(MIN_BLOCKS)))
+    return _BINDING_SOURCE.replace("__KERNEL__", kernel_source()).replace(
+        "__MIN_BLOCKS__", str(MIN_BLOCKS)
+    )
 
 
 def stack_entries(bvh: FlatBVH) -> int:
@@ -318,15 +319,28 @@ def _module():
         # only older targets plus PTX for the driver to compile at load).
         major, minor = torch.cuda.get_device_capability()
         arch = [f"-gencode=arch=compute_{major}{minor},code=sm_{major}{minor}"]
-        _MODULE = load_inline(name=f"rtcourse_cuda_tracer_{tag}", cpp_sources=_CPP_SOURCE,
-                              cuda_sources=source, functions=["trace", "attributes"],
-                              extra_cuda_cflags=["-O3", "-lineinfo", *arch], verbose=False)
+        _MODULE = load_inline(
+            name=f"rtcourse_cuda_tracer_{tag}",
+            cpp_sources=_CPP_SOURCE,
+            cuda_sources=source,
+            functions=["trace", "attributes"],
+            extra_cuda_cflags=["-O3", "-lineinfo", *arch],
+            verbose=False,
+        )
     return _MODULE
 
 
-def trace_flat_cuda(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf, *,
-                    any_hit: bool = False, block: int = DEFAULT_BLOCK,
-                    capped: bool = False) -> Hits:
+def trace_flat_cuda(
+    bvh: FlatBVH,
+    origins,
+    directions,
+    t_min=0.0,
+    t_max=math.inf,
+    *,
+    any_hit: bool = False,
+    block: int = DEFAULT_BLOCK,
+    capped: bool = False,
+) -> Hits:
     """Closest (or any) hit of each ray by the CUDA C BVH walk, one thread per ray.
 
     bvh: ``build_flat_bvh(...)`` on the rays' CUDA device; origins, directions: (N, 3)
@@ -344,16 +358,27 @@ def trace_flat_cuda(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf
         raise ValueError(f"origins: expected CUDA tensors, got {o.device}")
     if not isinstance(bvh, FlatBVH) or bvh.nodes.device != o.device:
         raise ValueError("bvh: expected a course.kernels.flat_bvh.FlatBVH on the rays' device")
-    if isinstance(block, bool) or not isinstance(block, int) or block % 32 or not \
-            0 < block <= 1024:
+    if isinstance(block, bool) or not isinstance(block, int) or block % 32 or not 0 < block <= 1024:
         raise ValueError(f"block: expected a multiple of 32 in 32..1024, got {block!r}")
     if capped and block > 256:
         raise ValueError(f"block: the capped variant launches at most 256 threads, got {block}")
     none = o.new_empty(0)
-    t, tri, u, v = module.trace(bvh.pairs, bvh.nodes, bvh.triangles, bvh.root_ref, o, d,
-                                none if lo is None else lo, lo_value,
-                                none if hi is None else hi, hi_value, bool(any_hit), block,
-                                stack_entries(bvh), MIN_BLOCKS if capped else 0)
+    t, tri, u, v = module.trace(
+        bvh.pairs,
+        bvh.nodes,
+        bvh.triangles,
+        bvh.root_ref,
+        o,
+        d,
+        none if lo is None else lo,
+        lo_value,
+        none if hi is None else hi,
+        hi_value,
+        bool(any_hit),
+        block,
+        stack_entries(bvh),
+        MIN_BLOCKS if capped else 0,
+    )
     return Hits(t=t, triangle=tri, u=u, v=v)
 
 
@@ -369,30 +394,62 @@ def ptxas_report(arch: str = "sm_90") -> dict:
     from torch.utils.cpp_extension import CUDA_HOME
 
     nvcc = str(Path(CUDA_HOME or "/usr/local/cuda") / "bin" / "nvcc")
-    variants = [(a, k, m) for a in (False, True) for k in (SHORT_STACK, STACK_DEPTH)
-                for m in (0, MIN_BLOCKS)]
-    args = ("const float4*, const float4*, const float4*, int, const float*, const float*, "
-            "const float*, float, const float*, float, float*, long long*, float*, float*, int")
-    lines = [f"template __global__ void trace_kernel<{str(a).lower()}, {k}, {m}>({args});"
-             for a, k, m in variants]
+    variants = [
+        (a, k, m)
+        for a in (False, True)
+        for k in (SHORT_STACK, STACK_DEPTH)
+        for m in (0, MIN_BLOCKS)
+    ]
+    args = (
+        "const float4*, const float4*, const float4*, int, const float*, const float*, "
+        "const float*, float, const float*, float, float*, long long*, float*, float*, int"
+    )
+    lines = [
+        f"template __global__ void trace_kernel<{str(a).lower()}, {k}, {m}>({args});"
+        for a, k, m in variants
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "walk.cu"
-        src.write_text("#include <climits>\n#include <math_constants.h>\n" + kernel_source()
-                       + "\n".join(lines) + "\n")
-        out = subprocess.run([nvcc, "-O3", f"-arch={arch}", "-Xptxas", "-v", "-c", str(src),
-                              "-o", str(Path(tmp) / "walk.o")], capture_output=True, text=True,
-                             check=True).stderr
+        src.write_text(
+            "#include <climits>\n#include <math_constants.h>\n"
+            + kernel_source()
+            + "\n".join(lines)
+            + "\n"
+        )
+        out = subprocess.run(
+            [
+                nvcc,
+                "-O3",
+                f"-arch={arch}",
+                "-Xptxas",
+                "-v",
+                "-c",
+                str(src),
+                "-o",
+                str(Path(tmp) / "walk.o"),
+            ],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stderr
     report = {}
     for block in out.split("Compiling entry function")[1:]:
         name = block.split("'")[1]
         any_hit = "ILb1E" in name
         stack, cap = (int(x) for x in re.search(r"ELi(\d+)ELi(\d+)E", name).groups())
-        frame, stores, loads = (int(x) for x in re.search(
-            r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads",
-            block).groups())
+        frame, stores, loads = (
+            int(x)
+            for x in re.search(
+                r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads", block
+            ).groups()
+        )
         regs = int(re.search(r"Used (\d+) registers", block).group(1))
-        report[any_hit, stack, cap > 0] = {"regs": regs, "stack_frame": frame,
-                                           "spill_stores": stores, "spill_loads": loads}
+        report[any_hit, stack, cap > 0] = {
+            "regs": regs,
+            "stack_frame": frame,
+            "spill_stores": stores,
+            "spill_loads": loads,
+        }
     return report
 
 
@@ -418,8 +475,13 @@ class CudaKernelInfo:
     occupancy_model: float
 
 
-def cuda_kernel_info(any_hit: bool = False, block: int = DEFAULT_BLOCK, arch=None,
-                     stack: int = SHORT_STACK, capped: bool = False) -> CudaKernelInfo:
+def cuda_kernel_info(
+    any_hit: bool = False,
+    block: int = DEFAULT_BLOCK,
+    arch=None,
+    stack: int = SHORT_STACK,
+    capped: bool = False,
+) -> CudaKernelInfo:
     """Read the compiled kernel's attributes and occupancy (see CudaKernelInfo).
 
     arch: the course.measure.occupancy preset to model (default: Hopper, the H100/H200 SM);
@@ -430,14 +492,22 @@ def cuda_kernel_info(any_hit: bool = False, block: int = DEFAULT_BLOCK, arch=Non
     arch = arch or HOPPER_H100
     if stack not in (SHORT_STACK, STACK_DEPTH):
         raise ValueError(f"stack: expected {SHORT_STACK} or {STACK_DEPTH}, got {stack!r}")
-    regs, local, max_threads, shared, blocks = (int(x) for x in _module().attributes(
-        bool(any_hit), block, stack, MIN_BLOCKS if capped else 0))
+    regs, local, max_threads, shared, blocks = (
+        int(x)
+        for x in _module().attributes(bool(any_hit), block, stack, MIN_BLOCKS if capped else 0)
+    )
     model = occupancy(arch, regs, block, shared)
     warps = -(-block // 32)
     name = ("cuda_any_hit" if any_hit else "cuda_closest_hit") + ("_capped" if capped else "")
-    return CudaKernelInfo(name=name, block=block,
-                          num_regs=regs, local_bytes=local, max_threads_per_block=max_threads,
-                          shared_bytes=shared, blocks_per_sm_cuda=blocks,
-                          occupancy_cuda=blocks * warps / arch.max_warps_per_sm,
-                          blocks_per_sm_model=model.blocks_per_sm,
-                          occupancy_model=model.occupancy)
+    return CudaKernelInfo(
+        name=name,
+        block=block,
+        num_regs=regs,
+        local_bytes=local,
+        max_threads_per_block=max_threads,
+        shared_bytes=shared,
+        blocks_per_sm_cuda=blocks,
+        occupancy_cuda=blocks * warps / arch.max_warps_per_sm,
+        blocks_per_sm_model=model.blocks_per_sm,
+        occupancy_model=model.occupancy,
+    )

@@ -169,13 +169,21 @@ class FlatBVH:
         return self.triangles.view(torch.int32)
 
     def to(self, device) -> FlatBVH:
-        return FlatBVH(self.nodes.to(device), self.triangles.to(device), self.order.to(device),
-                       self.depth, self.leaf_size, self.build_seconds, self.pairs.to(device))
+        return FlatBVH(
+            self.nodes.to(device),
+            self.triangles.to(device),
+            self.order.to(device),
+            self.depth,
+            self.leaf_size,
+            self.build_seconds,
+            self.pairs.to(device),
+        )
 
 
 # --------------------------------------------------------------------------------------
 # Build
 # --------------------------------------------------------------------------------------
+
 
 @contextlib.contextmanager
 def _one_cpu_thread(device: torch.device):
@@ -215,22 +223,30 @@ def _binned_splits(lo, hi, cen, tri, owner, k):
     b = ((c - cmin[owner]) * scale).long().clamp_(0, BINS - 1)  # (P, 3)
     key = (owner[:, None] * 3 + torch.arange(3, device=device)) * BINS + b  # (P, 3)
     key = key.reshape(-1)
-    n = torch.zeros(k * 3 * BINS, device=device).index_add_(0, key, torch.ones(len(key),
-                                                                                device=device))
+    n = torch.zeros(k * 3 * BINS, device=device).index_add_(
+        0, key, torch.ones(len(key), device=device)
+    )
     idx = key[:, None].expand(-1, 3)
     box_lo = lo[tri][:, None, :].expand(-1, 3, -1).reshape(-1, 3)
     box_hi = hi[tri][:, None, :].expand(-1, 3, -1).reshape(-1, 3)
-    blo = torch.full((k * 3 * BINS, 3), math.inf, device=device).scatter_reduce(
-        0, idx, box_lo, "amin").view(k, 3, BINS, 3)
-    bhi = torch.full((k * 3 * BINS, 3), -math.inf, device=device).scatter_reduce(
-        0, idx, box_hi, "amax").view(k, 3, BINS, 3)
+    blo = (
+        torch.full((k * 3 * BINS, 3), math.inf, device=device)
+        .scatter_reduce(0, idx, box_lo, "amin")
+        .view(k, 3, BINS, 3)
+    )
+    bhi = (
+        torch.full((k * 3 * BINS, 3), -math.inf, device=device)
+        .scatter_reduce(0, idx, box_hi, "amax")
+        .view(k, 3, BINS, 3)
+    )
     n = n.view(k, 3, BINS)
     # Left of split s: bins 0..s; right: bins s+1..BINS-1 (prefix and suffix scans).
     left_n = n.cumsum(2)[..., :-1]
     left_a = surface_area(blo.cummin(2).values, bhi.cummax(2).values)[..., :-1]
     right_n = n.flip(2).cumsum(2).flip(2)[..., 1:]
-    right_a = surface_area(blo.flip(2).cummin(2).values.flip(2),
-                           bhi.flip(2).cummax(2).values.flip(2))[..., 1:]
+    right_a = surface_area(
+        blo.flip(2).cummin(2).values.flip(2), bhi.flip(2).cummax(2).values.flip(2)
+    )[..., 1:]
     cost = left_a * left_n + right_a * right_n
     cost = torch.where((left_n > 0) & (right_n > 0), cost, math.inf).reshape(k, -1)
     best_cost, best = cost.min(1)
@@ -259,8 +275,9 @@ def build_flat_bvh(vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int =
         return _build(vertices, faces, leaf_size, start_time)
 
 
-def _build(vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int,
-           start_time: float) -> FlatBVH:
+def _build(
+    vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int, start_time: float
+) -> FlatBVH:
     device = vertices.device
     faces = faces.long()
     corners = vertices[faces]  # (F, 3, 3) in the input dtype
@@ -288,25 +305,31 @@ def _build(vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int,
             # Object median along the widest centroid axis: sort each such node's triangles
             # by centroid (the others keep their order) and cut in the middle.
             c_axis = cen[tri].gather(1, widest[owner, None])[:, 0]
-            key = torch.argsort(torch.where(use_median[owner], c_axis, rank.float()),
-                                stable=True)
+            key = torch.argsort(torch.where(use_median[owner], c_axis, rank.float()), stable=True)
             key = key[torch.argsort(owner[key], stable=True)]  # by node, then by value
             tri, b = tri[key], b[key]
-        go_right = torch.where(use_median[owner], rank >= (count // 2)[owner],
-                               b.gather(1, axis[owner, None])[:, 0] > split_bin[owner])
+        go_right = torch.where(
+            use_median[owner],
+            rank >= (count // 2)[owner],
+            b.gather(1, axis[owner, None])[:, 0] > split_bin[owner],
+        )
         perm = torch.argsort(owner * 2 + go_right.long(), stable=True)
         order[pos] = tri[perm]
         n_left = torch.zeros(k, dtype=torch.int64, device=device).index_add_(
-            0, owner, (~go_right).long())
+            0, owner, (~go_right).long()
+        )
         level = tree.split(level, start + n_left, depth)
         depth += 1
     if depth + 1 > STACK_DEPTH:
-        raise ValueError(f"faces: the BVH has {depth + 1} levels, more than the traversal "
-                         f"stack's {STACK_DEPTH} (over 2^23 triangles?)")
+        raise ValueError(
+            f"faces: the BVH has {depth + 1} levels, more than the traversal "
+            f"stack's {STACK_DEPTH} (over 2^23 triangles?)"
+        )
     bvh = tree.finish(order, lo, hi)
     leaf = bvh["left"] < 0
-    ints = torch.stack([torch.where(leaf, bvh["first"], bvh["right"]),
-                        torch.where(leaf, bvh["count"], 0)], 1).to(torch.int32)
+    ints = torch.stack(
+        [torch.where(leaf, bvh["first"], bvh["right"]), torch.where(leaf, bvh["count"], 0)], 1
+    ).to(torch.int32)
     nodes = torch.cat([bvh["lo"], bvh["hi"], ints.view(torch.float32)], 1).contiguous()
     tris = corners[bvh["triangles"]].to(torch.float64)
     v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
@@ -314,11 +337,18 @@ def _build(vertices: torch.Tensor, faces: torch.Tensor, leaf_size: int,
     zero = torch.zeros_like(index)
     last = torch.zeros(n_tri, dtype=torch.int32, device=device)
     last[(bvh["first"] + bvh["count"] - 1)[leaf]] = 1  # each leaf's last row
-    rows = torch.cat([v0.float(), index, e1.float(), zero, e2.float(),
-                      last.view(torch.float32)[:, None]], 1).contiguous()
-    return FlatBVH(nodes=nodes, triangles=rows, order=bvh["triangles"], depth=depth + 1,
-                   leaf_size=leaf_size, build_seconds=time.perf_counter() - start_time,
-                   pairs=_pairs(nodes, ints, leaf))
+    rows = torch.cat(
+        [v0.float(), index, e1.float(), zero, e2.float(), last.view(torch.float32)[:, None]], 1
+    ).contiguous()
+    return FlatBVH(
+        nodes=nodes,
+        triangles=rows,
+        order=bvh["triangles"],
+        depth=depth + 1,
+        leaf_size=leaf_size,
+        build_seconds=time.perf_counter() - start_time,
+        pairs=_pairs(nodes, ints, leaf),
+    )
 
 
 def _pairs(nodes: torch.Tensor, ints: torch.Tensor, leaf: torch.Tensor) -> torch.Tensor:
@@ -331,8 +361,15 @@ def _pairs(nodes: torch.Tensor, ints: torch.Tensor, leaf: torch.Tensor) -> torch
     a, b = inner + 1, first[inner]  # an interior node's word 6 is its right child
     lo, hi = nodes[:, 0:3], nodes[:, 3:6]
     planes = torch.stack([lo[a], hi[a], lo[b], hi[b]], 2).reshape(-1, 12)  # axis-major
-    links = torch.stack([ref[a], ref[b], torch.where(leaf[a], count[a], 0).to(torch.int32),
-                         torch.where(leaf[b], count[b], 0).to(torch.int32)], 1)
+    links = torch.stack(
+        [
+            ref[a],
+            ref[b],
+            torch.where(leaf[a], count[a], 0).to(torch.int32),
+            torch.where(leaf[b], count[b], 0).to(torch.int32),
+        ],
+        1,
+    )
     return torch.cat([planes, links.view(torch.float32)], 1).contiguous()
 
 
@@ -355,8 +392,10 @@ def flat_bvh_for(scene, leaf_size: int = 4) -> FlatBVH:
     """
     for name in ("vertices", "faces"):
         if not isinstance(getattr(scene, name, None), torch.Tensor):
-            raise TypeError(f"scene: expected an object with a {name!r} tensor (a WhittedScene "
-                            f"or a Mesh), got {type(scene).__name__}")
+            raise TypeError(
+                f"scene: expected an object with a {name!r} tensor (a WhittedScene "
+                f"or a Mesh), got {type(scene).__name__}"
+            )
     try:
         per_scene = _CACHE.setdefault(scene, {})
     except TypeError:
@@ -370,6 +409,7 @@ def flat_bvh_for(scene, leaf_size: int = 4) -> FlatBVH:
 # Tracing
 # --------------------------------------------------------------------------------------
 
+
 def check_rays(origins, directions, t_min, t_max):
     """Validate a tracer's ray arguments; returns float32 ``(o, d, t_lo, t_hi)``, each
     contiguous, (N, 3), (N, 3), (N,), (N,), on the origins' device.
@@ -380,8 +420,12 @@ def check_rays(origins, directions, t_min, t_max):
     o, d, (lo, lo_value), (hi, hi_value) = check_ray_bounds(origins, directions, t_min, t_max)
     n, device = o.shape[0], o.device
     full = {"dtype": torch.float32, "device": device}
-    return (o, d, torch.full((n,), lo_value, **full) if lo is None else lo,
-            torch.full((n,), hi_value, **full) if hi is None else hi)
+    return (
+        o,
+        d,
+        torch.full((n,), lo_value, **full) if lo is None else lo,
+        torch.full((n,), hi_value, **full) if hi is None else hi,
+    )
 
 
 def check_ray_bounds(origins, directions, t_min, t_max):
@@ -397,11 +441,14 @@ def check_ray_bounds(origins, directions, t_min, t_max):
         if x.ndim != 2 or x.shape[1] != 3:
             raise ValueError(f"{name}: expected shape (N, 3), got {tuple(x.shape)}")
     if directions.shape != origins.shape:
-        raise ValueError(f"directions: expected shape {tuple(origins.shape)} like origins, "
-                         f"got {tuple(directions.shape)}")
+        raise ValueError(
+            f"directions: expected shape {tuple(origins.shape)} like origins, "
+            f"got {tuple(directions.shape)}"
+        )
     if directions.device != origins.device:
-        raise ValueError(f"directions: expected device {origins.device} like origins, "
-                         f"got {directions.device}")
+        raise ValueError(
+            f"directions: expected device {origins.device} like origins, got {directions.device}"
+        )
     n, device = origins.shape[0], origins.device
     bounds = []
     for name, x in (("t_min", t_min), ("t_max", t_max)):
@@ -409,25 +456,33 @@ def check_ray_bounds(origins, directions, t_min, t_max):
             if x.device != device:
                 raise ValueError(f"{name}: expected device {device} like origins, got {x.device}")
             if x.shape not in (torch.Size([n]), torch.Size([])):
-                raise ValueError(f"{name}: expected shape ({n},) or a scalar, "
-                                 f"got {tuple(x.shape)}")
+                raise ValueError(f"{name}: expected shape ({n},) or a scalar, got {tuple(x.shape)}")
             if not x.is_floating_point():
                 raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
             bounds.append((x.to(torch.float32).expand(n).contiguous(), 0.0))
         elif isinstance(x, (int, float)) and not isinstance(x, bool):
             bounds.append((None, float(x)))
         else:
-            raise TypeError(f"{name}: expected a number or a ({n},) tensor, "
-                            f"got {type(x).__name__}")
-    return (origins.to(torch.float32).contiguous(), directions.to(torch.float32).contiguous(),
-            *bounds)
+            raise TypeError(f"{name}: expected a number or a ({n},) tensor, got {type(x).__name__}")
+    return (
+        origins.to(torch.float32).contiguous(),
+        directions.to(torch.float32).contiguous(),
+        *bounds,
+    )
 
 
-def valid_rays(o: torch.Tensor, d: torch.Tensor, t_lo: torch.Tensor,
-               t_hi: torch.Tensor) -> torch.Tensor:
+def valid_rays(
+    o: torch.Tensor, d: torch.Tensor, t_lo: torch.Tensor, t_hi: torch.Tensor
+) -> torch.Tensor:
     """(N,) bool: rays that can hit anything (finite, nonzero direction, t_min <= t_max)."""
-    return (torch.isfinite(o).all(1) & torch.isfinite(d).all(1) & (d != 0).any(1)
-            & ~torch.isnan(t_lo) & ~torch.isnan(t_hi) & (t_lo <= t_hi))
+    return (
+        torch.isfinite(o).all(1)
+        & torch.isfinite(d).all(1)
+        & (d != 0).any(1)
+        & ~torch.isnan(t_lo)
+        & ~torch.isnan(t_hi)
+        & (t_lo <= t_hi)
+    )
 
 
 def _slab(o, inv, lo, hi, t_lo, t_hi):
@@ -458,8 +513,9 @@ def _mt(o, d, rows):
     return (e2 * q).sum(1) * inv, (s * p).sum(1) * inv, (d * q).sum(1) * inv
 
 
-def trace_flat_torch(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf,
-                     any_hit: bool = False) -> Hits:
+def trace_flat_torch(
+    bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf, any_hit: bool = False
+) -> Hits:
     """The traversal contract (module docstring) in vectorised torch: the CPU fallback.
 
     Every ray takes one step per iteration (visit a node, or test its current leaf's
@@ -485,8 +541,7 @@ def _walk(bvh: FlatBVH, o, d, t_lo, t_hi, any_hit: bool) -> Hits:
     sp = torch.zeros(n, dtype=torch.int64, device=device)
     node = torch.zeros(n, dtype=torch.int64, device=device)
     alive = valid_rays(o, d, t_lo, t_hi)
-    _, root_hit = _slab(o, inv, nodes[0, :3].expand(n, 3), nodes[0, 3:6].expand(n, 3),
-                        t_lo, t_hi)
+    _, root_hit = _slab(o, inv, nodes[0, :3].expand(n, 3), nodes[0, 3:6].expand(n, 3), t_lo, t_hi)
     alive &= root_hit
     big = torch.iinfo(torch.int64).max
     lane = alive.nonzero()[:, 0]
@@ -555,5 +610,9 @@ def _walk(bvh: FlatBVH, o, d, t_lo, t_hi, any_hit: bool) -> Hits:
         lane = lane[alive[lane]]
     hit = best_row >= 0
     tri = torch.where(hit, tri_index[best_row.clamp(min=0)], -1)
-    return Hits(t=torch.where(hit, best_t, math.inf), triangle=tri,
-                u=torch.where(hit, best_u, 0.0), v=torch.where(hit, best_v, 0.0))
+    return Hits(
+        t=torch.where(hit, best_t, math.inf),
+        triangle=tri,
+        u=torch.where(hit, best_u, 0.0),
+        v=torch.where(hit, best_v, 0.0),
+    )

@@ -15,8 +15,7 @@ from course.kernels.flat_bvh import check_rays, flat_bvh_for, trace_flat_torch
 __all__ = ["trace_bvh"]
 
 
-def trace_bvh(scene, origins, directions, t_min=0.0, t_max=math.inf,
-              any_hit: bool = False) -> Hits:
+def trace_bvh(scene, origins, directions, t_min=0.0, t_max=math.inf, any_hit: bool = False) -> Hits:
     """Closest (or any) hit of each ray in ``scene``: the lab's tracer callable.
 
     scene: a ``WhittedScene`` (or anything with ``vertices`` (V, 3) float and ``faces``
@@ -39,6 +38,7 @@ def trace_bvh(scene, origins, directions, t_min=0.0, t_max=math.inf,
         from course.kernels import triton_tracer
 
         if triton_tracer.triton_available() and not triton_tracer.interpreting():
-            return triton_tracer.trace_flat_triton(bvh.to(origins.device), origins, directions,
-                                                   t_min, t_max, any_hit=any_hit)
+            return triton_tracer.trace_flat_triton(
+                bvh.to(origins.device), origins, directions, t_min, t_max, any_hit=any_hit
+            )
     return trace_flat_torch(bvh, origins, directions, t_min, t_max, any_hit=any_hit)

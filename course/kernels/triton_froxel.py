@@ -98,10 +98,25 @@ BLOCK_TEXELS = 128  # lanes per program of the light-space textures and the exti
 BLOCK_TEXELS_INTERPRETED = 8192
 
 
-def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=None,
-                         slices=SLICES, near=None, far=None, phase="hg", integration="energy",
-                         volumetric_shadows=True, shadow_resolution=128, volume_resolution=None,
-                         light_steps=LIGHT_STEPS, counts=True, num_warps=None):
+def render_froxels_fused(
+    scene,
+    camera,
+    depth_image,
+    opaque_image,
+    *,
+    tile=None,
+    slices=SLICES,
+    near=None,
+    far=None,
+    phase="hg",
+    integration="energy",
+    volumetric_shadows=True,
+    shadow_resolution=128,
+    volume_resolution=None,
+    light_steps=LIGHT_STEPS,
+    counts=True,
+    num_warps=None,
+):
     """Lab 5's ``render_froxels`` (non-temporal) in five Triton launches: ``(image, report)``.
 
     scene: a ``course.given.lab5.Scene``; camera: its ``Camera``; depth_image (H, W)
@@ -143,27 +158,44 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=None,
     # Compiled, Triton rejects a warp count that is not a power of two deep in its compiler
     # (an assertion naming none of these arguments) and cannot launch over 32 warps; the
     # interpreter ignores num_warps, so a bad value would pass every CPU test.
-    if num_warps is not None and (isinstance(num_warps, bool) or not isinstance(num_warps, int)
-                                  or not 1 <= num_warps <= 32 or num_warps & (num_warps - 1)):
+    if num_warps is not None and (
+        isinstance(num_warps, bool)
+        or not isinstance(num_warps, int)
+        or not 1 <= num_warps <= 32
+        or num_warps & (num_warps - 1)
+    ):
         raise ValueError(f"num_warps: expected None or a power of two <= 32, got {num_warps!r}")
-    report = {"grid": grid, "froxels": math.prod(grid.shape), "froxels_lit": 0,
-              "tiles_with_media": 0, "light_tiles": [0] * len(scene.lights),
-              "light_evaluations": 0, "volume_bounds": None, "volume_resolution": 0,
-              "jitter": 0.5, "history_valid": 0.0, "history": None}
+    report = {
+        "grid": grid,
+        "froxels": math.prod(grid.shape),
+        "froxels_lit": 0,
+        "tiles_with_media": 0,
+        "light_tiles": [0] * len(scene.lights),
+        "light_evaluations": 0,
+        "volume_bounds": None,
+        "volume_resolution": 0,
+        "jitter": 0.5,
+        "history_valid": 0.0,
+        "history": None,
+    }
     if not scene.media:
         return opaque_image.clone(), report
     device = depth_image.device
     if not interpreting() and device.type != "cuda":
-        raise ValueError(f"depth_image: the compiled Triton kernels need CUDA tensors, got "
-                         f"{device} (for the CPU, set TRITON_INTERPRET=1 before importing "
-                         "triton)")
+        raise ValueError(
+            f"depth_image: the compiled Triton kernels need CUDA tensors, got "
+            f"{device} (for the CPU, set TRITON_INTERPRET=1 before importing "
+            "triton)"
+        )
 
-    plan = _plan(scene, grid, shadow_resolution, volume_resolution, bool(volumetric_shadows),
-                 device)
+    plan = _plan(
+        scene, grid, shadow_resolution, volume_resolution, bool(volumetric_shadows), device
+    )
     f32 = torch.float32
     if plan["textures"]:
-        tex = torch.cat([scene.media[m].density.to(device, f32).reshape(-1)
-                         for m in plan["textures"]])
+        tex = torch.cat(
+            [scene.media[m].density.to(device, f32).reshape(-1) for m in plan["textures"]]
+        )
     else:
         tex = torch.zeros(1, dtype=f32, device=device)
     vdata = torch.empty(plan["data_size"], dtype=f32, device=device)
@@ -172,8 +204,9 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=None,
     nodes = torch.empty(grid.slices + 1, grid.ny, grid.nx, 4, dtype=f32, device=device)
     lit = torch.empty(n_tiles if counts else 1, dtype=torch.int32, device=device)
     media = torch.empty(n_tiles if counts else 1, dtype=torch.int8, device=device)
-    listed = torch.empty(max(n_lights, 1) * n_tiles if counts else 1, dtype=torch.int8,
-                         device=device)
+    listed = torch.empty(
+        max(n_lights, 1) * n_tiles if counts else 1, dtype=torch.int8, device=device
+    )
     depth = depth_image.to(f32).contiguous()
     opaque = opaque_image.to(f32).contiguous()
     out = torch.empty(opaque.shape, dtype=f32, device=device)
@@ -184,35 +217,94 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=None,
         if plan["n_maps"]:
             res = plan["shadow_resolution"]
             _shadow_map_kernel[(plan["n_maps"], triton.cdiv(res * res, block))](
-                plan["volf"], plan["voli"], vdata, plan["boxes"], plan["n_boxes"],
-                BLOCK=block)
+                plan["volf"], plan["voli"], vdata, plan["boxes"], plan["n_boxes"], BLOCK=block
+            )
         res = plan["volume_resolution"] if plan["extinction"] else 1
-        ext = torch.empty(res ** 3, dtype=f32, device=device)
+        ext = torch.empty(res**3, dtype=f32, device=device)
         if plan["extinction"]:
-            _extinction_kernel[(triton.cdiv(res ** 3, block),)](
-                ext, plan["medf"], plan["medi"], tex, len(scene.media), res, *plan["lo"],
-                *plan["size"], BLOCK=block)
+            _extinction_kernel[(triton.cdiv(res**3, block),)](
+                ext,
+                plan["medf"],
+                plan["medi"],
+                tex,
+                len(scene.media),
+                res,
+                *plan["lo"],
+                *plan["size"],
+                BLOCK=block,
+            )
             if plan["n_volumes"]:
-                _transmittance_kernel[(plan["n_volumes"],
-                                       triton.cdiv(res * res, block))](
-                    plan["volf"], plan["voli"], vdata, ext, res, plan["first_volume"],
-                    *plan["lo"], *plan["size"], BLOCK=block)
+                _transmittance_kernel[(plan["n_volumes"], triton.cdiv(res * res, block))](
+                    plan["volf"],
+                    plan["voli"],
+                    vdata,
+                    ext,
+                    res,
+                    plan["first_volume"],
+                    *plan["lo"],
+                    *plan["size"],
+                    BLOCK=block,
+                )
         log_ratio = math.log(grid.far / grid.near)
         report["kernel"] = _froxel_kernel[(n_tiles,)](
-            nodes, lit, media, listed, plan["camf"], plan["camd"], plan["dz"],
-            plan["medf"], plan["medi"], tex, len(scene.media),
-            plan["lightf"], plan["lighti"], plan["lightd"], n_lights,
-            plan["volf"], plan["voli"], vdata,
-            ext, res, *plan["lo"], *plan["size"], light_steps,
-            grid.nx, grid.ny, grid.slices, grid.tile, camera.width, camera.height,
-            grid.near, log_ratio / grid.slices, slice_offset(grid, 0.5), *scene.ambient,
-            BLOCK_S=block_s, SCHLICK=phase == "schlick", NAIVE=integration == "naive",
-            COUNTS=bool(counts), num_warps=warps)
+            nodes,
+            lit,
+            media,
+            listed,
+            plan["camf"],
+            plan["camd"],
+            plan["dz"],
+            plan["medf"],
+            plan["medi"],
+            tex,
+            len(scene.media),
+            plan["lightf"],
+            plan["lighti"],
+            plan["lightd"],
+            n_lights,
+            plan["volf"],
+            plan["voli"],
+            vdata,
+            ext,
+            res,
+            *plan["lo"],
+            *plan["size"],
+            light_steps,
+            grid.nx,
+            grid.ny,
+            grid.slices,
+            grid.tile,
+            camera.width,
+            camera.height,
+            grid.near,
+            log_ratio / grid.slices,
+            slice_offset(grid, 0.5),
+            *scene.ambient,
+            BLOCK_S=block_s,
+            SCHLICK=phase == "schlick",
+            NAIVE=integration == "naive",
+            COUNTS=bool(counts),
+            num_warps=warps,
+        )
         n_pixels = camera.width * camera.height
         _apply_kernel[(triton.cdiv(n_pixels, BLOCK_PIXELS),)](
-            out, nodes, depth, opaque, n_pixels, camera.width, grid.tile, grid.nx, grid.ny,
-            grid.slices, float(grid.nx), float(grid.ny), float(grid.slices),
-            math.log(grid.near), grid.slices / log_ratio, BLOCK=BLOCK_PIXELS)
+            out,
+            nodes,
+            depth,
+            opaque,
+            n_pixels,
+            camera.width,
+            grid.tile,
+            grid.nx,
+            grid.ny,
+            grid.slices,
+            float(grid.nx),
+            float(grid.ny),
+            float(grid.slices),
+            math.log(grid.near),
+            grid.slices / log_ratio,
+            BLOCK=BLOCK_PIXELS,
+        )
     if plan["extinction"]:
         report["volume_bounds"] = plan["bounds"]
         report["volume_resolution"] = plan["volume_resolution"]
@@ -226,11 +318,12 @@ def render_froxels_fused(scene, camera, depth_image, opaque_image, *, tile=None,
 
 def _count(report, lit, media, listed, n_lights, n_tiles):
     """The lab's counts from the per-tile numbers the kernel wrote, in one transfer."""
-    listed = listed[:n_lights * n_tiles].reshape(n_lights, n_tiles).to(torch.int64)
+    listed = listed[: n_lights * n_tiles].reshape(n_lights, n_tiles).to(torch.int64)
     lit = lit.to(torch.int64)
     media = media.to(torch.int64)
-    totals = torch.cat([lit.sum()[None], media.sum()[None], (listed * lit).sum()[None],
-                        (listed * media).sum(1)]).tolist()
+    totals = torch.cat(
+        [lit.sum()[None], media.sum()[None], (listed * lit).sum()[None], (listed * media).sum(1)]
+    ).tolist()
     report["froxels_lit"], report["tiles_with_media"] = totals[0], totals[1]
     report["light_evaluations"] = totals[2]
     # Nothing lit: the lab evaluates no light anywhere.

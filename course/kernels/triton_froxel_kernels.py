@@ -31,8 +31,7 @@ from course.kernels.triton_intersect import _jit, tl
 
 
 @_jit
-def _shadow_map_kernel(volf_ptr, voli_ptr, vdata_ptr, boxes_ptr, n_boxes,
-                       BLOCK: tl.constexpr):
+def _shadow_map_kernel(volf_ptr, voli_ptr, vdata_ptr, boxes_ptr, n_boxes, BLOCK: tl.constexpr):
     """``build_shadow_map``: texel (i, j) of volume row ``program_id(0)`` traces one ray
     from its centre along w against every occluder box; depth of the first hit or inf."""
     v = tl.program_id(0)
@@ -75,8 +74,21 @@ def _shadow_map_kernel(volf_ptr, voli_ptr, vdata_ptr, boxes_ptr, n_boxes,
 
 
 @_jit
-def _extinction_kernel(ext_ptr, medf_ptr, medi_ptr, tex_ptr, n_media, res,
-                       lo_x, lo_y, lo_z, size_x, size_y, size_z, BLOCK: tl.constexpr):
+def _extinction_kernel(
+    ext_ptr,
+    medf_ptr,
+    medi_ptr,
+    tex_ptr,
+    n_media,
+    res,
+    lo_x,
+    lo_y,
+    lo_z,
+    size_x,
+    size_y,
+    size_z,
+    BLOCK: tl.constexpr,
+):
     """``extinction_volume``: the media's extinction at the voxel centres of the (R, R, R)
     box ``lo .. lo + size`` (x the first axis)."""
     t = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
@@ -85,15 +97,35 @@ def _extinction_kernel(ext_ptr, medf_ptr, medi_ptr, tex_ptr, n_media, res,
     fx = tl.div_rn((t // (res * res)).to(tl.float32) + 0.5, fres)
     fy = tl.div_rn(((t // res) % res).to(tl.float32) + 0.5, fres)
     fz = tl.div_rn((t % res).to(tl.float32) + 0.5, fres)
-    _, _, _, ext, _, _, _, _ = _media(lo_x + fx * size_x, lo_y + fy * size_y,
-                                      lo_z + fz * size_z, medf_ptr, medi_ptr, tex_ptr,
-                                      n_media, live)
+    _, _, _, ext, _, _, _, _ = _media(
+        lo_x + fx * size_x,
+        lo_y + fy * size_y,
+        lo_z + fz * size_z,
+        medf_ptr,
+        medi_ptr,
+        tex_ptr,
+        n_media,
+        live,
+    )
     tl.store(ext_ptr + t, ext, mask=live)
 
 
 @_jit
-def _transmittance_kernel(volf_ptr, voli_ptr, vdata_ptr, ext_ptr, ext_res, first,
-                          lo_x, lo_y, lo_z, size_x, size_y, size_z, BLOCK: tl.constexpr):
+def _transmittance_kernel(
+    volf_ptr,
+    voli_ptr,
+    vdata_ptr,
+    ext_ptr,
+    ext_res,
+    first,
+    lo_x,
+    lo_y,
+    lo_z,
+    size_x,
+    size_y,
+    size_z,
+    BLOCK: tl.constexpr,
+):
     """``transmittance_volume`` of volume row ``first + program_id(0)``: a lane per texel
     marches its ray in K - 1 equal steps from the light side, midpoint rule, through the
     extinction volume (0 outside its box); data[i, j, k] = exp(-optical depth to k)."""
@@ -140,24 +172,60 @@ def _transmittance_kernel(volf_ptr, voli_ptr, vdata_ptr, ext_ptr, ext_res, first
         lx = tl.div_rn(sx + mid * dx - lo_x, size_x)
         ly = tl.div_rn(sy + mid * dy - lo_y, size_y)
         lz = tl.div_rn(sz + mid * dz - lo_z, size_z)
-        inside = (lx >= 0.0) & (lx <= 1.0) & (ly >= 0.0) & (ly <= 1.0) & (lz >= 0.0) \
-            & (lz <= 1.0)
-        sigma = _texture(ext_ptr, 0, ext_res, ext_res, ext_res, lx * fres, ly * fres,
-                         lz * fres, live & inside)
+        inside = (lx >= 0.0) & (lx <= 1.0) & (ly >= 0.0) & (ly <= 1.0) & (lz >= 0.0) & (lz <= 1.0)
+        sigma = _texture(
+            ext_ptr, 0, ext_res, ext_res, ext_res, lx * fres, ly * fres, lz * fres, live & inside
+        )
         depth += tl.where(inside, sigma, 0.0) * step
         tl.store(vdata_ptr + off + t * k + m + 1, tl.exp(-depth), mask=live)
 
 
 @_jit
-def _froxel_kernel(nodes_ptr, lit_ptr, media_ptr, listed_ptr, camf_ptr, camd_ptr, dz_ptr,
-                   medf_ptr, medi_ptr, tex_ptr, n_media,
-                   lightf_ptr, lighti_ptr, lightd_ptr, n_lights,
-                   volf_ptr, voli_ptr, vdata_ptr,
-                   ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, size_z, light_steps,
-                   nx, ny, slices, tile, width, height,
-                   near, depth_scale, offset, amb_r, amb_g, amb_b,
-                   BLOCK_S: tl.constexpr, SCHLICK: tl.constexpr, NAIVE: tl.constexpr,
-                   COUNTS: tl.constexpr):
+def _froxel_kernel(
+    nodes_ptr,
+    lit_ptr,
+    media_ptr,
+    listed_ptr,
+    camf_ptr,
+    camd_ptr,
+    dz_ptr,
+    medf_ptr,
+    medi_ptr,
+    tex_ptr,
+    n_media,
+    lightf_ptr,
+    lighti_ptr,
+    lightd_ptr,
+    n_lights,
+    volf_ptr,
+    voli_ptr,
+    vdata_ptr,
+    ext_ptr,
+    ext_res,
+    lo_x,
+    lo_y,
+    lo_z,
+    size_x,
+    size_y,
+    size_z,
+    light_steps,
+    nx,
+    ny,
+    slices,
+    tile,
+    width,
+    height,
+    near,
+    depth_scale,
+    offset,
+    amb_r,
+    amb_g,
+    amb_b,
+    BLOCK_S: tl.constexpr,
+    SCHLICK: tl.constexpr,
+    NAIVE: tl.constexpr,
+    COUNTS: tl.constexpr,
+):
     """One tile column (i, j): V-buffer, lighting and integration of all its slices."""
     tile_id = tl.program_id(0)
     i = tile_id % nx
@@ -185,8 +253,9 @@ def _froxel_kernel(nodes_ptr, lit_ptr, media_ptr, listed_ptr, camf_ptr, camd_ptr
     py = eye_y + depth * dir_y
     pz = eye_z + depth * dir_z
 
-    s0, s1, s2, sigma_t, src0, src1, src2, g = _media(px, py, pz, medf_ptr, medi_ptr, tex_ptr,
-                                                      n_media, live)
+    s0, s1, s2, sigma_t, src0, src1, src2, g = _media(
+        px, py, pz, medf_ptr, medi_ptr, tex_ptr, n_media, live
+    )
     has_media = live & ((sigma_t > 0.0) | (tl.maximum(tl.maximum(src0, src1), src2) > 0.0))
     media_lanes = tl.sum(has_media.to(tl.int32), axis=0)
     tile_media = media_lanes > 0
@@ -259,12 +328,27 @@ def _froxel_kernel(nodes_ptr, lit_ptr, media_ptr, listed_ptr, camf_ptr, camd_ptr
                 reach = lit & (falloff > 0.0)
                 if (tl.load(irow + 3) != 0) & (tl.max(reach.to(tl.int32), axis=0) > 0):
                     falloff = falloff * _segment_transmittance(
-                        ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, size_z, px, py,
-                        pz, tl.load(frow + 6), tl.load(frow + 7), tl.load(frow + 8),
-                        light_steps, reach)
+                        ext_ptr,
+                        ext_res,
+                        lo_x,
+                        lo_y,
+                        lo_z,
+                        size_x,
+                        size_y,
+                        size_z,
+                        px,
+                        py,
+                        pz,
+                        tl.load(frow + 6),
+                        tl.load(frow + 7),
+                        tl.load(frow + 8),
+                        light_steps,
+                        reach,
+                    )
                 if kind == 2:
-                    cos_axis = -(tx * tl.load(frow + 3) + ty * tl.load(frow + 4)
-                                 + tz * tl.load(frow + 5))
+                    cos_axis = -(
+                        tx * tl.load(frow + 3) + ty * tl.load(frow + 4) + tz * tl.load(frow + 5)
+                    )
                     s = (cos_axis - tl.load(frow + 10)) / tl.load(frow + 11)
                     s = tl.minimum(tl.maximum(s, 0.0), 1.0)
                     falloff = falloff * s * s * (3.0 - 2.0 * s)
@@ -290,8 +374,7 @@ def _froxel_kernel(nodes_ptr, lit_ptr, media_ptr, listed_ptr, camf_ptr, camd_ptr
                 e2 = e2 * vis
             tv = tl.load(irow + 2)
             if tv >= 0:
-                trans = _transmittance_lookup(volf_ptr, voli_ptr, vdata_ptr, tv, px, py, pz,
-                                              lit)
+                trans = _transmittance_lookup(volf_ptr, voli_ptr, vdata_ptr, tv, px, py, pz, lit)
                 e0 = e0 * trans
                 e1 = e1 * trans
                 e2 = e2 * trans
@@ -305,15 +388,21 @@ def _froxel_kernel(nodes_ptr, lit_ptr, media_ptr, listed_ptr, camf_ptr, camd_ptr
     # Front to back along the column: the transmittance in front of slice k is
     # exp(-(inclusive prefix sum - own optical depth)), as integrate_froxels computes it.
     # Slice lengths along the ray through the tile's centre, in float64 like the lab.
-    d64x = tl.load(camd_ptr + 9) + (2.0 * (i64 + 0.5) * tile / width - 1.0) \
-        * hw * tl.load(camd_ptr + 3) + (1.0 - 2.0 * (j64 + 0.5) * tile / height) * hh \
-        * tl.load(camd_ptr + 6)
-    d64y = tl.load(camd_ptr + 10) + (2.0 * (i64 + 0.5) * tile / width - 1.0) * hw \
-        * tl.load(camd_ptr + 4) + (1.0 - 2.0 * (j64 + 0.5) * tile / height) * hh \
-        * tl.load(camd_ptr + 7)
-    d64z = tl.load(camd_ptr + 11) + (2.0 * (i64 + 0.5) * tile / width - 1.0) * hw \
-        * tl.load(camd_ptr + 5) + (1.0 - 2.0 * (j64 + 0.5) * tile / height) * hh \
-        * tl.load(camd_ptr + 8)
+    d64x = (
+        tl.load(camd_ptr + 9)
+        + (2.0 * (i64 + 0.5) * tile / width - 1.0) * hw * tl.load(camd_ptr + 3)
+        + (1.0 - 2.0 * (j64 + 0.5) * tile / height) * hh * tl.load(camd_ptr + 6)
+    )
+    d64y = (
+        tl.load(camd_ptr + 10)
+        + (2.0 * (i64 + 0.5) * tile / width - 1.0) * hw * tl.load(camd_ptr + 4)
+        + (1.0 - 2.0 * (j64 + 0.5) * tile / height) * hh * tl.load(camd_ptr + 7)
+    )
+    d64z = (
+        tl.load(camd_ptr + 11)
+        + (2.0 * (i64 + 0.5) * tile / width - 1.0) * hw * tl.load(camd_ptr + 5)
+        + (1.0 - 2.0 * (j64 + 0.5) * tile / height) * hh * tl.load(camd_ptr + 8)
+    )
     stretch = tl.sqrt(d64x * d64x + d64y * d64y + d64z * d64z)
     length = (tl.load(dz_ptr + k, mask=live, other=0.0) * stretch).to(tl.float32)
     sigma_t = tl.where(live, sigma_t, 0.0)
@@ -341,8 +430,24 @@ def _froxel_kernel(nodes_ptr, lit_ptr, media_ptr, listed_ptr, camf_ptr, camd_ptr
 
 
 @_jit
-def _apply_kernel(out_ptr, nodes_ptr, depth_ptr, opaque_ptr, n_pixels, width, tile, nx, ny,
-                  slices, fx, fy, fs, log_near, depth_to_z, BLOCK: tl.constexpr):
+def _apply_kernel(
+    out_ptr,
+    nodes_ptr,
+    depth_ptr,
+    opaque_ptr,
+    n_pixels,
+    width,
+    tile,
+    nx,
+    ny,
+    slices,
+    fx,
+    fy,
+    fs,
+    log_near,
+    depth_to_z,
+    BLOCK: tl.constexpr,
+):
     """``apply_froxels``: opaque * T + L, (L, T) trilinear in the nodes at the pixel's
     view depth (clamped to near .. far) and its position across the tiles."""
     p = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
@@ -384,8 +489,11 @@ def _apply_kernel(out_ptr, nodes_ptr, depth_ptr, opaque_ptr, n_pixels, width, ti
         gz = iz + (jz - iz) * ba
         gy = iy + (jy - iy) * bb
         gx = ix + (jx - ix) * bc
-        w = ((1 - ba) + (2 * ba - 1) * az) * ((1 - bb) + (2 * bb - 1) * ay) \
+        w = (
+            ((1 - ba) + (2 * ba - 1) * az)
+            * ((1 - bb) + (2 * bb - 1) * ay)
             * ((1 - bc) + (2 * bc - 1) * ax)
+        )
         base = nodes_ptr + 4 * ((gz * ny + gy) * nx + gx)
         l0 += tl.load(base + 0, mask=live, other=0.0) * w
         l1 += tl.load(base + 1, mask=live, other=0.0) * w

@@ -28,13 +28,22 @@ from course.kernels.triton_intersect import _jit, tl
 #   (VOL_I): perspective 0, data offset 1, resolution 2, depth samples 3;
 # * the camera, float32 (CAM_F) and float64 (CAM_D): eye 0-2, right 3-5, up 6-8, forward
 #   9-11, half width 12, half height 13 of the image plane at unit depth.
-SIZES = {"MED_F": 32, "MED_I": 8, "LIGHT_F": 16, "LIGHT_I": 4, "LIGHT_D": 8, "VOL_F": 20,
-         "VOL_I": 4, "CAM_F": 16, "CAM_D": 16}
+SIZES = {
+    "MED_F": 32,
+    "MED_I": 8,
+    "LIGHT_F": 16,
+    "LIGHT_I": 4,
+    "LIGHT_D": 8,
+    "VOL_F": 20,
+    "VOL_I": 4,
+    "CAM_F": 16,
+    "CAM_D": 16,
+}
 # Kernels read module-level numbers only as constexpr.
 _const = tl.constexpr if tl is not None else float
 MED_F, MED_I, LIGHT_F, LIGHT_I, LIGHT_D, VOL_F, VOL_I = (
-    _const(SIZES[k]) for k in ("MED_F", "MED_I", "LIGHT_F", "LIGHT_I", "LIGHT_D", "VOL_F",
-                               "VOL_I"))
+    _const(SIZES[k]) for k in ("MED_F", "MED_I", "LIGHT_F", "LIGHT_I", "LIGHT_D", "VOL_F", "VOL_I")
+)
 FOUR_PI = _const(4 * math.pi)
 MIN_DISTANCE = _const(MIN_LIGHT_DISTANCE)
 K_MAX = _const(SCHLICK_K_MAX)
@@ -119,12 +128,15 @@ def _media(px, py, pz, medf_ptr, medi_ptr, tex_ptr, n_media, live):
             rx = px - tl.load(row + 10)
             ry = py - tl.load(row + 11)
             rz = pz - tl.load(row + 12)
-            lx = (rx * tl.load(row + 13) + ry * tl.load(row + 14) + rz * tl.load(row + 15)) \
-                / tl.load(row + 22)
-            ly = (rx * tl.load(row + 16) + ry * tl.load(row + 17) + rz * tl.load(row + 18)) \
-                / tl.load(row + 23)
-            lz = (rx * tl.load(row + 19) + ry * tl.load(row + 20) + rz * tl.load(row + 21)) \
-                / tl.load(row + 24)
+            lx = (
+                rx * tl.load(row + 13) + ry * tl.load(row + 14) + rz * tl.load(row + 15)
+            ) / tl.load(row + 22)
+            ly = (
+                rx * tl.load(row + 16) + ry * tl.load(row + 17) + rz * tl.load(row + 18)
+            ) / tl.load(row + 23)
+            lz = (
+                rx * tl.load(row + 19) + ry * tl.load(row + 20) + rz * tl.load(row + 21)
+            ) / tl.load(row + 24)
             if kind == 2:
                 inside = (tl.abs(lx) <= 1.0) & (tl.abs(ly) <= 1.0) & (tl.abs(lz) <= 1.0)
             else:
@@ -136,10 +148,17 @@ def _media(px, py, pz, medf_ptr, medi_ptr, tex_ptr, n_media, live):
                 tx = tl.load(irow + 2)
                 ty = tl.load(irow + 3)
                 tz = tl.load(irow + 4)
-                density = _texture(tex_ptr, tl.load(irow + 1), tx, ty, tz,
-                                   (lx + 1.0) / 2.0 * tx.to(tl.float32),
-                                   (ly + 1.0) / 2.0 * ty.to(tl.float32),
-                                   (lz + 1.0) / 2.0 * tz.to(tl.float32), inside)
+                density = _texture(
+                    tex_ptr,
+                    tl.load(irow + 1),
+                    tx,
+                    ty,
+                    tz,
+                    (lx + 1.0) / 2.0 * tx.to(tl.float32),
+                    (ly + 1.0) / 2.0 * ty.to(tl.float32),
+                    (lz + 1.0) / 2.0 * tz.to(tl.float32),
+                    inside,
+                )
                 w = w * density
         s0 += w * tl.load(row + 0)
         s1 += w * tl.load(row + 1)
@@ -209,15 +228,17 @@ def _transmittance_lookup(volf_ptr, voli_ptr, vdata_ptr, v, px, py, pz, live):
     inside = (tl.abs(a) <= 1.0) & (tl.abs(b) <= 1.0)
     ca = tl.where(inside, (a + 1.0) / 2.0 * fres, 0.0)
     cb = tl.where(inside, (b + 1.0) / 2.0 * fres, 0.0)
-    cd = tl.where(inside, (depth - tl.load(row + 13)) / tl.load(row + 14)
-                  * (k - 1).to(tl.float32) + 0.5, 0.0)
+    cd = tl.where(
+        inside, (depth - tl.load(row + 13)) / tl.load(row + 14) * (k - 1).to(tl.float32) + 0.5, 0.0
+    )
     t = _texture(vdata_ptr, tl.load(irow + 1), res, res, k, ca, cb, cd, live)
     return tl.where(inside, t, 1.0)
 
 
 @_jit
-def _segment_transmittance(ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, size_z,
-                           px, py, pz, qx, qy, qz, steps, live):
+def _segment_transmittance(
+    ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, size_z, px, py, pz, qx, qy, qz, steps, live
+):
     """``light_transmittance``: exp(-optical depth) from points p to q through the
     extinction volume over the box ``lo .. lo + size`` (0 outside), midpoint rule with
     ``steps`` steps over the part of the segment inside the box (slab test)."""
@@ -257,10 +278,10 @@ def _segment_transmittance(ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, s
         lx = tl.div_rn(px + t * rx - lo_x, size_x)
         ly = tl.div_rn(py + t * ry - lo_y, size_y)
         lz = tl.div_rn(pz + t * rz - lo_z, size_z)
-        inside = (lx >= 0.0) & (lx <= 1.0) & (ly >= 0.0) & (ly <= 1.0) & (lz >= 0.0) \
-            & (lz <= 1.0)
-        sigma = _texture(ext_ptr, 0, ext_res, ext_res, ext_res, lx * fres, ly * fres,
-                         lz * fres, run & inside)
+        inside = (lx >= 0.0) & (lx <= 1.0) & (ly >= 0.0) & (ly <= 1.0) & (lz >= 0.0) & (lz <= 1.0)
+        sigma = _texture(
+            ext_ptr, 0, ext_res, ext_res, ext_res, lx * fres, ly * fres, lz * fres, run & inside
+        )
         depth += tl.where(inside, sigma, 0.0)
     length = tl.sqrt(rx * rx + ry * ry + rz * rz)
     return tl.exp(-depth * (span * length / steps))
@@ -270,7 +291,16 @@ def _segment_transmittance(ext_ptr, ext_res, lo_x, lo_y, lo_z, size_x, size_y, s
 def _phi(tau):
     """(1 - e^-x) / x: its Taylor series below x = 0.25 (no 0 / 0, no cancellation in
     thin media; the first dropped term is below 1e-10), the ratio above."""
-    series = 1.0 - tau / 2.0 * (1.0 - tau / 3.0 * (1.0 - tau / 4.0 * (1.0 - tau / 5.0 * (
-        1.0 - tau / 6.0 * (1.0 - tau / 7.0 * (1.0 - tau / 8.0))))))
+    series = 1.0 - tau / 2.0 * (
+        1.0
+        - tau
+        / 3.0
+        * (
+            1.0
+            - tau
+            / 4.0
+            * (1.0 - tau / 5.0 * (1.0 - tau / 6.0 * (1.0 - tau / 7.0 * (1.0 - tau / 8.0))))
+        )
+    )
     safe = tl.where(tau < 0.25, 1.0, tau)
     return tl.where(tau < 0.25, series, (1.0 - tl.exp(-safe)) / safe)

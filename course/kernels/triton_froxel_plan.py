@@ -35,18 +35,19 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
         return per_scene[key]
     f32, f64 = torch.float32, torch.float64
     eye, right, up, fwd, (hw, hh) = grid.axes(f64)
-    camd = torch.zeros(SIZES['CAM_D'], dtype=f64)
+    camd = torch.zeros(SIZES["CAM_D"], dtype=f64)
     camd[0:12] = torch.cat([eye, right, up, fwd])
     camd[12], camd[13] = hw, hh
-    camf = torch.zeros(SIZES['CAM_F'], dtype=f32)
+    camf = torch.zeros(SIZES["CAM_F"], dtype=f32)
     camf[0:12] = camd[0:12].to(f32)
     camf[12], camf[13] = hw, hh
-    z = grid.near * torch.exp(torch.arange(grid.slices + 1, dtype=f64) / grid.slices
-                              * math.log(grid.far / grid.near))
+    z = grid.near * torch.exp(
+        torch.arange(grid.slices + 1, dtype=f64) / grid.slices * math.log(grid.far / grid.near)
+    )
     z[0], z[-1] = grid.near, grid.far
 
-    medf = torch.zeros(max(len(scene.media), 1), SIZES['MED_F'], dtype=f32)
-    medi = torch.zeros(max(len(scene.media), 1), SIZES['MED_I'], dtype=torch.int32)
+    medf = torch.zeros(max(len(scene.media), 1), SIZES["MED_F"], dtype=f32)
+    medi = torch.zeros(max(len(scene.media), 1), SIZES["MED_I"], dtype=torch.int32)
     textures, tex_offset = [], 0
     for m, medium in enumerate(scene.media):
         sigma_s = torch.tensor(medium.scattering, dtype=f32)
@@ -74,23 +75,28 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
     view_lo, view_hi = frustum_bounds(grid)
     center = tuple((a + b) / 2 for a, b in zip(view_lo, view_hi))
     radius = 0.5 * math.dist(view_lo, view_hi)
-    shadow_lights = [n for n, light in enumerate(scene.lights)
-                     if isinstance(light, DirectionalLight) and light.shadows
-                     and scene.occluders]
+    shadow_lights = [
+        n
+        for n, light in enumerate(scene.lights)
+        if isinstance(light, DirectionalLight) and light.shadows and scene.occluders
+    ]
     # The extinction volume over the media in view (volume_bounds), as light_froxels.
     bounds = volume_bounds(scene, grid) if volumetric_shadows and scene.lights else None
     extinction = bounds is not None
     lo, hi = bounds if extinction else (view_lo, view_hi)
     if extinction and volume_resolution is None:
         volume_resolution = auto_volume_resolution(scene, lo, hi)
-    volume_lights = [n for n, light in enumerate(scene.lights)
-                     if extinction and not isinstance(light, PointLight)]
+    volume_lights = [
+        n
+        for n, light in enumerate(scene.lights)
+        if extinction and not isinstance(light, PointLight)
+    ]
     n_vol = len(shadow_lights) + len(volume_lights)
-    volf = torch.zeros(max(n_vol, 1), SIZES['VOL_F'], dtype=f32)
-    voli = torch.zeros(max(n_vol, 1), SIZES['VOL_I'], dtype=torch.int32)
-    lightf = torch.zeros(max(len(scene.lights), 1), SIZES['LIGHT_F'], dtype=f32)
-    lighti = torch.full((max(len(scene.lights), 1), SIZES['LIGHT_I']), -1, dtype=torch.int32)
-    lightd = torch.zeros(max(len(scene.lights), 1), SIZES['LIGHT_D'], dtype=f64)
+    volf = torch.zeros(max(n_vol, 1), SIZES["VOL_F"], dtype=f32)
+    voli = torch.zeros(max(n_vol, 1), SIZES["VOL_I"], dtype=torch.int32)
+    lightf = torch.zeros(max(len(scene.lights), 1), SIZES["LIGHT_F"], dtype=f32)
+    lighti = torch.full((max(len(scene.lights), 1), SIZES["LIGHT_I"]), -1, dtype=torch.int32)
+    lightd = torch.zeros(max(len(scene.lights), 1), SIZES["LIGHT_D"], dtype=f64)
     data_offset = 0
 
     def volume(v, origin, axes, extent, near, far, persp, res, k, last):
@@ -110,11 +116,25 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
             for cx in (box.lo[0], box.hi[0]):
                 for cy in (box.lo[1], box.hi[1]):
                     for cz in (box.lo[2], box.hi[2]):
-                        lift = max(lift, (cx - center[0]) * toward[0] + (cy - center[1])
-                                   * toward[1] + (cz - center[2]) * toward[2])
+                        lift = max(
+                            lift,
+                            (cx - center[0]) * toward[0]
+                            + (cy - center[1]) * toward[1]
+                            + (cz - center[2]) * toward[2],
+                        )
         origin = tuple(c + (lift + 1.0) * t for c, t in zip(center, toward))
-        volume(v, origin, light_frame(tuple(-x for x in toward)), radius, 0.0, math.inf, 0,
-               shadow_resolution, 1, 4 * radius / shadow_resolution)
+        volume(
+            v,
+            origin,
+            light_frame(tuple(-x for x in toward)),
+            radius,
+            0.0,
+            math.inf,
+            0,
+            shadow_resolution,
+            1,
+            4 * radius / shadow_resolution,
+        )
         lighti[n, 1] = v
         v += 1
     first_volume = v
@@ -125,12 +145,31 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
         light = scene.lights[n]
         if isinstance(light, DirectionalLight):
             origin = tuple(c + box_radius * t for c, t in zip(box_center, light.direction))
-            volume(v, origin, light_frame(tuple(-x for x in light.direction)), box_radius,
-                   0.0, 2 * box_radius, 0, volume_resolution, k, 2 * box_radius / (k - 1))
+            volume(
+                v,
+                origin,
+                light_frame(tuple(-x for x in light.direction)),
+                box_radius,
+                0.0,
+                2 * box_radius,
+                0,
+                volume_resolution,
+                k,
+                2 * box_radius / (k - 1),
+            )
         else:
-            volume(v, light.position, light_frame(light.direction),
-                   math.tan(math.radians(light.outer_deg)), 0.0, light.range, 1,
-                   volume_resolution, k, light.range / (k - 1))
+            volume(
+                v,
+                light.position,
+                light_frame(light.direction),
+                math.tan(math.radians(light.outer_deg)),
+                0.0,
+                light.range,
+                1,
+                volume_resolution,
+                k,
+                light.range / (k - 1),
+            )
         lighti[n, 2] = v
         v += 1
 
@@ -161,16 +200,29 @@ def _plan(scene, grid, shadow_resolution, volume_resolution, volumetric_shadows,
     size32 = torch.tensor(hi, dtype=f32) - lo32
     boxes = torch.tensor([[*b.lo, *b.hi] for b in scene.occluders] or [[0.0] * 6], dtype=f32)
     plan = {
-        "camf": camf.to(device), "camd": camd.to(device), "dz": (z[1:] - z[:-1]).to(device),
-        "medf": medf.to(device), "medi": medi.to(device), "textures": textures,
-        "lightf": lightf.to(device), "lighti": lighti.to(device),
-        "lightd": lightd.to(device), "volf": volf.to(device), "voli": voli.to(device),
-        "boxes": boxes.to(device), "n_boxes": len(scene.occluders),
-        "n_maps": len(shadow_lights), "n_volumes": len(volume_lights),
-        "first_volume": first_volume, "data_size": max(data_offset, 1),
-        "extinction": extinction, "bounds": bounds, "lo": lo32.tolist(),
+        "camf": camf.to(device),
+        "camd": camd.to(device),
+        "dz": (z[1:] - z[:-1]).to(device),
+        "medf": medf.to(device),
+        "medi": medi.to(device),
+        "textures": textures,
+        "lightf": lightf.to(device),
+        "lighti": lighti.to(device),
+        "lightd": lightd.to(device),
+        "volf": volf.to(device),
+        "voli": voli.to(device),
+        "boxes": boxes.to(device),
+        "n_boxes": len(scene.occluders),
+        "n_maps": len(shadow_lights),
+        "n_volumes": len(volume_lights),
+        "first_volume": first_volume,
+        "data_size": max(data_offset, 1),
+        "extinction": extinction,
+        "bounds": bounds,
+        "lo": lo32.tolist(),
         "size": size32.tolist(),
-        "shadow_resolution": shadow_resolution, "volume_resolution": volume_resolution,
+        "shadow_resolution": shadow_resolution,
+        "volume_resolution": volume_resolution,
     }
     per_scene[key] = plan
     return plan

@@ -96,6 +96,7 @@ DEFAULT_UNROLL = 4
 # Triangle layouts (built once per mesh, like an acceleration structure)
 # --------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class TriangleLayout:
     """Per-triangle data in structure-of-arrays form, padded for the kernels.
@@ -117,11 +118,14 @@ class TriangleLayout:
 
 def _check_triangles(triangles: torch.Tensor) -> torch.Tensor:
     if not isinstance(triangles, torch.Tensor):
-        raise TypeError(f"triangles: expected a (M, 3, 3) float tensor or a TriangleLayout, "
-                        f"got {type(triangles).__name__}")
+        raise TypeError(
+            f"triangles: expected a (M, 3, 3) float tensor or a TriangleLayout, "
+            f"got {type(triangles).__name__}"
+        )
     if triangles.ndim != 3 or triangles.shape[1:] != (3, 3):
-        raise ValueError(f"triangles: expected shape (M, 3, 3) (corners x xyz), "
-                         f"got {tuple(triangles.shape)}")
+        raise ValueError(
+            f"triangles: expected shape (M, 3, 3) (corners x xyz), got {tuple(triangles.shape)}"
+        )
     if not triangles.is_floating_point():
         raise TypeError(f"triangles: expected a floating-point tensor, got {triangles.dtype}")
     return triangles
@@ -163,8 +167,10 @@ def unit_layout(triangles: torch.Tensor) -> TriangleLayout:
     e1, e2 = v1 - v0, v2 - v0
     n = torch.linalg.cross(e1, e2)
     n2 = (n * n).sum(-1, keepdim=True)
-    rot = torch.stack([torch.linalg.cross(e2, n), torch.linalg.cross(n, e1), n],
-                      dim=1) / n2[..., None]
+    rot = (
+        torch.stack([torch.linalg.cross(e2, n), torch.linalg.cross(n, e1), n], dim=1)
+        / n2[..., None]
+    )
     shift = -(rot @ v0[..., None])  # (M, 3, 1): maps v0 to the origin
     rows = torch.cat([rot, shift], dim=2).reshape(-1, 12)
     never = torch.tensor([0.0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, 1], dtype=torch.float64)
@@ -177,28 +183,43 @@ def unit_layout(triangles: torch.Tensor) -> TriangleLayout:
 # Kernels
 # --------------------------------------------------------------------------------------
 
+
 @_jit
 def _load_mt(ptr, stride, idx):
     """Column ``idx`` of the (9, stride) Möller–Trumbore layout: v0, e1, e2.
 
     ``idx`` is a scalar (one triangle, broadcast to the ray block) in the loop and a
     per-ray vector (each ray's winner: a gather) in the epilogue."""
-    return (tl.load(ptr + 0 * stride + idx), tl.load(ptr + 1 * stride + idx),
-            tl.load(ptr + 2 * stride + idx), tl.load(ptr + 3 * stride + idx),
-            tl.load(ptr + 4 * stride + idx), tl.load(ptr + 5 * stride + idx),
-            tl.load(ptr + 6 * stride + idx), tl.load(ptr + 7 * stride + idx),
-            tl.load(ptr + 8 * stride + idx))
+    return (
+        tl.load(ptr + 0 * stride + idx),
+        tl.load(ptr + 1 * stride + idx),
+        tl.load(ptr + 2 * stride + idx),
+        tl.load(ptr + 3 * stride + idx),
+        tl.load(ptr + 4 * stride + idx),
+        tl.load(ptr + 5 * stride + idx),
+        tl.load(ptr + 6 * stride + idx),
+        tl.load(ptr + 7 * stride + idx),
+        tl.load(ptr + 8 * stride + idx),
+    )
 
 
 @_jit
 def _load_unit(ptr, stride, idx):
     """Column ``idx`` of the (12, stride) unit-triangle layout: the 3x4 transform by rows."""
-    return (tl.load(ptr + 0 * stride + idx), tl.load(ptr + 1 * stride + idx),
-            tl.load(ptr + 2 * stride + idx), tl.load(ptr + 3 * stride + idx),
-            tl.load(ptr + 4 * stride + idx), tl.load(ptr + 5 * stride + idx),
-            tl.load(ptr + 6 * stride + idx), tl.load(ptr + 7 * stride + idx),
-            tl.load(ptr + 8 * stride + idx), tl.load(ptr + 9 * stride + idx),
-            tl.load(ptr + 10 * stride + idx), tl.load(ptr + 11 * stride + idx))
+    return (
+        tl.load(ptr + 0 * stride + idx),
+        tl.load(ptr + 1 * stride + idx),
+        tl.load(ptr + 2 * stride + idx),
+        tl.load(ptr + 3 * stride + idx),
+        tl.load(ptr + 4 * stride + idx),
+        tl.load(ptr + 5 * stride + idx),
+        tl.load(ptr + 6 * stride + idx),
+        tl.load(ptr + 7 * stride + idx),
+        tl.load(ptr + 8 * stride + idx),
+        tl.load(ptr + 9 * stride + idx),
+        tl.load(ptr + 10 * stride + idx),
+        tl.load(ptr + 11 * stride + idx),
+    )
 
 
 @_jit
@@ -249,10 +270,22 @@ def _store_hits(t_ptr, id_ptr, u_ptr, v_ptr, ray, live, best_t, best_id, u, v):
 
 
 @_jit
-def _mt_closest_kernel(o_ptr, d_ptr, tmin_ptr, tmax_ptr, tri_ptr, t_ptr, id_ptr, u_ptr, v_ptr,
-                       n_rays, m_pad,
-                       BLOCK_RAYS: tl.constexpr, UNROLL: tl.constexpr,
-                       DIVISION_FREE: tl.constexpr):
+def _mt_closest_kernel(
+    o_ptr,
+    d_ptr,
+    tmin_ptr,
+    tmax_ptr,
+    tri_ptr,
+    t_ptr,
+    id_ptr,
+    u_ptr,
+    v_ptr,
+    n_rays,
+    m_pad,
+    BLOCK_RAYS: tl.constexpr,
+    UNROLL: tl.constexpr,
+    DIVISION_FREE: tl.constexpr,
+):
     ray = tl.program_id(0) * BLOCK_RAYS + tl.arange(0, BLOCK_RAYS)
     live = ray < n_rays
     ox, oy, oz, dx, dy, dz, t_lo, t_hi = _load_rays(o_ptr, d_ptr, tmin_ptr, tmax_ptr, ray, live)
@@ -270,8 +303,9 @@ def _mt_closest_kernel(o_ptr, d_ptr, tmin_ptr, tmax_ptr, tri_ptr, t_ptr, id_ptr,
         for k in tl.static_range(UNROLL):
             j = base + k
             v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z = _load_mt(tri_ptr, m_pad, j)
-            det, u_num, v_num, t_num = _mt_terms(ox, oy, oz, dx, dy, dz,
-                                                 v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z)
+            det, u_num, v_num, t_num = _mt_terms(
+                ox, oy, oz, dx, dy, dz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z
+            )
             if DIVISION_FREE:
                 # Fold det's sign into the numerators, then test u, v, t scaled by |det|:
                 # u >= 0, v >= 0, u + v <= 1, t_min <= t < best become comparisons of
@@ -282,8 +316,13 @@ def _mt_closest_kernel(o_ptr, d_ptr, tmin_ptr, tmax_ptr, tri_ptr, t_ptr, id_ptr,
                 su = tl.where(flip, -u_num, u_num)
                 sv = tl.where(flip, -v_num, v_num)
                 st = tl.where(flip, -t_num, t_num)
-                hit = ((su >= 0.0) & (sv >= 0.0) & (su + sv <= adet)
-                       & (st >= t_lo * adet) & (st * best_den < best_num * adet))
+                hit = (
+                    (su >= 0.0)
+                    & (sv >= 0.0)
+                    & (su + sv <= adet)
+                    & (st >= t_lo * adet)
+                    & (st * best_den < best_num * adet)
+                )
                 best_num = tl.where(hit, st, best_num)
                 best_den = tl.where(hit, adet, best_den)
             else:
@@ -302,16 +341,26 @@ def _mt_closest_kernel(o_ptr, d_ptr, tmin_ptr, tmax_ptr, tri_ptr, t_ptr, id_ptr,
     # Misses read column 0 (a layout always has one) and are overwritten by the store.
     winner = tl.maximum(best_id, 0)
     v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z = _load_mt(tri_ptr, m_pad, winner)
-    det, u_num, v_num, t_num = _mt_terms(ox, oy, oz, dx, dy, dz,
-                                         v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z)
+    det, u_num, v_num, t_num = _mt_terms(
+        ox, oy, oz, dx, dy, dz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z
+    )
     inv_det = 1.0 / det
-    _store_hits(t_ptr, id_ptr, u_ptr, v_ptr, ray, live, best_num / best_den, best_id,
-                u_num * inv_det, v_num * inv_det)
+    _store_hits(
+        t_ptr,
+        id_ptr,
+        u_ptr,
+        v_ptr,
+        ray,
+        live,
+        best_num / best_den,
+        best_id,
+        u_num * inv_det,
+        v_num * inv_det,
+    )
 
 
 @_jit
-def _unit_terms(ox, oy, oz, dx, dy, dz,
-                m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23):
+def _unit_terms(ox, oy, oz, dx, dy, dz, m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23):
     """Woop's unit-triangle test: transform the ray, intersect the plane z = 0.
 
     ``t = -o'z / d'z``; the hit point's ``(x, y)`` in triangle space are ``(u, v)``.
@@ -325,9 +374,21 @@ def _unit_terms(ox, oy, oz, dx, dy, dz,
 
 
 @_jit
-def _unit_closest_kernel(o_ptr, d_ptr, tmin_ptr, tmax_ptr, tri_ptr, t_ptr, id_ptr, u_ptr, v_ptr,
-                         n_rays, m_pad,
-                         BLOCK_RAYS: tl.constexpr, UNROLL: tl.constexpr):
+def _unit_closest_kernel(
+    o_ptr,
+    d_ptr,
+    tmin_ptr,
+    tmax_ptr,
+    tri_ptr,
+    t_ptr,
+    id_ptr,
+    u_ptr,
+    v_ptr,
+    n_rays,
+    m_pad,
+    BLOCK_RAYS: tl.constexpr,
+    UNROLL: tl.constexpr,
+):
     ray = tl.program_id(0) * BLOCK_RAYS + tl.arange(0, BLOCK_RAYS)
     live = ray < n_rays
     ox, oy, oz, dx, dy, dz, t_lo, t_hi = _load_rays(o_ptr, d_ptr, tmin_ptr, tmax_ptr, ray, live)
@@ -338,10 +399,12 @@ def _unit_closest_kernel(o_ptr, d_ptr, tmin_ptr, tmax_ptr, tri_ptr, t_ptr, id_pt
     while base < m_pad:
         for k in tl.static_range(UNROLL):
             j = base + k
-            (m00, m01, m02, m03, m10, m11, m12, m13,
-             m20, m21, m22, m23) = _load_unit(tri_ptr, m_pad, j)
-            t, u, v = _unit_terms(ox, oy, oz, dx, dy, dz,
-                                  m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23)
+            (m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23) = _load_unit(
+                tri_ptr, m_pad, j
+            )
+            t, u, v = _unit_terms(
+                ox, oy, oz, dx, dy, dz, m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23
+            )
             # A ray parallel to the plane gives t = +-inf or NaN and u, v = NaN: no hit.
             hit = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t >= t_lo) & (t < best_t)
             best_t = tl.where(hit, t, best_t)
@@ -349,10 +412,12 @@ def _unit_closest_kernel(o_ptr, d_ptr, tmin_ptr, tmax_ptr, tri_ptr, t_ptr, id_pt
         base += UNROLL
 
     winner = tl.maximum(best_id, 0)
-    (m00, m01, m02, m03, m10, m11, m12, m13,
-     m20, m21, m22, m23) = _load_unit(tri_ptr, m_pad, winner)
-    t, u, v = _unit_terms(ox, oy, oz, dx, dy, dz,
-                          m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23)
+    (m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23) = _load_unit(
+        tri_ptr, m_pad, winner
+    )
+    t, u, v = _unit_terms(
+        ox, oy, oz, dx, dy, dz, m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23
+    )
     _store_hits(t_ptr, id_ptr, u_ptr, v_ptr, ray, live, best_t, best_id, u, v)
 
 
@@ -360,10 +425,13 @@ def _unit_closest_kernel(o_ptr, d_ptr, tmin_ptr, tmax_ptr, tri_ptr, t_ptr, id_pt
 # Launchers
 # --------------------------------------------------------------------------------------
 
+
 def _require_triton() -> None:
     if triton is None:
-        raise ImportError("the Triton kernels need the `triton` package (pip install triton; "
-                          "it ships with torch's CUDA wheels on Linux)") from _TRITON_IMPORT_ERROR
+        raise ImportError(
+            "the Triton kernels need the `triton` package (pip install triton; "
+            "it ships with torch's CUDA wheels on Linux)"
+        ) from _TRITON_IMPORT_ERROR
 
 
 def interpreting() -> bool:
@@ -397,19 +465,33 @@ def _rays_arg(x, name: str, n: int, device: torch.device) -> torch.Tensor:
     return torch.full((n,), float(x), dtype=torch.float32, device=device)
 
 
-def _launch(kernel, kind: str, origins, directions, triangles, t_min, t_max,
-            block_rays: int, num_warps: int, unroll: int, **constexprs):
+def _launch(
+    kernel,
+    kind: str,
+    origins,
+    directions,
+    triangles,
+    t_min,
+    t_max,
+    block_rays: int,
+    num_warps: int,
+    unroll: int,
+    **constexprs,
+):
     """Validate, launch one kernel over all rays; return ((t, id, u, v), compiled handle)."""
     _require_triton()
     for name, x in (("origins", origins), ("directions", directions)):
         if not isinstance(x, torch.Tensor):
             raise TypeError(f"{name}: expected a (N, 3) float tensor, got {type(x).__name__}")
         if x.ndim != 2 or x.shape[1] != 3 or not x.is_floating_point():
-            raise ValueError(f"{name}: expected a (N, 3) float tensor, "
-                             f"got shape {tuple(x.shape)} {x.dtype}")
+            raise ValueError(
+                f"{name}: expected a (N, 3) float tensor, got shape {tuple(x.shape)} {x.dtype}"
+            )
     if origins.shape != directions.shape:
-        raise ValueError(f"directions: expected shape {tuple(origins.shape)} like origins, "
-                         f"got {tuple(directions.shape)}")
+        raise ValueError(
+            f"directions: expected shape {tuple(origins.shape)} like origins, "
+            f"got {tuple(directions.shape)}"
+        )
     if not _is_pow2(block_rays):
         raise ValueError(f"block_rays: expected a power of two, got {block_rays!r}")
     if not _is_pow2(num_warps) or num_warps > 32:
@@ -427,14 +509,17 @@ def _launch(kernel, kind: str, origins, directions, triangles, t_min, t_max,
     t_lo = _rays_arg(t_min, "t_min", n, device)
     # The kernels keep the best t so far and accept strictly nearer hits (ties keep the
     # lower index); starting from the next float above t_max makes t == t_max a hit.
-    t_hi = torch.nextafter(_rays_arg(t_max, "t_max", n, device),
-                           torch.tensor(math.inf, device=device))
+    t_hi = torch.nextafter(
+        _rays_arg(t_max, "t_max", n, device), torch.tensor(math.inf, device=device)
+    )
     for name, x in (("directions", directions), ("triangles", layout.data)):
         if x.device != device:
             raise ValueError(f"{name}: expected device {device} like origins, got {x.device}")
     if not interpreting() and device.type != "cuda":
-        raise ValueError(f"origins: the compiled Triton kernels need CUDA tensors, got {device} "
-                         "(for the CPU, set TRITON_INTERPRET=1 before importing triton)")
+        raise ValueError(
+            f"origins: the compiled Triton kernels need CUDA tensors, got {device} "
+            "(for the CPU, set TRITON_INTERPRET=1 before importing triton)"
+        )
     o = origins.to(torch.float32).contiguous()
     d = directions.to(torch.float32).contiguous()
     t = torch.empty(n, dtype=torch.float32, device=device)
@@ -445,17 +530,38 @@ def _launch(kernel, kind: str, origins, directions, triangles, t_min, t_max,
     if n > 0:
         grid = (triton.cdiv(n, block_rays),)
         with _ieee_quiet():
-            handle = kernel[grid](o, d, t_lo, t_hi, layout.data, t, ids, u, v,
-                                  n, layout.padded_count,
-                                  BLOCK_RAYS=block_rays, UNROLL=unroll, num_warps=num_warps,
-                                  **constexprs)
+            handle = kernel[grid](
+                o,
+                d,
+                t_lo,
+                t_hi,
+                layout.data,
+                t,
+                ids,
+                u,
+                v,
+                n,
+                layout.padded_count,
+                BLOCK_RAYS=block_rays,
+                UNROLL=unroll,
+                num_warps=num_warps,
+                **constexprs,
+            )
     return (t, ids, u, v), handle
 
 
-def mt_closest_hit_triton(origins: torch.Tensor, directions: torch.Tensor, triangles,
-                          t_min=0.0, t_max=math.inf, *, block_rays: int = DEFAULT_BLOCK_RAYS,
-                          num_warps: int = DEFAULT_NUM_WARPS, unroll: int = DEFAULT_UNROLL,
-                          division_free: bool = False):
+def mt_closest_hit_triton(
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    triangles,
+    t_min=0.0,
+    t_max=math.inf,
+    *,
+    block_rays: int = DEFAULT_BLOCK_RAYS,
+    num_warps: int = DEFAULT_NUM_WARPS,
+    unroll: int = DEFAULT_UNROLL,
+    division_free: bool = False,
+):
     """Closest hit of each ray among all triangles, Möller–Trumbore, one Triton program
     per block of rays looping over every triangle.
 
@@ -473,26 +579,56 @@ def mt_closest_hit_triton(origins: torch.Tensor, directions: torch.Tensor, trian
     Returns ``(t, triangle, u, v)``: (N,) float32 (inf on a miss), (N,) int64 (-1),
     (N,) float32 barycentrics of v1 and v2 (0 on a miss).
     """
-    return _launch(_mt_closest_kernel, "mt", origins, directions, triangles, t_min, t_max,
-                   block_rays, num_warps, unroll, DIVISION_FREE=bool(division_free))[0]
+    return _launch(
+        _mt_closest_kernel,
+        "mt",
+        origins,
+        directions,
+        triangles,
+        t_min,
+        t_max,
+        block_rays,
+        num_warps,
+        unroll,
+        DIVISION_FREE=bool(division_free),
+    )[0]
 
 
-def unit_closest_hit_triton(origins: torch.Tensor, directions: torch.Tensor, triangles,
-                            t_min=0.0, t_max=math.inf, *, block_rays: int = DEFAULT_BLOCK_RAYS,
-                            num_warps: int = DEFAULT_NUM_WARPS, unroll: int = DEFAULT_UNROLL):
+def unit_closest_hit_triton(
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    triangles,
+    t_min=0.0,
+    t_max=math.inf,
+    *,
+    block_rays: int = DEFAULT_BLOCK_RAYS,
+    num_warps: int = DEFAULT_NUM_WARPS,
+    unroll: int = DEFAULT_UNROLL,
+):
     """Closest hit by Woop's unit-triangle test with a precomputed 3x4 transform per
     triangle (12 floats), one Triton program per block of rays.
 
     triangles: (M, 3, 3) float corners, or ``unit_layout(triangles)``. Everything else
     as in ``mt_closest_hit_triton``; one fast division per pair (``t = -o'z / d'z``).
     """
-    return _launch(_unit_closest_kernel, "unit", origins, directions, triangles, t_min, t_max,
-                   block_rays, num_warps, unroll)[0]
+    return _launch(
+        _unit_closest_kernel,
+        "unit",
+        origins,
+        directions,
+        triangles,
+        t_min,
+        t_max,
+        block_rays,
+        num_warps,
+        unroll,
+    )[0]
 
 
 # --------------------------------------------------------------------------------------
 # What the compiler made of it
 # --------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class KernelInfo:
@@ -523,19 +659,24 @@ def _field(obj, name: str):
     return getattr(obj, name, None)
 
 
-def compiled_kernel_info(kernel_fn, origins, directions, triangles, t_min=0.0, t_max=math.inf,
-                         **launch) -> KernelInfo:
+def compiled_kernel_info(
+    kernel_fn, origins, directions, triangles, t_min=0.0, t_max=math.inf, **launch
+) -> KernelInfo:
     """Launch ``kernel_fn`` (``mt_closest_hit_triton`` or ``unit_closest_hit_triton``) once
     with these arguments and report the compiled kernel's registers and spills.
 
     ``launch`` takes the kernel's keywords (block_rays, num_warps, unroll, division_free).
     Under the interpreter there is no compiled kernel: n_regs, n_spills, shared_bytes are None.
     """
-    launchers = {mt_closest_hit_triton: (_mt_closest_kernel, "mt"),
-                 unit_closest_hit_triton: (_unit_closest_kernel, "unit")}
+    launchers = {
+        mt_closest_hit_triton: (_mt_closest_kernel, "mt"),
+        unit_closest_hit_triton: (_unit_closest_kernel, "unit"),
+    }
     if kernel_fn not in launchers:
-        raise ValueError("kernel_fn: expected mt_closest_hit_triton or unit_closest_hit_triton, "
-                         f"got {getattr(kernel_fn, '__name__', kernel_fn)!r}")
+        raise ValueError(
+            "kernel_fn: expected mt_closest_hit_triton or unit_closest_hit_triton, "
+            f"got {getattr(kernel_fn, '__name__', kernel_fn)!r}"
+        )
     kernel, kind = launchers[kernel_fn]
     block_rays = launch.pop("block_rays", DEFAULT_BLOCK_RAYS)
     num_warps = launch.pop("num_warps", DEFAULT_NUM_WARPS)
@@ -543,14 +684,29 @@ def compiled_kernel_info(kernel_fn, origins, directions, triangles, t_min=0.0, t
     constexprs = {"DIVISION_FREE": bool(launch.pop("division_free", False))} if kind == "mt" else {}
     if launch:
         raise TypeError(f"unexpected launch keywords: {sorted(launch)}")
-    _, handle = _launch(kernel, kind, origins, directions, triangles, t_min, t_max,
-                        block_rays, num_warps, unroll, **constexprs)
+    _, handle = _launch(
+        kernel,
+        kind,
+        origins,
+        directions,
+        triangles,
+        t_min,
+        t_max,
+        block_rays,
+        num_warps,
+        unroll,
+        **constexprs,
+    )
     if handle is not None and _field(handle, "n_regs") is None:
         # Registers are known once the binary is loaded, which recent Tritons do lazily.
         init = getattr(handle, "_init_handles", None)
         if callable(init):
             init()
     metadata = _field(handle, "metadata")
-    return KernelInfo(n_regs=_field(handle, "n_regs"), n_spills=_field(handle, "n_spills"),
-                      num_warps=num_warps, block_rays=block_rays,
-                      shared_bytes=_field(metadata, "shared"))
+    return KernelInfo(
+        n_regs=_field(handle, "n_regs"),
+        n_spills=_field(handle, "n_spills"),
+        num_warps=num_warps,
+        block_rays=block_rays,
+        shared_bytes=_field(metadata, "shared"),
+    )

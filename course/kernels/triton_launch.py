@@ -34,15 +34,22 @@ def _check_refill(refill, programs, block: int, loop: str) -> int:
     if refill is None:
         refill = min(DEFAULT_REFILL, block) if loop == "while" else 0
     if isinstance(refill, bool) or not isinstance(refill, int) or not 0 <= refill <= block:
-        raise ValueError(f"refill: expected None, 0 (off) or free lanes from 1 to block "
-                         f"({block}), got {refill!r}")
+        raise ValueError(
+            f"refill: expected None, 0 (off) or free lanes from 1 to block "
+            f"({block}), got {refill!r}"
+        )
     if refill and loop != "while":
-        raise ValueError(f"refill: the persistent walk runs the while-while loop, got "
-                         f"loop={loop!r} (refill=0 or None for the if-if loop)")
-    if programs is not None and (not refill or isinstance(programs, bool)
-                                 or not isinstance(programs, int) or programs < 1):
-        raise ValueError(f"programs: expected None, or an int >= 1 with refill, got "
-                         f"{programs!r} (refill={refill})")
+        raise ValueError(
+            f"refill: the persistent walk runs the while-while loop, got "
+            f"loop={loop!r} (refill=0 or None for the if-if loop)"
+        )
+    if programs is not None and (
+        not refill or isinstance(programs, bool) or not isinstance(programs, int) or programs < 1
+    ):
+        raise ValueError(
+            f"programs: expected None, or an int >= 1 with refill, got "
+            f"{programs!r} (refill={refill})"
+        )
     return refill
 
 
@@ -59,19 +66,24 @@ def _check_launch(block: int, num_warps: int) -> None:
         if isinstance(x, bool) or not isinstance(x, int) or x < 1 or x & (x - 1):
             raise ValueError(f"{name}: expected a power of two, got {x!r}")
     if block < 32 * num_warps:
-        raise ValueError(f"block: expected at least 32 lanes per warp ({32 * num_warps} for "
-                         f"num_warps={num_warps}), got {block}")
+        raise ValueError(
+            f"block: expected at least 32 lanes per warp ({32 * num_warps} for "
+            f"num_warps={num_warps}), got {block}"
+        )
 
 
 def _device_check(device: torch.device) -> None:
     if not interpreting() and device.type != "cuda":
-        raise ValueError(f"origins: the compiled Triton kernels need CUDA tensors, got {device} "
-                         "(for the CPU, set TRITON_INTERPRET=1 before importing triton, or use "
-                         "course.kernels.flat_bvh.trace_flat_torch)")
+        raise ValueError(
+            f"origins: the compiled Triton kernels need CUDA tensors, got {device} "
+            "(for the CPU, set TRITON_INTERPRET=1 before importing triton, or use "
+            "course.kernels.flat_bvh.trace_flat_torch)"
+        )
 
 
-def _stack(n: int, block: int, device, bvh: FlatBVH,
-           local: bool = False) -> tuple[torch.Tensor, int]:
+def _stack(
+    n: int, block: int, device, bvh: FlatBVH, local: bool = False
+) -> tuple[torch.Tensor, int]:
     """The per-lane stacks: (entries, lanes) int32, lanes = n rounded up to blocks;
     near-child-first traversal pushes at most one entry per interior level (depth - 1).
     local: the kernel keeps its stacks in local memory, so the buffer is a (1, 1)
@@ -108,14 +120,15 @@ class TracerKernelInfo:
 
         if self.n_regs is None:
             return None
-        return occupancy(arch or HOPPER_H100, self.n_regs, 32 * self.num_warps,
-                         self.shared_bytes or 0)
+        return occupancy(
+            arch or HOPPER_H100, self.n_regs, 32 * self.num_warps, self.shared_bytes or 0
+        )
 
 
-def _info(name: str, handle, num_warps: int, block: int,
-          stack_words: int = 0) -> TracerKernelInfo:
+def _info(name: str, handle, num_warps: int, block: int, stack_words: int = 0) -> TracerKernelInfo:
     """The kernel info of a launch's ``handle``; stack_words: the words of local memory
     the kernel declares itself (its local stack), not spills."""
+
     def field(obj, key):
         if obj is None:
             return None
@@ -126,21 +139,30 @@ def _info(name: str, handle, num_warps: int, block: int,
         if callable(init):
             init()
     words = field(handle, "n_spills")  # Triton: local memory bytes / 4
-    return TracerKernelInfo(name, field(handle, "n_regs"),
-                            None if words is None else max(0, words - stack_words),
-                            field(field(handle, "metadata"), "shared"), num_warps, block,
-                            None if words is None else 4 * words)
+    return TracerKernelInfo(
+        name,
+        field(handle, "n_regs"),
+        None if words is None else max(0, words - stack_words),
+        field(field(handle, "metadata"), "shared"),
+        num_warps,
+        block,
+        None if words is None else 4 * words,
+    )
 
 
 def _bvh_args(bvh: FlatBVH, device):
     if not isinstance(bvh, FlatBVH):
-        raise TypeError(f"bvh: expected a course.kernels.flat_bvh.FlatBVH, "
-                        f"got {type(bvh).__name__}")
+        raise TypeError(
+            f"bvh: expected a course.kernels.flat_bvh.FlatBVH, got {type(bvh).__name__}"
+        )
     if bvh.nodes.device != device:
-        raise ValueError(f"bvh: expected a BVH on {device} like the rays (bvh.to(device)), "
-                         f"got {bvh.nodes.device}")
+        raise ValueError(
+            f"bvh: expected a BVH on {device} like the rays (bvh.to(device)), "
+            f"got {bvh.nodes.device}"
+        )
     # pairs has a row even for a one-leaf tree: masked-off lanes of the 16-byte loads read
     # row 0 of every array.
-    pairs = bvh.pair_ints if len(bvh.pairs) else torch.zeros(1, 16, dtype=torch.int32,
-                                                              device=device)
+    pairs = (
+        bvh.pair_ints if len(bvh.pairs) else torch.zeros(1, 16, dtype=torch.int32, device=device)
+    )
     return pairs, bvh.nodes, bvh.triangles, bvh.triangle_ints, bvh.root_ref

@@ -93,11 +93,30 @@ def _slab(r, d, size, t_near, t_far):
 
 
 @_jit
-def _march_kernel(o_ptr, d_ptr, density_ptr, source_ptr, radiance_ptr, trans_ptr, samples_ptr,
-                  n_rays, divisions, min_t,
-                  lo_x, lo_y, lo_z, size_x, size_y, size_z,
-                  nx, ny, nz,
-                  STEPS: tl.constexpr, CHANNELS: tl.constexpr, BLOCK_RAYS: tl.constexpr):
+def _march_kernel(
+    o_ptr,
+    d_ptr,
+    density_ptr,
+    source_ptr,
+    radiance_ptr,
+    trans_ptr,
+    samples_ptr,
+    n_rays,
+    divisions,
+    min_t,
+    lo_x,
+    lo_y,
+    lo_z,
+    size_x,
+    size_y,
+    size_z,
+    nx,
+    ny,
+    nz,
+    STEPS: tl.constexpr,
+    CHANNELS: tl.constexpr,
+    BLOCK_RAYS: tl.constexpr,
+):
     ray = tl.program_id(0) * BLOCK_RAYS + tl.arange(0, BLOCK_RAYS)
     live = ray < n_rays
     ox = tl.load(o_ptr + 3 * ray, mask=live, other=0.0)
@@ -114,8 +133,14 @@ def _march_kernel(o_ptr, d_ptr, density_ptr, source_ptr, radiance_ptr, trans_ptr
     t_near, t_far = _slab(rx, dx, size_x, t_near, t_far)
     t_near, t_far = _slab(ry, dy, size_y, t_near, t_far)
     t_near, t_far = _slab(rz, dz, size_z, t_near, t_far)
-    finite = ((tl.abs(ox) < inf) & (tl.abs(oy) < inf) & (tl.abs(oz) < inf)
-              & (tl.abs(dx) < inf) & (tl.abs(dy) < inf) & (tl.abs(dz) < inf))
+    finite = (
+        (tl.abs(ox) < inf)
+        & (tl.abs(oy) < inf)
+        & (tl.abs(oz) < inf)
+        & (tl.abs(dx) < inf)
+        & (tl.abs(dy) < inf)
+        & (tl.abs(dz) < inf)
+    )
     moving = (dx != 0.0) | (dy != 0.0) | (dz != 0.0)
     hit = live & finite & moving & (t_near <= t_far) & (tl.abs(t_far) < inf)
     t_near = tl.where(hit, t_near, 0.0)
@@ -142,8 +167,7 @@ def _march_kernel(o_ptr, d_ptr, density_ptr, source_ptr, radiance_ptr, trans_ptr
         # no cancellation in thin media (the series' next term is below fp32 rounding).
         ratio = tl.where(x < 1e-3, 1.0 - x * (0.5 - x / 6.0), (1.0 - step_t) / x)
         weight = tl.where(active, ds * ratio, 0.0) * transmittance
-        l0 += weight * _trilinear(source_ptr, u, v, w, nx, ny, nz, fx, fy, fz, CHANNELS, 0,
-                                  active)
+        l0 += weight * _trilinear(source_ptr, u, v, w, nx, ny, nz, fx, fy, fz, CHANNELS, 0, active)
         if CHANNELS == 3:
             l1 += weight * _trilinear(source_ptr, u, v, w, nx, ny, nz, fx, fy, fz, 3, 1, active)
             l2 += weight * _trilinear(source_ptr, u, v, w, nx, ny, nz, fx, fy, fz, 3, 2, active)
@@ -158,9 +182,25 @@ def _march_kernel(o_ptr, d_ptr, density_ptr, source_ptr, radiance_ptr, trans_ptr
 
 
 @_jit
-def _bake_kernel(density_ptr, out_ptr, n_cells, nx, ny, nz, size_x, size_y, size_z,
-                 lx, ly, lz, scale, divisions, STEPS: tl.constexpr, SCALED: tl.constexpr,
-                 BLOCK: tl.constexpr):
+def _bake_kernel(
+    density_ptr,
+    out_ptr,
+    n_cells,
+    nx,
+    ny,
+    nz,
+    size_x,
+    size_y,
+    size_z,
+    lx,
+    ly,
+    lz,
+    scale,
+    divisions,
+    STEPS: tl.constexpr,
+    SCALED: tl.constexpr,
+    BLOCK: tl.constexpr,
+):
     """Transmittance toward a directional light from every voxel centre: one lane per voxel,
     a midpoint march of STEPS steps to where the light ray leaves the box (Lab 4's
     ``shadow_transmittance`` of the voxel centres). SCALED: write ``scale * sigma * T``,
@@ -199,9 +239,17 @@ def _bake_kernel(density_ptr, out_ptr, n_cells, nx, ny, nz, size_x, size_y, size
     tl.store(out_ptr + cell, lit, mask=live)
 
 
-def bake_light_triton(density: torch.Tensor, box_min, box_max, light_direction,
-                      steps: int = 16, *, scale: float | None = None,
-                      block: int = 128, num_warps: int = 4) -> torch.Tensor:
+def bake_light_triton(
+    density: torch.Tensor,
+    box_min,
+    box_max,
+    light_direction,
+    steps: int = 16,
+    *,
+    scale: float | None = None,
+    block: int = 128,
+    num_warps: int = 4,
+) -> torch.Tensor:
     """The sun's transmittance at every voxel centre of ``density``, as one Triton kernel.
 
     density: (X, Y, Z) extinction grid spanning the box ``box_min .. box_max`` (3 numbers
@@ -218,8 +266,11 @@ def bake_light_triton(density: torch.Tensor, box_min, box_max, light_direction,
         raise TypeError(f"density: expected a float grid tensor, got {type(density).__name__}")
     dens = _grid(density, "density", density.device, channels=False)
     lo, hi = _box(box_min, box_max)
-    light = [float(c) for c in light_direction] if not isinstance(light_direction, torch.Tensor) \
+    light = (
+        [float(c) for c in light_direction]
+        if not isinstance(light_direction, torch.Tensor)
         else [float(c) for c in light_direction.detach().cpu().double().tolist()]
+    )
     norm = math.sqrt(sum(c * c for c in light)) if len(light) == 3 else 0.0
     if len(light) != 3 or not math.isfinite(norm) or norm == 0:
         raise ValueError(f"light_direction: expected a finite non-zero 3-vector, got {light}")
@@ -228,30 +279,50 @@ def bake_light_triton(density: torch.Tensor, box_min, box_max, light_direction,
     if scale is not None and (isinstance(scale, bool) or not isinstance(scale, (int, float))):
         raise TypeError(f"scale: expected a number or None, got {type(scale).__name__}")
     if not _is_pow2(block) or not _is_pow2(num_warps) or num_warps > 32:
-        raise ValueError(f"block, num_warps: expected powers of two (num_warps <= 32), "
-                         f"got {block!r}, {num_warps!r}")
+        raise ValueError(
+            f"block, num_warps: expected powers of two (num_warps <= 32), "
+            f"got {block!r}, {num_warps!r}"
+        )
     from course.kernels.triton_intersect import interpreting
+
     if not interpreting() and dens.device.type != "cuda":
-        raise ValueError(f"density: the compiled Triton kernel needs a CUDA tensor, got "
-                         f"{dens.device} (for the CPU, set TRITON_INTERPRET=1 before "
-                         "importing triton)")
+        raise ValueError(
+            f"density: the compiled Triton kernel needs a CUDA tensor, got "
+            f"{dens.device} (for the CPU, set TRITON_INTERPRET=1 before "
+            "importing triton)"
+        )
     out = torch.empty_like(dens)
     cells = dens.numel()
     with _ieee_quiet():
         _bake_kernel[(triton.cdiv(cells, block),)](
-            dens, out, cells, *dens.shape, *(b - a for a, b in zip(lo, hi)),
-            *(c / norm for c in light), float(scale or 0.0), max(steps, 1), STEPS=steps,
-            SCALED=scale is not None, BLOCK=block, num_warps=num_warps)
+            dens,
+            out,
+            cells,
+            *dens.shape,
+            *(b - a for a, b in zip(lo, hi)),
+            *(c / norm for c in light),
+            float(scale or 0.0),
+            max(steps, 1),
+            STEPS=steps,
+            SCALED=scale is not None,
+            BLOCK=block,
+            num_warps=num_warps,
+        )
     return out
 
 
 def _box(box_min, box_max) -> tuple[list[float], list[float]]:
     lo = [float(c) for c in box_min]
     hi = [float(c) for c in box_max]
-    if len(lo) != 3 or len(hi) != 3 or not all(math.isfinite(c) for c in lo + hi) \
-            or not all(b > a for a, b in zip(lo, hi)):
-        raise ValueError(f"box_min, box_max: expected finite 3-vectors with box_max > box_min, "
-                         f"got {lo} and {hi}")
+    if (
+        len(lo) != 3
+        or len(hi) != 3
+        or not all(math.isfinite(c) for c in lo + hi)
+        or not all(b > a for a, b in zip(lo, hi))
+    ):
+        raise ValueError(
+            f"box_min, box_max: expected finite 3-vectors with box_max > box_min, got {lo} and {hi}"
+        )
     return lo, hi
 
 
@@ -267,10 +338,19 @@ def _grid(x, name: str, device: torch.device, channels: bool) -> torch.Tensor:
     return x.to(torch.float32).contiguous()
 
 
-def march_grid_triton(origins: torch.Tensor, directions: torch.Tensor, box_min, box_max,
-                      density: torch.Tensor, source: torch.Tensor, steps: int = 64, *,
-                      min_transmittance: float = 0.0, block_rays: int = DEFAULT_BLOCK_RAYS,
-                      num_warps: int = DEFAULT_NUM_WARPS) -> dict:
+def march_grid_triton(
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    box_min,
+    box_max,
+    density: torch.Tensor,
+    source: torch.Tensor,
+    steps: int = 64,
+    *,
+    min_transmittance: float = 0.0,
+    block_rays: int = DEFAULT_BLOCK_RAYS,
+    num_warps: int = DEFAULT_NUM_WARPS,
+) -> dict:
     """Lab 4's exact-integrator ``march_box`` over grids, as one fused Triton kernel.
 
     origins, directions: (N, 3) float (computed in float32); box_min, box_max: 3 numbers;
@@ -285,34 +365,44 @@ def march_grid_triton(origins: torch.Tensor, directions: torch.Tensor, box_min, 
         if not isinstance(x, torch.Tensor):
             raise TypeError(f"{name}: expected a (N, 3) float tensor, got {type(x).__name__}")
         if x.ndim != 2 or x.shape[1] != 3 or not x.is_floating_point():
-            raise ValueError(f"{name}: expected a (N, 3) float tensor, "
-                             f"got shape {tuple(x.shape)} {x.dtype}")
+            raise ValueError(
+                f"{name}: expected a (N, 3) float tensor, got shape {tuple(x.shape)} {x.dtype}"
+            )
     if directions.shape != origins.shape or directions.device != origins.device:
-        raise ValueError(f"directions: expected shape {tuple(origins.shape)} on "
-                         f"{origins.device} like origins, got {tuple(directions.shape)} on "
-                         f"{directions.device}")
+        raise ValueError(
+            f"directions: expected shape {tuple(origins.shape)} on "
+            f"{origins.device} like origins, got {tuple(directions.shape)} on "
+            f"{directions.device}"
+        )
     device = origins.device
     lo, hi = _box(box_min, box_max)
     if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
         raise ValueError(f"steps: expected an int >= 0, got {steps!r}")
     if not _is_pow2(block_rays) or not _is_pow2(num_warps) or num_warps > 32:
-        raise ValueError(f"block_rays, num_warps: expected powers of two (num_warps <= 32), "
-                         f"got {block_rays!r}, {num_warps!r}")
+        raise ValueError(
+            f"block_rays, num_warps: expected powers of two (num_warps <= 32), "
+            f"got {block_rays!r}, {num_warps!r}"
+        )
     dens = _grid(density, "density", device, channels=False)
     src = _grid(source, "source", device, channels=True)
     if src.shape[:3] != dens.shape:
-        raise ValueError(f"source: expected the cells of density {tuple(dens.shape)}, "
-                         f"got {tuple(src.shape)}")
+        raise ValueError(
+            f"source: expected the cells of density {tuple(dens.shape)}, got {tuple(src.shape)}"
+        )
     channels = 1 if src.ndim == 3 else src.shape[3]
     from course.kernels.triton_intersect import interpreting
+
     if not interpreting() and device.type != "cuda":
-        raise ValueError(f"origins: the compiled Triton kernel needs CUDA tensors, got {device} "
-                         "(for the CPU, set TRITON_INTERPRET=1 before importing triton)")
+        raise ValueError(
+            f"origins: the compiled Triton kernel needs CUDA tensors, got {device} "
+            "(for the CPU, set TRITON_INTERPRET=1 before importing triton)"
+        )
     n = origins.shape[0]
     o = origins.to(torch.float32).contiguous()
     d = directions.to(torch.float32).contiguous()
-    radiance = torch.empty((n, channels) if src.ndim == 4 else (n,), dtype=torch.float32,
-                           device=device)
+    radiance = torch.empty(
+        (n, channels) if src.ndim == 4 else (n,), dtype=torch.float32, device=device
+    )
     transmittance = torch.empty(n, dtype=torch.float32, device=device)
     samples = torch.empty(n, dtype=torch.int64, device=device)
     handle = None
@@ -320,9 +410,27 @@ def march_grid_triton(origins: torch.Tensor, directions: torch.Tensor, box_min, 
         grid = (triton.cdiv(n, block_rays),)
         with _ieee_quiet():
             handle = _march_kernel[grid](
-                o, d, dens, src, radiance, transmittance, samples, n, max(steps, 1),
-                float(min_transmittance), *lo, *(b - a for a, b in zip(lo, hi)),
-                *dens.shape, STEPS=steps, CHANNELS=channels, BLOCK_RAYS=block_rays,
-                num_warps=num_warps)
-    return {"radiance": radiance, "transmittance": transmittance, "samples": samples,
-            "kernel": handle}
+                o,
+                d,
+                dens,
+                src,
+                radiance,
+                transmittance,
+                samples,
+                n,
+                max(steps, 1),
+                float(min_transmittance),
+                *lo,
+                *(b - a for a, b in zip(lo, hi)),
+                *dens.shape,
+                STEPS=steps,
+                CHANNELS=channels,
+                BLOCK_RAYS=block_rays,
+                num_warps=num_warps,
+            )
+    return {
+        "radiance": radiance,
+        "transmittance": transmittance,
+        "samples": samples,
+        "kernel": handle,
+    }

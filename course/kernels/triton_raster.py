@@ -64,8 +64,15 @@ from course.kernels.triton_raster_kernels import (
     _vertex_kernel,
 )
 
-__all__ = ["EMPTY", "SMALL_BOX", "FusedVisibility", "rasterize_triton",
-           "screen_triangles_fast", "screen_triangles_triton", "visibility_fused"]
+__all__ = [
+    "EMPTY",
+    "SMALL_BOX",
+    "FusedVisibility",
+    "rasterize_triton",
+    "screen_triangles_fast",
+    "screen_triangles_triton",
+    "visibility_fused",
+]
 
 EMPTY = torch.iinfo(torch.int64).max  # the key of a pixel no fragment reached
 # Launch settings (module attributes, read at every launch; bench/lab6_raster.py's sweep).
@@ -99,17 +106,51 @@ def _programs(device: torch.device) -> int:
 _SM_COUNT: dict[int, int] = {}
 
 
-def _raster_launch(screen, out, queue, counter, count: int, width: int, height: int,
-                   depth_bits: int, cull: bool, small_box: int, huge_box: int) -> None:
+def _raster_launch(
+    screen,
+    out,
+    queue,
+    counter,
+    count: int,
+    width: int,
+    height: int,
+    depth_bits: int,
+    cull: bool,
+    small_box: int,
+    huge_box: int,
+) -> None:
     """The two raster kernels on ``screen`` (count, 3, 4) float32; ``out`` cleared to
     EMPTY, ``counter`` (2,) int32 zeroed, ``queue`` (2 * count,) int32 scratch."""
     _small_kernel[(triton.cdiv(count, BLOCK_TRIANGLES),)](
-        screen, out, queue, counter, count, width, height, small_box, huge_box,
-        DEPTH_BITS=depth_bits, CULL=cull, BLOCK=BLOCK_TRIANGLES, num_warps=SMALL_WARPS,
-        enable_fp_fusion=FP_FUSION)
+        screen,
+        out,
+        queue,
+        counter,
+        count,
+        width,
+        height,
+        small_box,
+        huge_box,
+        DEPTH_BITS=depth_bits,
+        CULL=cull,
+        BLOCK=BLOCK_TRIANGLES,
+        num_warps=SMALL_WARPS,
+        enable_fp_fusion=FP_FUSION,
+    )
     _large_kernel[(_programs(screen.device),)](
-        screen, out, queue, counter, count, width, height, DEPTH_BITS=depth_bits,
-        CULL=cull, BLOCK=BLOCK_PIXELS, num_warps=LARGE_WARPS, enable_fp_fusion=FP_FUSION)
+        screen,
+        out,
+        queue,
+        counter,
+        count,
+        width,
+        height,
+        DEPTH_BITS=depth_bits,
+        CULL=cull,
+        BLOCK=BLOCK_PIXELS,
+        num_warps=LARGE_WARPS,
+        enable_fp_fusion=FP_FUSION,
+    )
 
 
 def _check_viewport(width, height) -> None:
@@ -131,13 +172,23 @@ def _check_knobs(depth_bits, small_box, huge_box=HUGE_BOX) -> None:
 
 def _check_device(device: torch.device, name: str) -> None:
     if not interpreting() and device.type != "cuda":
-        raise ValueError(f"{name}: the compiled Triton kernels need a CUDA tensor, got {device} "
-                         "(for the CPU, set TRITON_INTERPRET=1 before importing triton)")
+        raise ValueError(
+            f"{name}: the compiled Triton kernels need a CUDA tensor, got {device} "
+            "(for the CPU, set TRITON_INTERPRET=1 before importing triton)"
+        )
 
 
-def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bits: int = 32,
-                     cull_backfaces: bool = False, out: torch.Tensor | None = None,
-                     small_box: int = SMALL_BOX, huge_box: int | None = None) -> torch.Tensor:
+def rasterize_triton(
+    screen: torch.Tensor,
+    width: int,
+    height: int,
+    *,
+    depth_bits: int = 32,
+    cull_backfaces: bool = False,
+    out: torch.Tensor | None = None,
+    small_box: int = SMALL_BOX,
+    huge_box: int | None = None,
+) -> torch.Tensor:
     """Lab 6's ``rasterize`` (same arguments and keys), fused: (width * height,) int64.
 
     screen: (K, 3, 4) float ``(x, y, z_ndc, 1/w)`` (computed in float32); width, height:
@@ -147,11 +198,14 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
     huge_box: above it, a triangle is split over all programs (default ``HUGE_BOX``).
     """
     _require_triton()
-    if not isinstance(screen, torch.Tensor) or screen.ndim != 3 or screen.shape[1:] != (3, 4) \
-            or not screen.is_floating_point():
+    if (
+        not isinstance(screen, torch.Tensor)
+        or screen.ndim != 3
+        or screen.shape[1:] != (3, 4)
+        or not screen.is_floating_point()
+    ):
         got = tuple(screen.shape) if isinstance(screen, torch.Tensor) else type(screen).__name__
-        raise ValueError(f"screen: expected a (K, 3, 4) float tensor (x, y, z_ndc, 1/w), "
-                         f"got {got}")
+        raise ValueError(f"screen: expected a (K, 3, 4) float tensor (x, y, z_ndc, 1/w), got {got}")
     _check_viewport(width, height)
     _check_knobs(depth_bits, small_box, HUGE_BOX if huge_box is None else huge_box)
     device = screen.device
@@ -159,8 +213,10 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
     if out is None:
         out = torch.empty(width * height, dtype=torch.int64, device=device)
     if out.shape != (width * height,) or out.dtype != torch.int64 or out.device != device:
-        raise ValueError(f"out: expected a ({width * height},) int64 tensor on {device}, got "
-                         f"{tuple(out.shape)} {out.dtype} on {out.device}")
+        raise ValueError(
+            f"out: expected a ({width * height},) int64 tensor on {device}, got "
+            f"{tuple(out.shape)} {out.dtype} on {out.device}"
+        )
     out.fill_(EMPTY)
     data = screen.to(torch.float32).contiguous()
     count = data.shape[0]
@@ -168,8 +224,19 @@ def rasterize_triton(screen: torch.Tensor, width: int, height: int, *, depth_bit
         counter = torch.zeros(2, dtype=torch.int32, device=device)
         queue = torch.empty(2 * count, dtype=torch.int32, device=device)
         with _ieee_quiet():
-            _raster_launch(data, out, queue, counter, count, width, height, depth_bits,
-                           cull_backfaces, small_box, HUGE_BOX if huge_box is None else huge_box)
+            _raster_launch(
+                data,
+                out,
+                queue,
+                counter,
+                count,
+                width,
+                height,
+                depth_bits,
+                cull_backfaces,
+                small_box,
+                HUGE_BOX if huge_box is None else huge_box,
+            )
     return out
 
 
@@ -177,15 +244,29 @@ def _mesh_arguments(vertices, faces, mvp, width, height, depth_bits=32, small_bo
     """Checked arguments of the mesh entry points. The device comes last: on a machine
     without CUDA every other bad argument is still named, not reported as a CPU tensor."""
     _require_triton()
-    if not isinstance(vertices, torch.Tensor) or vertices.ndim != 2 \
-            or vertices.shape[1] != 3 or vertices.dtype not in (torch.float32, torch.float64):
-        got = (f"{tuple(vertices.shape)} {vertices.dtype}" if isinstance(vertices, torch.Tensor)
-               else type(vertices).__name__)
+    if (
+        not isinstance(vertices, torch.Tensor)
+        or vertices.ndim != 2
+        or vertices.shape[1] != 3
+        or vertices.dtype not in (torch.float32, torch.float64)
+    ):
+        got = (
+            f"{tuple(vertices.shape)} {vertices.dtype}"
+            if isinstance(vertices, torch.Tensor)
+            else type(vertices).__name__
+        )
         raise ValueError(f"vertices: expected a (V, 3) float32/float64 tensor, got {got}")
-    if not isinstance(faces, torch.Tensor) or faces.ndim != 2 or faces.shape[1] != 3 \
-            or faces.dtype not in (torch.int32, torch.int64):
-        got = (f"{tuple(faces.shape)} {faces.dtype}" if isinstance(faces, torch.Tensor)
-               else type(faces).__name__)
+    if (
+        not isinstance(faces, torch.Tensor)
+        or faces.ndim != 2
+        or faces.shape[1] != 3
+        or faces.dtype not in (torch.int32, torch.int64)
+    ):
+        got = (
+            f"{tuple(faces.shape)} {faces.dtype}"
+            if isinstance(faces, torch.Tensor)
+            else type(faces).__name__
+        )
         raise ValueError(f"faces: expected an (F, 3) int32/int64 tensor, got {got}")
     if not isinstance(mvp, torch.Tensor) or mvp.shape != (4, 4) or not mvp.is_floating_point():
         got = tuple(mvp.shape) if isinstance(mvp, torch.Tensor) else type(mvp).__name__
@@ -206,14 +287,27 @@ def _vertex_launch(vertices, faces, mvp, screen, keys, counter, width, height) -
     n_keys = 0 if keys is None else keys.shape[0]
     grid = max(triton.cdiv(count, BLOCK_FACES), triton.cdiv(n_keys, FILL_KEYS))
     _vertex_kernel[(grid,)](
-        vertices, faces, mvp, screen, screen if keys is None else keys,
-        screen if counter is None else counter, count, n_keys, width / 2, height / 2,
-        BLOCK=BLOCK_FACES, FILL=FILL_KEYS, PREPARE=keys is not None, num_warps=4,
-        enable_fp_fusion=False)
+        vertices,
+        faces,
+        mvp,
+        screen,
+        screen if keys is None else keys,
+        screen if counter is None else counter,
+        count,
+        n_keys,
+        width / 2,
+        height / 2,
+        BLOCK=BLOCK_FACES,
+        FILL=FILL_KEYS,
+        PREPARE=keys is not None,
+        num_warps=4,
+        enable_fp_fusion=False,
+    )
 
 
-def screen_triangles_triton(vertices: torch.Tensor, faces: torch.Tensor, mvp: torch.Tensor,
-                            width: int, height: int) -> torch.Tensor:
+def screen_triangles_triton(
+    vertices: torch.Tensor, faces: torch.Tensor, mvp: torch.Tensor, width: int, height: int
+) -> torch.Tensor:
     """Lab 6's ``to_clip_space``, ``clip_triangles`` and ``to_screen`` in one kernel.
 
     vertices: (V, 3) float32 (float64 is rounded to float32 clip coordinates); faces: (F, 3)
@@ -234,9 +328,17 @@ def screen_triangles_triton(vertices: torch.Tensor, faces: torch.Tensor, mvp: to
     return screen
 
 
-def visibility_fused(vertices: torch.Tensor, faces: torch.Tensor, mvp: torch.Tensor,
-                     width: int, height: int, *, depth_bits: int = 32,
-                     cull_backfaces: bool = False, small_box: int = SMALL_BOX) -> torch.Tensor:
+def visibility_fused(
+    vertices: torch.Tensor,
+    faces: torch.Tensor,
+    mvp: torch.Tensor,
+    width: int,
+    height: int,
+    *,
+    depth_bits: int = 32,
+    cull_backfaces: bool = False,
+    small_box: int = SMALL_BOX,
+) -> torch.Tensor:
     """Primary visibility of a mesh: (height, width) int64 source-face ids, -1 where empty.
 
     Lab 6's pipeline (``to_clip_space`` .. ``rasterize``, ids through ``source``) in four
@@ -248,8 +350,7 @@ def visibility_fused(vertices: torch.Tensor, faces: torch.Tensor, mvp: torch.Ten
     that an exact depth tie between a face's second piece and another face goes to the
     other face here (slot order), to the lower face in the lab.
     """
-    vertices, faces, m = _mesh_arguments(vertices, faces, mvp, width, height, depth_bits,
-                                         small_box)
+    vertices, faces, m = _mesh_arguments(vertices, faces, mvp, width, height, depth_bits, small_box)
     device, count = vertices.device, faces.shape[0]
     if count == 0:
         return torch.full((height, width), -1, dtype=torch.int64, device=device)
@@ -259,10 +360,22 @@ def visibility_fused(vertices: torch.Tensor, faces: torch.Tensor, mvp: torch.Ten
     queue = torch.empty(4 * count, dtype=torch.int32, device=device)
     with _ieee_quiet():
         _vertex_launch(vertices, faces, m, screen, keys, counter, width, height)
-        _raster_launch(screen, keys, queue, counter, 2 * count, width, height, depth_bits,
-                       cull_backfaces, small_box, HUGE_BOX)
-        _ids_kernel[(triton.cdiv(keys.shape[0], BLOCK_IDS),)](keys, keys.shape[0], count,
-                                                              BLOCK=BLOCK_IDS, num_warps=4)
+        _raster_launch(
+            screen,
+            keys,
+            queue,
+            counter,
+            2 * count,
+            width,
+            height,
+            depth_bits,
+            cull_backfaces,
+            small_box,
+            HUGE_BOX,
+        )
+        _ids_kernel[(triton.cdiv(keys.shape[0], BLOCK_IDS),)](
+            keys, keys.shape[0], count, BLOCK=BLOCK_IDS, num_warps=4
+        )
     return keys.view(height, width)
 
 
@@ -281,30 +394,42 @@ class FusedVisibility:
     ``visibility_fused``.
     """
 
-    def __init__(self, vertices: torch.Tensor, faces: torch.Tensor, width: int, height: int,
-                 *, depth_bits: int = 32, cull_backfaces: bool = False,
-                 small_box: int = SMALL_BOX) -> None:
+    def __init__(
+        self,
+        vertices: torch.Tensor,
+        faces: torch.Tensor,
+        width: int,
+        height: int,
+        *,
+        depth_bits: int = 32,
+        cull_backfaces: bool = False,
+        small_box: int = SMALL_BOX,
+    ) -> None:
         # A stand-in matrix on the CPU: vertices, not yet checked, may have no device.
         eye = torch.eye(4, dtype=torch.float64)
-        vertices, faces, _ = _mesh_arguments(vertices, faces, eye, width, height, depth_bits,
-                                             small_box)
+        vertices, faces, _ = _mesh_arguments(
+            vertices, faces, eye, width, height, depth_bits, small_box
+        )
         self.vertices, self.faces, self.width, self.height = vertices, faces, width, height
-        self.knobs = {"depth_bits": depth_bits, "cull_backfaces": cull_backfaces,
-                      "small_box": small_box}
+        self.knobs = {
+            "depth_bits": depth_bits,
+            "cull_backfaces": cull_backfaces,
+            "small_box": small_box,
+        }
         self._graph = None
         self._mvp = None
         self._ids = None
 
     def _eager(self, mvp: torch.Tensor) -> torch.Tensor:
-        return visibility_fused(self.vertices, self.faces, mvp, self.width, self.height,
-                                **self.knobs)
+        return visibility_fused(
+            self.vertices, self.faces, mvp, self.width, self.height, **self.knobs
+        )
 
     def __call__(self, mvp: torch.Tensor) -> torch.Tensor:
         device = self.vertices.device
         if device.type != "cuda" or interpreting():
             return self._eager(mvp)
-        if not isinstance(mvp, torch.Tensor) or mvp.shape != (4, 4) \
-                or not mvp.is_floating_point():
+        if not isinstance(mvp, torch.Tensor) or mvp.shape != (4, 4) or not mvp.is_floating_point():
             got = tuple(mvp.shape) if isinstance(mvp, torch.Tensor) else type(mvp).__name__
             raise ValueError(f"mvp: expected a (4, 4) float tensor, got {got}")
         if self._graph is None:
@@ -325,8 +450,14 @@ class FusedVisibility:
         return self._ids.clone()
 
 
-def screen_triangles_fast(clip_vertices: torch.Tensor, faces: torch.Tensor, width: int,
-                          height: int, clip_triangles, to_screen):
+def screen_triangles_fast(
+    clip_vertices: torch.Tensor,
+    faces: torch.Tensor,
+    width: int,
+    height: int,
+    clip_triangles,
+    to_screen,
+):
     """Lab 6's setup stages (``clip_triangles`` then ``to_screen``), cheap for most triangles.
 
     clip_vertices: (V, 4) clip coordinates (``to_clip_space``); faces: (F, 3) int64;

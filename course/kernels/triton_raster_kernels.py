@@ -74,9 +74,31 @@ def _load_rows(screen_ptr, tri, live, BLOCK: tl.constexpr):
 
 
 @_jit
-def _fragment(out_ptr, tri, col, row, ok, width,
-              x0, y0, z0, w0, x1, y1, z1, w1, x2, y2, z2, w2, positive,
-              tl0, tl1, tl2, DEPTH_BITS: tl.constexpr):
+def _fragment(
+    out_ptr,
+    tri,
+    col,
+    row,
+    ok,
+    width,
+    x0,
+    y0,
+    z0,
+    w0,
+    x1,
+    y1,
+    z1,
+    w1,
+    x2,
+    y2,
+    z2,
+    w2,
+    positive,
+    tl0,
+    tl1,
+    tl2,
+    DEPTH_BITS: tl.constexpr,
+):
     """Inside test, depth and atomic minimum of the fragments (tri, row, col) where ok."""
     px = col.to(tl.float32) + 0.5
     py = row.to(tl.float32) + 0.5
@@ -86,8 +108,11 @@ def _fragment(out_ptr, tri, col, row, ok, width,
     e0 = tl.where(positive, e0, -e0)
     e1 = tl.where(positive, e1, -e1)
     e2 = tl.where(positive, e2, -e2)
-    inside = (((e0 > 0) | ((e0 == 0) & tl0)) & ((e1 > 0) | ((e1 == 0) & tl1))
-              & ((e2 > 0) | ((e2 == 0) & tl2)))
+    inside = (
+        ((e0 > 0) | ((e0 == 0) & tl0))
+        & ((e1 > 0) | ((e1 == 0) & tl1))
+        & ((e2 > 0) | ((e2 == 0) & tl2))
+    )
     total = e0 + e1 + e2
     # Correctly rounded divisions (``/`` would compile to the 2-ulp approximation) and no
     # FMA contraction (FP_FUSION): the torch version's values, bit for bit.
@@ -108,8 +133,7 @@ def _fragment(out_ptr, tri, col, row, ok, width,
         down = tl.floor(scaled)
         frac = scaled - down
         odd = (down.to(tl.int64) & 1) == 1
-        quantised = (down + tl.where((frac > 0.5) | ((frac == 0.5) & odd), 1.0, 0.0)
-                     ).to(tl.int64)
+        quantised = (down + tl.where((frac > 0.5) | ((frac == 0.5) & odd), 1.0, 0.0)).to(tl.int64)
     key = (quantised << 32) | tri.to(tl.int64)
     hit = ok & inside & (z_ndc <= 1.0)
     tl.atomic_min(out_ptr + row.to(tl.int64) * width + col, key, mask=hit)
@@ -120,8 +144,14 @@ def _setup(x0, y0, x1, y1, x2, y2, live, width, height, CULL: tl.constexpr):
     """Per triangle: drawn?, positive area?, top-left flags, clamped box of pixel centres."""
     area = _edge(x1, y1, x2, y2, x0, y0)
     inf = float("inf")
-    finite = ((tl.abs(x0) < inf) & (tl.abs(y0) < inf) & (tl.abs(x1) < inf)
-              & (tl.abs(y1) < inf) & (tl.abs(x2) < inf) & (tl.abs(y2) < inf))
+    finite = (
+        (tl.abs(x0) < inf)
+        & (tl.abs(y0) < inf)
+        & (tl.abs(x1) < inf)
+        & (tl.abs(y1) < inf)
+        & (tl.abs(x2) < inf)
+        & (tl.abs(y2) < inf)
+    )
     drawn = live & finite & (tl.abs(area) < inf) & (area != 0)
     if CULL:
         drawn = drawn & (area > 0)
@@ -145,8 +175,20 @@ def _setup(x0, y0, x1, y1, x2, y2, live, width, height, CULL: tl.constexpr):
 
 
 @_jit
-def _small_kernel(screen_ptr, out_ptr, list_ptr, counter_ptr, count, width, height, small_box,
-                  huge_box, DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr):
+def _small_kernel(
+    screen_ptr,
+    out_ptr,
+    list_ptr,
+    counter_ptr,
+    count,
+    width,
+    height,
+    small_box,
+    huge_box,
+    DEPTH_BITS: tl.constexpr,
+    CULL: tl.constexpr,
+    BLOCK: tl.constexpr,
+):
     """One lane per triangle: rasterizes the small ones, queues the others for
     ``_large_kernel`` (``list[:count]``: one program each; ``list[count:]``: huge, shared by
     all programs), rejects the rest (empty slots, NaN, zero area, off screen, culled)."""
@@ -154,8 +196,9 @@ def _small_kernel(screen_ptr, out_ptr, list_ptr, counter_ptr, count, width, heig
     tri = tl.program_id(0) * BLOCK + lanes
     live = tri < count
     x0, y0, z0, w0, x1, y1, z1, w1, x2, y2, z2, w2 = _load_rows(screen_ptr, tri, live, BLOCK)
-    positive, tl0, tl1, tl2, bx, by, box_w, box_h = _setup(x0, y0, x1, y1, x2, y2, live,
-                                                           width, height, CULL)
+    positive, tl0, tl1, tl2, bx, by, box_w, box_h = _setup(
+        x0, y0, x1, y1, x2, y2, live, width, height, CULL
+    )
     pixels = box_w * box_h
     # Queue the large boxes: one atomic per large triangle (they are few).
     large = pixels > small_box
@@ -174,8 +217,31 @@ def _small_kernel(screen_ptr, out_ptr, list_ptr, counter_ptr, count, width, heig
     row = by
     end = bx + box_w
     for k in range(most):
-        _fragment(out_ptr, tri, col, row, k < pixels, width, x0, y0, z0, w0, x1, y1, z1,
-                  w1, x2, y2, z2, w2, positive, tl0, tl1, tl2, DEPTH_BITS)
+        _fragment(
+            out_ptr,
+            tri,
+            col,
+            row,
+            k < pixels,
+            width,
+            x0,
+            y0,
+            z0,
+            w0,
+            x1,
+            y1,
+            z1,
+            w1,
+            x2,
+            y2,
+            z2,
+            w2,
+            positive,
+            tl0,
+            tl1,
+            tl2,
+            DEPTH_BITS,
+        )
         col += 1
         wrap = col >= end
         col = tl.where(wrap, bx, col)
@@ -183,26 +249,70 @@ def _small_kernel(screen_ptr, out_ptr, list_ptr, counter_ptr, count, width, heig
 
 
 @_jit
-def _large_fragments(screen_ptr, out_ptr, tri, lanes, first, step, width, height,
-                     DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr):
+def _large_fragments(
+    screen_ptr,
+    out_ptr,
+    tri,
+    lanes,
+    first,
+    step,
+    width,
+    height,
+    DEPTH_BITS: tl.constexpr,
+    CULL: tl.constexpr,
+    BLOCK: tl.constexpr,
+):
     """Pixels ``first, first + step, ...`` (BLOCK at a time) of triangle ``tri``'s box."""
     tri_v = tl.zeros([BLOCK], tl.int64) + tri  # the same triangle in every lane
     live = lanes >= 0
     x0, y0, z0, w0, x1, y1, z1, w1, x2, y2, z2, w2 = _load_triangle(screen_ptr, tri_v, live)
-    positive, tl0, tl1, tl2, bx, by, box_w, box_h = _setup(x0, y0, x1, y1, x2, y2, live,
-                                                           width, height, CULL)
+    positive, tl0, tl1, tl2, bx, by, box_w, box_h = _setup(
+        x0, y0, x1, y1, x2, y2, live, width, height, CULL
+    )
     pixels = tl.max(box_w * box_h, axis=0)
     safe_w = tl.maximum(box_w, 1)
     for start in range(first, pixels, step):
         k = start + lanes
-        _fragment(out_ptr, tri_v, bx + k % safe_w, by + k // safe_w, k < pixels, width,
-                  x0, y0, z0, w0, x1, y1, z1, w1, x2, y2, z2, w2, positive, tl0, tl1, tl2,
-                  DEPTH_BITS)
+        _fragment(
+            out_ptr,
+            tri_v,
+            bx + k % safe_w,
+            by + k // safe_w,
+            k < pixels,
+            width,
+            x0,
+            y0,
+            z0,
+            w0,
+            x1,
+            y1,
+            z1,
+            w1,
+            x2,
+            y2,
+            z2,
+            w2,
+            positive,
+            tl0,
+            tl1,
+            tl2,
+            DEPTH_BITS,
+        )
 
 
 @_jit
-def _large_kernel(screen_ptr, out_ptr, list_ptr, counter_ptr, count, width, height,
-                  DEPTH_BITS: tl.constexpr, CULL: tl.constexpr, BLOCK: tl.constexpr):
+def _large_kernel(
+    screen_ptr,
+    out_ptr,
+    list_ptr,
+    counter_ptr,
+    count,
+    width,
+    height,
+    DEPTH_BITS: tl.constexpr,
+    CULL: tl.constexpr,
+    BLOCK: tl.constexpr,
+):
     """A fixed grid over ``_small_kernel``'s queues: the large triangles round robin, one
     program each (lanes over its box); then every huge triangle split over all programs."""
     pid = tl.program_id(0)
@@ -211,18 +321,49 @@ def _large_kernel(screen_ptr, out_ptr, list_ptr, counter_ptr, count, width, heig
     queued = tl.load(counter_ptr)
     for k in range(pid, queued, programs):
         tri = tl.load(list_ptr + k).to(tl.int64)
-        _large_fragments(screen_ptr, out_ptr, tri, lanes, 0, BLOCK, width, height, DEPTH_BITS,
-                         CULL, BLOCK)
+        _large_fragments(
+            screen_ptr, out_ptr, tri, lanes, 0, BLOCK, width, height, DEPTH_BITS, CULL, BLOCK
+        )
     huge = tl.load(counter_ptr + 1)
     for k in range(huge):
         tri = tl.load(list_ptr + count + k).to(tl.int64)
-        _large_fragments(screen_ptr, out_ptr, tri, lanes, pid * BLOCK, programs * BLOCK,
-                         width, height, DEPTH_BITS, CULL, BLOCK)
+        _large_fragments(
+            screen_ptr,
+            out_ptr,
+            tri,
+            lanes,
+            pid * BLOCK,
+            programs * BLOCK,
+            width,
+            height,
+            DEPTH_BITS,
+            CULL,
+            BLOCK,
+        )
 
 
 @_jit
-def _clip_corner(vert_ptr, index, live, m00, m01, m02, m03, m10, m11, m12, m13,
-                 m20, m21, m22, m23, m30, m31, m32, m33):
+def _clip_corner(
+    vert_ptr,
+    index,
+    live,
+    m00,
+    m01,
+    m02,
+    m03,
+    m10,
+    m11,
+    m12,
+    m13,
+    m20,
+    m21,
+    m22,
+    m23,
+    m30,
+    m31,
+    m32,
+    m33,
+):
     """``to_clip_space`` of one corner: ``mvp @ [x, y, z, 1]`` in float64, rounded once."""
     base = vert_ptr + index * 3
     x = tl.load(base + 0, mask=live, other=0.0).to(tl.float64)
@@ -253,13 +394,18 @@ def _screen_corner(valid, x, y, z, w, half_w, half_h):
     nan = float("nan")
     sx = (tl.div_rn(x, w) + 1.0) * half_w
     sy = (1.0 - tl.div_rn(y, w)) * half_h
-    return (tl.where(valid, sx, nan), tl.where(valid, sy, nan),
-            tl.where(valid, tl.div_rn(z, w), nan), tl.where(valid, tl.div_rn(one, w), nan))
+    return (
+        tl.where(valid, sx, nan),
+        tl.where(valid, sy, nan),
+        tl.where(valid, tl.div_rn(z, w), nan),
+        tl.where(valid, tl.div_rn(one, w), nan),
+    )
 
 
 @_jit
-def _store_rows(screen_ptr, slot, live, v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11,
-                BLOCK: tl.constexpr):
+def _store_rows(
+    screen_ptr, slot, live, v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11, BLOCK: tl.constexpr
+):
     """Store 12 floats per lane as one contiguous row of ``screen`` (12 floats per slot):
     the lanes' rows are adjacent, so a warp writes whole sectors (12 scalar stores with a
     48-byte stride would each touch 32 sectors). The row is assembled in registers by
@@ -277,9 +423,21 @@ def _store_rows(screen_ptr, slot, live, v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, 
 
 
 @_jit
-def _vertex_kernel(vert_ptr, face_ptr, mvp_ptr, screen_ptr, keys_ptr, counter_ptr, count,
-                   n_keys, half_w, half_h, BLOCK: tl.constexpr, FILL: tl.constexpr,
-                   PREPARE: tl.constexpr):
+def _vertex_kernel(
+    vert_ptr,
+    face_ptr,
+    mvp_ptr,
+    screen_ptr,
+    keys_ptr,
+    counter_ptr,
+    count,
+    n_keys,
+    half_w,
+    half_h,
+    BLOCK: tl.constexpr,
+    FILL: tl.constexpr,
+    PREPARE: tl.constexpr,
+):
     """Lab 6's ``to_clip_space``, ``clip_triangles`` and ``to_screen``, one lane per face:
     slot ``i`` of ``screen`` (2F, 3, 4) gets face i's triangle (the first piece when the
     near plane cuts it), slot ``F + i`` the second piece of a face cut into a quad, NaN
@@ -288,8 +446,9 @@ def _vertex_kernel(vert_ptr, face_ptr, mvp_ptr, screen_ptr, keys_ptr, counter_pt
     pid = tl.program_id(0)
     if PREPARE:
         spots = pid.to(tl.int64) * FILL + tl.arange(0, FILL)
-        tl.store(keys_ptr + spots, tl.full([FILL], 9223372036854775807, tl.int64),
-                 mask=spots < n_keys)
+        tl.store(
+            keys_ptr + spots, tl.full([FILL], 9223372036854775807, tl.int64), mask=spots < n_keys
+        )
         pair = tl.arange(0, 2)
         tl.store(counter_ptr + pair, tl.zeros([2], tl.int32), mask=(pair * 0 + pid) == 0)
     tri = pid.to(tl.int64) * BLOCK + tl.arange(0, BLOCK)
@@ -313,21 +472,93 @@ def _vertex_kernel(vert_ptr, face_ptr, mvp_ptr, screen_ptr, keys_ptr, counter_pt
     m31 = tl.load(mvp_ptr + 13)
     m32 = tl.load(mvp_ptr + 14)
     m33 = tl.load(mvp_ptr + 15)
-    x0, y0, z0, w0 = _clip_corner(vert_ptr, i0, live, m00, m01, m02, m03, m10, m11, m12, m13,
-                                  m20, m21, m22, m23, m30, m31, m32, m33)
-    x1, y1, z1, w1 = _clip_corner(vert_ptr, i1, live, m00, m01, m02, m03, m10, m11, m12, m13,
-                                  m20, m21, m22, m23, m30, m31, m32, m33)
-    x2, y2, z2, w2 = _clip_corner(vert_ptr, i2, live, m00, m01, m02, m03, m10, m11, m12, m13,
-                                  m20, m21, m22, m23, m30, m31, m32, m33)
+    x0, y0, z0, w0 = _clip_corner(
+        vert_ptr,
+        i0,
+        live,
+        m00,
+        m01,
+        m02,
+        m03,
+        m10,
+        m11,
+        m12,
+        m13,
+        m20,
+        m21,
+        m22,
+        m23,
+        m30,
+        m31,
+        m32,
+        m33,
+    )
+    x1, y1, z1, w1 = _clip_corner(
+        vert_ptr,
+        i1,
+        live,
+        m00,
+        m01,
+        m02,
+        m03,
+        m10,
+        m11,
+        m12,
+        m13,
+        m20,
+        m21,
+        m22,
+        m23,
+        m30,
+        m31,
+        m32,
+        m33,
+    )
+    x2, y2, z2, w2 = _clip_corner(
+        vert_ptr,
+        i2,
+        live,
+        m00,
+        m01,
+        m02,
+        m03,
+        m10,
+        m11,
+        m12,
+        m13,
+        m20,
+        m21,
+        m22,
+        m23,
+        m30,
+        m31,
+        m32,
+        m33,
+    )
     # clip_triangles, step 1: trivial reject (non-finite, or all corners outside one plane).
     inf = float("inf")
-    finite = ((tl.abs(x0) < inf) & (tl.abs(y0) < inf) & (tl.abs(z0) < inf) & (tl.abs(w0) < inf)
-              & (tl.abs(x1) < inf) & (tl.abs(y1) < inf) & (tl.abs(z1) < inf)
-              & (tl.abs(w1) < inf) & (tl.abs(x2) < inf) & (tl.abs(y2) < inf)
-              & (tl.abs(z2) < inf) & (tl.abs(w2) < inf))
-    outside = (((x0 < -w0) & (x1 < -w1) & (x2 < -w2)) | ((x0 > w0) & (x1 > w1) & (x2 > w2))
-               | ((y0 < -w0) & (y1 < -w1) & (y2 < -w2)) | ((y0 > w0) & (y1 > w1) & (y2 > w2))
-               | ((z0 < -w0) & (z1 < -w1) & (z2 < -w2)) | ((z0 > w0) & (z1 > w1) & (z2 > w2)))
+    finite = (
+        (tl.abs(x0) < inf)
+        & (tl.abs(y0) < inf)
+        & (tl.abs(z0) < inf)
+        & (tl.abs(w0) < inf)
+        & (tl.abs(x1) < inf)
+        & (tl.abs(y1) < inf)
+        & (tl.abs(z1) < inf)
+        & (tl.abs(w1) < inf)
+        & (tl.abs(x2) < inf)
+        & (tl.abs(y2) < inf)
+        & (tl.abs(z2) < inf)
+        & (tl.abs(w2) < inf)
+    )
+    outside = (
+        ((x0 < -w0) & (x1 < -w1) & (x2 < -w2))
+        | ((x0 > w0) & (x1 > w1) & (x2 > w2))
+        | ((y0 < -w0) & (y1 < -w1) & (y2 < -w2))
+        | ((y0 > w0) & (y1 > w1) & (y2 > w2))
+        | ((z0 < -w0) & (z1 < -w1) & (z2 < -w2))
+        | ((z0 > w0) & (z1 > w1) & (z2 > w2))
+    )
     keep = live & finite & ~outside
     # Step 2: the near plane d = z + w >= 0; the corner alone on its side first.
     d0 = z0 + w0
@@ -381,13 +612,28 @@ def _vertex_kernel(vert_ptr, face_ptr, mvp_ptr, screen_ptr, keys_ptr, counter_pt
     _store_rows(screen_ptr, tri, live, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, BLOCK)
     # Second piece of a quad: (BA, C, CA).
     second = keep & two_in
-    a0, a1, a2, a3 = _screen_corner(second, _cross(bx, ax, t_ba), _cross(by, ay, t_ba),
-                                    _cross(bz, az, t_ba), _cross(bw, aw, t_ba), half_w, half_h)
+    a0, a1, a2, a3 = _screen_corner(
+        second,
+        _cross(bx, ax, t_ba),
+        _cross(by, ay, t_ba),
+        _cross(bz, az, t_ba),
+        _cross(bw, aw, t_ba),
+        half_w,
+        half_h,
+    )
     a4, a5, a6, a7 = _screen_corner(second, cx, cy, cz, cw, half_w, half_h)
-    a8, a9, a10, a11 = _screen_corner(second, _cross(cx, ax, t_ca), _cross(cy, ay, t_ca),
-                                      _cross(cz, az, t_ca), _cross(cw, aw, t_ca), half_w, half_h)
-    _store_rows(screen_ptr, tri + count, live, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10,
-                a11, BLOCK)
+    a8, a9, a10, a11 = _screen_corner(
+        second,
+        _cross(cx, ax, t_ca),
+        _cross(cy, ay, t_ca),
+        _cross(cz, az, t_ca),
+        _cross(cw, aw, t_ca),
+        half_w,
+        half_h,
+    )
+    _store_rows(
+        screen_ptr, tri + count, live, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, BLOCK
+    )
 
 
 @_jit

@@ -120,29 +120,104 @@ __all__ = [
 
 
 @_jit
-def _trace_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, root, tris,
-                  root_ref, stack_ptr, t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
-                  BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr,
-                  UNIFORM: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
-                  REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr,
-                  WHILE: tl.constexpr, TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
+def _trace_kernel(
+    o_ptr,
+    d_ptr,
+    tlo_ptr,
+    tlo_value,
+    thi_ptr,
+    thi_value,
+    pairs,
+    root,
+    tris,
+    root_ref,
+    stack_ptr,
+    t_ptr,
+    id_ptr,
+    u_ptr,
+    v_ptr,
+    n_rays,
+    stride,
+    BLOCK: tl.constexpr,
+    ANY_HIT: tl.constexpr,
+    EXIT: tl.constexpr,
+    UNIFORM: tl.constexpr,
+    VEC: tl.constexpr,
+    SANITIZE: tl.constexpr,
+    REGS: tl.constexpr,
+    TRIS: tl.constexpr,
+    SPECULATE: tl.constexpr,
+    WHILE: tl.constexpr,
+    TLO_ARRAY: tl.constexpr,
+    THI_ARRAY: tl.constexpr,
+):
     slot = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = slot < n_rays
     ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive = _load_rays(
-        o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, slot, live, TLO_ARRAY, THI_ARRAY)
-    t, row, u, v = _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
-                          ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT, EXIT, UNIFORM,
-                          VEC, SANITIZE, REGS, TRIS, SPECULATE, WHILE)
+        o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, slot, live, TLO_ARRAY, THI_ARRAY
+    )
+    t, row, u, v = _trace(
+        pairs,
+        root,
+        tris,
+        root_ref,
+        stack_ptr,
+        slot,
+        stride,
+        ox,
+        oy,
+        oz,
+        dx,
+        dy,
+        dz,
+        t_lo,
+        t_hi,
+        alive,
+        ANY_HIT,
+        EXIT,
+        UNIFORM,
+        VEC,
+        SANITIZE,
+        REGS,
+        TRIS,
+        SPECULATE,
+        WHILE,
+    )
     _store_row_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, slot, live, t, row, u, v)
 
 
 @_jit
-def _refill_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, root, tris,
-                   root_ref, stack_ptr, counter, t_ptr, id_ptr, u_ptr, v_ptr, n_rays, stride,
-                   BLOCK: tl.constexpr, ANY_HIT: tl.constexpr, EXIT: tl.constexpr,
-                   VEC: tl.constexpr, SANITIZE: tl.constexpr, REGS: tl.constexpr,
-                   TRIS: tl.constexpr, SPECULATE: tl.constexpr, REFILL: tl.constexpr,
-                   TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
+def _refill_kernel(
+    o_ptr,
+    d_ptr,
+    tlo_ptr,
+    tlo_value,
+    thi_ptr,
+    thi_value,
+    pairs,
+    root,
+    tris,
+    root_ref,
+    stack_ptr,
+    counter,
+    t_ptr,
+    id_ptr,
+    u_ptr,
+    v_ptr,
+    n_rays,
+    stride,
+    BLOCK: tl.constexpr,
+    ANY_HIT: tl.constexpr,
+    EXIT: tl.constexpr,
+    VEC: tl.constexpr,
+    SANITIZE: tl.constexpr,
+    REGS: tl.constexpr,
+    TRIS: tl.constexpr,
+    SPECULATE: tl.constexpr,
+    REFILL: tl.constexpr,
+    TLO_ARRAY: tl.constexpr,
+    THI_ARRAY: tl.constexpr,
+):
     """The while-while walk in persistent programs that replace finished rays (Aila &
     Laine's dynamic ray fetch): a program runs rounds of ``_while_round``; after each, the
     lanes whose ray is done write its hit, and once at least REFILL lanes are free they
@@ -173,11 +248,20 @@ def _refill_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, 
             more = first + n_free < n_rays
             ray = tl.where(take, fresh, ray)
             (nox, noy, noz, ndx, ndy, ndz, nlo, nhi, nalive) = _load_rays(
-                o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, fresh, take, TLO_ARRAY,
-                THI_ARRAY)
+                o_ptr,
+                d_ptr,
+                tlo_ptr,
+                tlo_value,
+                thi_ptr,
+                thi_value,
+                fresh,
+                take,
+                TLO_ARRAY,
+                THI_ARRAY,
+            )
             nix, niy, niz, nnx, nny, nnz, nalive, nnode, ncur = _start(
-                root, root_ref, nox, noy, noz, ndx, ndy, ndz, nlo, nhi, nalive, EXIT, VEC,
-                SANITIZE)
+                root, root_ref, nox, noy, noz, ndx, ndy, ndz, nlo, nhi, nalive, EXIT, VEC, SANITIZE
+            )
             ox, oy, oz = tl.where(take, nox, ox), tl.where(take, noy, oy), tl.where(take, noz, oz)
             dx, dy, dz = tl.where(take, ndx, dx), tl.where(take, ndy, dy), tl.where(take, ndz, dz)
             ix, iy, iz = tl.where(take, nix, ix), tl.where(take, niy, iy), tl.where(take, niz, iz)
@@ -194,27 +278,76 @@ def _refill_kernel(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, pairs, 
             best_tri = tl.where(take, 2147483647, best_tri)
             best_u = tl.where(take, 0.0, best_u)
             best_v = tl.where(take, 0.0, best_v)
-        (alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row, best_tri, best_u,
-         best_v) = _while_round(
-            pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz, neg_x,
-            neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row,
-            best_tri, best_u, best_v, ANY_HIT, EXIT, VEC, SANITIZE, REGS, TRIS, SPECULATE)
+        (alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row, best_tri, best_u, best_v) = (
+            _while_round(
+                pairs,
+                tris,
+                stack_ptr,
+                slot,
+                stride,
+                ox,
+                oy,
+                oz,
+                dx,
+                dy,
+                dz,
+                ix,
+                iy,
+                iz,
+                neg_x,
+                neg_y,
+                neg_z,
+                t_lo,
+                alive,
+                node,
+                cur,
+                sp,
+                s0,
+                s1,
+                s2,
+                s3,
+                best_t,
+                best_row,
+                best_tri,
+                best_u,
+                best_v,
+                ANY_HIT,
+                EXIT,
+                VEC,
+                SANITIZE,
+                REGS,
+                TRIS,
+                SPECULATE,
+            )
+        )
         done = (ray >= 0) & ~alive
-        _store_row_hits(tris, t_ptr, id_ptr, u_ptr, v_ptr, ray, done, best_t, best_row, best_u,
-                    best_v)
+        _store_row_hits(
+            tris, t_ptr, id_ptr, u_ptr, v_ptr, ray, done, best_t, best_row, best_u, best_v
+        )
         ray = tl.where(done, -1, ray)
         busy = tl.reduce((ray >= 0).to(tl.int32), 0, _or) | more.to(tl.int32)
 
 
-def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.inf, *,
-                      any_hit: bool = False, block: int = DEFAULT_BLOCK,
-                      num_warps: int = DEFAULT_NUM_WARPS,
-                      uniform_branches: bool = DEFAULT_UNIFORM,
-                      stack_regs: int = DEFAULT_STACK_REGS,
-                      tris_per_step: int = DEFAULT_TRIS_PER_STEP,
-                      speculate: bool = DEFAULT_SPECULATE, loop: str = DEFAULT_LOOP,
-                      stack: str | None = DEFAULT_STACK, refill: int | None = None,
-                      programs: int | None = None, return_info: bool = False):
+def trace_flat_triton(
+    bvh: FlatBVH,
+    origins,
+    directions,
+    t_min=0.0,
+    t_max=math.inf,
+    *,
+    any_hit: bool = False,
+    block: int = DEFAULT_BLOCK,
+    num_warps: int = DEFAULT_NUM_WARPS,
+    uniform_branches: bool = DEFAULT_UNIFORM,
+    stack_regs: int = DEFAULT_STACK_REGS,
+    tris_per_step: int = DEFAULT_TRIS_PER_STEP,
+    speculate: bool = DEFAULT_SPECULATE,
+    loop: str = DEFAULT_LOOP,
+    stack: str | None = DEFAULT_STACK,
+    refill: int | None = None,
+    programs: int | None = None,
+    return_info: bool = False,
+):
     """Closest (or any) hit of each ray by the Triton BVH walk (one ray per lane).
 
     bvh: ``build_flat_bvh(...)`` on the rays' device; origins, directions: (N, 3) float
@@ -241,8 +374,7 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
     Returns float32 ``Hits``, or ``(Hits, TracerKernelInfo)`` with ``return_info``.
     """
     _require_triton()
-    o, d, (t_lo, lo_value), (t_hi, hi_value) = check_ray_bounds(origins, directions, t_min,
-                                                                t_max)
+    o, d, (t_lo, lo_value), (t_hi, hi_value) = check_ray_bounds(origins, directions, t_min, t_max)
     _check_launch(block, num_warps)
     _check_walk(stack_regs, tris_per_step, loop)
     if stack is None:
@@ -272,25 +404,72 @@ def trace_flat_triton(bvh: FlatBVH, origins, directions, t_min=0.0, t_max=math.i
         counter = torch.zeros(1, dtype=torch.int32, device=device)
         with _ieee_quiet():
             handle = _refill_kernel[(grid,)](
-                o, d, o if t_lo is None else t_lo, lo_value, o if t_hi is None else t_hi,
-                hi_value, pairs, root, tris, root_ref, buffer, counter,
-                out_t, out_id, out_u, out_v, n, lanes,
-                BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE, VEC=compiled,
-                SANITIZE=not compiled, REGS=-1 if local else stack_regs, TRIS=tris_per_step,
-                SPECULATE=bool(speculate), REFILL=refill, TLO_ARRAY=t_lo is not None,
-                THI_ARRAY=t_hi is not None, num_warps=num_warps)
+                o,
+                d,
+                o if t_lo is None else t_lo,
+                lo_value,
+                o if t_hi is None else t_hi,
+                hi_value,
+                pairs,
+                root,
+                tris,
+                root_ref,
+                buffer,
+                counter,
+                out_t,
+                out_id,
+                out_u,
+                out_v,
+                n,
+                lanes,
+                BLOCK=block,
+                ANY_HIT=bool(any_hit),
+                EXIT=EXIT_SCALE,
+                VEC=compiled,
+                SANITIZE=not compiled,
+                REGS=-1 if local else stack_regs,
+                TRIS=tris_per_step,
+                SPECULATE=bool(speculate),
+                REFILL=refill,
+                TLO_ARRAY=t_lo is not None,
+                THI_ARRAY=t_hi is not None,
+                num_warps=num_warps,
+            )
     elif n:
         buffer, lanes = _stack(n, block, device, bvh, local)
         with _ieee_quiet():
             handle = _trace_kernel[(lanes // block,)](
-                o, d, o if t_lo is None else t_lo, lo_value, o if t_hi is None else t_hi,
-                hi_value, pairs, root, tris, root_ref, buffer,
-                out_t, out_id, out_u, out_v, n, lanes,
-                BLOCK=block, ANY_HIT=bool(any_hit), EXIT=EXIT_SCALE,
-                UNIFORM=bool(uniform_branches), VEC=compiled, SANITIZE=not compiled,
-                REGS=-1 if local else stack_regs, TRIS=tris_per_step,  # -1: LOCAL_STACK
-                SPECULATE=bool(speculate), WHILE=loop == "while",
-                TLO_ARRAY=t_lo is not None, THI_ARRAY=t_hi is not None, num_warps=num_warps)
+                o,
+                d,
+                o if t_lo is None else t_lo,
+                lo_value,
+                o if t_hi is None else t_hi,
+                hi_value,
+                pairs,
+                root,
+                tris,
+                root_ref,
+                buffer,
+                out_t,
+                out_id,
+                out_u,
+                out_v,
+                n,
+                lanes,
+                BLOCK=block,
+                ANY_HIT=bool(any_hit),
+                EXIT=EXIT_SCALE,
+                UNIFORM=bool(uniform_branches),
+                VEC=compiled,
+                SANITIZE=not compiled,
+                REGS=-1 if local else stack_regs,
+                TRIS=tris_per_step,  # -1: LOCAL_STACK
+                SPECULATE=bool(speculate),
+                WHILE=loop == "while",
+                TLO_ARRAY=t_lo is not None,
+                THI_ARRAY=t_hi is not None,
+                num_warps=num_warps,
+            )
     hits = Hits(t=out_t, triangle=out_id, u=out_u, v=out_v)
     if return_info:
         name = "any_hit" if any_hit else "closest_hit"

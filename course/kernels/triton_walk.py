@@ -75,8 +75,9 @@ UBER_STACK_REGS, UBER_TRIS_PER_STEP, UBER_SPECULATE = 4, 1, False
 LOCAL_STACK = tl.constexpr(-1) if tl is not None else -1
 """``REGS`` of a stack in each lane's local memory (compiled only; ``stack="local"``)."""
 if STACK_DEPTH != 64:  # _local_stack declares 64 entries in its PTX
-    raise ImportError(f"triton_walk: the local stack holds 64 entries, STACK_DEPTH is "
-                      f"{STACK_DEPTH}")
+    raise ImportError(
+        f"triton_walk: the local stack holds 64 entries, STACK_DEPTH is {STACK_DEPTH}"
+    )
 NONE = tl.constexpr(-2147483648) if tl is not None else -2147483648
 """The walk's "no node" (int32 min: every other negative value is a leaf's ``~first``)."""
 HIT_UP = tl.constexpr(1.0 + HIT_SLACK) if tl is not None else 1.0 + HIT_SLACK
@@ -87,6 +88,7 @@ HIT_DOWN = tl.constexpr(1.0 - HIT_SLACK) if tl is not None else 1.0 - HIT_SLACK
 # --------------------------------------------------------------------------------------
 # Device functions
 # --------------------------------------------------------------------------------------
+
 
 @_jit
 def _nan_to(x, value):
@@ -117,24 +119,48 @@ def _load4(row, WORD: tl.constexpr, VEC: tl.constexpr):
     if VEC:
         if WORD == 0:
             return tl.inline_asm_elementwise(
-                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4];", "=r,=r,=r,=r,l", [row],
-                dtype=(tl.int32, tl.int32, tl.int32, tl.int32), is_pure=True, pack=1)
+                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4];",
+                "=r,=r,=r,=r,l",
+                [row],
+                dtype=(tl.int32, tl.int32, tl.int32, tl.int32),
+                is_pure=True,
+                pack=1,
+            )
         elif WORD == 4:
             return tl.inline_asm_elementwise(
-                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4+16];", "=r,=r,=r,=r,l", [row],
-                dtype=(tl.int32, tl.int32, tl.int32, tl.int32), is_pure=True, pack=1)
+                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4+16];",
+                "=r,=r,=r,=r,l",
+                [row],
+                dtype=(tl.int32, tl.int32, tl.int32, tl.int32),
+                is_pure=True,
+                pack=1,
+            )
         elif WORD == 8:
             return tl.inline_asm_elementwise(
-                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4+32];", "=r,=r,=r,=r,l", [row],
-                dtype=(tl.int32, tl.int32, tl.int32, tl.int32), is_pure=True, pack=1)
+                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4+32];",
+                "=r,=r,=r,=r,l",
+                [row],
+                dtype=(tl.int32, tl.int32, tl.int32, tl.int32),
+                is_pure=True,
+                pack=1,
+            )
         else:
             tl.static_assert(WORD == 12, "_load4: WORD must be 0, 4, 8 or 12")
             return tl.inline_asm_elementwise(
-                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4+48];", "=r,=r,=r,=r,l", [row],
-                dtype=(tl.int32, tl.int32, tl.int32, tl.int32), is_pure=True, pack=1)
+                "ld.global.nc.v4.b32 {$0, $1, $2, $3}, [$4+48];",
+                "=r,=r,=r,=r,l",
+                [row],
+                dtype=(tl.int32, tl.int32, tl.int32, tl.int32),
+                is_pure=True,
+                pack=1,
+            )
     else:
-        return (tl.load(row + WORD), tl.load(row + WORD + 1), tl.load(row + WORD + 2),
-                tl.load(row + WORD + 3))
+        return (
+            tl.load(row + WORD),
+            tl.load(row + WORD + 1),
+            tl.load(row + WORD + 2),
+            tl.load(row + WORD + 3),
+        )
 
 
 @_jit
@@ -148,15 +174,35 @@ def _rcp(x, VEC: tl.constexpr):
     ``__frcp_rn`` is), a few instructions where the IEEE division ``div.rn.f32`` is a
     subroutine; both round the exact quotient, so the bits are the same."""
     if VEC:
-        return tl.inline_asm_elementwise("rcp.rn.f32 $0, $1;", "=f,f", [x], dtype=tl.float32,
-                                         is_pure=True, pack=1)
+        return tl.inline_asm_elementwise(
+            "rcp.rn.f32 $0, $1;", "=f,f", [x], dtype=tl.float32, is_pure=True, pack=1
+        )
     else:
         return tl.math.div_rn(tl.full(x.shape, 1.0, tl.float32), x)
 
 
 @_jit
-def _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz, t_lo, t_hi,
-          EXIT: tl.constexpr, SANITIZE: tl.constexpr):
+def _slab(
+    ox,
+    oy,
+    oz,
+    ix,
+    iy,
+    iz,
+    neg_x,
+    neg_y,
+    neg_z,
+    lx,
+    hx,
+    ly,
+    hy,
+    lz,
+    hz,
+    t_lo,
+    t_hi,
+    EXIT: tl.constexpr,
+    SANITIZE: tl.constexpr,
+):
     """Rays against one box each: (entry distance, hit?). Each axis's near plane is lo
     (hi) for a positive (negative) direction, so ``(plane - o) / d`` comes out in order. A
     NaN from ``0 * inf`` (a ray in a slab plane, parallel to it) means "inside this slab":
@@ -204,8 +250,13 @@ def _local_stack(like):
     ``.local`` declaration in inline PTX, kept by ptxas because its address is used. 64 is
     flat_bvh's STACK_DEPTH: every FlatBVH is checked at build to need no more."""
     return tl.inline_asm_elementwise(
-        "{ .local .align 16 .b32 stk[64]; mov.u64 $0, stk; }", "=l,r", [like],
-        dtype=tl.int64, is_pure=False, pack=1)
+        "{ .local .align 16 .b32 stk[64]; mov.u64 $0, stk; }",
+        "=l,r",
+        [like],
+        dtype=tl.int64,
+        is_pure=False,
+        pack=1,
+    )
 
 
 @_jit
@@ -218,8 +269,12 @@ def _push(stack_ptr, slot, stride, sp, value, mask, s0, s1, s2, s3, REGS: tl.con
     if REGS == LOCAL_STACK:
         tl.inline_asm_elementwise(
             "{ .reg .pred p; setp.ne.s32 p, $3, 0; @p st.local.b32 [$1], $2; mov.b32 $0, 0; }",
-            "=r,l,r,r", [slot + sp.to(tl.int64) * 4, value, mask.to(tl.int32)],
-            dtype=tl.int32, is_pure=False, pack=1)
+            "=r,l,r,r",
+            [slot + sp.to(tl.int64) * 4, value, mask.to(tl.int32)],
+            dtype=tl.int32,
+            is_pure=False,
+            pack=1,
+        )
     elif REGS == 0:
         tl.store(stack_ptr + sp * stride + slot, value, mask=mask)
     else:
@@ -238,8 +293,12 @@ def _pop(stack_ptr, slot, stride, sp, mask, s0, s1, s2, s3, REGS: tl.constexpr):
     if REGS == LOCAL_STACK:
         value = tl.inline_asm_elementwise(
             "{ .reg .pred p; setp.ne.s32 p, $2, 0; mov.b32 $0, 0; @p ld.local.b32 $0, [$1]; }",
-            "=r,l,r", [slot + sp.to(tl.int64) * 4, mask.to(tl.int32)], dtype=tl.int32,
-            is_pure=False, pack=1)
+            "=r,l,r",
+            [slot + sp.to(tl.int64) * 4, mask.to(tl.int32)],
+            dtype=tl.int32,
+            is_pure=False,
+            pack=1,
+        )
     elif REGS == 0:
         value = tl.load(stack_ptr + sp * stride + slot, mask=mask, other=0)
     else:
@@ -247,15 +306,42 @@ def _pop(stack_ptr, slot, stride, sp, mask, s0, s1, s2, s3, REGS: tl.constexpr):
         s0 = tl.where(mask, s1, s0)
         s1 = tl.where(mask, s2, s1)
         s2 = tl.where(mask, s3, s2)
-        s3 = tl.where(mask, tl.load(stack_ptr + (sp - 4) * stride + slot,
-                                    mask=mask & (sp >= 4), other=0), s3)
+        s3 = tl.where(
+            mask, tl.load(stack_ptr + (sp - 4) * stride + slot, mask=mask & (sp >= 4), other=0), s3
+        )
     return value, sp, s0, s1, s2, s3
 
 
 @_jit
-def _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
-           t_lo, best_t, visit, node, sp, cur, s0, s1, s2, s3, EXIT: tl.constexpr,
-           VEC: tl.constexpr, SANITIZE: tl.constexpr, REGS: tl.constexpr):
+def _visit(
+    pairs,
+    stack_ptr,
+    slot,
+    stride,
+    ox,
+    oy,
+    oz,
+    ix,
+    iy,
+    iz,
+    neg_x,
+    neg_y,
+    neg_z,
+    t_lo,
+    best_t,
+    visit,
+    node,
+    sp,
+    cur,
+    s0,
+    s1,
+    s2,
+    s3,
+    EXIT: tl.constexpr,
+    VEC: tl.constexpr,
+    SANITIZE: tl.constexpr,
+    REGS: tl.constexpr,
+):
     """TRAVERSE for the lanes in ``visit``: one row of ``pairs`` (both children's boxes and
     links, four 16-byte loads); go to the nearer hit child, push the farther. Returns the
     lanes' new ``(node, sp, cur, s0, s1, s2, s3)``; node = cur = -1: pop next."""
@@ -264,24 +350,79 @@ def _visit(pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y,
     ay0, ay1, by0, by1 = _load4(row, 4, VEC)
     az0, az1, bz0, bz1 = _load4(row, 8, VEC)
     ref_a, ref_b, _ca, _cb = _load4(row, 12, VEC)
-    ta, ha = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, _f(ax0), _f(ax1), _f(ay0),
-                   _f(ay1), _f(az0), _f(az1), t_lo, best_t, EXIT, SANITIZE)
-    tb, hb = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, _f(bx0), _f(bx1), _f(by0),
-                   _f(by1), _f(bz0), _f(bz1), t_lo, best_t, EXIT, SANITIZE)
+    ta, ha = _slab(
+        ox,
+        oy,
+        oz,
+        ix,
+        iy,
+        iz,
+        neg_x,
+        neg_y,
+        neg_z,
+        _f(ax0),
+        _f(ax1),
+        _f(ay0),
+        _f(ay1),
+        _f(az0),
+        _f(az1),
+        t_lo,
+        best_t,
+        EXIT,
+        SANITIZE,
+    )
+    tb, hb = _slab(
+        ox,
+        oy,
+        oz,
+        ix,
+        iy,
+        iz,
+        neg_x,
+        neg_y,
+        neg_z,
+        _f(bx0),
+        _f(bx1),
+        _f(by0),
+        _f(by1),
+        _f(bz0),
+        _f(bz1),
+        t_lo,
+        best_t,
+        EXIT,
+        SANITIZE,
+    )
     ha = ha & visit
     hb = hb & visit
     b_first = hb & (~ha | (tb < ta))
     both = ha & hb
-    sp, s0, s1, s2, s3 = _push(stack_ptr, slot, stride, sp, tl.where(b_first, ref_a, ref_b),
-                               both, s0, s1, s2, s3, REGS)
+    sp, s0, s1, s2, s3 = _push(
+        stack_ptr, slot, stride, sp, tl.where(b_first, ref_a, ref_b), both, s0, s1, s2, s3, REGS
+    )
     node = tl.where(visit, NONE, node)
     node, cur = _dispatch(ha | hb, tl.where(b_first, ref_b, ref_a), node, cur)
     return node, sp, cur, s0, s1, s2, s3
 
 
 @_jit
-def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-               best_t, best_row, best_tri, best_u, best_v, VEC: tl.constexpr):
+def _intersect(
+    tris,
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    t_lo,
+    test,
+    cur,
+    best_t,
+    best_row,
+    best_tri,
+    best_u,
+    best_v,
+    VEC: tl.constexpr,
+):
     """INTERSECT for the lanes in ``test``: Möller–Trumbore against row ``cur`` (three
     16-byte loads); keeps the nearest hit (ties: lower original index). Returns the updated
     best, the hit mask and the next row (-1 after the row flagged last in its leaf)."""
@@ -312,18 +453,49 @@ def _intersect(tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
     # det = +-0 makes 1/det infinite, so u and v are +-inf or NaN and fail it. Written as
     # the separate comparisons, the compiler packs the flags into bits and unpacks them
     # (~10 more instructions per test; bench/results/nvidia-h200/lab3_rows/).
-    inside = tl.minimum(tl.minimum(u, v, propagate_nan=tl.PropagateNan.ALL), 1.0 - (u + v),
-                        propagate_nan=tl.PropagateNan.ALL) >= 0.0
+    inside = (
+        tl.minimum(
+            tl.minimum(u, v, propagate_nan=tl.PropagateNan.ALL),
+            1.0 - (u + v),
+            propagate_nan=tl.PropagateNan.ALL,
+        )
+        >= 0.0
+    )
     hit = test & inside & (t >= t_lo) & (t <= best_t) & ((t < best_t) | (tri < best_tri))
     nxt = tl.where(test, tl.where(last != 0, -1, cur + 1), cur)
-    return (tl.where(hit, t, best_t), tl.where(hit, cur, best_row), tl.where(hit, tri, best_tri),
-            tl.where(hit, u, best_u), tl.where(hit, v, best_v), hit, nxt)
+    return (
+        tl.where(hit, t, best_t),
+        tl.where(hit, cur, best_row),
+        tl.where(hit, tri, best_tri),
+        tl.where(hit, u, best_u),
+        tl.where(hit, v, best_v),
+        hit,
+        nxt,
+    )
 
 
 @_jit
-def _test_leaves(tris, ox, oy, oz, dx, dy, dz, t_lo, alive, cur, best_t, best_row, best_tri,
-                 best_u, best_v, ANY_HIT: tl.constexpr, VEC: tl.constexpr,
-                 TRIS: tl.constexpr, UNIFORM: tl.constexpr):
+def _test_leaves(
+    tris,
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    t_lo,
+    alive,
+    cur,
+    best_t,
+    best_row,
+    best_tri,
+    best_u,
+    best_v,
+    ANY_HIT: tl.constexpr,
+    VEC: tl.constexpr,
+    TRIS: tl.constexpr,
+    UNIFORM: tl.constexpr,
+):
     """INTERSECT: up to TRIS rows of each lane's pending leaf (``_intersect``); with
     UNIFORM, a test no lane needs is skipped (a vote). Any hit ends a lane's walk. Returns
     ``(alive, cur, best_t, best_row, best_tri, best_u, best_v)``."""
@@ -333,12 +505,42 @@ def _test_leaves(tris, ox, oy, oz, dx, dy, dz, t_lo, alive, cur, best_t, best_ro
         if UNIFORM:
             if tl.max(test.to(tl.int32), axis=0) > 0:
                 best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
-                    tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-                    best_t, best_row, best_tri, best_u, best_v, VEC)
+                    tris,
+                    ox,
+                    oy,
+                    oz,
+                    dx,
+                    dy,
+                    dz,
+                    t_lo,
+                    test,
+                    cur,
+                    best_t,
+                    best_row,
+                    best_tri,
+                    best_u,
+                    best_v,
+                    VEC,
+                )
         else:
             best_t, best_row, best_tri, best_u, best_v, hit, cur = _intersect(
-                tris, ox, oy, oz, dx, dy, dz, t_lo, test, cur,
-                best_t, best_row, best_tri, best_u, best_v, VEC)
+                tris,
+                ox,
+                oy,
+                oz,
+                dx,
+                dy,
+                dz,
+                t_lo,
+                test,
+                cur,
+                best_t,
+                best_row,
+                best_tri,
+                best_u,
+                best_v,
+                VEC,
+            )
         if ANY_HIT:
             alive = alive & ~hit
     return alive, cur, best_t, best_row, best_tri, best_u, best_v
@@ -356,8 +558,21 @@ def _start_waiting(alive, node, cur, SPECULATE: tl.constexpr):
 
 
 @_jit
-def _pop_or_finish(stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3,
-                   REGS: tl.constexpr, SPECULATE: tl.constexpr):
+def _pop_or_finish(
+    stack_ptr,
+    slot,
+    stride,
+    alive,
+    node,
+    cur,
+    sp,
+    s0,
+    s1,
+    s2,
+    s3,
+    REGS: tl.constexpr,
+    SPECULATE: tl.constexpr,
+):
     """A lane with no node pops its stack; with an empty stack and no leaf work it is done.
     Without SPECULATE a lane with leaf work waits for it before popping."""
     no_node = alive & (node == NONE)
@@ -372,8 +587,22 @@ def _pop_or_finish(stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3
 
 
 @_jit
-def _start(root, root_ref, ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, EXIT: tl.constexpr,
-           VEC: tl.constexpr, SANITIZE: tl.constexpr):
+def _start(
+    root,
+    root_ref,
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    t_lo,
+    t_hi,
+    alive,
+    EXIT: tl.constexpr,
+    VEC: tl.constexpr,
+    SANITIZE: tl.constexpr,
+):
     """A walk's start per lane: the inverse direction and its signs, and, for the lanes of
     ``alive`` whose ray enters the root's box (row 0 of the float ``nodes``), the root as
     the next node (or pending leaf). Returns ``(ix, iy, iz, neg_x, neg_y, neg_z, alive,
@@ -391,8 +620,27 @@ def _start(root, root_ref, ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, EXIT: tl.c
     hx = tl.load(root + zero_i + 3)
     hy = tl.load(root + zero_i + 4)
     hz = tl.load(root + zero_i + 5)
-    _, in_root = _slab(ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z, lx, hx, ly, hy, lz, hz,
-                       t_lo, t_hi, EXIT, SANITIZE)
+    _, in_root = _slab(
+        ox,
+        oy,
+        oz,
+        ix,
+        iy,
+        iz,
+        neg_x,
+        neg_y,
+        neg_z,
+        lx,
+        hx,
+        ly,
+        hy,
+        lz,
+        hz,
+        t_lo,
+        t_hi,
+        EXIT,
+        SANITIZE,
+    )
     alive = alive & in_root
     node = zero_i + NONE  # the pair row to visit next (or a leaf waiting); NONE: none
     cur = zero_i - 1  # the leaf row to test next; -1: none
@@ -401,11 +649,46 @@ def _start(root, root_ref, ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, EXIT: tl.c
 
 
 @_jit
-def _while_round(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz,
-                 neg_x, neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t,
-                 best_row, best_tri, best_u, best_v, ANY_HIT: tl.constexpr,
-                 EXIT: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
-                 REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr):
+def _while_round(
+    pairs,
+    tris,
+    stack_ptr,
+    slot,
+    stride,
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    ix,
+    iy,
+    iz,
+    neg_x,
+    neg_y,
+    neg_z,
+    t_lo,
+    alive,
+    node,
+    cur,
+    sp,
+    s0,
+    s1,
+    s2,
+    s3,
+    best_t,
+    best_row,
+    best_tri,
+    best_u,
+    best_v,
+    ANY_HIT: tl.constexpr,
+    EXIT: tl.constexpr,
+    VEC: tl.constexpr,
+    SANITIZE: tl.constexpr,
+    REGS: tl.constexpr,
+    TRIS: tl.constexpr,
+    SPECULATE: tl.constexpr,
+):
     """One round of Aila & Laine's *while-while* loop, the shape of the CUDA C kernel: the
     program traverses while some lane still looks for a leaf (a lane that found one waits
     or, with SPECULATE, traverses on and parks one more), then tests triangles while some
@@ -416,51 +699,190 @@ def _while_round(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, i
     searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
     while searching != 0:
         node, sp, cur, s0, s1, s2, s3 = _visit(
-            pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
-            t_lo, best_t, alive & (node >= 0), node, sp, cur, s0, s1, s2, s3, EXIT, VEC,
-            SANITIZE, REGS)
+            pairs,
+            stack_ptr,
+            slot,
+            stride,
+            ox,
+            oy,
+            oz,
+            ix,
+            iy,
+            iz,
+            neg_x,
+            neg_y,
+            neg_z,
+            t_lo,
+            best_t,
+            alive & (node >= 0),
+            node,
+            sp,
+            cur,
+            s0,
+            s1,
+            s2,
+            s3,
+            EXIT,
+            VEC,
+            SANITIZE,
+            REGS,
+        )
         alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
-            stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
+            stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE
+        )
         searching = tl.reduce((alive & (node >= 0) & (cur < 0)).to(tl.int32), 0, _or)
     # INTERSECT while some lane has leaf work (a parked leaf follows its predecessor).
     testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
     while testing != 0:
         alive, cur, best_t, best_row, best_tri, best_u, best_v = _test_leaves(
-            tris, ox, oy, oz, dx, dy, dz, t_lo, alive, cur, best_t, best_row, best_tri,
-            best_u, best_v, ANY_HIT, VEC, TRIS, False)
+            tris,
+            ox,
+            oy,
+            oz,
+            dx,
+            dy,
+            dz,
+            t_lo,
+            alive,
+            cur,
+            best_t,
+            best_row,
+            best_tri,
+            best_u,
+            best_v,
+            ANY_HIT,
+            VEC,
+            TRIS,
+            False,
+        )
         node, cur = _start_waiting(alive, node, cur, SPECULATE)
         testing = tl.reduce((alive & (cur >= 0)).to(tl.int32), 0, _or)
     # POP: lanes left with no node go on from their stack (or finish).
     alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
-        stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
+        stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE
+    )
     return alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row, best_tri, best_u, best_v
 
 
 @_jit
-def _while_while(pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz,
-                 neg_x, neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t,
-                 best_row, best_tri, best_u, best_v, ANY_HIT: tl.constexpr,
-                 EXIT: tl.constexpr, VEC: tl.constexpr, SANITIZE: tl.constexpr,
-                 REGS: tl.constexpr, TRIS: tl.constexpr, SPECULATE: tl.constexpr):
+def _while_while(
+    pairs,
+    tris,
+    stack_ptr,
+    slot,
+    stride,
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    ix,
+    iy,
+    iz,
+    neg_x,
+    neg_y,
+    neg_z,
+    t_lo,
+    alive,
+    node,
+    cur,
+    sp,
+    s0,
+    s1,
+    s2,
+    s3,
+    best_t,
+    best_row,
+    best_tri,
+    best_u,
+    best_v,
+    ANY_HIT: tl.constexpr,
+    EXIT: tl.constexpr,
+    VEC: tl.constexpr,
+    SANITIZE: tl.constexpr,
+    REGS: tl.constexpr,
+    TRIS: tl.constexpr,
+    SPECULATE: tl.constexpr,
+):
     """The walk as rounds of ``_while_round`` while some lane is alive: same state and
     results as the *if-if* loop of ``_trace``."""
     votes = tl.reduce(alive.to(tl.int32), 0, _or)
     while votes != 0:
-        (alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row, best_tri, best_u,
-         best_v) = _while_round(
-            pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz, neg_x,
-            neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row,
-            best_tri, best_u, best_v, ANY_HIT, EXIT, VEC, SANITIZE, REGS, TRIS, SPECULATE)
+        (alive, node, cur, sp, s0, s1, s2, s3, best_t, best_row, best_tri, best_u, best_v) = (
+            _while_round(
+                pairs,
+                tris,
+                stack_ptr,
+                slot,
+                stride,
+                ox,
+                oy,
+                oz,
+                dx,
+                dy,
+                dz,
+                ix,
+                iy,
+                iz,
+                neg_x,
+                neg_y,
+                neg_z,
+                t_lo,
+                alive,
+                node,
+                cur,
+                sp,
+                s0,
+                s1,
+                s2,
+                s3,
+                best_t,
+                best_row,
+                best_tri,
+                best_u,
+                best_v,
+                ANY_HIT,
+                EXIT,
+                VEC,
+                SANITIZE,
+                REGS,
+                TRIS,
+                SPECULATE,
+            )
+        )
         votes = tl.reduce(alive.to(tl.int32), 0, _or)
     return best_t, best_row, best_u, best_v
 
 
 @_jit
-def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
-           ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, ANY_HIT: tl.constexpr,
-           EXIT: tl.constexpr, UNIFORM: tl.constexpr, VEC: tl.constexpr,
-           SANITIZE: tl.constexpr, REGS: tl.constexpr, TRIS: tl.constexpr,
-           SPECULATE: tl.constexpr, WHILE: tl.constexpr):
+def _trace(
+    pairs,
+    root,
+    tris,
+    root_ref,
+    stack_ptr,
+    slot,
+    stride,
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    t_lo,
+    t_hi,
+    alive,
+    ANY_HIT: tl.constexpr,
+    EXIT: tl.constexpr,
+    UNIFORM: tl.constexpr,
+    VEC: tl.constexpr,
+    SANITIZE: tl.constexpr,
+    REGS: tl.constexpr,
+    TRIS: tl.constexpr,
+    SPECULATE: tl.constexpr,
+    WHILE: tl.constexpr,
+):
     """Walk the BVH for every lane with ``alive`` set: the TRAVERSE/INTERSECT/POP loop.
 
     pairs, tris: the int32 views of the ``pairs`` and ``triangles`` layouts; root: the
@@ -483,7 +905,8 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
     best_u = tl.zeros(ox.shape, tl.float32)
     best_v = tl.zeros(ox.shape, tl.float32)
     ix, iy, iz, neg_x, neg_y, neg_z, alive, node, cur = _start(
-        root, root_ref, ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, EXIT, VEC, SANITIZE)
+        root, root_ref, ox, oy, oz, dx, dy, dz, t_lo, t_hi, alive, EXIT, VEC, SANITIZE
+    )
     if REGS == LOCAL_STACK:
         slot = _local_stack(zero_i)
     sp = zero_i
@@ -493,10 +916,45 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
     s3 = zero_i
     if WHILE:
         best_t, best_row, best_u, best_v = _while_while(
-            pairs, tris, stack_ptr, slot, stride, ox, oy, oz, dx, dy, dz, ix, iy, iz,
-            neg_x, neg_y, neg_z, t_lo, alive, node, cur, sp, s0, s1, s2, s3, best_t,
-            best_row, best_tri, best_u, best_v, ANY_HIT, EXIT, VEC, SANITIZE, REGS, TRIS,
-            SPECULATE)
+            pairs,
+            tris,
+            stack_ptr,
+            slot,
+            stride,
+            ox,
+            oy,
+            oz,
+            dx,
+            dy,
+            dz,
+            ix,
+            iy,
+            iz,
+            neg_x,
+            neg_y,
+            neg_z,
+            t_lo,
+            alive,
+            node,
+            cur,
+            sp,
+            s0,
+            s1,
+            s2,
+            s3,
+            best_t,
+            best_row,
+            best_tri,
+            best_u,
+            best_v,
+            ANY_HIT,
+            EXIT,
+            VEC,
+            SANITIZE,
+            REGS,
+            TRIS,
+            SPECULATE,
+        )
         return best_t, best_row, best_u, best_v
     # One vote per step for the loop and the TRAVERSE skip: bit 0 some lane alive, bit 1
     # some lane at an interior node.
@@ -507,23 +965,92 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
         if UNIFORM:
             if (votes & 2) != 0:
                 node, sp, cur, s0, s1, s2, s3 = _visit(
-                    pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y,
-                    neg_z, t_lo, best_t, visit, node, sp, cur, s0, s1, s2, s3, EXIT, VEC,
-                    SANITIZE, REGS)
+                    pairs,
+                    stack_ptr,
+                    slot,
+                    stride,
+                    ox,
+                    oy,
+                    oz,
+                    ix,
+                    iy,
+                    iz,
+                    neg_x,
+                    neg_y,
+                    neg_z,
+                    t_lo,
+                    best_t,
+                    visit,
+                    node,
+                    sp,
+                    cur,
+                    s0,
+                    s1,
+                    s2,
+                    s3,
+                    EXIT,
+                    VEC,
+                    SANITIZE,
+                    REGS,
+                )
         else:
             node, sp, cur, s0, s1, s2, s3 = _visit(
-                pairs, stack_ptr, slot, stride, ox, oy, oz, ix, iy, iz, neg_x, neg_y, neg_z,
-                t_lo, best_t, visit, node, sp, cur, s0, s1, s2, s3, EXIT, VEC, SANITIZE, REGS)
+                pairs,
+                stack_ptr,
+                slot,
+                stride,
+                ox,
+                oy,
+                oz,
+                ix,
+                iy,
+                iz,
+                neg_x,
+                neg_y,
+                neg_z,
+                t_lo,
+                best_t,
+                visit,
+                node,
+                sp,
+                cur,
+                s0,
+                s1,
+                s2,
+                s3,
+                EXIT,
+                VEC,
+                SANITIZE,
+                REGS,
+            )
         # 2. INTERSECT up to TRIS triangles of the pending leaf
         alive, cur, best_t, best_row, best_tri, best_u, best_v = _test_leaves(
-            tris, ox, oy, oz, dx, dy, dz, t_lo, alive, cur, best_t, best_row, best_tri,
-            best_u, best_v, ANY_HIT, VEC, TRIS, UNIFORM)
+            tris,
+            ox,
+            oy,
+            oz,
+            dx,
+            dy,
+            dz,
+            t_lo,
+            alive,
+            cur,
+            best_t,
+            best_row,
+            best_tri,
+            best_u,
+            best_v,
+            ANY_HIT,
+            VEC,
+            TRIS,
+            UNIFORM,
+        )
         # 3. POP: a lane with no node and no leaf work pops its stack (or finishes)
         node, cur = _start_waiting(alive, node, cur, SPECULATE)
         alive, node, cur, sp, s0, s1, s2, s3 = _pop_or_finish(
-            stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE)
-        votes = tl.reduce(alive.to(tl.int32) | ((alive & (node >= 0)).to(tl.int32) << 1), 0,
-                          _or)
+            stack_ptr, slot, stride, alive, node, cur, sp, s0, s1, s2, s3, REGS, SPECULATE
+        )
+        votes = tl.reduce(alive.to(tl.int32) | ((alive & (node >= 0)).to(tl.int32) << 1), 0, _or)
     return best_t, best_row, best_u, best_v
 
 
@@ -531,14 +1058,30 @@ def _trace(pairs, root, tris, root_ref, stack_ptr, slot, stride,
 def _valid(ox, oy, oz, dx, dy, dz):
     """Rays that can hit: finite components and a nonzero direction."""
     inf = float("inf")
-    return ((tl.abs(ox) < inf) & (tl.abs(oy) < inf) & (tl.abs(oz) < inf)
-            & (tl.abs(dx) < inf) & (tl.abs(dy) < inf) & (tl.abs(dz) < inf)
-            & ((dx != 0.0) | (dy != 0.0) | (dz != 0.0)))
+    return (
+        (tl.abs(ox) < inf)
+        & (tl.abs(oy) < inf)
+        & (tl.abs(oz) < inf)
+        & (tl.abs(dx) < inf)
+        & (tl.abs(dy) < inf)
+        & (tl.abs(dz) < inf)
+        & ((dx != 0.0) | (dy != 0.0) | (dz != 0.0))
+    )
 
 
 @_jit
-def _load_rays(o_ptr, d_ptr, tlo_ptr, tlo_value, thi_ptr, thi_value, ray, live,
-               TLO_ARRAY: tl.constexpr, THI_ARRAY: tl.constexpr):
+def _load_rays(
+    o_ptr,
+    d_ptr,
+    tlo_ptr,
+    tlo_value,
+    thi_ptr,
+    thi_value,
+    ray,
+    live,
+    TLO_ARRAY: tl.constexpr,
+    THI_ARRAY: tl.constexpr,
+):
     """Rays ``ray`` in the lanes of ``live``: ``(ox, oy, oz, dx, dy, dz, t_lo, t_hi,
     alive)``; alive: the ray can hit (rays with NaN/inf, a zero direction, t_max < t_min
     or NaN never walk)."""

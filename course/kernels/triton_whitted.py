@@ -40,13 +40,39 @@ def _pow(x, s):
 
 
 @_jit
-def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, root_ref,
-                    stack_ptr, stride, mat_id_ptr, mat_ptr, light_ptr,
-                    amb_r, amb_g, amb_b, bg_r, bg_g, bg_b, offset,
-                    N_LIGHTS: tl.constexpr, MAX_DEPTH: tl.constexpr,
-                    BLOCK: tl.constexpr, EXIT: tl.constexpr, UNIFORM: tl.constexpr,
-                    VEC: tl.constexpr, SANITIZE: tl.constexpr, REGS: tl.constexpr,
-                    TRIS: tl.constexpr, SPECULATE: tl.constexpr):
+def _whitted_kernel(
+    o_ptr,
+    d_ptr,
+    out_ptr,
+    n_rays,
+    pairs,
+    root,
+    tris_f,
+    tris_i,
+    root_ref,
+    stack_ptr,
+    stride,
+    mat_id_ptr,
+    mat_ptr,
+    light_ptr,
+    amb_r,
+    amb_g,
+    amb_b,
+    bg_r,
+    bg_g,
+    bg_b,
+    offset,
+    N_LIGHTS: tl.constexpr,
+    MAX_DEPTH: tl.constexpr,
+    BLOCK: tl.constexpr,
+    EXIT: tl.constexpr,
+    UNIFORM: tl.constexpr,
+    VEC: tl.constexpr,
+    SANITIZE: tl.constexpr,
+    REGS: tl.constexpr,
+    TRIS: tl.constexpr,
+    SPECULATE: tl.constexpr,
+):
     """The uber kernel: per lane, primary ray -> (closest hit -> shade with shadow rays ->
     mirror bounce) up to ``max_depth`` bounces; the radiance recursion unrolled into a
     loop with a throughput weight (``L += kr * radiance(...)`` becomes ``weight *= kr``).
@@ -65,9 +91,15 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
     zero = tl.zeros([BLOCK], tl.float32)
     inf = zero + float("inf")
     # A primary ray with a NaN/inf component or a zero direction misses: background.
-    finite = ((tl.abs(ox) < inf) & (tl.abs(oy) < inf) & (tl.abs(oz) < inf)
-              & (tl.abs(dx) < inf) & (tl.abs(dy) < inf) & (tl.abs(dz) < inf)
-              & ((dx != 0.0) | (dy != 0.0) | (dz != 0.0)))
+    finite = (
+        (tl.abs(ox) < inf)
+        & (tl.abs(oy) < inf)
+        & (tl.abs(oz) < inf)
+        & (tl.abs(dx) < inf)
+        & (tl.abs(dy) < inf)
+        & (tl.abs(dz) < inf)
+        & ((dx != 0.0) | (dy != 0.0) | (dz != 0.0))
+    )
     w_r = zero + 1.0
     w_g = zero + 1.0
     w_b = zero + 1.0
@@ -77,9 +109,33 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
     active = live & finite
     inv_pi = 0.3183098861837907
     for _depth in range(MAX_DEPTH + 1):
-        t, row, _u, _v = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot, stride,
-                                ox, oy, oz, dx, dy, dz, zero, inf, active, False, EXIT,
-                                UNIFORM, VEC, SANITIZE, REGS, TRIS, SPECULATE, False)
+        t, row, _u, _v = _trace(
+            pairs,
+            root,
+            tris_i,
+            root_ref,
+            stack_ptr,
+            slot,
+            stride,
+            ox,
+            oy,
+            oz,
+            dx,
+            dy,
+            dz,
+            zero,
+            inf,
+            active,
+            False,
+            EXIT,
+            UNIFORM,
+            VEC,
+            SANITIZE,
+            REGS,
+            TRIS,
+            SPECULATE,
+            False,
+        )
         hit = active & (row >= 0)
         miss = active & (row < 0)
         c_r += tl.where(miss, w_r * bg_r, 0.0)
@@ -106,8 +162,7 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
         px = ox + t * dx
         py = oy + t * dy
         pz = oz + t * dz
-        scale = offset * tl.maximum(tl.maximum(tl.abs(px), tl.abs(py)),
-                                    tl.maximum(tl.abs(pz), 1.0))
+        scale = offset * tl.maximum(tl.maximum(tl.abs(px), tl.abs(py)), tl.maximum(tl.abs(pz), 1.0))
         px = px + nx * scale
         py = py + ny * scale
         pz = pz + nz * scale
@@ -148,10 +203,33 @@ def _whitted_kernel(o_ptr, d_ptr, out_ptr, n_rays, pairs, root, tris_f, tris_i, 
             s_max = tl.where(is_point, dist - light_reach, inf)
             ndl = nx * lx + ny * ly + nz * lz
             want = hit & (ndl > 0.0)
-            _t, occluder, _u2, _v2 = _trace(pairs, root, tris_i, root_ref, stack_ptr, slot,
-                                            stride, px, py, pz, lx, ly, lz, zero, s_max, want,
-                                            True, EXIT, UNIFORM, VEC, SANITIZE, REGS, TRIS,
-                                            SPECULATE, False)
+            _t, occluder, _u2, _v2 = _trace(
+                pairs,
+                root,
+                tris_i,
+                root_ref,
+                stack_ptr,
+                slot,
+                stride,
+                px,
+                py,
+                pz,
+                lx,
+                ly,
+                lz,
+                zero,
+                s_max,
+                want,
+                True,
+                EXIT,
+                UNIFORM,
+                VEC,
+                SANITIZE,
+                REGS,
+                TRIS,
+                SPECULATE,
+                False,
+            )
             lit = want & (occluder < 0)
             hx = lx - dx
             hy = ly - dy
@@ -192,12 +270,26 @@ def _scene_tables(scene, device, offset: float):
     lights (L, 8) float32 ``xyz, is_point, rgb, offset max(1, |P|inf)``, the light count,
     and the ambient and background colours as 6 floats, of a WhittedScene: built once per
     scene, device and offset (cached like its BVH), so a frame launches without host syncs."""
-    names = ("vertices", "faces", "material", "kd", "ks", "shininess", "kr", "point_positions",
-             "point_intensities", "dir_directions", "dir_irradiance", "ambient", "background")
+    names = (
+        "vertices",
+        "faces",
+        "material",
+        "kd",
+        "ks",
+        "shininess",
+        "kr",
+        "point_positions",
+        "point_intensities",
+        "dir_directions",
+        "dir_irradiance",
+        "ambient",
+        "background",
+    )
     for name in names:
         if not isinstance(getattr(scene, name, None), torch.Tensor):
-            raise TypeError(f"scene: expected a WhittedScene with a {name!r} tensor, "
-                            f"got {type(scene).__name__}")
+            raise TypeError(
+                f"scene: expected a WhittedScene with a {name!r} tensor, got {type(scene).__name__}"
+            )
     key = (str(device), offset)
     try:
         cached = _TABLES.setdefault(scene, {})
@@ -211,24 +303,46 @@ def _scene_tables(scene, device, offset: float):
     mats[:, 9] = scene.shininess
     pp = scene.point_positions.to(**f32)
     reach = offset * pp.abs().amax(1).clamp(min=1.0) if len(pp) else pp[:, 0]
-    point = torch.cat([pp, torch.ones(len(pp), 1, **f32), scene.point_intensities.to(**f32),
-                       reach[:, None]], 1)
+    point = torch.cat(
+        [pp, torch.ones(len(pp), 1, **f32), scene.point_intensities.to(**f32), reach[:, None]], 1
+    )
     dd = scene.dir_directions.to(**f32)
-    direc = torch.cat([dd, torch.zeros(len(dd), 1, **f32), scene.dir_irradiance.to(**f32),
-                       torch.zeros(len(dd), 1, **f32)], 1)
+    direc = torch.cat(
+        [
+            dd,
+            torch.zeros(len(dd), 1, **f32),
+            scene.dir_irradiance.to(**f32),
+            torch.zeros(len(dd), 1, **f32),
+        ],
+        1,
+    )
     lights = torch.cat([point, direc], 0).contiguous()
     if not len(lights):
         lights = torch.zeros(1, 8, **f32)  # never read: n_lights = 0
     colours = [float(x) for x in torch.cat([scene.ambient, scene.background]).tolist()]
-    cached[key] = (scene.material.to(device, torch.int32).contiguous(), mats.contiguous(),
-                   lights, len(pp) + len(dd), colours)
+    cached[key] = (
+        scene.material.to(device, torch.int32).contiguous(),
+        mats.contiguous(),
+        lights,
+        len(pp) + len(dd),
+        colours,
+    )
     return cached[key]
 
 
-def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
-                          offset: float | None = None, block: int = DEFAULT_BLOCK,
-                          num_warps: int = DEFAULT_NUM_WARPS, bvh: FlatBVH | None = None,
-                          uniform_branches: bool = DEFAULT_UNIFORM, return_info: bool = False):
+def render_whitted_triton(
+    scene,
+    origins,
+    directions,
+    max_depth: int = 2,
+    *,
+    offset: float | None = None,
+    block: int = DEFAULT_BLOCK,
+    num_warps: int = DEFAULT_NUM_WARPS,
+    bvh: FlatBVH | None = None,
+    uniform_branches: bool = DEFAULT_UNIFORM,
+    return_info: bool = False,
+):
     """Radiance along each primary ray by the Whitted contract, in one kernel launch.
 
     scene: a ``course.given.lab3.WhittedScene`` (its BVH is cached per scene object
@@ -257,11 +371,34 @@ def render_whitted_triton(scene, origins, directions, max_depth: int = 2, *,
         compiled = not interpreting()
         with _ieee_quiet():
             handle = _whitted_kernel[(lanes // block,)](
-                o, d, out, n, pairs, root, tris_f, tris_i, root_ref, stack, lanes, mat_id,
-                mats, lights, *colours, float(offset), N_LIGHTS=n_lights, MAX_DEPTH=max_depth,
-                BLOCK=block, EXIT=EXIT_SCALE, UNIFORM=bool(uniform_branches), VEC=compiled,
-                SANITIZE=not compiled, REGS=UBER_STACK_REGS, TRIS=UBER_TRIS_PER_STEP,
-                SPECULATE=UBER_SPECULATE, num_warps=num_warps)
+                o,
+                d,
+                out,
+                n,
+                pairs,
+                root,
+                tris_f,
+                tris_i,
+                root_ref,
+                stack,
+                lanes,
+                mat_id,
+                mats,
+                lights,
+                *colours,
+                float(offset),
+                N_LIGHTS=n_lights,
+                MAX_DEPTH=max_depth,
+                BLOCK=block,
+                EXIT=EXIT_SCALE,
+                UNIFORM=bool(uniform_branches),
+                VEC=compiled,
+                SANITIZE=not compiled,
+                REGS=UBER_STACK_REGS,
+                TRIS=UBER_TRIS_PER_STEP,
+                SPECULATE=UBER_SPECULATE,
+                num_warps=num_warps,
+            )
     if return_info:
         return out, _info("whitted_uber", handle, num_warps, block)
     return out

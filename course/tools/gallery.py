@@ -28,8 +28,9 @@ def showcases(root: Path) -> list[tuple[int, Path]]:
     return found
 
 
-def build_gallery(root: Path, impl_folder: Path, device: str, out: Path, size: int,
-                  log=print) -> list[dict]:
+def build_gallery(
+    root: Path, impl_folder: Path, device: str, out: Path, size: int, log=print
+) -> list[dict]:
     """Render every available showcase into ``out`` and write ``out/index.html``."""
     out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -55,8 +56,7 @@ def build_gallery(root: Path, impl_folder: Path, device: str, out: Path, size: i
         seconds = time.perf_counter() - start
         png = out / f"lab{number}.png"
         save_png(png, image)
-        rows.append({"lab": number, "status": "ok", "image": png.name,
-                     "seconds": seconds, **info})
+        rows.append({"lab": number, "status": "ok", "image": png.name, "seconds": seconds, **info})
         log(f"    done in {seconds:.2f} s -> {png}")
     _write_index(out, rows, device)
     return rows
@@ -66,18 +66,23 @@ def _write_index(out: Path, rows: list[dict], device: str):
     name = torch.cuda.get_device_name() if device.startswith("cuda") else "CPU"
     cards = []
     for row in rows:
-        facts = "".join(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(_fmt(v))}</td></tr>"
-                        for k, v in row.items() if k not in ("image", "lab"))
+        facts = "".join(
+            f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(_fmt(v))}</td></tr>"
+            for k, v in row.items()
+            if k not in ("image", "lab")
+        )
         img = f'<img src="{row["image"]}" alt="lab {row["lab"]}">' if "image" in row else ""
-        cards.append(f'<div class="card"><h2>Lab {row["lab"]}</h2>{img}<table>{facts}'
-                     f"</table></div>")
+        cards.append(
+            f'<div class="card"><h2>Lab {row["lab"]}</h2>{img}<table>{facts}</table></div>'
+        )
     (out / "index.html").write_text(
         "<!doctype html><meta charset=utf-8><title>GPU ray tracing with PyTorch: gallery"
         "</title><style>body{font-family:sans-serif;margin:2em}.card{display:inline-block;"
         "vertical-align:top;margin:1em;padding:1em;border:1px solid #ccc}img{width:320px;"
         "image-rendering:pixelated}th{text-align:left;padding-right:1em}</style>"
         f"<h1>Gallery</h1><p>Rendered on {html.escape(device)} ({html.escape(name)}), "
-        f"torch {torch.__version__}.</p>" + "".join(cards))
+        f"torch {torch.__version__}.</p>" + "".join(cards)
+    )
 
 
 def _fmt(value) -> str:

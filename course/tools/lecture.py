@@ -33,8 +33,7 @@ from course.core.labs import lab_file_number
 
 FIGURES = Path("slides") / "figures"  # under the course root
 INDEX = "index.json"
-_KEPT = ("image/png", "image/svg+xml", "text/html", "text/markdown", "text/latex",
-         "text/plain")
+_KEPT = ("image/png", "image/svg+xml", "text/html", "text/markdown", "text/latex", "text/plain")
 
 
 def cell_key(source: str) -> str:
@@ -67,8 +66,7 @@ def save_reference_outputs(notebook, name: str, folder) -> dict[str, dict]:
             elif set(data) - {"text/plain"}:
                 kept.append({"data": data, "metadata": dict(output.get("metadata", {}))})
         if kept:
-            entries[cell_key(cell.source)] = {"notebook": name, "cell": number,
-                                              "outputs": kept}
+            entries[cell_key(cell.source)] = {"notebook": name, "cell": number, "outputs": kept}
     return entries
 
 
@@ -158,7 +156,8 @@ def names_assigned(code: str) -> set[str]:
         if isinstance(node, ast.Name) and isinstance(node.ctx, (ast.Store, ast.Del)):
             found.add(node.id)
         elif isinstance(node, (ast.Subscript, ast.Attribute)) and isinstance(
-                node.ctx, (ast.Store, ast.Del)):
+            node.ctx, (ast.Store, ast.Del)
+        ):
             root = node.value
             while isinstance(root, (ast.Subscript, ast.Attribute)):
                 root = root.value
@@ -176,8 +175,7 @@ def names_read(code: str) -> set[str]:
         tree = ast.parse(code)
     except SyntaxError:
         return set()
-    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)
-            and isinstance(n.ctx, ast.Load)}
+    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)}
 
 
 class _Fallback:
@@ -220,8 +218,7 @@ class _Fallback:
             return found
         if isinstance(value, NameError):
             return self.unmade.get(getattr(value, "name", None))
-        return next((self.unmade[n] for n in sorted(names_read(code)) if n in self.unmade),
-                    None)
+        return next((self.unmade[n] for n in sorted(names_read(code)) if n in self.unmade), None)
 
     def handle(self, shell, etype, value, tb, tb_offset=None):
         try:

@@ -58,8 +58,9 @@ def regions(source: str, name: str = "<source>") -> list[Region]:
         begin, end = BEGIN.match(line), END.match(line)
         if begin:
             if open_ is not None:
-                raise MarkerError(f"{name}:{number}: BEGIN SOLUTION inside the region opened "
-                                  f"at line {open_[0]}")
+                raise MarkerError(
+                    f"{name}:{number}: BEGIN SOLUTION inside the region opened at line {open_[0]}"
+                )
             open_ = (number, begin["indent"], begin["text"].strip())
         elif end:
             if open_ is None:
@@ -93,15 +94,18 @@ def _enclosing_functions(tree: ast.Module) -> list[tuple[int, int, str]]:
 def _stub(region: Region, functions, name: str) -> str | None:
     """The line that replaces ``region``: a ``raise`` inside its innermost function, nothing
     outside any function."""
-    inside = [(first, qualname) for first, last, qualname in functions
-              if first < region.begin <= last]
+    inside = [
+        (first, qualname) for first, last, qualname in functions if first < region.begin <= last
+    ]
     if not inside:
         return None
     qualname = max(inside)[1]
     message = f"not implemented yet: {qualname}" + (f" {region.text}" if region.text else "")
     if '"' in message or "\\" in message:
-        raise MarkerError(f"{name}:{region.begin}: the text after BEGIN SOLUTION may not hold "
-                          f"a double quote or a backslash: {region.text!r}")
+        raise MarkerError(
+            f"{name}:{region.begin}: the text after BEGIN SOLUTION may not hold "
+            f"a double quote or a backslash: {region.text!r}"
+        )
     return f'{region.indent}raise NotImplementedError("{message}")'
 
 
@@ -115,7 +119,7 @@ def skeleton_source(source: str, name: str = "<source>") -> str:
     out: list[str] = []
     at = 0  # lines[:at] are done
     for region in found:
-        out += lines[at:region.begin - 1]
+        out += lines[at : region.begin - 1]
         stub = _stub(region, functions, name)
         at = region.end
         if stub is not None:
@@ -132,8 +136,10 @@ def skeleton_source(source: str, name: str = "<source>") -> str:
     try:
         ast.parse(text, filename=name)
     except SyntaxError as exc:
-        raise MarkerError(f"{name}: the generated skeleton does not parse (line {exc.lineno}: "
-                          f"{exc.msg}); a marked region must hold whole statements") from None
+        raise MarkerError(
+            f"{name}: the generated skeleton does not parse (line {exc.lineno}: "
+            f"{exc.msg}); a marked region must hold whole statements"
+        ) from None
     return text
 
 
@@ -158,8 +164,10 @@ def lab_sources(solutions) -> list[Path]:
 def generate(solutions) -> dict[Path, str]:
     """Skeleton text per path relative to ``labs/`` (``lab4_march.py``)."""
     solutions = Path(solutions)
-    return {path.relative_to(solutions): skeleton_source(
-        path.read_text(), str(path)) for path in lab_sources(solutions)}
+    return {
+        path.relative_to(solutions): skeleton_source(path.read_text(), str(path))
+        for path in lab_sources(solutions)
+    }
 
 
 def _generated_files(labs: Path) -> list[Path]:
@@ -202,18 +210,23 @@ def differences(solutions, labs) -> list[str]:
         have, want = target.read_text().splitlines(), text.splitlines()
         for number, (mine, theirs) in enumerate(zip(have, want, strict=False), 1):
             if mine != theirs:
-                problems.append(f"labs/{rel.as_posix()}:{number}: is {mine.strip()!r}, the "
-                                f"reference generates {theirs.strip()!r}")
+                problems.append(
+                    f"labs/{rel.as_posix()}:{number}: is {mine.strip()!r}, the "
+                    f"reference generates {theirs.strip()!r}"
+                )
                 break
         else:
             if len(have) != len(want):
                 number = min(len(have), len(want)) + 1
-                problems.append(f"labs/{rel.as_posix()}:{number}: {len(have)} lines, the "
-                                f"reference generates {len(want)}")
+                problems.append(
+                    f"labs/{rel.as_posix()}:{number}: {len(have)} lines, the "
+                    f"reference generates {len(want)}"
+                )
     for path in _generated_files(labs):
         if path.relative_to(labs) not in wanted:
-            problems.append(f"labs/{path.relative_to(labs).as_posix()}: no reference in "
-                            f"solutions/ generates it")
+            problems.append(
+                f"labs/{path.relative_to(labs).as_posix()}: no reference in solutions/ generates it"
+            )
     return problems
 
 
@@ -222,16 +235,20 @@ def main(root, check: bool = False, log=print) -> int:
     root = Path(root)
     solutions, labs = root / "solutions", root / "labs"
     if not solutions.is_dir():
-        log(f"rtcourse skeletons: no solutions/ in {root} (the handout's labs/ are already "
-            f"generated)")
+        log(
+            f"rtcourse skeletons: no solutions/ in {root} (the handout's labs/ are already "
+            f"generated)"
+        )
         return 2
     if check:
         problems = differences(solutions, labs)
         for line in problems:
             log(line)
         if problems:
-            log("labs/ is generated from solutions/: edit the reference, then run "
-                "`rtcourse skeletons`")
+            log(
+                "labs/ is generated from solutions/: edit the reference, then run "
+                "`rtcourse skeletons`"
+            )
             return 1
         log(f"labs/: {len(generate(solutions))} files as the references generate them")
         return 0

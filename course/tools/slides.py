@@ -55,15 +55,19 @@ _CSS = """<style type="text/css">
 .jp-InputArea-editor pre, .jp-RenderedText pre { overflow-x: auto; }
 .jp-RenderedText pre { white-space: pre; word-break: normal; overflow-wrap: normal; }
 </style>"""
-_TEMPLATE_TEXT = ("{%- extends 'index.html.j2' -%}\n"
-                  "{% block html_head_js_mermaidjs %}{% endblock html_head_js_mermaidjs %}\n"
-                  "{% block html_head_css %}" + _CSS + "{% endblock html_head_css %}\n")
+_TEMPLATE_TEXT = (
+    "{%- extends 'index.html.j2' -%}\n"
+    "{% block html_head_js_mermaidjs %}{% endblock html_head_js_mermaidjs %}\n"
+    "{% block html_head_css %}" + _CSS + "{% endblock html_head_css %}\n"
+)
 
 
 def notebooks(root) -> list[Path]:
     """The lecture notebooks in lecture order: the overview first, then by file name."""
-    return sorted(Path(root, "slides").glob("*.ipynb"),
-                  key=lambda p: (not p.stem.endswith("_overview"), p.name))
+    return sorted(
+        Path(root, "slides").glob("*.ipynb"),
+        key=lambda p: (not p.stem.endswith("_overview"), p.name),
+    )
 
 
 def select_notebooks(root, names=None) -> list[Path]:
@@ -72,8 +76,11 @@ def select_notebooks(root, names=None) -> list[Path]:
     every = notebooks(root)
     if not names:
         return every
-    by_name = ({p.stem: p for p in every} | {p.name: p for p in every}
-               | {str(p.resolve()): p for p in every})
+    by_name = (
+        {p.stem: p for p in every}
+        | {p.name: p for p in every}
+        | {str(p.resolve()): p for p in every}
+    )
     chosen = []
     for name in names:
         path = Path(name)
@@ -82,8 +89,10 @@ def select_notebooks(root, names=None) -> list[Path]:
             found = by_name.get(str(path.resolve()), path.resolve())
         if found is None:
             known = ", ".join(p.stem for p in every) or "none"
-            raise ValueError(f"notebook {name!r}: no such notebook in "
-                             f"{Path(root, 'slides')} (there are: {known})")
+            raise ValueError(
+                f"notebook {name!r}: no such notebook in "
+                f"{Path(root, 'slides')} (there are: {known})"
+            )
         if found not in chosen:
             chosen.append(found)
     order = {p: i for i, p in enumerate(every)}
@@ -123,8 +132,11 @@ def with_slide_types(notebook):
 
 
 def error_cells(notebook) -> int:
-    return sum(any(o.get("output_type") == "error" for o in cell.get("outputs", []))
-               for cell in notebook.cells if cell.cell_type == "code")
+    return sum(
+        any(o.get("output_type") == "error" for o in cell.get("outputs", []))
+        for cell in notebook.cells
+        if cell.cell_type == "code"
+    )
 
 
 def execute(notebook, folder: Path, timeout: float = 600) -> str | None:
@@ -139,9 +151,13 @@ def execute(notebook, folder: Path, timeout: float = 600) -> str | None:
         # warns once per notebook that the channel is unencrypted, although nothing but
         # this process connects to it.
         ipc = {"transport": "ipc", "ip": os.path.join(sockets, "k")} if os.name == "posix" else {}
-        client = NotebookClient(notebook, km=KernelManager(kernel_name="python3", **ipc),
-                                timeout=timeout, allow_errors=True,
-                                resources={"metadata": {"path": str(folder)}})
+        client = NotebookClient(
+            notebook,
+            km=KernelManager(kernel_name="python3", **ipc),
+            timeout=timeout,
+            allow_errors=True,
+            resources={"metadata": {"path": str(folder)}},
+        )
         try:
             client.execute(env=env)
         except Exception as exc:  # noqa: BLE001  (a cell timeout, a dead kernel: render what ran)
@@ -169,8 +185,11 @@ def _exporter(kind):
     import jinja2
 
     urls = {k: v for k, v in PAGE_URLS.items() if k in kind.class_trait_names()}
-    return kind(extra_loaders=[jinja2.DictLoader({_TEMPLATE: _TEMPLATE_TEXT})],
-                template_file=_TEMPLATE, **urls)
+    return kind(
+        extra_loaders=[jinja2.DictLoader({_TEMPLATE: _TEMPLATE_TEXT})],
+        template_file=_TEMPLATE,
+        **urls,
+    )
 
 
 def _local_reveal(page: str) -> str:
@@ -187,8 +206,14 @@ def render_notebook(path: Path, out: Path, *, execute_first=True, notebook=None)
     path = Path(path)
     notebook = nbformat.read(path, as_version=4) if notebook is None else notebook
     title = title_of(notebook, path.stem)
-    row = {"name": path.stem, "title": title, "slides": f"{path.stem}.slides.html",
-           "notes": f"{path.stem}.html", "seconds": None, "stopped": None}
+    row = {
+        "name": path.stem,
+        "title": title,
+        "slides": f"{path.stem}.slides.html",
+        "notes": f"{path.stem}.html",
+        "seconds": None,
+        "stopped": None,
+    }
     if execute_first:
         start = time.perf_counter()
         row["stopped"] = execute(notebook, path.parent)
@@ -198,10 +223,12 @@ def render_notebook(path: Path, out: Path, *, execute_first=True, notebook=None)
     resources = {"metadata": {"name": title}}
     slides_exporter = _exporter(SlidesExporter)
     slides_exporter.reveal_scroll, slides_exporter.reveal_theme = True, "white"
-    slides, _ = slides_exporter.from_notebook_node(with_slide_types(notebook),
-                                                   resources=copy.deepcopy(resources))
-    notes, _ = _exporter(HTMLExporter).from_notebook_node(notebook,
-                                                          resources=copy.deepcopy(resources))
+    slides, _ = slides_exporter.from_notebook_node(
+        with_slide_types(notebook), resources=copy.deepcopy(resources)
+    )
+    notes, _ = _exporter(HTMLExporter).from_notebook_node(
+        notebook, resources=copy.deepcopy(resources)
+    )
     out = Path(out)
     copy_static(out)
     (out / row["slides"]).write_text(_local_reveal(slides), encoding="utf-8")
@@ -241,22 +268,37 @@ def render_slides(root, out, *, execute=True, log=print, names=None) -> list[dic
             row = render_notebook(path, out, execute_first=execute)
             rows.append(row)
             seconds = f" in {row['seconds']:.1f} s" if row["seconds"] is not None else ""
-            problem = (f"; stopped early ({row['stopped']})" if row["stopped"] else
-                       f"; {row['errors']} cell(s) raised" if row["errors"] else "")
-            say(f"    {path.name} done{seconds}{problem}" if bar is not None
-                else f"    done{seconds}{problem}")
+            problem = (
+                f"; stopped early ({row['stopped']})"
+                if row["stopped"]
+                else f"; {row['errors']} cell(s) raised"
+                if row["errors"]
+                else ""
+            )
+            say(
+                f"    {path.name} done{seconds}{problem}"
+                if bar is not None
+                else f"    done{seconds}{problem}"
+            )
             if bar is not None:
                 bar.update()
     finally:
         if bar is not None:
             bar.close()
     rendered = {row["name"] for row in rows}
-    earlier = [{"name": p.stem, "title": p.stem, "slides": f"{p.stem}.slides.html",
-                "notes": f"{p.stem}.html", "earlier": True} for p in notebooks(root)
-               if p.stem not in rendered and (out / f"{p.stem}.html").is_file()]
+    earlier = [
+        {
+            "name": p.stem,
+            "title": p.stem,
+            "slides": f"{p.stem}.slides.html",
+            "notes": f"{p.stem}.html",
+            "earlier": True,
+        }
+        for p in notebooks(root)
+        if p.stem not in rendered and (out / f"{p.stem}.html").is_file()
+    ]
     order = {p.stem: i for i, p in enumerate(notebooks(root))}
-    listed = sorted(rows + earlier, key=lambda r: (order.get(r["name"], len(order)),
-                                                   r["name"]))
+    listed = sorted(rows + earlier, key=lambda r: (order.get(r["name"], len(order)), r["name"]))
     write_index(out, listed, executed=execute)
     return rows
 
@@ -277,19 +319,27 @@ def write_index(out: Path, rows: list[dict], *, executed: bool, note: str | None
     replaces the sentence that says where the outputs come from."""
     esc = html.escape
     items = "".join(
-        f"<tr><td>{esc(row['title'])}</td><td><a href=\"{esc(row['slides'])}\">slides</a></td>"
-        f"<td><a href=\"{esc(row['notes'])}\">notes</a></td>"
-        f"<td>{esc(_status(row, executed))}</td></tr>" for row in rows)
+        f'<tr><td>{esc(row["title"])}</td><td><a href="{esc(row["slides"])}">slides</a></td>'
+        f'<td><a href="{esc(row["notes"])}">notes</a></td>'
+        f"<td>{esc(_status(row, executed))}</td></tr>"
+        for row in rows
+    )
     small = os.environ.get("RTCOURSE_SMALL", "1")
     if note is None:
-        note = (f"Outputs and figures come from running every notebook "
-                f"(RTCOURSE_SMALL={small})." if executed else
-                "Outputs are those saved in the notebooks.")
+        note = (
+            f"Outputs and figures come from running every notebook (RTCOURSE_SMALL={small})."
+            if executed
+            else "Outputs are those saved in the notebooks."
+        )
     Path(out, "index.html").write_text(
         "<!doctype html><meta charset=utf-8><title>GPU ray tracing with PyTorch: lectures"
         "</title><style>body{font-family:sans-serif;margin:2em}td,th{padding:.3em 1em;"
         "text-align:left}</style><h1>GPU ray tracing with PyTorch: lectures</h1>"
         "<p>Each lecture as reveal.js slides (arrow keys to move, <kbd>Esc</kbd> for an overview) "
-        "and as a static page of lecture notes. " + esc(note)
+        "and as a static page of lecture notes. "
+        + esc(note)
         + "</p><table><tr><th>lecture</th><th></th><th></th><th>outputs</th></tr>"
-        + items + "</table>", encoding="utf-8")
+        + items
+        + "</table>",
+        encoding="utf-8",
+    )

@@ -84,7 +84,11 @@ from .whitted import offset_origins, reflect, render_whitted, shade_direct, surf
 
 __all__ = [
     # task 1
-    "offset_origins", "reflect", "surface_at", "shade_direct", "render_whitted",
+    "offset_origins",
+    "reflect",
+    "surface_at",
+    "shade_direct",
+    "render_whitted",
     # task 2
     "render_wavefront",
     # task 3
@@ -92,7 +96,14 @@ __all__ = [
     # task 4
     "render_persistent",
     # task 5
-    "layout_indexed", "layout_float4", "layout_woop", "intersect_layout",
+    "layout_indexed",
+    "layout_float4",
+    "layout_woop",
+    "intersect_layout",
     # given (course.given.lab3), part of the lab's interface
-    "LAYOUTS", "MAX_DEPTH", "OFFSET", "StageClock", "WhittedScene",
+    "LAYOUTS",
+    "MAX_DEPTH",
+    "OFFSET",
+    "StageClock",
+    "WhittedScene",
 ]

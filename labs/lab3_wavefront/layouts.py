@@ -84,8 +84,13 @@ def layout_woop(mesh: Mesh) -> dict:
     raise NotImplementedError("not implemented yet: layout_woop (task 5)")
 
 
-def intersect_layout(layout: dict, origins: torch.Tensor, directions: torch.Tensor,
-                     t_min: torch.Tensor, t_max: torch.Tensor) -> Hits:
+def intersect_layout(
+    layout: dict,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    t_min: torch.Tensor,
+    t_max: torch.Tensor,
+) -> Hits:
     """Closest hits of N rays against every triangle of a layout (brute force, in tiles).
 
     layout: from ``layout_indexed``/``layout_float4``/``layout_woop``; origins, directions:
@@ -108,5 +113,6 @@ def intersect_layout(layout: dict, origins: torch.Tensor, directions: torch.Tens
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     kind, f = check_layout_inputs(  # noqa: RUF059 (the layout's kind and F, for your code)
-        layout, origins, directions, t_min, t_max)
+        layout, origins, directions, t_min, t_max
+    )
     raise NotImplementedError("not implemented yet: intersect_layout (task 5)")

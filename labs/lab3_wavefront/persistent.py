@@ -13,8 +13,14 @@ from course.given.lab3 import MAX_DEPTH, WhittedScene, check_pool_size, check_re
 from .whitted import offset_origins, reflect, shade_direct, surface_at
 
 
-def render_persistent(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-                      trace, max_depth: int = MAX_DEPTH, pool_size: int = 4096):
+def render_persistent(
+    scene: WhittedScene,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    trace,
+    max_depth: int = MAX_DEPTH,
+    pool_size: int = 4096,
+):
     """A fixed pool of ray slots that keep taking work from one global queue until done.
 
     Same arguments and image as :func:`render_whitted`; pool_size: the number of slots
@@ -52,6 +58,7 @@ def render_persistent(scene: WhittedScene, origins: torch.Tensor, directions: to
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
-        scene, origins, directions, trace, max_depth)
+        scene, origins, directions, trace, max_depth
+    )
     check_pool_size(pool_size)
     raise NotImplementedError("not implemented yet: render_persistent (task 4)")

@@ -19,8 +19,14 @@ from course.given.lab3 import (
 )
 
 
-def render_uber(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor, trace,
-                max_depth: int = MAX_DEPTH, compile=False) -> torch.Tensor:
+def render_uber(
+    scene: WhittedScene,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    trace,
+    max_depth: int = MAX_DEPTH,
+    compile=False,
+) -> torch.Tensor:
     """The bounce loop as one fused program over fixed-size lane buffers.
 
     Same arguments and image as :func:`render_whitted`; compile: False (eager), True
@@ -56,8 +62,11 @@ def render_uber(scene: WhittedScene, origins: torch.Tensor, directions: torch.Te
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
-        scene, origins, directions, trace, max_depth)
+        scene, origins, directions, trace, max_depth
+    )
     if not (isinstance(compile, (bool, str)) or callable(compile)):
-        raise TypeError(f"compile: expected a bool or a torch.compile backend (a name or a "
-                        f"callable), got {compile!r}")
+        raise TypeError(
+            f"compile: expected a bool or a torch.compile backend (a name or a "
+            f"callable), got {compile!r}"
+        )
     raise NotImplementedError("not implemented yet: render_uber (task 3)")

@@ -13,8 +13,14 @@ from course.given.lab3 import MAX_DEPTH, StageClock, WhittedScene, check_render_
 from .whitted import offset_origins, reflect, shade_direct, surface_at
 
 
-def render_wavefront(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-                     trace, max_depth: int = MAX_DEPTH, sort_by_material: bool = False):
+def render_wavefront(
+    scene: WhittedScene,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    trace,
+    max_depth: int = MAX_DEPTH,
+    sort_by_material: bool = False,
+):
     """The tracer as separate stages over a compacted queue of live rays.
 
     Same arguments and image as :func:`render_whitted`; sort_by_material: sort the shading
@@ -57,7 +63,8 @@ def render_wavefront(scene: WhittedScene, origins: torch.Tensor, directions: tor
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
-        scene, origins, directions, trace, max_depth)
+        scene, origins, directions, trace, max_depth
+    )
     if not isinstance(sort_by_material, bool):
         raise TypeError(f"sort_by_material: expected a bool, got {sort_by_material!r}")
     raise NotImplementedError("not implemented yet: render_wavefront (task 2)")

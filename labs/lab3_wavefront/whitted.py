@@ -65,8 +65,7 @@ def reflect(directions: torch.Tensor, normals: torch.Tensor) -> torch.Tensor:
     raise NotImplementedError("not implemented yet: reflect (task 1)")
 
 
-def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-               hits: Hits):
+def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor, hits: Hits):
     """What a ray sees at its hit: ``(points, normals, material)``.
 
     scene: the scene; origins, directions: (N, 3) the rays; hits: their ``Hits`` from
@@ -93,12 +92,19 @@ def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Ten
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_scene(scene)
     n = check_vectors(  # noqa: F841 (n: the number of rays, for your code)
-        scene.vertices, origins=origins, directions=directions)
+        scene.vertices, origins=origins, directions=directions
+    )
     raise NotImplementedError("not implemented yet: surface_at (task 1)")
 
 
-def shade_direct(scene: WhittedScene, points: torch.Tensor, normals: torch.Tensor,
-                 directions: torch.Tensor, material: torch.Tensor, trace):
+def shade_direct(
+    scene: WhittedScene,
+    points: torch.Tensor,
+    normals: torch.Tensor,
+    directions: torch.Tensor,
+    material: torch.Tensor,
+    trace,
+):
     """Ambient and direct light at N hits, with a shadow ray per visible light.
 
     points: (N, 3) hit points ``p`` (not offset); normals: (N, 3) unit, facing the ray;
@@ -132,12 +138,18 @@ def shade_direct(scene: WhittedScene, points: torch.Tensor, normals: torch.Tenso
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_surface_inputs(  # noqa: F841 (n: the number of points, for your code)
-        scene, points, normals, directions, material, trace)
+        scene, points, normals, directions, material, trace
+    )
     raise NotImplementedError("not implemented yet: shade_direct (task 1)")
 
 
-def render_whitted(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-                   trace, max_depth: int = MAX_DEPTH) -> torch.Tensor:
+def render_whitted(
+    scene: WhittedScene,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    trace,
+    max_depth: int = MAX_DEPTH,
+) -> torch.Tensor:
     """Backward (Whitted) ray tracing, one loop over bounces on full-size buffers.
 
     scene; origins, directions: (N, 3) primary rays; trace: the tracer; max_depth: the
@@ -165,5 +177,6 @@ def render_whitted(scene: WhittedScene, origins: torch.Tensor, directions: torch
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
-        scene, origins, directions, trace, max_depth)
+        scene, origins, directions, trace, max_depth
+    )
     raise NotImplementedError("not implemented yet: render_whitted (task 1)")

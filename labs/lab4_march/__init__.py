@@ -95,17 +95,28 @@ from .voxels import build_occupancy, voxel_walk
 
 __all__ = [
     # task 1
-    "ray_box_interval", "sample_grid", "march_box",
+    "ray_box_interval",
+    "sample_grid",
+    "march_box",
     # task 2
     "segment_integral",
     # task 3
-    "henyey_greenstein", "shadow_transmittance", "march_single_scatter",
+    "henyey_greenstein",
+    "shadow_transmittance",
+    "march_single_scatter",
     # task 4
-    "build_occupancy", "voxel_walk",
+    "build_occupancy",
+    "voxel_walk",
     # task 5
     "sphere_trace",
     # provided: a field's values at points (march.py)
     "evaluate",
     # given (course.given.lab4), part of the lab's interface
-    "INTEGRATORS", "MISS", "HIT", "UNSURE", "sdf_sphere", "sdf_box", "sdf_union",
+    "INTEGRATORS",
+    "MISS",
+    "HIT",
+    "UNSURE",
+    "sdf_sphere",
+    "sdf_box",
+    "sdf_union",
 ]

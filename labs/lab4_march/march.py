@@ -19,13 +19,16 @@ def check_density_defined(values: torch.Tensor, name: str = "density") -> None:
     """An extinction coefficient is a number or +inf (opaque), never NaN: a NaN density
     would turn every transmittance behind it into NaN. ValueError naming ``name``."""
     if bool(torch.isnan(values).any()):
-        raise ValueError(f"{name}: expected extinction coefficients >= 0 (or +inf), got "
-                         f"{int(torch.isnan(values).sum())} NaN values: a NaN density makes "
-                         f"the transmittance NaN for every ray that crosses it")
+        raise ValueError(
+            f"{name}: expected extinction coefficients >= 0 (or +inf), got "
+            f"{int(torch.isnan(values).sum())} NaN values: a NaN density makes "
+            f"the transmittance NaN for every ray that crosses it"
+        )
 
 
-def evaluate(field, name: str, points: torch.Tensor, local: torch.Tensor,
-             channels: bool = False) -> torch.Tensor:
+def evaluate(
+    field, name: str, points: torch.Tensor, local: torch.Tensor, channels: bool = False
+) -> torch.Tensor:
     """A field's values at N points: ``field(points)`` for a callable (world points, checked
     by ``field_values``), ``sample_grid(field, local)`` for a grid (box coordinates in
     [0, 1]^3). Returns (N,), or also (N, C) when ``channels``, in the points' dtype.
@@ -65,8 +68,9 @@ def ray_box_interval(origins, directions, box_min, box_max):
     validity mask with ``torch.isfinite``; return ``torch.where(hit, t, 0)``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    origins, directions, box_min, box_max = check_ray_box_inputs(origins, directions,
-                                                                 box_min, box_max)
+    origins, directions, box_min, box_max = check_ray_box_inputs(
+        origins, directions, box_min, box_max
+    )
     raise NotImplementedError("not implemented yet: ray_box_interval (task 1)")
 
 
@@ -101,8 +105,20 @@ def sample_grid(grid, uvw):
     raise NotImplementedError("not implemented yet: sample_grid (task 1)")
 
 
-def march_box(origins, directions, box_min, box_max, density, emission=None, steps=64, *,
-              integrator="exact", min_transmittance=0.0, jitter=False, seed=0):
+def march_box(
+    origins,
+    directions,
+    box_min,
+    box_max,
+    density,
+    emission=None,
+    steps=64,
+    *,
+    integrator="exact",
+    min_transmittance=0.0,
+    jitter=False,
+    seed=0,
+):
     """The lecture's ray marcher: a fixed number of steps through a volume in a box.
 
     origins, directions: (N, 3) float; box_min, box_max: (3,); density: callable or grid
@@ -150,8 +166,16 @@ def march_box(origins, directions, box_min, box_max, density, emission=None, ste
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max = check_march_inputs(
-        origins, directions, box_min, box_max, density, emission, steps, integrator,
-        min_transmittance)
+        origins,
+        directions,
+        box_min,
+        box_max,
+        density,
+        emission,
+        steps,
+        integrator,
+        min_transmittance,
+    )
     if isinstance(density, torch.Tensor):
         check_density_defined(density)
     raise NotImplementedError("not implemented yet: march_box (task 1)")

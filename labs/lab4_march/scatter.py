@@ -66,16 +66,30 @@ def shadow_transmittance(points, light_direction, box_min, box_max, density, ste
     ray misses the box); ``exp`` at the end.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    points, light, box_min, box_max = check_shadow_inputs(points, light_direction, box_min,
-                                                          box_max, density, steps)
+    points, light, box_min, box_max = check_shadow_inputs(
+        points, light_direction, box_min, box_max, density, steps
+    )
     if isinstance(density, torch.Tensor):
         check_density_defined(density)
     raise NotImplementedError("not implemented yet: shadow_transmittance (task 3)")
 
 
-def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
-                         light_direction, light_irradiance=1.0, g=0.0, steps=64,
-                         shadow_steps=16, *, integrator="exact", min_transmittance=0.0):
+def march_single_scatter(
+    origins,
+    directions,
+    box_min,
+    box_max,
+    density,
+    albedo,
+    light_direction,
+    light_irradiance=1.0,
+    g=0.0,
+    steps=64,
+    shadow_steps=16,
+    *,
+    integrator="exact",
+    min_transmittance=0.0,
+):
     """Single scattering of a directional light in a box, marched like :func:`march_box`.
 
     origins, directions: (N, 3); box_min, box_max: (3,); density: callable or grid (the
@@ -110,10 +124,24 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max, light, factor = check_scatter_inputs(
-        origins, directions, box_min, box_max, density, albedo, light_direction,
-        light_irradiance, g, steps, shadow_steps, integrator, min_transmittance)
+        origins,
+        directions,
+        box_min,
+        box_max,
+        density,
+        albedo,
+        light_direction,
+        light_irradiance,
+        g,
+        steps,
+        shadow_steps,
+        integrator,
+        min_transmittance,
+    )
     bad = torch.as_tensor(albedo, dtype=torch.float64)
     if not bool(((bad >= 0) & (bad <= 1)).all()):
-        raise ValueError(f"albedo: expected values in [0, 1] (sigma_s / sigma_t: a medium "
-                         f"scatters at most what it removes), got {albedo!r}")
+        raise ValueError(
+            f"albedo: expected values in [0, 1] (sigma_s / sigma_t: a medium "
+            f"scatters at most what it removes), got {albedo!r}"
+        )
     raise NotImplementedError("not implemented yet: march_single_scatter (task 3)")

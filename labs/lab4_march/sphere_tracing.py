@@ -1,5 +1,4 @@
-"""Task 5: ``sphere_trace``, signed-distance scenes traced with over-relaxation.
-"""
+"""Task 5: ``sphere_trace``, signed-distance scenes traced with over-relaxation."""
 
 from __future__ import annotations
 
@@ -10,8 +9,9 @@ import torch
 from course.given.lab4 import HIT, MISS, UNSURE, check_trace_inputs
 
 
-def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1e-4,
-                 relaxation=1.0):
+def sphere_trace(
+    origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1e-4, relaxation=1.0
+):
     """Sphere tracing (Hart 1996) with over-relaxation (Keinert et al. 2014).
 
     origins, directions: (N, 3); sdf: callable ``points (N, 3) -> (N,)``, a signed distance
@@ -46,6 +46,7 @@ def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1
     is active.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    origins, directions = check_trace_inputs(origins, directions, sdf, t_max, max_steps,
-                                             epsilon, relaxation)
+    origins, directions = check_trace_inputs(
+        origins, directions, sdf, t_max, max_steps, epsilon, relaxation
+    )
     raise NotImplementedError("not implemented yet: sphere_trace (task 5)")

@@ -31,8 +31,9 @@ def build_occupancy(density, macro_cell=1, emission=None):
     raise NotImplementedError("not implemented yet: build_occupancy (task 4)")
 
 
-def voxel_walk(origins, directions, box_min, box_max, density, emission=None, occupancy=None,
-               macro_cell=1):
+def voxel_walk(
+    origins, directions, box_min, box_max, density, emission=None, occupancy=None, macro_cell=1
+):
     """Exact emission–absorption through a piecewise-constant voxel grid (3D DDA).
 
     origins, directions: (N, 3); box_min, box_max: (3,); density: (X, Y, Z) grid >= 0
@@ -78,6 +79,7 @@ def voxel_walk(origins, directions, box_min, box_max, density, emission=None, oc
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max = check_voxel_inputs(
-        origins, directions, box_min, box_max, density, emission, occupancy, macro_cell)
+        origins, directions, box_min, box_max, density, emission, occupancy, macro_cell
+    )
     check_density_defined(density)
     raise NotImplementedError("not implemented yet: voxel_walk (task 4)")

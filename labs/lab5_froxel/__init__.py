@@ -128,24 +128,48 @@ from .volumetric_shadows import (
 
 __all__ = [
     # task 1
-    "slice_depths", "depth_to_slice", "froxel_to_world", "world_to_froxel",
+    "slice_depths",
+    "depth_to_slice",
+    "froxel_to_world",
+    "world_to_froxel",
     # task 2
-    "media_at", "voxelize",
+    "media_at",
+    "voxelize",
     # task 3
-    "henyey_greenstein", "schlick_phase", "cull_lights", "build_shadow_map", "shadow_lookup",
+    "henyey_greenstein",
+    "schlick_phase",
+    "cull_lights",
+    "build_shadow_map",
+    "shadow_lookup",
     "light_froxels",
     # task 4
-    "extinction_volume", "transmittance_volume", "sample_light_volume", "light_transmittance",
+    "extinction_volume",
+    "transmittance_volume",
+    "sample_light_volume",
+    "light_transmittance",
     # task 5
-    "reproject", "temporal_blend",
+    "reproject",
+    "temporal_blend",
     # task 6
-    "slice_integral", "integrate_froxels",
+    "slice_integral",
+    "integrate_froxels",
     # task 7
     "apply_froxels",
     # task 8
     "render_froxels",
     # given (course.given.lab5), part of the lab's interface
-    "BLEND", "INTEGRATIONS", "LIGHT_STEPS", "PHASES", "SLICES", "FroxelGrid", "LightVolume",
-    "Scene", "auto_volume_resolution", "frame_jitter", "froxel_sample_coords", "frustum_bounds",
-    "scene_grid", "volume_bounds",
+    "BLEND",
+    "INTEGRATIONS",
+    "LIGHT_STEPS",
+    "PHASES",
+    "SLICES",
+    "FroxelGrid",
+    "LightVolume",
+    "Scene",
+    "auto_volume_resolution",
+    "frame_jitter",
+    "froxel_sample_coords",
+    "frustum_bounds",
+    "scene_grid",
+    "volume_bounds",
 ]

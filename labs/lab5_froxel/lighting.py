@@ -89,8 +89,7 @@ def cull_lights(grid, lights, device="cpu"):
     raise NotImplementedError("not implemented yet: cull_lights (task 3)")
 
 
-def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float32,
-                     device="cpu"):
+def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float32, device="cpu"):
     """The sun's shadow map over the sphere (``center`` (3 numbers), ``radius``): an
     orthographic :class:`LightVolume` of kind "ortho" whose data (R, R) holds, per texel, the
     depth along ``w = -light.direction`` of the first occluder box (inf where none).
@@ -108,8 +107,18 @@ def shadow_lookup(shadow_map, points):
     raise NotImplementedError("not implemented yet: shadow_lookup (task 3)")
 
 
-def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_shadows=True,
-                  shadow_resolution=128, volume_resolution=None, light_steps=LIGHT_STEPS):
+def light_froxels(
+    scene,
+    grid,
+    vbuffer,
+    jitter=0.5,
+    *,
+    phase="hg",
+    volumetric_shadows=True,
+    shadow_resolution=128,
+    volume_resolution=None,
+    light_steps=LIGHT_STEPS,
+):
     """Light scattered toward the camera per unit length at every froxel, plus emission:
     ``(source (S, ny, nx, 3), report)``.
 

@@ -53,10 +53,26 @@ def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out
     raise NotImplementedError("not implemented yet: apply_froxels (task 7)")
 
 
-def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slices=SLICES,
-                   near=None, far=None, phase="hg", integration="energy", volumetric_shadows=True,
-                   shadow_resolution=128, volume_resolution=None, light_steps=LIGHT_STEPS,
-                   temporal=False, frame=0, history=None):
+def render_froxels(
+    scene,
+    camera,
+    depth_image,
+    opaque_image,
+    *,
+    tile=None,
+    slices=SLICES,
+    near=None,
+    far=None,
+    phase="hg",
+    integration="energy",
+    volumetric_shadows=True,
+    shadow_resolution=128,
+    volume_resolution=None,
+    light_steps=LIGHT_STEPS,
+    temporal=False,
+    frame=0,
+    history=None,
+):
     """One frame of the pipeline: ``(image (H, W, 3), report)``.
 
     voxelize -> light_froxels -> (temporal: reproject + temporal_blend of the lit source

@@ -105,7 +105,9 @@ def to_screen(clipped, width: int, height: int):
     behind = ~(clipped[..., 3] > 0)
     if bool(behind.any()):
         k, corner = (int(i) for i in behind.nonzero()[0])
-        raise ValueError(f"clipped: expected w > 0 at every corner (clip_triangles' output), "
-                         f"got w = {clipped[k, corner, 3].item()} at triangle {k}, corner "
-                         f"{corner}: the perspective divide x / w has no answer there")
+        raise ValueError(
+            f"clipped: expected w > 0 at every corner (clip_triangles' output), "
+            f"got w = {clipped[k, corner, 3].item()} at triangle {k}, corner "
+            f"{corner}: the perspective divide x / w has no answer there"
+        )
     raise NotImplementedError("not implemented yet: to_screen (task 1)")

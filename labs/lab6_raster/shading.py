@@ -67,8 +67,14 @@ def resolve_pixels(keys, screen, source, weights, width: int, height: int):
     raise NotImplementedError("not implemented yet: resolve_pixels (task 4)")
 
 
-def rasterize_mesh(mesh: Mesh, camera: Camera, *, depth_bits: int = 32,
-                   cull_backfaces: bool = False, memory_budget_bytes: int = 2**28):
+def rasterize_mesh(
+    mesh: Mesh,
+    camera: Camera,
+    *,
+    depth_bits: int = 32,
+    cull_backfaces: bool = False,
+    memory_budget_bytes: int = 2**28,
+):
     """The whole pipeline: ``(face (H, W) int64, bary (H, W, 3))`` of ``mesh`` seen by
     ``camera`` (``camera.width`` x ``camera.height`` pixels), on the mesh's device and dtype.
 

@@ -93,8 +93,16 @@ def depth_test(pixel, key, out):
     raise NotImplementedError("not implemented yet: depth_test (task 3)")
 
 
-def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
-              cull_backfaces: bool = False, memory_budget_bytes: int = 2**28, out=None):
+def rasterize(
+    screen,
+    width: int,
+    height: int,
+    *,
+    depth_bits: int = 32,
+    cull_backfaces: bool = False,
+    memory_budget_bytes: int = 2**28,
+    out=None,
+):
     """The visibility buffer of screen-space triangles.
 
     screen: (K, 3, 4) float ``(x, y, z_ndc, 1/w)`` (``to_screen``'s output); width, height:
@@ -124,13 +132,18 @@ def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_screen(screen)
     if screen.shape[2] != 4:
-        raise ValueError(f"screen: expected shape (K, 3, 4) (x, y, z_ndc, 1/w), "
-                         f"got {tuple(screen.shape)}")
+        raise ValueError(
+            f"screen: expected shape (K, 3, 4) (x, y, z_ndc, 1/w), got {tuple(screen.shape)}"
+        )
     check_size(width, height)
     if depth_bits not in (24, 32):
         raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
-    if isinstance(memory_budget_bytes, bool) or not isinstance(memory_budget_bytes, int) \
-            or memory_budget_bytes <= 0:
-        raise ValueError(f"memory_budget_bytes: expected a positive int, "
-                         f"got {memory_budget_bytes!r}")
+    if (
+        isinstance(memory_budget_bytes, bool)
+        or not isinstance(memory_budget_bytes, int)
+        or memory_budget_bytes <= 0
+    ):
+        raise ValueError(
+            f"memory_budget_bytes: expected a positive int, got {memory_budget_bytes!r}"
+        )
     raise NotImplementedError("not implemented yet: rasterize (task 3)")

@@ -25,6 +25,8 @@ from course.given.lab3 import (
 # BEGIN SOLUTION
 def _bytes(*tensors) -> int:
     return sum(x.numel() * x.element_size() for x in tensors)
+
+
 # END SOLUTION
 
 
@@ -44,8 +46,12 @@ def layout_indexed(mesh: Mesh) -> dict:
     check_mesh(mesh)
     # BEGIN SOLUTION (task 5)
     faces = mesh.faces.to(torch.int32)
-    return {"kind": "indexed", "vertices": mesh.vertices, "faces": faces,
-            "bytes_per_triangle": _bytes(mesh.vertices, faces) / mesh.num_faces}
+    return {
+        "kind": "indexed",
+        "vertices": mesh.vertices,
+        "faces": faces,
+        "bytes_per_triangle": _bytes(mesh.vertices, faces) / mesh.num_faces,
+    }
     # END SOLUTION
 
 
@@ -69,11 +75,14 @@ def layout_float4(mesh: Mesh, order: torch.Tensor | None = None) -> dict:
     check_mesh(mesh)
     index = check_order(order, mesh)  # noqa: F841 (the permutation; arange(F) for None)
     # BEGIN SOLUTION (task 5)
-    corners = mesh.triangles()[index]                                   # (F, 3, 3)
+    corners = mesh.triangles()[index]  # (F, 3, 3)
     w = index_as_float(index, mesh.dtype)[:, None, None].expand(-1, 3, 1)
     triangles = torch.cat((corners, w), dim=2).contiguous()
-    return {"kind": "float4", "triangles": triangles,
-            "bytes_per_triangle": _bytes(triangles) / mesh.num_faces}
+    return {
+        "kind": "float4",
+        "triangles": triangles,
+        "bytes_per_triangle": _bytes(triangles) / mesh.num_faces,
+    }
     # END SOLUTION
 
 
@@ -108,8 +117,11 @@ def layout_woop(mesh: Mesh) -> dict:
     inverse = torch.where((info == 0)[:, None, None], inverse, math.nan)
     translation = -(inverse @ c[:, 0, :, None])
     transforms = torch.cat((inverse, translation), dim=2).to(mesh.dtype).contiguous()
-    return {"kind": "woop", "transforms": transforms,
-            "bytes_per_triangle": _bytes(transforms) / mesh.num_faces}
+    return {
+        "kind": "woop",
+        "transforms": transforms,
+        "bytes_per_triangle": _bytes(transforms) / mesh.num_faces,
+    }
     # END SOLUTION
 
 
@@ -131,11 +143,18 @@ def _woop(o, d, m):
     dx, dy, dz = dot(m[..., 0, :3], d), dot(m[..., 1, :3], d), dot(m[..., 2, :3], d)
     t = -oz / dz
     return t, ox + t * dx, oy + t * dy, dz != 0
+
+
 # END SOLUTION
 
 
-def intersect_layout(layout: dict, origins: torch.Tensor, directions: torch.Tensor,
-                     t_min: torch.Tensor, t_max: torch.Tensor) -> Hits:
+def intersect_layout(
+    layout: dict,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    t_min: torch.Tensor,
+    t_max: torch.Tensor,
+) -> Hits:
     """Closest hits of N rays against every triangle of a layout (brute force, in tiles).
 
     layout: from ``layout_indexed``/``layout_float4``/``layout_woop``; origins, directions:
@@ -158,7 +177,8 @@ def intersect_layout(layout: dict, origins: torch.Tensor, directions: torch.Tens
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     kind, f = check_layout_inputs(  # noqa: RUF059 (the layout's kind and F, for your code)
-        layout, origins, directions, t_min, t_max)
+        layout, origins, directions, t_min, t_max
+    )
     # BEGIN SOLUTION (task 5)
     like = layout[LAYOUTS[kind]]
     n = origins.shape[0]
@@ -173,22 +193,29 @@ def intersect_layout(layout: dict, origins: torch.Tensor, directions: torch.Tens
         elif kind == "float4":
             tri = layout["triangles"][None, cols]
             t, u, v, ok = _moller_trumbore(o, d, tri[..., 0, :3], tri[..., 1, :3], tri[..., 2, :3])
-            index = float_as_index(layout["triangles"][cols, 0, 3])   # the w word
+            index = float_as_index(layout["triangles"][cols, 0, 3])  # the w word
         else:
             c = layout["vertices"][layout["faces"][cols].long()][None]
             t, u, v, ok = _moller_trumbore(o, d, c[..., 0, :], c[..., 1, :], c[..., 2, :])
             index = torch.arange(f, device=like.device)[cols]
-        hit = (ok & valid[rows, None] & (u >= 0) & (v >= 0) & (u + v <= 1)
-               & (t >= t_min[rows, None]) & (t <= t_max[rows, None]))
+        hit = (
+            ok
+            & valid[rows, None]
+            & (u >= 0)
+            & (v >= 0)
+            & (u + v <= 1)
+            & (t >= t_min[rows, None])
+            & (t <= t_max[rows, None])
+        )
         t = torch.where(hit, t, math.inf)
         # Nearest per ray; among equal t the lowest triangle index (as brute force).
         key = torch.where(hit, index[None].expand_as(t), torch.iinfo(torch.int64).max)
         nearest = t.amin(dim=1, keepdim=True)
-        j = torch.where(t == nearest, key, torch.iinfo(torch.int64).max).argmin(dim=1,
-                                                                              keepdim=True)
+        j = torch.where(t == nearest, key, torch.iinfo(torch.int64).max).argmin(dim=1, keepdim=True)
         tb, ib = t.gather(1, j)[:, 0], index[j[:, 0]]
-        better = (tb < best.t[rows]) | ((tb == best.t[rows]) & (tb < math.inf)
-                                        & (ib < best.triangle[rows]))
+        better = (tb < best.t[rows]) | (
+            (tb == best.t[rows]) & (tb < math.inf) & (ib < best.triangle[rows])
+        )
         best.t[rows] = torch.where(better, tb, best.t[rows])
         best.triangle[rows] = torch.where(better, ib, best.triangle[rows])
         best.u[rows] = torch.where(better, u.gather(1, j)[:, 0], best.u[rows])

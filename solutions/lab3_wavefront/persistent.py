@@ -20,8 +20,14 @@ from .whitted import _is_mirror
 # END SOLUTION
 
 
-def render_persistent(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-                      trace, max_depth: int = MAX_DEPTH, pool_size: int = 4096):
+def render_persistent(
+    scene: WhittedScene,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    trace,
+    max_depth: int = MAX_DEPTH,
+    pool_size: int = 4096,
+):
     """A fixed pool of ray slots that keep taking work from one global queue until done.
 
     Same arguments and image as :func:`render_whitted`; pool_size: the number of slots
@@ -59,28 +65,41 @@ def render_persistent(scene: WhittedScene, origins: torch.Tensor, directions: to
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
-        scene, origins, directions, trace, max_depth)
+        scene, origins, directions, trace, max_depth
+    )
     check_pool_size(pool_size)
     # BEGIN SOLUTION (task 4)
     device, dtype = scene.device, scene.dtype
     image = torch.zeros(n, 3, dtype=dtype, device=device)
     # The queue: one work item (pixel, origin, direction, depth, throughput) per row.
-    queue = {"pixel": torch.arange(n, device=device), "o": origins, "d": directions,
-             "depth": torch.zeros(n, dtype=torch.int64, device=device),
-             "throughput": torch.ones(n, 3, dtype=dtype, device=device)}
+    queue = {
+        "pixel": torch.arange(n, device=device),
+        "o": origins,
+        "d": directions,
+        "depth": torch.zeros(n, dtype=torch.int64, device=device),
+        "throughput": torch.ones(n, 3, dtype=dtype, device=device),
+    }
     head = 0
     # The pool: pool_size slots; pixel -1 marks an empty slot.
-    pool = {key: torch.zeros((pool_size, *x.shape[1:]), dtype=x.dtype, device=device)
-            for key, x in queue.items()}
+    pool = {
+        key: torch.zeros((pool_size, *x.shape[1:]), dtype=x.dtype, device=device)
+        for key, x in queue.items()
+    }
     pool["pixel"].fill_(-1)
-    stats = {"pool_size": pool_size, "steps": 0, "active_lanes": [], "work_generated": n,
-             "work_processed": 0, "shadow_rays": 0}
+    stats = {
+        "pool_size": pool_size,
+        "steps": 0,
+        "active_lanes": [],
+        "work_generated": n,
+        "work_processed": 0,
+        "shadow_rays": 0,
+    }
     while True:
         free = (pool["pixel"] < 0).nonzero()[:, 0]
         take = min(len(free), len(queue["pixel"]) - head)
         if take > 0:  # refill the empty slots from the head of the queue
             for key, slots in pool.items():
-                slots[free[:take]] = queue[key][head:head + take]
+                slots[free[:take]] = queue[key][head : head + take]
             head += take
         lane = (pool["pixel"] >= 0).nonzero()[:, 0]
         if len(lane) == 0:
@@ -100,11 +119,13 @@ def render_persistent(scene: WhittedScene, origins: torch.Tensor, directions: to
         image.index_add_(0, pixel[hit], throughput[hit] * direct)
         # Spawn: a mirror hit appends its reflected ray to the tail of the queue.
         mirror = _is_mirror(scene, material) & (depth[hit] < max_depth)
-        spawned = {"pixel": pixel[hit][mirror],
-                   "o": offset_origins(points[mirror], normals[mirror]),
-                   "d": reflect(d[hit][mirror], normals[mirror]),
-                   "depth": depth[hit][mirror] + 1,
-                   "throughput": throughput[hit][mirror] * scene.kr[material[mirror]]}
+        spawned = {
+            "pixel": pixel[hit][mirror],
+            "o": offset_origins(points[mirror], normals[mirror]),
+            "d": reflect(d[hit][mirror], normals[mirror]),
+            "depth": depth[hit][mirror] + 1,
+            "throughput": throughput[hit][mirror] * scene.kr[material[mirror]],
+        }
         stats["work_generated"] += len(spawned["pixel"])
         queue = {key: torch.cat((queue[key][head:], spawned[key])) for key in queue}
         head = 0

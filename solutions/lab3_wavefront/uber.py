@@ -20,8 +20,21 @@ from course.given.lab3 import (
 
 
 # BEGIN SOLUTION
-def _uber_shadow_rays(vertices, faces, mat_table, point_positions, point_intensities,
-                      dir_directions, dir_irradiance, eps: float, o, d, t, triangle, alive):
+def _uber_shadow_rays(
+    vertices,
+    faces,
+    mat_table,
+    point_positions,
+    point_intensities,
+    dir_directions,
+    dir_irradiance,
+    eps: float,
+    o,
+    d,
+    t,
+    triangle,
+    alive,
+):
     """Surface and shadow rays of all N lanes x L lights (static shapes, no branches)."""
     hit = alive & (triangle >= 0)
     tri = triangle.clamp(min=0)
@@ -34,20 +47,43 @@ def _uber_shadow_rays(vertices, faces, mat_table, point_positions, point_intensi
     dist = to.norm(dim=-1)
     n, nd = o.shape[0], dir_directions.shape[0]
     l = torch.cat((to / dist[..., None], dir_directions.expand(n, nd, 3)), 1)
-    irradiance = torch.cat((point_intensities / (dist**2)[..., None],
-                            dir_irradiance.expand(n, nd, 3)), 1)
+    irradiance = torch.cat(
+        (point_intensities / (dist**2)[..., None], dir_irradiance.expand(n, nd, 3)), 1
+    )
     light_offset = eps * point_positions.abs().amax(dim=1).clamp(min=1)
-    t_max = torch.cat((dist - light_offset,
-                       torch.full((n, nd), math.inf, dtype=dist.dtype, device=dist.device)), 1)
+    t_max = torch.cat(
+        (dist - light_offset, torch.full((n, nd), math.inf, dtype=dist.dtype, device=dist.device)),
+        1,
+    )
     cos = dot(normal[:, None], l)
     needed = hit[:, None] & (cos > 0)
     t_max = torch.where(needed, t_max, -math.inf)  # an empty interval: an idle lane
     return hit, tri, normal, p_off, l, irradiance, cos, needed, t_max
 
 
-def _uber_shade(material, kd, ks, shininess, kr, ambient, background, d, throughput, alive,
-                hit, tri, normal, p_off, l, irradiance, cos, needed, blocked, image,
-                more: bool):
+def _uber_shade(
+    material,
+    kd,
+    ks,
+    shininess,
+    kr,
+    ambient,
+    background,
+    d,
+    throughput,
+    alive,
+    hit,
+    tri,
+    normal,
+    p_off,
+    l,
+    irradiance,
+    cos,
+    needed,
+    blocked,
+    image,
+    more: bool,
+):
     """Shading and spawning of all N lanes (static shapes, no branches)."""
     m = material[tri]
     s = shininess[m]
@@ -56,10 +92,12 @@ def _uber_shade(material, kd, ks, shininess, kr, ambient, background, d, through
     lobe = ((s + 8) / (8 * math.pi))[:, None] * n_dot_h ** s[:, None]
     brdf = kd[m][:, None] / math.pi + ks[m][:, None] * lobe[..., None]
     lit = needed & ~blocked
-    direct = ambient * kd[m] + torch.where(lit[..., None], irradiance * cos[..., None] * brdf,
-                                           0.0).sum(1)
-    image = image + throughput * torch.where(hit[:, None], direct,
-                                             torch.where(alive[:, None], background, 0.0))
+    direct = ambient * kd[m] + torch.where(
+        lit[..., None], irradiance * cos[..., None] * brdf, 0.0
+    ).sum(1)
+    image = image + throughput * torch.where(
+        hit[:, None], direct, torch.where(alive[:, None], background, 0.0)
+    )
     alive = hit & (kr[m] > 0).any(dim=1) & more
     throughput = torch.where(alive[:, None], throughput * kr[m], 0.0)
     r = normalize(d - 2 * dot(d, normal)[:, None] * normal)
@@ -68,13 +106,23 @@ def _uber_shade(material, kd, ks, shininess, kr, ambient, background, d, through
 
 @functools.cache
 def _compiled(backend):
-    return (torch.compile(_uber_shadow_rays, backend=backend, fullgraph=True, dynamic=True),
-            torch.compile(_uber_shade, backend=backend, fullgraph=True, dynamic=True))
+    return (
+        torch.compile(_uber_shadow_rays, backend=backend, fullgraph=True, dynamic=True),
+        torch.compile(_uber_shade, backend=backend, fullgraph=True, dynamic=True),
+    )
+
+
 # END SOLUTION
 
 
-def render_uber(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor, trace,
-                max_depth: int = MAX_DEPTH, compile=False) -> torch.Tensor:
+def render_uber(
+    scene: WhittedScene,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    trace,
+    max_depth: int = MAX_DEPTH,
+    compile=False,
+) -> torch.Tensor:
     """The bounce loop as one fused program over fixed-size lane buffers.
 
     Same arguments and image as :func:`render_whitted`; compile: False (eager), True
@@ -110,10 +158,13 @@ def render_uber(scene: WhittedScene, origins: torch.Tensor, directions: torch.Te
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
-        scene, origins, directions, trace, max_depth)
+        scene, origins, directions, trace, max_depth
+    )
     if not (isinstance(compile, (bool, str)) or callable(compile)):
-        raise TypeError(f"compile: expected a bool or a torch.compile backend (a name or a "
-                        f"callable), got {compile!r}")
+        raise TypeError(
+            f"compile: expected a bool or a torch.compile backend (a name or a "
+            f"callable), got {compile!r}"
+        )
     # BEGIN SOLUTION (task 3)
     if compile:
         shadow_step, shade_step = _compiled("inductor" if compile is True else compile)
@@ -129,16 +180,51 @@ def render_uber(scene: WhittedScene, origins: torch.Tensor, directions: torch.Te
     for depth in range(max_depth + 1):
         hits = trace(scene, o, d, zeros, torch.where(alive, math.inf, -math.inf), False)
         hit, tri, normal, p_off, l, irradiance, cos, needed, t_max = shadow_step(
-            scene.vertices, scene.faces, scene.material, scene.point_positions,
-            scene.point_intensities, scene.dir_directions, scene.dir_irradiance, eps, o, d,
-            hits.t, hits.triangle, alive)
+            scene.vertices,
+            scene.faces,
+            scene.material,
+            scene.point_positions,
+            scene.point_intensities,
+            scene.dir_directions,
+            scene.dir_irradiance,
+            eps,
+            o,
+            d,
+            hits.t,
+            hits.triangle,
+            alive,
+        )
         # All N x L shadow lanes are traced; the unneeded ones have an empty interval.
-        blocked = trace(scene, p_off[:, None].expand(n, lights, 3).reshape(-1, 3),
-                        l.reshape(-1, 3), torch.zeros_like(t_max).reshape(-1),
-                        t_max.reshape(-1), True).hit.reshape(n, lights)
+        blocked = trace(
+            scene,
+            p_off[:, None].expand(n, lights, 3).reshape(-1, 3),
+            l.reshape(-1, 3),
+            torch.zeros_like(t_max).reshape(-1),
+            t_max.reshape(-1),
+            True,
+        ).hit.reshape(n, lights)
         image, throughput, alive, o, d = shade_step(
-            scene.material, scene.kd, scene.ks, scene.shininess, scene.kr, scene.ambient,
-            scene.background, d, throughput, alive, hit, tri, normal, p_off, l, irradiance,
-            cos, needed, blocked, image, depth < max_depth)
+            scene.material,
+            scene.kd,
+            scene.ks,
+            scene.shininess,
+            scene.kr,
+            scene.ambient,
+            scene.background,
+            d,
+            throughput,
+            alive,
+            hit,
+            tri,
+            normal,
+            p_off,
+            l,
+            irradiance,
+            cos,
+            needed,
+            blocked,
+            image,
+            depth < max_depth,
+        )
     return image
     # END SOLUTION

@@ -20,8 +20,14 @@ from .whitted import _is_mirror
 # END SOLUTION
 
 
-def render_wavefront(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-                     trace, max_depth: int = MAX_DEPTH, sort_by_material: bool = False):
+def render_wavefront(
+    scene: WhittedScene,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    trace,
+    max_depth: int = MAX_DEPTH,
+    sort_by_material: bool = False,
+):
     """The tracer as separate stages over a compacted queue of live rays.
 
     Same arguments and image as :func:`render_whitted`; sort_by_material: sort the shading
@@ -64,13 +70,20 @@ def render_wavefront(scene: WhittedScene, origins: torch.Tensor, directions: tor
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
-        scene, origins, directions, trace, max_depth)
+        scene, origins, directions, trace, max_depth
+    )
     if not isinstance(sort_by_material, bool):
         raise TypeError(f"sort_by_material: expected a bool, got {sort_by_material!r}")
     # BEGIN SOLUTION (task 2)
     clock = StageClock(scene.device)
-    stats = {"closest_rays": [], "hits": [], "shadow_rays": [], "reflected_rays": [],
-             "material_runs": [], "seconds": clock.seconds}
+    stats = {
+        "closest_rays": [],
+        "hits": [],
+        "shadow_rays": [],
+        "reflected_rays": [],
+        "material_runs": [],
+        "seconds": clock.seconds,
+    }
     with clock("generate"):
         image = torch.zeros(n, 3, dtype=scene.dtype, device=scene.device)
         pixel = torch.arange(n, device=scene.device)

@@ -70,8 +70,7 @@ def reflect(directions: torch.Tensor, normals: torch.Tensor) -> torch.Tensor:
     # END SOLUTION
 
 
-def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-               hits: Hits):
+def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor, hits: Hits):
     """What a ray sees at its hit: ``(points, normals, material)``.
 
     scene: the scene; origins, directions: (N, 3) the rays; hits: their ``Hits`` from
@@ -98,11 +97,13 @@ def surface_at(scene: WhittedScene, origins: torch.Tensor, directions: torch.Ten
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_scene(scene)
     n = check_vectors(  # noqa: F841 (n: the number of rays, for your code)
-        scene.vertices, origins=origins, directions=directions)
+        scene.vertices, origins=origins, directions=directions
+    )
     # BEGIN SOLUTION (task 1)
     if not isinstance(hits, Hits) or len(hits) != n:
-        raise TypeError(f"hits: expected course.core.types.Hits for {n} rays, got "
-                        f"{type(hits).__name__}")
+        raise TypeError(
+            f"hits: expected course.core.types.Hits for {n} rays, got {type(hits).__name__}"
+        )
     hit = hits.hit
     tri = hits.triangle.clamp(min=0)
     t = torch.where(hit, hits.t, 0.0)
@@ -121,21 +122,31 @@ def _light_rays(scene: WhittedScene, p_off: torch.Tensor):
     """Per (hit, light): unit direction to the light (n, L, 3), irradiance (n, L, 3) and the
     shadow ray's t_max (n, L); point lights first, then directional lights."""
     eps = offset_scale(scene.dtype)
-    to = scene.point_positions[None] - p_off[:, None]                 # (n, P, 3)
+    to = scene.point_positions[None] - p_off[:, None]  # (n, P, 3)
     dist = to.norm(dim=-1)
     light_offset = eps * scene.point_positions.abs().amax(dim=1).clamp(min=1)
     n, d = p_off.shape[0], scene.num_dir_lights
     directions = torch.cat((to / dist[..., None], scene.dir_directions.expand(n, d, 3)), 1)
-    irradiance = torch.cat((scene.point_intensities / (dist**2)[..., None],
-                            scene.dir_irradiance.expand(n, d, 3)), 1)
-    t_max = torch.cat((dist - light_offset, torch.full((n, d), math.inf, dtype=dist.dtype,
-                                                        device=dist.device)), 1)
+    irradiance = torch.cat(
+        (scene.point_intensities / (dist**2)[..., None], scene.dir_irradiance.expand(n, d, 3)), 1
+    )
+    t_max = torch.cat(
+        (dist - light_offset, torch.full((n, d), math.inf, dtype=dist.dtype, device=dist.device)), 1
+    )
     return directions, irradiance, t_max
+
+
 # END SOLUTION
 
 
-def shade_direct(scene: WhittedScene, points: torch.Tensor, normals: torch.Tensor,
-                 directions: torch.Tensor, material: torch.Tensor, trace):
+def shade_direct(
+    scene: WhittedScene,
+    points: torch.Tensor,
+    normals: torch.Tensor,
+    directions: torch.Tensor,
+    material: torch.Tensor,
+    trace,
+):
     """Ambient and direct light at N hits, with a shadow ray per visible light.
 
     points: (N, 3) hit points ``p`` (not offset); normals: (N, 3) unit, facing the ray;
@@ -169,7 +180,8 @@ def shade_direct(scene: WhittedScene, points: torch.Tensor, normals: torch.Tenso
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_surface_inputs(  # noqa: F841 (n: the number of points, for your code)
-        scene, points, normals, directions, material, trace)
+        scene, points, normals, directions, material, trace
+    )
     # BEGIN SOLUTION (task 1)
     kd, ks, s = scene.kd[material], scene.ks[material], scene.shininess[material]
     radiance = scene.ambient * kd
@@ -177,14 +189,20 @@ def shade_direct(scene: WhittedScene, points: torch.Tensor, normals: torch.Tenso
         return radiance, 0
     p_off = offset_origins(points, normals)
     l, irradiance, t_max = _light_rays(scene, p_off)
-    cos = dot(normals[:, None], l)                                     # (n, L)
+    cos = dot(normals[:, None], l)  # (n, L)
     # Only lights above the surface can contribute: only they get a shadow ray.
     row, light = (cos > 0).nonzero(as_tuple=True)
-    blocked = trace(scene, p_off[row], l[row, light], torch.zeros_like(t_max[row, light]),
-                    t_max[row, light], True).hit
+    blocked = trace(
+        scene,
+        p_off[row],
+        l[row, light],
+        torch.zeros_like(t_max[row, light]),
+        t_max[row, light],
+        True,
+    ).hit
     lit = torch.zeros_like(cos, dtype=torch.bool)
     lit[row, light] = ~blocked
-    half = normalize(l - directions[:, None])                          # h = normalize(l + v)
+    half = normalize(l - directions[:, None])  # h = normalize(l + v)
     n_dot_h = dot(normals[:, None], half).clamp(min=0)
     lobe = ((s + 8) / (8 * math.pi))[:, None] * n_dot_h ** s[:, None]
     brdf = kd[:, None] / math.pi + ks[:, None] * lobe[..., None]
@@ -196,11 +214,18 @@ def shade_direct(scene: WhittedScene, points: torch.Tensor, normals: torch.Tenso
 # BEGIN SOLUTION
 def _is_mirror(scene: WhittedScene, material: torch.Tensor) -> torch.Tensor:
     return (scene.kr[material] > 0).any(dim=1)
+
+
 # END SOLUTION
 
 
-def render_whitted(scene: WhittedScene, origins: torch.Tensor, directions: torch.Tensor,
-                   trace, max_depth: int = MAX_DEPTH) -> torch.Tensor:
+def render_whitted(
+    scene: WhittedScene,
+    origins: torch.Tensor,
+    directions: torch.Tensor,
+    trace,
+    max_depth: int = MAX_DEPTH,
+) -> torch.Tensor:
     """Backward (Whitted) ray tracing, one loop over bounces on full-size buffers.
 
     scene; origins, directions: (N, 3) primary rays; trace: the tracer; max_depth: the
@@ -228,7 +253,8 @@ def render_whitted(scene: WhittedScene, origins: torch.Tensor, directions: torch
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     n = check_render_inputs(  # noqa: F841 (n: the number of rays, for your code)
-        scene, origins, directions, trace, max_depth)
+        scene, origins, directions, trace, max_depth
+    )
     # BEGIN SOLUTION (task 1)
     image = torch.zeros(n, 3, dtype=scene.dtype, device=scene.device)
     throughput = torch.ones_like(image)

@@ -19,13 +19,16 @@ def check_density_defined(values: torch.Tensor, name: str = "density") -> None:
     """An extinction coefficient is a number or +inf (opaque), never NaN: a NaN density
     would turn every transmittance behind it into NaN. ValueError naming ``name``."""
     if bool(torch.isnan(values).any()):
-        raise ValueError(f"{name}: expected extinction coefficients >= 0 (or +inf), got "
-                         f"{int(torch.isnan(values).sum())} NaN values: a NaN density makes "
-                         f"the transmittance NaN for every ray that crosses it")
+        raise ValueError(
+            f"{name}: expected extinction coefficients >= 0 (or +inf), got "
+            f"{int(torch.isnan(values).sum())} NaN values: a NaN density makes "
+            f"the transmittance NaN for every ray that crosses it"
+        )
 
 
-def evaluate(field, name: str, points: torch.Tensor, local: torch.Tensor,
-             channels: bool = False) -> torch.Tensor:
+def evaluate(
+    field, name: str, points: torch.Tensor, local: torch.Tensor, channels: bool = False
+) -> torch.Tensor:
     """A field's values at N points: ``field(points)`` for a callable (world points, checked
     by ``field_values``), ``sample_grid(field, local)`` for a grid (box coordinates in
     [0, 1]^3). Returns (N,), or also (N, C) when ``channels``, in the points' dtype.
@@ -65,8 +68,9 @@ def ray_box_interval(origins, directions, box_min, box_max):
     validity mask with ``torch.isfinite``; return ``torch.where(hit, t, 0)``.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    origins, directions, box_min, box_max = check_ray_box_inputs(origins, directions,
-                                                                 box_min, box_max)
+    origins, directions, box_min, box_max = check_ray_box_inputs(
+        origins, directions, box_min, box_max
+    )
     # BEGIN SOLUTION (task 1)
     inv = torch.reciprocal(directions)
     t0 = (box_min - origins) * inv
@@ -75,8 +79,11 @@ def ray_box_interval(origins, directions, box_min, box_max):
     zero = torch.zeros((), dtype=origins.dtype, device=origins.device)
     t_near = torch.fmax(torch.fmax(torch.fmax(lo[:, 0], lo[:, 1]), lo[:, 2]), zero)
     t_far = torch.fmin(torch.fmin(hi[:, 0], hi[:, 1]), hi[:, 2])
-    valid = (torch.isfinite(origins).all(-1) & torch.isfinite(directions).all(-1)
-             & (directions != 0).any(-1))
+    valid = (
+        torch.isfinite(origins).all(-1)
+        & torch.isfinite(directions).all(-1)
+        & (directions != 0).any(-1)
+    )
     hit = valid & (t_near <= t_far) & torch.isfinite(t_far)
     return torch.where(hit, t_near, zero), torch.where(hit, t_far, zero), hit
     # END SOLUTION
@@ -120,8 +127,9 @@ def sample_grid(grid, uvw):
     f = u - i0
     i1 = torch.minimum(i0 + 1, sizes - 1)
     # The 8 corners at once: bit a of corner c picks i1 (weight f) or i0 (weight 1 - f).
-    upper = (torch.arange(8, device=grid.device)[:, None] >> torch.arange(3, device=grid.device)
-             ) & 1 == 1  # (8, 3)
+    upper = (
+        torch.arange(8, device=grid.device)[:, None] >> torch.arange(3, device=grid.device)
+    ) & 1 == 1  # (8, 3)
     index = torch.where(upper, i1[..., None, :], i0[..., None, :])  # (..., 8, 3)
     weight = torch.where(upper, f[..., None, :], 1 - f[..., None, :]).prod(-1)  # (..., 8)
     linear = (index[..., 0] * grid.shape[1] + index[..., 1]) * grid.shape[2] + index[..., 2]
@@ -132,8 +140,20 @@ def sample_grid(grid, uvw):
     # END SOLUTION
 
 
-def march_box(origins, directions, box_min, box_max, density, emission=None, steps=64, *,
-              integrator="exact", min_transmittance=0.0, jitter=False, seed=0):
+def march_box(
+    origins,
+    directions,
+    box_min,
+    box_max,
+    density,
+    emission=None,
+    steps=64,
+    *,
+    integrator="exact",
+    min_transmittance=0.0,
+    jitter=False,
+    seed=0,
+):
     """The lecture's ray marcher: a fixed number of steps through a volume in a box.
 
     origins, directions: (N, 3) float; box_min, box_max: (3,); density: callable or grid
@@ -181,8 +201,16 @@ def march_box(origins, directions, box_min, box_max, density, emission=None, ste
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max = check_march_inputs(
-        origins, directions, box_min, box_max, density, emission, steps, integrator,
-        min_transmittance)
+        origins,
+        directions,
+        box_min,
+        box_max,
+        density,
+        emission,
+        steps,
+        integrator,
+        min_transmittance,
+    )
     if isinstance(density, torch.Tensor):
         check_density_defined(density)
     # BEGIN SOLUTION (task 1)
@@ -224,8 +252,13 @@ def march_box(origins, directions, box_min, box_max, density, emission=None, ste
         samples += active
     if not isinstance(radiance, torch.Tensor):  # nothing emitted: zeros of the right shape
         centre = torch.full((n, 3), 0.5, **like)
-        channels = () if emission is None else evaluate(
-            emission, "emission", box_min + centre * size, centre, channels=True).shape[1:]
+        channels = (
+            ()
+            if emission is None
+            else evaluate(
+                emission, "emission", box_min + centre * size, centre, channels=True
+            ).shape[1:]
+        )
         radiance = torch.zeros(n, *channels, **like)
     return {"radiance": radiance, "transmittance": transmittance, "samples": samples}
     # END SOLUTION

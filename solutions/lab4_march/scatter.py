@@ -44,8 +44,9 @@ def henyey_greenstein(cos_theta, g):
     g = check_phase_inputs(cos_theta, g)
     # BEGIN SOLUTION (task 3)
     cos_theta = cos_theta.clamp(-1, 1)
-    base = torch.where(g >= 0, (1 - g) ** 2 + 2 * g * (1 - cos_theta),
-                       (1 + g) ** 2 - 2 * g * (1 + cos_theta))
+    base = torch.where(
+        g >= 0, (1 - g) ** 2 + 2 * g * (1 - cos_theta), (1 + g) ** 2 - 2 * g * (1 + cos_theta)
+    )
     return (1 - g) * (1 + g) / (4 * math.pi * base * base.sqrt())
     # END SOLUTION
 
@@ -71,8 +72,9 @@ def shadow_transmittance(points, light_direction, box_min, box_max, density, ste
     ray misses the box); ``exp`` at the end.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    points, light, box_min, box_max = check_shadow_inputs(points, light_direction, box_min,
-                                                          box_max, density, steps)
+    points, light, box_min, box_max = check_shadow_inputs(
+        points, light_direction, box_min, box_max, density, steps
+    )
     if isinstance(density, torch.Tensor):
         check_density_defined(density)
     # BEGIN SOLUTION (task 3)
@@ -84,16 +86,30 @@ def shadow_transmittance(points, light_direction, box_min, box_max, density, ste
     depth = torch.zeros_like(dt)
     for k in range(steps):
         offset = rel + (t_near + (k + 0.5) * dt)[:, None] * light
-        sigma = evaluate(density, "density", box_min + offset,
-                         torch.where(size > 0, offset / size, 0.5))
+        sigma = evaluate(
+            density, "density", box_min + offset, torch.where(size > 0, offset / size, 0.5)
+        )
         depth = depth + torch.where(hit, sigma, 0) * dt
     return torch.exp(-depth)
     # END SOLUTION
 
 
-def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
-                         light_direction, light_irradiance=1.0, g=0.0, steps=64,
-                         shadow_steps=16, *, integrator="exact", min_transmittance=0.0):
+def march_single_scatter(
+    origins,
+    directions,
+    box_min,
+    box_max,
+    density,
+    albedo,
+    light_direction,
+    light_irradiance=1.0,
+    g=0.0,
+    steps=64,
+    shadow_steps=16,
+    *,
+    integrator="exact",
+    min_transmittance=0.0,
+):
     """Single scattering of a directional light in a box, marched like :func:`march_box`.
 
     origins, directions: (N, 3); box_min, box_max: (3,); density: callable or grid (the
@@ -128,12 +144,26 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max, light, factor = check_scatter_inputs(
-        origins, directions, box_min, box_max, density, albedo, light_direction,
-        light_irradiance, g, steps, shadow_steps, integrator, min_transmittance)
+        origins,
+        directions,
+        box_min,
+        box_max,
+        density,
+        albedo,
+        light_direction,
+        light_irradiance,
+        g,
+        steps,
+        shadow_steps,
+        integrator,
+        min_transmittance,
+    )
     bad = torch.as_tensor(albedo, dtype=torch.float64)
     if not bool(((bad >= 0) & (bad <= 1)).all()):
-        raise ValueError(f"albedo: expected values in [0, 1] (sigma_s / sigma_t: a medium "
-                         f"scatters at most what it removes), got {albedo!r}")
+        raise ValueError(
+            f"albedo: expected values in [0, 1] (sigma_s / sigma_t: a medium "
+            f"scatters at most what it removes), got {albedo!r}"
+        )
     # BEGIN SOLUTION (task 3)
     unit = directions / directions.norm(dim=-1, keepdim=True)
     phase = henyey_greenstein(torch.nan_to_num(dot(unit, light)), g)  # (N,)
@@ -147,6 +177,15 @@ def march_single_scatter(origins, directions, box_min, box_max, density, albedo,
             return scattered[:, None] * factor
         return scattered * factor
 
-    return march_box(origins, directions, box_min, box_max, density, source, steps,
-                     integrator=integrator, min_transmittance=min_transmittance)
+    return march_box(
+        origins,
+        directions,
+        box_min,
+        box_max,
+        density,
+        source,
+        steps,
+        integrator=integrator,
+        min_transmittance=min_transmittance,
+    )
     # END SOLUTION

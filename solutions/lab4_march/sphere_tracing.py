@@ -1,5 +1,4 @@
-"""Task 5: ``sphere_trace``, signed-distance scenes traced with over-relaxation.
-"""
+"""Task 5: ``sphere_trace``, signed-distance scenes traced with over-relaxation."""
 
 from __future__ import annotations
 
@@ -10,8 +9,9 @@ import torch
 from course.given.lab4 import HIT, MISS, UNSURE, check_trace_inputs
 
 
-def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1e-4,
-                 relaxation=1.0):
+def sphere_trace(
+    origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1e-4, relaxation=1.0
+):
     """Sphere tracing (Hart 1996) with over-relaxation (Keinert et al. 2014).
 
     origins, directions: (N, 3); sdf: callable ``points (N, 3) -> (N,)``, a signed distance
@@ -46,14 +46,19 @@ def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1
     is active.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
-    origins, directions = check_trace_inputs(origins, directions, sdf, t_max, max_steps,
-                                             epsilon, relaxation)
+    origins, directions = check_trace_inputs(
+        origins, directions, sdf, t_max, max_steps, epsilon, relaxation
+    )
     # BEGIN SOLUTION (task 5)
     n = origins.shape[0]
     like = {"dtype": origins.dtype, "device": origins.device}
     length = directions.norm(dim=-1)
-    valid = (torch.isfinite(origins).all(-1) & torch.isfinite(directions).all(-1)
-             & (length > 0) & torch.isfinite(length))
+    valid = (
+        torch.isfinite(origins).all(-1)
+        & torch.isfinite(directions).all(-1)
+        & (length > 0)
+        & torch.isfinite(length)
+    )
     o = torch.where(valid[:, None], origins, 0)
     d = torch.where(valid[:, None], directions, 0)
     t = torch.zeros(n, **like)
@@ -69,9 +74,10 @@ def sphere_trace(origins, directions, sdf, t_max=100.0, max_steps=128, epsilon=1
             break
         f = sdf(o + t[:, None] * d)
         if not isinstance(f, torch.Tensor) or f.shape != (n,):
-            raise ValueError(f"sdf: the callable must return a tensor of shape ({n},), got "
-                             + (str(tuple(f.shape)) if isinstance(f, torch.Tensor)
-                                else type(f).__name__))
+            raise ValueError(
+                f"sdf: the callable must return a tensor of shape ({n},), got "
+                + (str(tuple(f.shape)) if isinstance(f, torch.Tensor) else type(f).__name__)
+            )
         f = f.to(origins.dtype)
         steps += active
         radius = f.abs()

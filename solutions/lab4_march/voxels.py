@@ -33,14 +33,16 @@ def build_occupancy(density, macro_cell=1, emission=None):
     if emission is not None:
         nonzero = emission != 0
         busy = busy | (nonzero.any(-1) if emission.ndim == 4 else nonzero)
-    pooled = torch.nn.functional.max_pool3d(busy[None, None].float(), macro_cell,
-                                            stride=macro_cell, ceil_mode=True)
+    pooled = torch.nn.functional.max_pool3d(
+        busy[None, None].float(), macro_cell, stride=macro_cell, ceil_mode=True
+    )
     return pooled[0, 0] > 0
     # END SOLUTION
 
 
-def voxel_walk(origins, directions, box_min, box_max, density, emission=None, occupancy=None,
-               macro_cell=1):
+def voxel_walk(
+    origins, directions, box_min, box_max, density, emission=None, occupancy=None, macro_cell=1
+):
     """Exact emission–absorption through a piecewise-constant voxel grid (3D DDA).
 
     origins, directions: (N, 3); box_min, box_max: (3,); density: (X, Y, Z) grid >= 0
@@ -86,7 +88,8 @@ def voxel_walk(origins, directions, box_min, box_max, density, emission=None, oc
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     origins, directions, box_min, box_max = check_voxel_inputs(
-        origins, directions, box_min, box_max, density, emission, occupancy, macro_cell)
+        origins, directions, box_min, box_max, density, emission, occupancy, macro_cell
+    )
     check_density_defined(density)
     # BEGIN SOLUTION (task 4)
     n = origins.shape[0]
@@ -126,8 +129,9 @@ def voxel_walk(origins, directions, box_min, box_max, density, emission=None, oc
             skip = ~occupancy[macro[:, 0], macro[:, 1], macro[:, 2]]
         # The block being crossed: one voxel, or the whole (empty) macro cell.
         block_lo = torch.where(skip[:, None], (index // macro_cell) * macro_cell, index)
-        block_hi = torch.where(skip[:, None], torch.minimum(
-            (index // macro_cell + 1) * macro_cell, sizes) - 1, index)
+        block_hi = torch.where(
+            skip[:, None], torch.minimum((index // macro_cell + 1) * macro_cell, sizes) - 1, index
+        )
         ahead = torch.where(step > 0, block_hi + 1, block_lo)  # index of the plane ahead
         t_axis = torch.where(step != 0, (ahead * voxel - rel) * inv, inf)
         t_exit = torch.minimum(t_axis.amin(-1), t_end)
@@ -152,12 +156,20 @@ def voxel_walk(origins, directions, box_min, box_max, density, emission=None, oc
         # exit point lies, kept inside the block and never backwards (rounding).
         located = torch.floor((rel + t_exit[:, None] * d) / voxel).long()
         located = torch.minimum(torch.maximum(located, block_lo), block_hi)
-        located = torch.where(step > 0, torch.maximum(located, index),
-                              torch.where(step < 0, torch.minimum(located, index), index))
+        located = torch.where(
+            step > 0,
+            torch.maximum(located, index),
+            torch.where(step < 0, torch.minimum(located, index), index),
+        )
         across = torch.where(step > 0, block_hi + 1, block_lo - 1)
         on_axis = torch.nn.functional.one_hot(axis, 3).bool()
         cell = torch.where(active[:, None], torch.where(on_axis, across, located), cell)
         t = torch.where(active, t_exit, t)
-    return {"optical_depth": depth, "transmittance": torch.exp(-depth), "radiance": radiance,
-            "steps": steps_taken, "samples": samples}
+    return {
+        "optical_depth": depth,
+        "transmittance": torch.exp(-depth),
+        "radiance": radiance,
+        "steps": steps_taken,
+        "samples": samples,
+    }
     # END SOLUTION

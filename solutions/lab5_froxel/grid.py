@@ -64,6 +64,8 @@ def _view_dirs(grid, x, y, dtype, device):
     ndc_x = 2 * x * grid.tile / grid.camera.width - 1
     ndc_y = 1 - 2 * y * grid.tile / grid.camera.height
     return fwd + (ndc_x * hw)[..., None] * right + (ndc_y * hh)[..., None] * up
+
+
 # END SOLUTION
 
 
@@ -80,8 +82,7 @@ def froxel_to_world(grid, coords):
     check_inputs({"coords": (coords, (3,))})
     check_dtype(coords.dtype, "coords")
     eye = _camera(grid, coords.dtype, coords.device)[0]
-    depth = grid.near * torch.exp(coords[..., 2] * (math.log(grid.far / grid.near)
-                                                    / grid.slices))
+    depth = grid.near * torch.exp(coords[..., 2] * (math.log(grid.far / grid.near) / grid.slices))
     dirs = _view_dirs(grid, coords[..., 0], coords[..., 1], coords.dtype, coords.device)
     return eye + depth[..., None] * dirs
     # END SOLUTION

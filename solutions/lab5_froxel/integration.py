@@ -38,12 +38,15 @@ def slice_integral(source, extinction, length):
     # BEGIN SOLUTION (task 6)
     for name, x in (("source", source), ("extinction", extinction), ("length", length)):
         if not isinstance(x, torch.Tensor) or not x.is_floating_point():
-            raise TypeError(f"{name}: expected a float tensor, got "
-                            f"{getattr(x, 'dtype', type(x).__name__)}")
+            raise TypeError(
+                f"{name}: expected a float tensor, got {getattr(x, 'dtype', type(x).__name__)}"
+            )
     for name, x in (("extinction", extinction), ("length", length)):
         if bool((x < 0).any()):
-            raise ValueError(f"{name}: expected values >= 0, got {int((x < 0).sum())} "
-                             f"negative (minimum {x.min().item():.3g})")
+            raise ValueError(
+                f"{name}: expected values >= 0, got {int((x < 0).sum())} "
+                f"negative (minimum {x.min().item():.3g})"
+            )
     # inf * 0 is no optical depth (written so autograd keeps d tau / d sigma = length).
     finite = torch.where(torch.isinf(length) & (extinction == 0), 0, length)
     tau = torch.where(length == 0, 0, extinction * finite)
@@ -85,8 +88,9 @@ def integrate_froxels(source, extinction, grid, method="energy"):
     dtype, device = source.dtype, source.device
     check_volume(extinction, "extinction", grid.shape, dtype, device)
     if bool((extinction < 0).any()):
-        raise ValueError(f"extinction: expected values >= 0, got minimum "
-                         f"{extinction.min().item():.3g}")
+        raise ValueError(
+            f"extinction: expected values >= 0, got minimum {extinction.min().item():.3g}"
+        )
     z = slice_depths(grid.near, grid.far, grid.slices, torch.float64, device)
     j = torch.arange(grid.ny, dtype=torch.float64, device=device) + 0.5
     i = torch.arange(grid.nx, dtype=torch.float64, device=device) + 0.5

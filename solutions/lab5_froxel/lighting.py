@@ -84,7 +84,7 @@ def schlick_phase(cos_theta, g):
     # BEGIN SOLUTION (task 3)
     g = check_phase_inputs(cos_theta, g)
     cos_theta = cos_theta.clamp(-1, 1)
-    k = (1.55 * g - 0.55 * g ** 3).clamp(-SCHLICK_K_MAX, SCHLICK_K_MAX)
+    k = (1.55 * g - 0.55 * g**3).clamp(-SCHLICK_K_MAX, SCHLICK_K_MAX)
     return (1 - k * k) / (4 * math.pi * (1 - k * cos_theta).square())
     # END SOLUTION
 
@@ -133,8 +133,7 @@ def cull_lights(grid, lights, device="cpu"):
     # END SOLUTION
 
 
-def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float32,
-                     device="cpu"):
+def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float32, device="cpu"):
     """The sun's shadow map over the sphere (``center`` (3 numbers), ``radius``): an
     orthographic :class:`LightVolume` of kind "ortho" whose data (R, R) holds, per texel, the
     depth along ``w = -light.direction`` of the first occluder box (inf where none).
@@ -156,18 +155,25 @@ def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float
     toward = torch.tensor(light.direction, dtype=torch.float64)
     lift = radius
     for box in scene.occluders:
-        for corner in torch.cartesian_prod(*[torch.tensor([lo, hi], dtype=torch.float64)
-                                             for lo, hi in zip(box.lo, box.hi)]):
+        for corner in torch.cartesian_prod(
+            *[torch.tensor([lo, hi], dtype=torch.float64) for lo, hi in zip(box.lo, box.hi)]
+        ):
             lift = max(lift, float((corner - c) @ toward))
     origin = c + (lift + 1.0) * toward
     u, v, w = (torch.tensor(a, dtype=dtype, device=device) for a in axes)
     texel = (torch.arange(resolution, dtype=dtype, device=device) + 0.5) / resolution * 2 - 1
     a, b = torch.meshgrid(texel, texel, indexing="ij")
     starts = origin.to(device, dtype) + radius * (a[..., None] * u + b[..., None] * v)
-    depth = ray_boxes(starts.reshape(-1, 3), w.expand(resolution * resolution, 3),
-                      scene.occluders)
-    return LightVolume("ortho", tuple(origin.tolist()), axes, float(radius), 0.0, math.inf,
-                       depth.reshape(resolution, resolution))
+    depth = ray_boxes(starts.reshape(-1, 3), w.expand(resolution * resolution, 3), scene.occluders)
+    return LightVolume(
+        "ortho",
+        tuple(origin.tolist()),
+        axes,
+        float(radius),
+        0.0,
+        math.inf,
+        depth.reshape(resolution, resolution),
+    )
     # END SOLUTION
 
 
@@ -177,8 +183,7 @@ def shadow_lookup(shadow_map, points):
     occluders' own lit faces from shadowing themselves); 1 outside the map."""
     # BEGIN SOLUTION (task 3)
     if not isinstance(shadow_map, LightVolume) or shadow_map.data.ndim != 2:
-        raise TypeError("shadow_map: expected a LightVolume with (R, R) data from "
-                        "build_shadow_map")
+        raise TypeError("shadow_map: expected a LightVolume with (R, R) data from build_shadow_map")
     check_inputs({"points": (points, (3,))})
     a, b, depth = light_coords(shadow_map, points)
     res = shadow_map.data.shape[0]
@@ -198,8 +203,11 @@ def _light_radiance(light, points, dtype):
     """Irradiance (N, 3) arriving at ``points`` from ``light`` and unit directions (N, 3)
     toward it (no shadows)."""
     device = points.device
-    color = torch.tensor(light.irradiance if isinstance(light, DirectionalLight)
-                         else light.intensity, dtype=dtype, device=device)
+    color = torch.tensor(
+        light.irradiance if isinstance(light, DirectionalLight) else light.intensity,
+        dtype=dtype,
+        device=device,
+    )
     if isinstance(light, DirectionalLight):
         to_light = torch.tensor(light.direction, dtype=dtype, device=device).expand_as(points)
         return color.expand(len(points), 3), to_light
@@ -214,11 +222,23 @@ def _light_radiance(light, points, dtype):
         s = ((cos_axis - lo) / (hi - lo)).clamp(0, 1)
         falloff = falloff * s * s * (3 - 2 * s)
     return falloff[:, None] * color, to_light
+
+
 # END SOLUTION
 
 
-def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_shadows=True,
-                  shadow_resolution=128, volume_resolution=None, light_steps=LIGHT_STEPS):
+def light_froxels(
+    scene,
+    grid,
+    vbuffer,
+    jitter=0.5,
+    *,
+    phase="hg",
+    volumetric_shadows=True,
+    shadow_resolution=128,
+    volume_resolution=None,
+    light_steps=LIGHT_STEPS,
+):
     """Light scattered toward the camera per unit length at every froxel, plus emission:
     ``(source (S, ny, nx, 3), report)``.
 
@@ -259,15 +279,18 @@ def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_sh
     check_grid(grid)
     jitter = check_jitter(jitter)
     check_choice(phase, "phase", PHASES)
-    if not isinstance(vbuffer, dict) or not {"scattering", "extinction", "emissive",
-                                             "g"} <= set(vbuffer):
+    if not isinstance(vbuffer, dict) or not {"scattering", "extinction", "emissive", "g"} <= set(
+        vbuffer
+    ):
         raise TypeError("vbuffer: expected the dict voxelize returns")
     sigma_s = check_volume(vbuffer["scattering"], "vbuffer['scattering']", (*grid.shape, 3))
     dtype, device = sigma_s.dtype, sigma_s.device
-    sigma_t = check_volume(vbuffer["extinction"], "vbuffer['extinction']", grid.shape, dtype,
-                           device)
-    emissive = check_volume(vbuffer["emissive"], "vbuffer['emissive']", (*grid.shape, 3),
-                            dtype, device)
+    sigma_t = check_volume(
+        vbuffer["extinction"], "vbuffer['extinction']", grid.shape, dtype, device
+    )
+    emissive = check_volume(
+        vbuffer["emissive"], "vbuffer['emissive']", (*grid.shape, 3), dtype, device
+    )
     g = check_volume(vbuffer["g"], "vbuffer['g']", grid.shape, dtype, device)
     check_volume_resolution(volume_resolution)
     if isinstance(light_steps, bool) or not isinstance(light_steps, int) or light_steps < 1:
@@ -278,9 +301,15 @@ def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_sh
     lit = (sigma_s.amax(-1) > 0) & tile_media  # (S, ny, nx)
     idx = lit.reshape(-1).nonzero()[:, 0]
     source = emissive.clone()
-    report = {"froxels": math.prod(grid.shape), "froxels_lit": len(idx),
-              "tiles_with_media": int(tile_media.sum()), "light_tiles": [],
-              "light_evaluations": 0, "volume_bounds": None, "volume_resolution": 0}
+    report = {
+        "froxels": math.prod(grid.shape),
+        "froxels_lit": len(idx),
+        "tiles_with_media": int(tile_media.sum()),
+        "light_tiles": [],
+        "light_evaluations": 0,
+        "volume_bounds": None,
+        "volume_resolution": 0,
+    }
     lists = cull_lights(grid, scene.lights, device)
     if len(idx) == 0:
         report["light_tiles"] = [0] * len(scene.lights)
@@ -317,15 +346,12 @@ def light_froxels(scene, grid, vbuffer, jitter=0.5, *, phase="hg", volumetric_sh
         e, to_light = _light_radiance(light, p, dtype)
         e = e * phase_fn((view[sel] * to_light).sum(-1), g_lit[sel])[:, None]
         if isinstance(light, DirectionalLight) and light.shadows and scene.occluders:
-            smap = build_shadow_map(scene, light, center, radius, shadow_resolution, dtype,
-                                    device)
+            smap = build_shadow_map(scene, light, center, radius, shadow_resolution, dtype, device)
             e = e * shadow_lookup(smap, p)[:, None]
         if extinction is not None and isinstance(light, PointLight):
-            e = e * light_transmittance(extinction, lo, hi, p, light.position,
-                                        light_steps)[:, None]
+            e = e * light_transmittance(extinction, lo, hi, p, light.position, light_steps)[:, None]
         elif extinction is not None:
-            tv = transmittance_volume(extinction, lo, hi, light, resolution,
-                                      4 * resolution)
+            tv = transmittance_volume(extinction, lo, hi, light, resolution, 4 * resolution)
             e = e * sample_light_volume(tv, p)[:, None]
         radiance[sel] += e
     flat = source.reshape(-1, 3)

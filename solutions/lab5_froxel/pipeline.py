@@ -59,10 +59,15 @@ def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out
     h, w = depth_image.shape
     if out is not None:
         check_volume(out, "out", (h, w, 3), dtype, device)
-    nodes = torch.cat([torch.cat([torch.zeros(1, grid.ny, grid.nx, 3, dtype=dtype,
-                                              device=device), inscatter]),
-                       torch.cat([torch.ones(1, grid.ny, grid.nx, dtype=dtype, device=device),
-                                  transmittance])[..., None]], -1)  # (S + 1, ny, nx, 4)
+    nodes = torch.cat(
+        [
+            torch.cat([torch.zeros(1, grid.ny, grid.nx, 3, dtype=dtype, device=device), inscatter]),
+            torch.cat([torch.ones(1, grid.ny, grid.nx, dtype=dtype, device=device), transmittance])[
+                ..., None
+            ],
+        ],
+        -1,
+    )  # (S + 1, ny, nx, 4)
     z = depth_to_slice(depth_image, grid.near, grid.far, grid.slices)
     z = torch.nan_to_num(z, nan=0.0, posinf=grid.slices, neginf=0.0).clamp(0, grid.slices)
     rows = ((torch.arange(h, dtype=dtype, device=device) + 0.5) / grid.tile)[:, None]
@@ -77,10 +82,26 @@ def apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image, out
     # END SOLUTION
 
 
-def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slices=SLICES,
-                   near=None, far=None, phase="hg", integration="energy", volumetric_shadows=True,
-                   shadow_resolution=128, volume_resolution=None, light_steps=LIGHT_STEPS,
-                   temporal=False, frame=0, history=None):
+def render_froxels(
+    scene,
+    camera,
+    depth_image,
+    opaque_image,
+    *,
+    tile=None,
+    slices=SLICES,
+    near=None,
+    far=None,
+    phase="hg",
+    integration="energy",
+    volumetric_shadows=True,
+    shadow_resolution=128,
+    volume_resolution=None,
+    light_steps=LIGHT_STEPS,
+    temporal=False,
+    frame=0,
+    history=None,
+):
     """One frame of the pipeline: ``(image (H, W, 3), report)``.
 
     voxelize -> light_froxels -> (temporal: reproject + temporal_blend of the lit source
@@ -123,18 +144,33 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slice
         raise ValueError(f"frame: expected an int >= 0, got {frame!r}")
     dtype, device = depth_image.dtype, depth_image.device
     jitter = frame_jitter(frame) if temporal else 0.5
-    report = {"grid": grid, "froxels": math.prod(grid.shape), "froxels_lit": 0,
-              "tiles_with_media": 0, "light_tiles": [0] * len(scene.lights),
-              "light_evaluations": 0, "volume_bounds": None, "volume_resolution": 0,
-              "jitter": jitter, "history_valid": 0.0, "history": None}
+    report = {
+        "grid": grid,
+        "froxels": math.prod(grid.shape),
+        "froxels_lit": 0,
+        "tiles_with_media": 0,
+        "light_tiles": [0] * len(scene.lights),
+        "light_evaluations": 0,
+        "volume_bounds": None,
+        "volume_resolution": 0,
+        "jitter": jitter,
+        "history_valid": 0.0,
+        "history": None,
+    }
     if not scene.media:
         return opaque_image.clone(), report
     vbuffer = voxelize(scene, grid, jitter, dtype, device)
-    source, light_report = light_froxels(scene, grid, vbuffer, jitter, phase=phase,
-                                         volumetric_shadows=volumetric_shadows,
-                                         shadow_resolution=shadow_resolution,
-                                         volume_resolution=volume_resolution,
-                                         light_steps=light_steps)
+    source, light_report = light_froxels(
+        scene,
+        grid,
+        vbuffer,
+        jitter,
+        phase=phase,
+        volumetric_shadows=volumetric_shadows,
+        shadow_resolution=shadow_resolution,
+        volume_resolution=volume_resolution,
+        light_steps=light_steps,
+    )
     report.update(light_report)
     extinction = vbuffer["extinction"]
     if temporal and history is not None:
@@ -146,8 +182,12 @@ def render_froxels(scene, camera, depth_image, opaque_image, *, tile=None, slice
         extinction = temporal_blend(extinction, prev_ext, valid)
         report["history_valid"] = valid.to(torch.float64).mean().item()
     if temporal:
-        report["history"] = {"grid": grid, "source": source, "extinction": extinction,
-                             "frame": frame}
+        report["history"] = {
+            "grid": grid,
+            "source": source,
+            "extinction": extinction,
+            "frame": frame,
+        }
     inscatter, transmittance = integrate_froxels(source, extinction, grid, integration)
     return apply_froxels(inscatter, transmittance, grid, depth_image, opaque_image), report
     # END SOLUTION

@@ -37,21 +37,29 @@ def reproject(history, prev_grid, grid):
     if not isinstance(prev_grid, FroxelGrid):
         raise TypeError(f"prev_grid: expected a FroxelGrid, got {type(prev_grid).__name__}")
     if prev_grid.shape != grid.shape:
-        raise ValueError(f"prev_grid: expected the shape {grid.shape} of grid, got "
-                         f"{prev_grid.shape}")
-    if not isinstance(history, torch.Tensor) or history.ndim not in (3, 4) \
-            or tuple(history.shape[:3]) != grid.shape:
-        raise ValueError(f"history: expected shape {grid.shape} or {grid.shape} + (C,), got "
-                         f"{tuple(getattr(history, 'shape', ()))}")
+        raise ValueError(
+            f"prev_grid: expected the shape {grid.shape} of grid, got {prev_grid.shape}"
+        )
+    if (
+        not isinstance(history, torch.Tensor)
+        or history.ndim not in (3, 4)
+        or tuple(history.shape[:3]) != grid.shape
+    ):
+        raise ValueError(
+            f"history: expected shape {grid.shape} or {grid.shape} + (C,), got "
+            f"{tuple(getattr(history, 'shape', ()))}"
+        )
     check_dtype(history.dtype, "history")
     coords = froxel_sample_coords(grid, 0.5, history.dtype, history.device)
     prev = world_to_froxel(prev_grid, froxel_to_world(grid, coords))
-    limits = torch.tensor([grid.nx, grid.ny, grid.slices], dtype=history.dtype,
-                          device=history.device)
+    limits = torch.tensor(
+        [grid.nx, grid.ny, grid.slices], dtype=history.dtype, device=history.device
+    )
     valid = ((prev >= 0) & (prev <= limits)).all(-1)  # NaN compares False: dropped
     # History voxels sit at the froxel centres: x, y = i + 0.5, j + 0.5, z = k + offset.
-    lookup = prev - torch.tensor([0.0, 0.0, slice_offset(grid, 0.5) - 0.5],
-                                 dtype=prev.dtype, device=prev.device)
+    lookup = prev - torch.tensor(
+        [0.0, 0.0, slice_offset(grid, 0.5) - 0.5], dtype=prev.dtype, device=prev.device
+    )
     zyx = torch.where(valid[..., None], lookup.flip(-1), 0)
     return sample_texture(history, zyx), valid
     # END SOLUTION
@@ -68,11 +76,13 @@ def temporal_blend(current, history, valid, alpha=BLEND):
     (0, 1].
     """
     # BEGIN SOLUTION (task 5)
-    check_volume(current, "current", current.shape if isinstance(current, torch.Tensor)
-                 else ())
+    check_volume(current, "current", current.shape if isinstance(current, torch.Tensor) else ())
     check_volume(history, "history", current.shape, current.dtype, current.device)
-    if not isinstance(valid, torch.Tensor) or valid.dtype != torch.bool \
-            or tuple(valid.shape) != tuple(current.shape[:3]):
+    if (
+        not isinstance(valid, torch.Tensor)
+        or valid.dtype != torch.bool
+        or tuple(valid.shape) != tuple(current.shape[:3])
+    ):
         raise ValueError(f"valid: expected a bool tensor of shape {tuple(current.shape[:3])}")
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not 0 < alpha <= 1:
         raise ValueError(f"alpha: expected a number in (0, 1], got {alpha!r}")

@@ -39,6 +39,8 @@ def _fog_volume_weight(vol, points):
         coords = (local + 1) / 2 * torch.tensor(tex.shape, dtype=dtype, device=device)
         weight = weight * sample_texture(tex, coords)
     return weight
+
+
 # END SOLUTION
 
 
@@ -75,8 +77,7 @@ def media_at(scene, points):
         sigma_s = torch.tensor(medium.scattering, dtype=dtype, device=device)
         scattering = scattering + w[:, None] * sigma_s
         extinction = extinction + w * medium.extinction
-        emissive = emissive + w[:, None] * torch.tensor(medium.emissive, dtype=dtype,
-                                                        device=device)
+        emissive = emissive + w[:, None] * torch.tensor(medium.emissive, dtype=dtype, device=device)
         g_weighted = g_weighted + w * (sigma_s.mean() * medium.g)
     weight = scattering.mean(-1)
     g = torch.where(weight > 0, g_weighted / torch.where(weight > 0, weight, 1.0), 0.0)

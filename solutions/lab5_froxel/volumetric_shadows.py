@@ -55,6 +55,8 @@ def _sample_extinction(extinction, lo, hi, points):
     inside = ((local >= 0) & (local <= 1)).all(-1)
     sizes = torch.tensor(extinction.shape, dtype=points.dtype, device=points.device)
     return torch.where(inside, sample_texture(extinction, local * sizes), 0)
+
+
 # END SOLUTION
 
 
@@ -75,8 +77,13 @@ def light_transmittance(extinction, lo, hi, points, position, steps=LIGHT_STEPS)
     ``steps`` unless it is an int >= 1.
     """
     # BEGIN SOLUTION (task 4)
-    check_volume(extinction, "extinction", extinction.shape if isinstance(
-        extinction, torch.Tensor) and extinction.ndim == 3 else (1, 1, 1))
+    check_volume(
+        extinction,
+        "extinction",
+        extinction.shape
+        if isinstance(extinction, torch.Tensor) and extinction.ndim == 3
+        else (1, 1, 1),
+    )
     check_inputs({"points": (points, (3,))})
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise ValueError(f"steps: expected an int >= 1, got {steps!r}")
@@ -115,11 +122,18 @@ def transmittance_volume(extinction, lo, hi, light, resolution=32, steps=None):
     SpotLight; ValueError naming ``resolution`` unless it is an int >= 1.
     """
     # BEGIN SOLUTION (task 4)
-    check_volume(extinction, "extinction", extinction.shape if isinstance(
-        extinction, torch.Tensor) and extinction.ndim == 3 else (1, 1, 1))
+    check_volume(
+        extinction,
+        "extinction",
+        extinction.shape
+        if isinstance(extinction, torch.Tensor) and extinction.ndim == 3
+        else (1, 1, 1),
+    )
     if not isinstance(light, (DirectionalLight, SpotLight)):
-        raise TypeError(f"light: expected a DirectionalLight or SpotLight (point lights cast "
-                        f"no volumetric shadows), got {type(light).__name__}")
+        raise TypeError(
+            f"light: expected a DirectionalLight or SpotLight (point lights cast "
+            f"no volumetric shadows), got {type(light).__name__}"
+        )
     if isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 1:
         raise ValueError(f"resolution: expected an int >= 1, got {resolution!r}")
     k = steps or 2 * resolution
@@ -150,10 +164,22 @@ def transmittance_volume(extinction, lo, hi, light, resolution=32, steps=None):
     mids = near + (torch.arange(k - 1, dtype=dtype, device=device) + 0.5) * step
     samples = starts[:, :, None] + mids[:, None] * dirs[:, :, None]  # (R, R, K-1, 3)
     sigma = _sample_extinction(extinction, lo, hi, samples)
-    depth = torch.cat([torch.zeros(resolution, resolution, 1, dtype=dtype, device=device),
-                       torch.cumsum(sigma * step, -1)], -1)
-    return LightVolume(kind, tuple(origin.tolist()), axes, float(extent), float(near),
-                       float(far), torch.exp(-depth))
+    depth = torch.cat(
+        [
+            torch.zeros(resolution, resolution, 1, dtype=dtype, device=device),
+            torch.cumsum(sigma * step, -1),
+        ],
+        -1,
+    )
+    return LightVolume(
+        kind,
+        tuple(origin.tolist()),
+        axes,
+        float(extent),
+        float(near),
+        float(far),
+        torch.exp(-depth),
+    )
     # END SOLUTION
 
 
@@ -163,15 +189,21 @@ def sample_light_volume(volume, points):
     and behind a spot light."""
     # BEGIN SOLUTION (task 4)
     if not isinstance(volume, LightVolume) or volume.data.ndim != 3:
-        raise TypeError("volume: expected a LightVolume with (R, R, K) data from "
-                        "transmittance_volume")
+        raise TypeError(
+            "volume: expected a LightVolume with (R, R, K) data from transmittance_volume"
+        )
     check_inputs({"points": (points, (3,))})
     a, b, depth = light_coords(volume, points)
     r, _, k = volume.data.shape
     inside = (a.abs() <= 1) & (b.abs() <= 1)
-    coords = torch.stack([(a + 1) / 2 * r, (b + 1) / 2 * r,
-                          (depth - volume.near) / (volume.far - volume.near) * (k - 1) + 0.5],
-                         -1)
+    coords = torch.stack(
+        [
+            (a + 1) / 2 * r,
+            (b + 1) / 2 * r,
+            (depth - volume.near) / (volume.far - volume.near) * (k - 1) + 0.5,
+        ],
+        -1,
+    )
     t = sample_texture(volume.data.to(points.dtype), torch.where(inside[:, None], coords, 0))
     return torch.where(inside, t, 1.0)
     # END SOLUTION

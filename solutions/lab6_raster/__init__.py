@@ -103,16 +103,33 @@ from .visibility import depth_test, pack_depth_id, rasterize, triangle_ids
 
 __all__ = [
     # task 1
-    "to_clip_space", "clip_triangles", "to_screen",
+    "to_clip_space",
+    "clip_triangles",
+    "to_screen",
     # task 2
-    "edge_functions", "bounding_boxes", "coverage",
+    "edge_functions",
+    "bounding_boxes",
+    "coverage",
     # task 3
-    "pack_depth_id", "triangle_ids", "depth_test", "rasterize",
+    "pack_depth_id",
+    "triangle_ids",
+    "depth_test",
+    "rasterize",
     # task 4
-    "perspective_correct", "resolve_pixels", "rasterize_mesh", "interpolate", "shade",
+    "perspective_correct",
+    "resolve_pixels",
+    "rasterize_mesh",
+    "interpolate",
+    "shade",
     # task 5
-    "traced_visibility", "world_positions", "shadow_epsilon", "hybrid_shadows",
+    "traced_visibility",
+    "world_positions",
+    "shadow_epsilon",
+    "hybrid_shadows",
     "traced_shadows",
     # given (course.given.lab6), part of the lab's interface
-    "EMPTY", "ID_BITS", "ID_MASK", "BYTES_PER_FRAGMENT",
+    "EMPTY",
+    "ID_BITS",
+    "ID_MASK",
+    "BYTES_PER_FRAGMENT",
 ]

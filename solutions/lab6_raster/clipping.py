@@ -89,8 +89,15 @@ def clip_triangles(clip):
     F = clip.shape[0]
     x, y, z, w = clip.unbind(-1)  # (F, 3) each
     finite = torch.isfinite(clip).all(-1).all(-1)
-    outside = ((x < -w).all(-1) | (x > w).all(-1) | (y < -w).all(-1) | (y > w).all(-1)
-               | (z < -w).all(-1) | (z > w).all(-1) | (w <= 0).all(-1))
+    outside = (
+        (x < -w).all(-1)
+        | (x > w).all(-1)
+        | (y < -w).all(-1)
+        | (y > w).all(-1)
+        | (z < -w).all(-1)
+        | (z > w).all(-1)
+        | (w <= 0).all(-1)
+    )
     keep = finite & ~outside
     d = z + w
     inside = d >= 0
@@ -110,10 +117,14 @@ def clip_triangles(clip):
     BA, w_BA = crossing(B, dB, wB, A, dA, wA)
     CA, w_CA = crossing(C, dC, wC, A, dA, wA)
     one, two = (n_in == 1)[:, None, None], (n_in == 2)[:, None, None]
-    first_tri = torch.where(one, torch.stack([A, AB, AC], 1),
-                            torch.where(two, torch.stack([BA, B, C], 1), rot))
-    first_w = torch.where(one, torch.stack([wA, w_AB, w_AC], 1),
-                          torch.where(two, torch.stack([w_BA, wB, wC], 1), slots))
+    first_tri = torch.where(
+        one, torch.stack([A, AB, AC], 1), torch.where(two, torch.stack([BA, B, C], 1), rot)
+    )
+    first_w = torch.where(
+        one,
+        torch.stack([wA, w_AB, w_AC], 1),
+        torch.where(two, torch.stack([w_BA, wB, wC], 1), slots),
+    )
     tris = torch.stack([first_tri, torch.stack([BA, C, CA], 1)], 1)  # (F, 2, 3, 4)
     weights = torch.stack([first_w, torch.stack([w_BA, wC, w_CA], 1)], 1)
     valid = torch.stack([keep, keep & (n_in == 2)], 1)  # (F, 2): row-major keeps F's order
@@ -147,9 +158,11 @@ def to_screen(clipped, width: int, height: int):
     behind = ~(clipped[..., 3] > 0)
     if bool(behind.any()):
         k, corner = (int(i) for i in behind.nonzero()[0])
-        raise ValueError(f"clipped: expected w > 0 at every corner (clip_triangles' output), "
-                         f"got w = {clipped[k, corner, 3].item()} at triangle {k}, corner "
-                         f"{corner}: the perspective divide x / w has no answer there")
+        raise ValueError(
+            f"clipped: expected w > 0 at every corner (clip_triangles' output), "
+            f"got w = {clipped[k, corner, 3].item()} at triangle {k}, corner "
+            f"{corner}: the perspective divide x / w has no answer there"
+        )
     # BEGIN SOLUTION (task 1)
     x, y, z, w = clipped.unbind(-1)
     sx = (x / w + 1) * (width / 2)

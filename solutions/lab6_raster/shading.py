@@ -88,8 +88,14 @@ def resolve_pixels(keys, screen, source, weights, width: int, height: int):
     # END SOLUTION
 
 
-def rasterize_mesh(mesh: Mesh, camera: Camera, *, depth_bits: int = 32,
-                   cull_backfaces: bool = False, memory_budget_bytes: int = 2**28):
+def rasterize_mesh(
+    mesh: Mesh,
+    camera: Camera,
+    *,
+    depth_bits: int = 32,
+    cull_backfaces: bool = False,
+    memory_budget_bytes: int = 2**28,
+):
     """The whole pipeline: ``(face (H, W) int64, bary (H, W, 3))`` of ``mesh`` seen by
     ``camera`` (``camera.width`` x ``camera.height`` pixels), on the mesh's device and dtype.
 
@@ -114,8 +120,14 @@ def rasterize_mesh(mesh: Mesh, camera: Camera, *, depth_bits: int = 32,
     clip = to_clip_space(mesh.vertices, mvp)
     clipped, source, weights = clip_triangles(clip[mesh.faces])
     screen = to_screen(clipped, camera.width, camera.height)
-    keys = rasterize(screen, camera.width, camera.height, depth_bits=depth_bits,
-                     cull_backfaces=cull_backfaces, memory_budget_bytes=memory_budget_bytes)
+    keys = rasterize(
+        screen,
+        camera.width,
+        camera.height,
+        depth_bits=depth_bits,
+        cull_backfaces=cull_backfaces,
+        memory_budget_bytes=memory_budget_bytes,
+    )
     return resolve_pixels(keys, screen, source, weights, camera.width, camera.height)
     # END SOLUTION
 
@@ -138,8 +150,11 @@ def interpolate(values, faces, face, bary):
     hit = face >= 0
     corners = values[faces[torch.where(hit, face, 0)]]  # (..., 3, C)
     b = bary.to(values.dtype)
-    result = (b[..., 0, None] * corners[..., 0, :] + b[..., 1, None] * corners[..., 1, :]
-              + b[..., 2, None] * corners[..., 2, :])
+    result = (
+        b[..., 0, None] * corners[..., 0, :]
+        + b[..., 1, None] * corners[..., 1, :]
+        + b[..., 2, None] * corners[..., 2, :]
+    )
     return torch.where(hit[..., None], result, torch.zeros_like(result))
     # END SOLUTION
 
@@ -175,7 +190,8 @@ def shade(mesh: Mesh, face, bary, light_direction, smooth: bool = True):
     normals = face_normals(mesh)
     if smooth:
         vertex_normals = torch.zeros_like(mesh.vertices).index_add_(
-            0, mesh.faces.reshape(-1), normals.repeat_interleave(3, dim=0))
+            0, mesh.faces.reshape(-1), normals.repeat_interleave(3, dim=0)
+        )
         n = normalized(interpolate(normalized(vertex_normals), mesh.faces, face, bary))
     else:
         n = normalized(normals)[torch.where(face >= 0, face, 0)]

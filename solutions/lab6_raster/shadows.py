@@ -123,8 +123,9 @@ def hybrid_shadows(trace, mesh: Mesh, face, bary, light_direction):
     light = sun_direction(light_direction, mesh.vertices)  # unit, toward the light
     # BEGIN SOLUTION (task 5)
     points = world_positions(mesh, face, bary)
-    return _shadow_rays(trace, mesh, points.reshape(-1, 3), face.reshape(-1) >= 0,
-                        light).reshape(face.shape)
+    return _shadow_rays(trace, mesh, points.reshape(-1, 3), face.reshape(-1) >= 0, light).reshape(
+        face.shape
+    )
     # END SOLUTION
 
 

@@ -56,8 +56,10 @@ def pack_depth_id(depth, triangle, depth_bits: int = 32):
         raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
     # BEGIN SOLUTION (task 3)
     if triangle.numel() and (int(triangle.min()) < 0 or int(triangle.max()) > ID_MASK):
-        raise ValueError(f"triangle: expected ids in [0, 2**{ID_BITS}), got values in "
-                         f"[{int(triangle.min())}, {int(triangle.max())}]")
+        raise ValueError(
+            f"triangle: expected ids in [0, 2**{ID_BITS}), got values in "
+            f"[{int(triangle.min())}, {int(triangle.max())}]"
+        )
     depth = torch.where(torch.isnan(depth), math.inf, depth)
     depth = torch.where(depth > 0, depth, torch.zeros_like(depth))  # -0.0 and below -> +0.0
     if depth_bits == 32:
@@ -65,7 +67,8 @@ def pack_depth_id(depth, triangle, depth_bits: int = 32):
     else:
         # In float64: float32 would round depth * (2**24 - 1) before the rounding to an integer.
         quantised = torch.round(depth.to(torch.float64).clamp(max=1.0) * (2**24 - 1)).to(
-            torch.int64)
+            torch.int64
+        )
     return (quantised << ID_BITS) | triangle
     # END SOLUTION
 
@@ -107,15 +110,25 @@ def depth_test(pixel, key, out):
     check_tensor(key, "key", (pixel.shape[0],), kind="int64", like=out)
     # BEGIN SOLUTION (task 3)
     if pixel.numel() and (int(pixel.min()) < 0 or int(pixel.max()) >= out.shape[0]):
-        raise ValueError(f"pixel: expected indices in [0, {out.shape[0]}), got values in "
-                         f"[{int(pixel.min())}, {int(pixel.max())}]")
+        raise ValueError(
+            f"pixel: expected indices in [0, {out.shape[0]}), got values in "
+            f"[{int(pixel.min())}, {int(pixel.max())}]"
+        )
     out.scatter_reduce_(0, pixel, key, reduce="amin")
     return out
     # END SOLUTION
 
 
-def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
-              cull_backfaces: bool = False, memory_budget_bytes: int = 2**28, out=None):
+def rasterize(
+    screen,
+    width: int,
+    height: int,
+    *,
+    depth_bits: int = 32,
+    cull_backfaces: bool = False,
+    memory_budget_bytes: int = 2**28,
+    out=None,
+):
     """The visibility buffer of screen-space triangles.
 
     screen: (K, 3, 4) float ``(x, y, z_ndc, 1/w)`` (``to_screen``'s output); width, height:
@@ -145,15 +158,20 @@ def rasterize(screen, width: int, height: int, *, depth_bits: int = 32,
     # Provided: validates the arguments (ValueError/TypeError naming the argument).
     check_screen(screen)
     if screen.shape[2] != 4:
-        raise ValueError(f"screen: expected shape (K, 3, 4) (x, y, z_ndc, 1/w), "
-                         f"got {tuple(screen.shape)}")
+        raise ValueError(
+            f"screen: expected shape (K, 3, 4) (x, y, z_ndc, 1/w), got {tuple(screen.shape)}"
+        )
     check_size(width, height)
     if depth_bits not in (24, 32):
         raise ValueError(f"depth_bits: expected 24 or 32, got {depth_bits!r}")
-    if isinstance(memory_budget_bytes, bool) or not isinstance(memory_budget_bytes, int) \
-            or memory_budget_bytes <= 0:
-        raise ValueError(f"memory_budget_bytes: expected a positive int, "
-                         f"got {memory_budget_bytes!r}")
+    if (
+        isinstance(memory_budget_bytes, bool)
+        or not isinstance(memory_budget_bytes, int)
+        or memory_budget_bytes <= 0
+    ):
+        raise ValueError(
+            f"memory_budget_bytes: expected a positive int, got {memory_budget_bytes!r}"
+        )
     # BEGIN SOLUTION (task 3)
     if out is None:
         out = torch.empty(width * height, dtype=torch.int64, device=screen.device)

@@ -42,14 +42,24 @@ def random_rgba(shape, seed) -> torch.Tensor:
 @pytest.mark.parametrize("shape", SHAPES, ids=[f"{h}x{w}" for h, w in SHAPES])
 def test_pack_rgba8_unpack_rgba8_odd_and_large_sizes(impl, device, shape):
     rgba = random_rgba(shape, seed=shape[0] * 7919 + shape[1])
-    packed = check_tensor(impl.pack_rgba8(rgba.to(device)), f"pack_rgba8 of a {shape} image",
-                          shape=shape, dtype=torch.int32, device=device)
-    assert_equal(packed, formula_pack(rgba), name=f"pack_rgba8 of a {shape} image",
-                 where="pixel")
-    back = check_tensor(impl.unpack_rgba8(packed), f"unpack_rgba8 of a {shape} framebuffer",
-                        shape=(*shape, 4), dtype=torch.uint8, device=device)
-    assert_equal(back, rgba, name=f"unpack_rgba8(pack_rgba8(rgba)) at {shape}",
-                 where="(y, x, channel)")
+    packed = check_tensor(
+        impl.pack_rgba8(rgba.to(device)),
+        f"pack_rgba8 of a {shape} image",
+        shape=shape,
+        dtype=torch.int32,
+        device=device,
+    )
+    assert_equal(packed, formula_pack(rgba), name=f"pack_rgba8 of a {shape} image", where="pixel")
+    back = check_tensor(
+        impl.unpack_rgba8(packed),
+        f"unpack_rgba8 of a {shape} framebuffer",
+        shape=(*shape, 4),
+        dtype=torch.uint8,
+        device=device,
+    )
+    assert_equal(
+        back, rgba, name=f"unpack_rgba8(pack_rgba8(rgba)) at {shape}", where="(y, x, channel)"
+    )
 
 
 def strided_views(device):
@@ -57,8 +67,11 @@ def strided_views(device):
     (4, H, W) image seen channel-last."""
     base = random_rgba((24, 34), seed=5).to(device)
     planar = base.permute(2, 0, 1).contiguous()
-    return {"a crop": base[3:17, 5:26], "every other column": base[:, ::2],
-            "a channel-last view of a planar image": planar.permute(1, 2, 0)}
+    return {
+        "a crop": base[3:17, 5:26],
+        "every other column": base[:, ::2],
+        "a channel-last view of a planar image": planar.permute(1, 2, 0),
+    }
 
 
 def probe_pack_strided(lab, device):
@@ -80,11 +93,15 @@ def test_pack_rgba8_strided_views(impl, device):
     for name, view in strided_views("cpu").items():  # the grader's own inputs
         result = results.get(name) if isinstance(results, dict) else None
         if isinstance(result, str):
-            pytest.fail(f"pack_rgba8 of {name} (a valid (H, W, 4) uint8 tensor that is not "
-                        f"contiguous) raised {result}. Kernels must accept any strided input; "
-                        f"a byte view of the input needs .contiguous() first.", pytrace=False)
-        packed = check_tensor(result, f"pack_rgba8 of {name}", shape=view.shape[:2],
-                              dtype=torch.int32)
+            pytest.fail(
+                f"pack_rgba8 of {name} (a valid (H, W, 4) uint8 tensor that is not "
+                f"contiguous) raised {result}. Kernels must accept any strided input; "
+                f"a byte view of the input needs .contiguous() first.",
+                pytrace=False,
+            )
+        packed = check_tensor(
+            result, f"pack_rgba8 of {name}", shape=view.shape[:2], dtype=torch.int32
+        )
         assert_equal(packed, formula_pack(view), name=f"pack_rgba8 of {name}", where="pixel")
 
 
@@ -95,8 +112,15 @@ def stub_clock(fn, *args, repeats=5, warmup=1, device=None, **kwargs):
     """``time_fn``'s stand-in: calls ``fn`` once and reports a fixed clock, a median of
     0.25 s per call and a best of 0.125 s, so the units and the statistic are seen exactly."""
     fn(*args, **kwargs)
-    return Timing(median=0.25, min=0.125, max=0.5, mean=0.3, repeats=repeats,
-                  device=str(device), method="stub")
+    return Timing(
+        median=0.25,
+        min=0.125,
+        max=0.5,
+        mean=0.3,
+        repeats=repeats,
+        device=str(device),
+        method="stub",
+    )
 
 
 def probe_bandwidth_under_a_stub_clock(lab, nbytes, pinned, device):
@@ -119,4 +143,5 @@ def test_measure_copy_bandwidth_under_a_stub_clock(impl, device, pinned):
     assert isinstance(got, float) and math.isclose(got, want, rel_tol=1e-9), (
         f"measure_copy_bandwidth({nbytes}, pinned={pinned}) with the given time_fn stubbed "
         f"to a median of 0.25 s per copy (best 0.125 s): expected nbytes / median / 1e9 = "
-        f"{want!r} GB/s, got {got!r}.{why}")
+        f"{want!r} GB/s, got {got!r}.{why}"
+    )

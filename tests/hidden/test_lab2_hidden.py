@@ -63,21 +63,31 @@ def hidden_scene(name: str) -> Mesh:
 
 def hidden_rays(mesh: Mesh, seed: int, n: int = 90):
     """Rays around the scene, axis-parallel ones and NaN/inf ones, in the mesh's dtype."""
-    return cat_rays(rays_around(mesh, n, seed, inside=0.4, clip=0.3, dtype=mesh.dtype),
-                    visible.axis_rays(mesh, seed + 1, 2, dtype=mesh.dtype),
-                    *([visible.bad_rays()] if mesh.dtype == torch.float32 else []))
+    return cat_rays(
+        rays_around(mesh, n, seed, inside=0.4, clip=0.3, dtype=mesh.dtype),
+        visible.axis_rays(mesh, seed + 1, 2, dtype=mesh.dtype),
+        *([visible.bad_rays()] if mesh.dtype == torch.float32 else []),
+    )
 
 
 @pytest.mark.task(1)
 @pytest.mark.points(0.5)
 def test_grid_closest_hit_hidden_scenes(impl, device):
-    for name, resolution in (("slivers", None), ("slivers", (9, 2, 5)), ("soup64", (3, 7, 1)),
-                             ("moved64", None)):
+    for name, resolution in (
+        ("slivers", None),
+        ("slivers", (9, 2, 5)),
+        ("soup64", (3, 7, 1)),
+        ("moved64", None),
+    ):
         mesh = on(hidden_scene(name), device)
         rays = hidden_rays(mesh, 501).to(device)
-        compare(impl.grid_closest_hit(rays, mesh, uniform_grid(mesh, resolution), mt64), rays,
-                mesh, f"grid_closest_hit(hidden scene {name}, resolution={resolution})",
-                counters=("steps", "tests", "skipped"))
+        compare(
+            impl.grid_closest_hit(rays, mesh, uniform_grid(mesh, resolution), mt64),
+            rays,
+            mesh,
+            f"grid_closest_hit(hidden scene {name}, resolution={resolution})",
+            counters=("steps", "tests", "skipped"),
+        )
 
 
 @pytest.mark.task(2)
@@ -86,15 +96,24 @@ def test_lbvh_sah_bvh_hidden_scenes(impl, device):
     for name in ("slivers", "soup64", "moved64"):
         mesh = on(hidden_scene(name), device)
         leaf_size = {"slivers": 2, "soup64": 3, "moved64": 5}[name]
-        check_bvh(impl.build_lbvh(mesh, leaf_size), mesh,
-                  f"build_lbvh(hidden scene {name}, leaf_size={leaf_size})", leaf_size)
-        check_bvh(impl.build_sah_bvh(mesh, leaf_size, 7), mesh,
-                  f"build_sah_bvh(hidden scene {name}, leaf_size={leaf_size}, bins=7)",
-                  leaf_size)
+        check_bvh(
+            impl.build_lbvh(mesh, leaf_size),
+            mesh,
+            f"build_lbvh(hidden scene {name}, leaf_size={leaf_size})",
+            leaf_size,
+        )
+        check_bvh(
+            impl.build_sah_bvh(mesh, leaf_size, 7),
+            mesh,
+            f"build_sah_bvh(hidden scene {name}, leaf_size={leaf_size}, bins=7)",
+            leaf_size,
+        )
     mesh = on(hidden_scene("soup64"), device)
     got, median = sah_cost(impl.build_sah_bvh(mesh, 3, 12)), sah_cost(median_bvh(mesh, 3))
-    assert got <= median, (f"build_sah_bvh(hidden soup, float64): SAH cost {got:.1f}, more "
-                           f"than the {median:.1f} of an object-median BVH")
+    assert got <= median, (
+        f"build_sah_bvh(hidden soup, float64): SAH cost {got:.1f}, more "
+        f"than the {median:.1f} of an object-median BVH"
+    )
 
 
 @pytest.mark.task(3)
@@ -107,8 +126,13 @@ def test_bvh_closest_hit_stack_and_stackless_hidden_scenes(impl, device):
         ref = visible.reference(rays.to("cpu"), on(mesh, "cpu"))
         for fn in (impl.bvh_closest_hit, impl.bvh_closest_hit_stackless):
             label = getattr(fn, "__name__", None) or getattr(fn, "_name", "traversal")
-            compare(fn(rays, mesh, bvh, mt64), rays, mesh,
-                    f"{label}(hidden scene {name}, median BVH, leaf_size={leaf_size})", ref=ref)
+            compare(
+                fn(rays, mesh, bvh, mt64),
+                rays,
+                mesh,
+                f"{label}(hidden scene {name}, median BVH, leaf_size={leaf_size})",
+                ref=ref,
+            )
 
 
 @pytest.mark.task(4)
@@ -117,24 +141,35 @@ def test_kd_closest_hit_hidden_scenes(impl, device):
     for name, depth in (("slivers", 7), ("soup64", 5), ("moved64", 8)):
         mesh = on(hidden_scene(name), device)
         rays = hidden_rays(mesh, 503).to(device)
-        compare(impl.kd_closest_hit(rays, mesh, median_kdtree(mesh, depth, 2), mt64), rays,
-                mesh, f"kd_closest_hit(hidden scene {name}, spatial-median tree of depth "
-                      f"{depth})")
+        compare(
+            impl.kd_closest_hit(rays, mesh, median_kdtree(mesh, depth, 2), mt64),
+            rays,
+            mesh,
+            f"kd_closest_hit(hidden scene {name}, spatial-median tree of depth {depth})",
+        )
 
 
 @pytest.mark.task(6)
 @pytest.mark.points(0.5)
 def test_two_level_closest_hit_hidden_scenes(impl, device):
-    for name, top, sub, min_tri in (("slivers", (4, 2, 3), (3, 5, 4), 5),
-                                    ("soup64", (2, 3, 2), (6, 2, 3), 3),
-                                    ("moved64", (3, 1, 2), (4, 4, 2), 6)):
+    for name, top, sub, min_tri in (
+        ("slivers", (4, 2, 3), (3, 5, 4), 5),
+        ("soup64", (2, 3, 2), (6, 2, 3), 3),
+        ("moved64", (3, 1, 2), (4, 4, 2), 6),
+    ):
         mesh = on(hidden_scene(name), device)
         rays = hidden_rays(mesh, 504).to(device)
         mailbox = name != "soup64"
-        compare(impl.two_level_closest_hit(rays, mesh, simple_two_level(mesh, top, sub, min_tri),
-                                           mt64, mailbox=mailbox), rays, mesh,
-                f"two_level_closest_hit(hidden scene {name}, top {top}, sub-grids {sub}, "
-                f"mailbox={mailbox})", counters=GRID2_COUNTERS)
+        compare(
+            impl.two_level_closest_hit(
+                rays, mesh, simple_two_level(mesh, top, sub, min_tri), mt64, mailbox=mailbox
+            ),
+            rays,
+            mesh,
+            f"two_level_closest_hit(hidden scene {name}, top {top}, sub-grids {sub}, "
+            f"mailbox={mailbox})",
+            counters=GRID2_COUNTERS,
+        )
 
 
 @pytest.mark.task(7)
@@ -143,7 +178,9 @@ def test_fast_bvh_hidden_scenes(impl, device):
     for name, leaf_size, k in (("slivers", 2, 5), ("soup64", 4, 3), ("moved64", 3, 11)):
         mesh = on(hidden_scene(name), device)
         rays = hidden_rays(mesh, 505).to(device)
-        compare_fast(impl.bvh_closest_hit_fast(rays, mesh, median_bvh(mesh, leaf_size),
-                                               check_every=k), rays, mesh,
-                     f"bvh_closest_hit_fast(hidden scene {name}, leaf_size={leaf_size}, "
-                     f"check_every={k})")
+        compare_fast(
+            impl.bvh_closest_hit_fast(rays, mesh, median_bvh(mesh, leaf_size), check_every=k),
+            rays,
+            mesh,
+            f"bvh_closest_hit_fast(hidden scene {name}, leaf_size={leaf_size}, check_every={k})",
+        )

@@ -20,8 +20,14 @@ MUTANTS = load_mutants(ROOT)
 
 
 def _rtcourse(*args, cwd, timeout=900):
-    return subprocess.run([sys.executable, "-m", "course.tools.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "course.tools.cli", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -41,8 +47,9 @@ def test_handout_holds_no_solutions(handout):
     for lab in sorted(labs):
         solution = ROOT / "solutions" / lab.name  # a file, or a package folder
         assert solution.exists(), f"{lab.name} has no reference solution"
-        assert _public_api(lab) == _public_api(solution), \
+        assert _public_api(lab) == _public_api(solution), (
             f"{lab.name}: the skeleton's API differs from the solution's"
+        )
         assert sum(f.read_text().count("NotImplementedError") for f in module_files(lab)) >= 1
 
 
@@ -53,15 +60,20 @@ def _public_api(path: Path) -> dict:
 
     def visit(nodes, prefix=""):
         for node in nodes:
-            if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and not node.name.startswith("_") \
-                    or isinstance(node, ast.FunctionDef) and node.name == "__init__":
+            if (
+                isinstance(node, (ast.FunctionDef, ast.ClassDef))
+                and not node.name.startswith("_")
+                or isinstance(node, ast.FunctionDef)
+                and node.name == "__init__"
+            ):
                 if isinstance(node, ast.ClassDef):
                     api[prefix + node.name] = "class"
                     visit(node.body, prefix + node.name + ".")
                 else:
                     args = node.args
-                    api[prefix + node.name] = [a.arg for a in args.posonlyargs + args.args
-                                               + args.kwonlyargs]
+                    api[prefix + node.name] = [
+                        a.arg for a in args.posonlyargs + args.args + args.kwonlyargs
+                    ]
 
     for f in module_files(path):
         visit(ast.parse(f.read_text()).body)
@@ -84,9 +96,9 @@ def test_references_score_full_marks(tmp_path):
     proc = _rtcourse("grade", "--impl", "solutions", "--json", str(results), cwd=ROOT)
     data = json.loads(results.read_text())
     lost = [t["name"] for t in data["tests"] if t["status"] != "passed"]
-    assert not lost and data["max_score"] > 0 and data["score"] == pytest.approx(
-        data["max_score"]), \
-        f"references lost points on {lost}\n{proc.stdout[-3000:]}"
+    assert (
+        not lost and data["max_score"] > 0 and data["score"] == pytest.approx(data["max_score"])
+    ), f"references lost points on {lost}\n{proc.stdout[-3000:]}"
 
 
 @pytest.fixture(scope="module")
@@ -108,20 +120,36 @@ def test_a_mutant_that_does_not_parse_is_refused():
     from course.grading.mutants import Mutant, apply_mutant
 
     source = "def f(x):\n    x = x + 0\n    x = x.clamp(-1, 1)\n    return x\n"
-    bad = Mutant(name="drop", module="lab0_x", function="f", find="x = x.clamp(-1, 1)\n",
-                 replace="", tests="f", why="")
+    bad = Mutant(
+        name="drop",
+        module="lab0_x",
+        function="f",
+        find="x = x.clamp(-1, 1)\n",
+        replace="",
+        tests="f",
+        why="",
+    )
     with pytest.raises(ValueError, match="drop: the mutated source does not parse"):
         apply_mutant(bad, source)
-    good = Mutant(name="keep", module="lab0_x", function="f", find="x.clamp(-1, 1)",
-                  replace="x", tests="f", why="")
+    good = Mutant(
+        name="keep",
+        module="lab0_x",
+        function="f",
+        find="x.clamp(-1, 1)",
+        replace="x",
+        tests="f",
+        why="",
+    )
     assert "x = x\n" in apply_mutant(good, source)
 
 
 @pytest.mark.parametrize("mutant", MUTANTS, ids=[m.name for m in MUTANTS])
 def test_mutant_loses_points(mutant_outcomes, mutant):
     outcome = mutant_outcomes[mutant.name]
-    assert not outcome.get("error"), \
+    assert not outcome.get("error"), (
         f"{mutant.name}: its -k {mutant.tests!r} proved nothing: {outcome['error']}"
+    )
     assert outcome["killed"], (
         f"mutant {mutant.name} ({mutant.why}) passed all {outcome['ran']} tests its -k "
-        f"{mutant.tests!r} selects: the grader misses this mistake")
+        f"{mutant.tests!r} selects: the grader misses this mistake"
+    )

@@ -21,8 +21,9 @@ def test_free_cpus_follows_affinity_and_load(monkeypatch):
     if hasattr(os, "sched_getaffinity"):
         monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
         monkeypatch.setattr(os, "getloadavg", lambda: (0.0, 0.0, 0.0))
-        assert device.allowed_cpus() == 1 and device.free_cpus() == 1, \
+        assert device.allowed_cpus() == 1 and device.free_cpus() == 1, (
             "pinned to one core: one thread, whatever os.cpu_count() says"
+        )
 
 
 def test_set_cpu_threads():

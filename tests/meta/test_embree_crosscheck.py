@@ -22,8 +22,11 @@ from course.core.files import import_file
 from course.core.scenes import load_scene
 from course.core.types import Rays
 
-pytest.importorskip("embreex", reason="the Embree cross-check needs the optional package "
-                                      "embreex (pip install embreex; wheels for x86_64)")
+pytest.importorskip(
+    "embreex",
+    reason="the Embree cross-check needs the optional package "
+    "embreex (pip install embreex; wheels for x86_64)",
+)
 from trimesh import Trimesh  # after the skip: only with Embree present
 from trimesh.ray.ray_pyembree import RayMeshIntersector
 
@@ -49,8 +52,11 @@ def mt64(origins, directions, v0, v1, v2, t_min=0.0, t_max=float("inf")):
     u, v, t = (s * p).sum(-1) / det, (d * q).sum(-1) / det, (e2 * q).sum(-1) / det
     t_min, t_max = (torch.as_tensor(x, device=o.device).to(F64) for x in (t_min, t_max))
     hit = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= t_min) & (t <= t_max)
-    return (torch.where(hit, t, torch.inf).to(dtype), torch.where(hit, u, 0).to(dtype),
-            torch.where(hit, v, 0).to(dtype))
+    return (
+        torch.where(hit, t, torch.inf).to(dtype),
+        torch.where(hit, u, 0).to(dtype),
+        torch.where(hit, v, 0).to(dtype),
+    )
 
 
 def _random_rays(mesh, n: int, seed: int) -> Rays:
@@ -70,7 +76,8 @@ def _embree(mesh, rays: Rays) -> tuple[np.ndarray, np.ndarray]:
     scene = Trimesh(mesh.vertices.double().numpy(), mesh.faces.numpy(), process=False)
     o, d = rays.origins.double().numpy(), rays.directions.double().numpy()
     tri, ray, where = RayMeshIntersector(scene).intersects_id(
-        o, d, multiple_hits=False, return_locations=True)
+        o, d, multiple_hits=False, return_locations=True
+    )
     triangle = np.full(len(o), -1)
     t = np.full(len(o), np.inf)
     triangle[ray] = tri
@@ -124,8 +131,13 @@ def test_walks_find_embrees_closest_triangle(walk, rays_kind):
         f"from Embree ({len(unexplained)} not at a triangle's boundary, {len(missed_by_me)} "
         f"missed where Embree hits); first: ray {differ[:1].tolist()}, ours "
         f"{mine[differ[:3]].tolist()} at t {t_mine[differ[:3]].tolist()}, Embree "
-        f"{theirs[differ[:3]].tolist()} at t {t_theirs[differ[:3]].tolist()}")
+        f"{theirs[differ[:3]].tolist()} at t {t_theirs[differ[:3]].tolist()}"
+    )
     agree = mine == theirs
     hit = agree & (mine >= 0)
-    np.testing.assert_allclose(t_mine[hit], t_theirs[hit], rtol=1e-4,
-                               err_msg=f"{walk}: distances of the same triangle's hits")
+    np.testing.assert_allclose(
+        t_mine[hit],
+        t_theirs[hit],
+        rtol=1e-4,
+        err_msg=f"{walk}: distances of the same triangle's hits",
+    )

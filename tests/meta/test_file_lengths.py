@@ -15,14 +15,21 @@ FOLDERS = ("labs", "solutions", "course")
 
 
 def _sources() -> list[Path]:
-    return sorted(p for folder in FOLDERS for p in (ROOT / folder).rglob("*.py")
-                  if "assets" not in p.relative_to(ROOT).parts)
+    return sorted(
+        p
+        for folder in FOLDERS
+        for p in (ROOT / folder).rglob("*.py")
+        if "assets" not in p.relative_to(ROOT).parts
+    )
 
 
 @pytest.mark.parametrize("folder", FOLDERS)
 def test_no_source_file_over_the_limit(folder):
-    long = [f"{p.relative_to(ROOT)}: {n} lines" for p in _sources()
-            if p.relative_to(ROOT).parts[0] == folder
-            and (n := len(p.read_text().splitlines())) > LIMIT]
+    long = [
+        f"{p.relative_to(ROOT)}: {n} lines"
+        for p in _sources()
+        if p.relative_to(ROOT).parts[0] == folder and (n := len(p.read_text().splitlines())) > LIMIT
+    ]
     assert not long, f"over {LIMIT} lines (split into modules named for what they hold):\n" + (
-        "\n".join(long))
+        "\n".join(long)
+    )

@@ -33,19 +33,32 @@ def _toy(tmp_path) -> Path:
 
 
 def test_generate_covers_each_operator_kind_at_its_source_position():
-    source = ("def f(x, y):\n"
-              "    '''doc 1.5'''\n"
-              "    if x.sum() < 0 and y >= 2:\n"
-              "        raise ValueError(f'x < {0}')\n"
-              "    z = torch.where(x > y, x.abs(), -y) * 2.0 + x.floor()\n"
-              "    return z.double().sum(dim=-1)\n")
+    source = (
+        "def f(x, y):\n"
+        "    '''doc 1.5'''\n"
+        "    if x.sum() < 0 and y >= 2:\n"
+        "        raise ValueError(f'x < {0}')\n"
+        "    z = torch.where(x > y, x.abs(), -y) * 2.0 + x.floor()\n"
+        "    return z.double().sum(dim=-1)\n"
+    )
     mutants = generate("lab9_toy", source, ["f"])
     kinds = {m.kind for m in mutants}
-    assert {"cmp_Lt_LtE", "cmp_GtE_Gt", "bool_And_Or", "op_Mult_Div", "op_Add_Sub",
-            "const_float", "const_int", "drop_abs", "drop_neg", "swap_where",
-            "round_floor_ceil", "narrow_double"} <= kinds, kinds
+    assert {
+        "cmp_Lt_LtE",
+        "cmp_GtE_Gt",
+        "bool_And_Or",
+        "op_Mult_Div",
+        "op_Add_Sub",
+        "const_float",
+        "const_int",
+        "drop_abs",
+        "drop_neg",
+        "swap_where",
+        "round_floor_ceil",
+        "narrow_double",
+    } <= kinds, kinds
     for m in mutants:
-        assert source[m.start:m.end] == m.original
+        assert source[m.start : m.end] == m.original
         compile(m.apply(source), "<mutant>", "exec")  # every mutant is valid Python
     # neither the docstring, the error branch nor the axis argument is mutated
     assert all(m.line not in (2, 4) for m in mutants)
@@ -71,8 +84,11 @@ def test_survivors_are_scored_unless_reviewed_equivalent(tmp_path):
     course = _toy(tmp_path)
     # a weak grader: test_double only checks the shape, so a wrong factor survives
     grader = course / "tests" / "test_lab9_toy.py"
-    grader.write_text(grader.read_text().replace(
-        "torch.testing.assert_close(got, 2 * x)", "assert got.shape == x.shape"))
+    grader.write_text(
+        grader.read_text().replace(
+            "torch.testing.assert_close(got, 2 * x)", "assert got.shape == x.shape"
+        )
+    )
     plans = plan(course)
     mutants = [m for m in plans[0].mutants if m.function == "double"]
     outcomes = run(course, mutants, plans, workers=1, deadline=120)
@@ -87,9 +103,13 @@ def test_survivors_are_scored_unless_reviewed_equivalent(tmp_path):
 def test_a_hanging_mutant_is_caught_by_its_deadline(tmp_path):
     course = _toy(tmp_path)
     (course / "solutions" / "lab9_toy.py").write_text(
-        (course / "solutions" / "lab9_toy.py").read_text().replace(
+        (course / "solutions" / "lab9_toy.py")
+        .read_text()
+        .replace(
             "    return 2 * x\n",
-            "    i = 0\n    while i < 2:\n        i = i + 1\n    return i * x\n"))
+            "    i = 0\n    while i < 2:\n        i = i + 1\n    return i * x\n",
+        )
+    )
     plans = plan(course)
     hang = [m for m in plans[0].mutants if m.kind == "op_Add_Sub"]
     assert [m.original for m in hang] == ["i + 1"]
@@ -121,16 +141,19 @@ def test_a_package_reference_is_mutated_in_the_file_defining_the_function(tmp_pa
     package = course / "solutions" / "lab9_toy"
     package.mkdir()
     (package / "twice.py").write_text('"""Task 1."""\n\n\n' + text[start:end].rstrip() + "\n")
-    (package / "__init__.py").write_text(text[:start] + "from .twice import double\n\n\n"
-                                         + text[end:])
+    (package / "__init__.py").write_text(
+        text[:start] + "from .twice import double\n\n\n" + text[end:]
+    )
     solution.unlink()
     plans = plan(course)
     mutants = plans[0].mutants
-    assert [(m.id, m.original, m.replacement) for m in mutants] == \
-        [(m.id, m.original, m.replacement) for m in single], "the same mutants, the same ids"
+    assert [(m.id, m.original, m.replacement) for m in mutants] == [
+        (m.id, m.original, m.replacement) for m in single
+    ], "the same mutants, the same ids"
     assert {m.file for m in mutants} == {"lab9_toy/twice.py"}
     # A change that changes nothing survives: the graded copy is the whole package.
-    same = dataclasses.replace(mutants[0], id="lab9_toy:double:same:0",
-                               replacement=mutants[0].original)
+    same = dataclasses.replace(
+        mutants[0], id="lab9_toy:double:same:0", replacement=mutants[0].original
+    )
     outcomes = run(course, [*mutants, same], plans, workers=1, deadline=120)
     assert all(o["killed"] for o in outcomes[:-1]) and not outcomes[-1]["killed"], outcomes

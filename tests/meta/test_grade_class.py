@@ -84,19 +84,33 @@ def _class(folder: Path) -> dict[str, str]:
     hand_in(export / "submission_111", "reference")
     hand_in(export / "submission_222", "skeleton")
     # An LMS hands in loose files: a lab kept as a package is laid over the skeleton.
-    for prefix, kind in (("evansmith_LATE_20001_30001_", "mutant"),
-                         ("Fay Lee_20002_assignsubmission_file_", "reference")):
+    for prefix, kind in (
+        ("evansmith_LATE_20001_30001_", "mutant"),
+        ("Fay Lee_20002_assignsubmission_file_", "reference"),
+    ):
         for file, text in _lab_files(kind).items():
             if not file.endswith("__init__.py"):
                 write(folder / f"{prefix}{Path(file).name}", text)
-    return {"alice": "reference", "bob": "skeleton", "gus": "crash", "hal": "missing",
-            "carol": "reference", "dave": "mutant", "Gina Gold": "reference",
-            "Hugo Hall": "skeleton", "evansmith": "mutant", "Fay Lee": "reference"}
+    return {
+        "alice": "reference",
+        "bob": "skeleton",
+        "gus": "crash",
+        "hal": "missing",
+        "carol": "reference",
+        "dave": "mutant",
+        "Gina Gold": "reference",
+        "Hugo Hall": "skeleton",
+        "evansmith": "mutant",
+        "Fay Lee": "reference",
+    }
 
 
 def _hashes(folder: Path) -> dict[str, str]:
-    return {p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
 
 
 def test_layouts_are_detected(tmp_path):
@@ -104,15 +118,29 @@ def test_layouts_are_detected(tmp_path):
     subs, ignored = find_submissions(tmp_path)
     assert sorted(s.student for s in subs) == sorted(expected)
     assert ignored == []
-    assert describe(subs) == ("folders: 4, zips: 2, Gradescope export: 2, Canvas files: 1, "
-                              "Moodle files: 1")
+    assert describe(subs) == (
+        "folders: 4, zips: 2, Gradescope export: 2, Canvas files: 1, Moodle files: 1"
+    )
     gina = next(s for s in subs if s.student == "Gina Gold")
     assert gina.sid == "111" and gina.kind == "gradescope"
 
 
 def _command(class_folder, out):
-    return [sys.executable, "-m", "course.tools.cli", "grade-class", str(class_folder),
-            "--lab", str(LAB), "--task", TASK, "--out", str(out), "--jobs", "2"]
+    return [
+        sys.executable,
+        "-m",
+        "course.tools.cli",
+        "grade-class",
+        str(class_folder),
+        "--lab",
+        str(LAB),
+        "--task",
+        TASK,
+        "--out",
+        str(out),
+        "--jobs",
+        "2",
+    ]
 
 
 def _snapshot(dest: Path) -> Path:
@@ -133,9 +161,14 @@ def test_grade_class_killed_and_resumed(tmp_path):
     env = dict(os.environ, RTCOURSE_PROGRESS="0", PYTHONPATH=str(root))
 
     # A killed machine: the whole process tree goes at once, after the first rows.
-    proc = subprocess.Popen(_command(class_folder, out), cwd=root, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            start_new_session=True)
+    proc = subprocess.Popen(
+        _command(class_folder, out),
+        cwd=root,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+    )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:
         if len(list((out / "students").glob("*.json"))) >= 2:
@@ -148,8 +181,9 @@ def test_grade_class_killed_and_resumed(tmp_path):
     assert finished, first_output
     assert not (out / "gradebook.csv").exists() or len(finished) == len(expected)
 
-    run = subprocess.run(_command(class_folder, out), cwd=root, env=env, capture_output=True,
-                         text=True, timeout=240)
+    run = subprocess.run(
+        _command(class_folder, out), cwd=root, env=env, capture_output=True, text=True, timeout=240
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     if len(finished) < len(expected):
         assert f"kept {len(finished)} students" in run.stdout, run.stdout
@@ -170,16 +204,19 @@ def test_grade_class_killed_and_resumed(tmp_path):
             assert 0 <= score < FULL and row["status"] == "graded", row
         else:
             assert score == 0, row
-            assert row["status"] == {"skeleton": "graded", "crash": "import failed",
-                                     "missing": "missing"}[kind], row
+            assert (
+                row["status"]
+                == {"skeleton": "graded", "crash": "import failed", "missing": "missing"}[kind]
+            ), row
     assert by["Gina Gold"]["sid"] == "111"
     assert len(list((out / "feedback").glob("*.txt"))) == len(expected)
     assert "broken at import" in (out / "summary.txt").read_text()
     assert _hashes(class_folder) == before  # the submissions were only read
 
     # A third run grades nothing: every row is kept, with the same scores.
-    again = subprocess.run(_command(class_folder, out), cwd=root, env=env,
-                           capture_output=True, text=True, timeout=120)
+    again = subprocess.run(
+        _command(class_folder, out), cwd=root, env=env, capture_output=True, text=True, timeout=120
+    )
     assert again.returncode == 0, again.stdout + again.stderr
     assert f"kept {len(expected)} students" in again.stdout
     assert read_gradebook(out / "gradebook.csv") == rows

@@ -37,11 +37,24 @@ def _unpack(zip_path: Path, dest: Path) -> Path:
 
 
 def _run_autograder(package: Path, submission: Path, results: Path, **env) -> dict:
-    env = {**os.environ, "RTCOURSE_SUBMISSION_DIR": str(submission),
-           "RTCOURSE_RESULTS_DIR": str(results), "RTCOURSE_PYTHON": sys.executable,
-           "RTCOURSE_WORKER_USER": "", "RTCOURSE_TIME_LIMIT": "60", **env}
-    proc = subprocess.run(["bash", str(package / "run_autograder")], env=env, cwd=package,
-                          capture_output=True, text=True, timeout=600, check=False)
+    env = {
+        **os.environ,
+        "RTCOURSE_SUBMISSION_DIR": str(submission),
+        "RTCOURSE_RESULTS_DIR": str(results),
+        "RTCOURSE_PYTHON": sys.executable,
+        "RTCOURSE_WORKER_USER": "",
+        "RTCOURSE_TIME_LIMIT": "60",
+        **env,
+    }
+    proc = subprocess.run(
+        ["bash", str(package / "run_autograder")],
+        env=env,
+        cwd=package,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     out = results / "results.json"
     assert out.is_file(), f"no results.json\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return {"proc": proc, "data": json.loads(out.read_text())}
@@ -60,8 +73,11 @@ def _lab_scores(data: dict) -> dict[int, tuple[float, float]]:
 def package(tmp_path_factory):
     base = tmp_path_factory.mktemp("gradescope")
     names = build_autograder(ROOT, base / "autograder.zip")
-    return {"names": names, "dir": _unpack(base / "autograder.zip", base / "unpacked"),
-            "zip": base / "autograder.zip"}
+    return {
+        "names": names,
+        "dir": _unpack(base / "autograder.zip", base / "unpacked"),
+        "zip": base / "autograder.zip",
+    }
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +87,8 @@ def graded(package, tmp_path_factory):
     (submission / "labs").mkdir(parents=True)
     shutil.copy(ROOT / "solutions" / "lab0_interop.py", submission / "labs")
     (submission / "lab1_intersect.py").write_text(
-        "import torch\n\ndef moller_trumbore(:\n    pass\n")  # a syntax error: lab 1 fails
+        "import torch\n\ndef moller_trumbore(:\n    pass\n"
+    )  # a syntax error: lab 1 fails
     (submission / "notes.txt").write_text("not a lab file")
     return _run_autograder(package["dir"], submission, base / "results")
 
@@ -85,18 +102,28 @@ def test_package_layout(package):
         assert script in names and modes[script] & stat.S_IXUSR, f"{script}: not executable"
     assert f"rtcourse/{HIDDEN}" in names, "the hidden graders ship in the autograder"
     assert "rtcourse/solutions/lab0_interop.py" in names, "the references ship for instructors"
-    packages = [f for folder in ("labs", "solutions") for p in (ROOT / folder).glob("lab*_*")
-                if p.is_dir() for f in module_files(p)]
-    assert packages and all(f"rtcourse/{f.relative_to(ROOT).as_posix()}" in names
-                            for f in packages), "a lab kept as a package ships with its files"
+    packages = [
+        f
+        for folder in ("labs", "solutions")
+        for p in (ROOT / folder).glob("lab*_*")
+        if p.is_dir()
+        for f in module_files(p)
+    ]
+    assert packages and all(
+        f"rtcourse/{f.relative_to(ROOT).as_posix()}" in names for f in packages
+    ), "a lab kept as a package ships with its files"
     assert "rtcourse/pyproject.toml" in names and "rtcourse/course/tools/cli.py" in names
     assert not any(n.startswith(("rtcourse/tests/meta/", "rtcourse/.git/")) for n in names)
 
 
 def test_scripts_parse_and_setup_installs_cpu_torch(package):
     for script in ("setup.sh", "run_autograder"):
-        proc = subprocess.run(["bash", "-n", str(package["dir"] / script)],
-                              capture_output=True, text=True, check=False)
+        proc = subprocess.run(
+            ["bash", "-n", str(package["dir"] / script)],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
         assert proc.returncode == 0, f"{script}: {proc.stderr}"
     setup = (package["dir"] / "setup.sh").read_text()
     assert 'TORCH_SPEC="${TORCH_SPEC:-torch==2.13.0}"' in setup
@@ -104,7 +131,9 @@ def test_scripts_parse_and_setup_installs_cpu_torch(package):
     assert "useradd" in setup and STUDENT_USER in setup
     run = (package["dir"] / "run_autograder").read_text()
     assert "/autograder/submission" in run and "/autograder/results" in run
-    assert 'course.tools.cli grade --impl "$WORK"' in run and '--json "$RESULTS/results.json"' in run
+    assert (
+        'course.tools.cli grade --impl "$WORK"' in run and '--json "$RESULTS/results.json"' in run
+    )
 
 
 def test_results_json_is_gradescope_format(graded):
@@ -112,8 +141,15 @@ def test_results_json_is_gradescope_format(graded):
     for key in ("score", "max_score", "execution_time", "output", "tests"):
         assert key in data, f"results.json lacks {key!r}"
     for test in data["tests"]:
-        assert set(test) >= {"name", "number", "score", "max_score", "status", "output",
-                             "visibility"}, f"malformed test entry {test}"
+        assert set(test) >= {
+            "name",
+            "number",
+            "score",
+            "max_score",
+            "status",
+            "output",
+            "visibility",
+        }, f"malformed test entry {test}"
         assert test["status"] in ("passed", "failed")
         assert test["visibility"] in ("visible", "hidden", "after_due_date", "after_published")
 
@@ -124,8 +160,9 @@ def test_submitted_lab_full_marks_others_zero(graded):
     labs = lab_catalog(lab_test_files(ROOT))
     assert set(scores) == set(labs), f"graded labs {sorted(scores)}, course has {sorted(labs)}"
     score, top = scores[0]
-    assert top == pytest.approx(labs[0].points()) and score == pytest.approx(top), \
+    assert top == pytest.approx(labs[0].points()) and score == pytest.approx(top), (
         f"lab 0 (submitted correctly): {score}/{top}\n{data['output']}"
+    )
     for lab, (score, top) in scores.items():
         if lab != 0:
             assert top > 0 and score == 0, f"lab {lab} (broken or missing) scored {score}/{top}"
@@ -153,17 +190,18 @@ def test_hidden_tests_graded_with_their_visibility(graded):
 
     def hidden_name(result):
         lab = int(result["number"].split(".")[0])
-        return any(lab == n_lab and f": {name}[" in result["name"] + "["
-                   for n_lab, name in names)
+        return any(lab == n_lab and f": {name}[" in result["name"] + "[" for n_lab, name in names)
 
     tests = graded["data"]["tests"]
     hidden = [t for t in tests if hidden_name(t)]
-    assert {int(t["number"].split(".")[0]) for t in hidden} == {lab for lab, _ in names}, \
+    assert {int(t["number"].split(".")[0]) for t in hidden} == {lab for lab, _ in names}, (
         "every lab's hidden graders run in the autograder"
+    )
     assert all(t["visibility"] == "after_due_date" for t in hidden)
     lab0 = [t for t in hidden if t["number"].startswith("0.")]
-    assert lab0 and all(t["status"] == "passed" for t in lab0), \
+    assert lab0 and all(t["status"] == "passed" for t in lab0), (
         "the submitted Lab 0 passes its hidden tests"
+    )
     visible = [t for t in tests if t not in hidden]
     assert visible and all(t["visibility"] == "visible" for t in visible)
 
@@ -187,12 +225,19 @@ def test_collect_submission_takes_lab_files_only(tmp_path):
     assert found == {"lab0_interop.py": Path("labs/lab0_interop.py"), "lab1_intersect.py": None}
     assert (tmp_path / "work" / "lab0_interop.py").read_text() == "A = 1\n"
     assert sorted(p.name for p in (tmp_path / "work").iterdir()) == [
-        SUBMISSION_MANIFEST, "lab0_interop.py"]
+        SUBMISSION_MANIFEST,
+        "lab0_interop.py",
+    ]
     # What the grader's messages name: the files as handed in, and all of them.
     assert read_manifest(tmp_path / "work") == {
         "files": {"lab0_interop.py": "labs/lab0_interop.py", "lab1_intersect.py": None},
-        "handed_in": ["deep/labs/lab0_interop.py", "helper.py", "lab1_intersect.py",
-                      "labs/lab0_interop.py"]}
+        "handed_in": [
+            "deep/labs/lab0_interop.py",
+            "helper.py",
+            "lab1_intersect.py",
+            "labs/lab0_interop.py",
+        ],
+    }
 
 
 def _skeleton_package(tmp_path) -> Path:
@@ -210,9 +255,11 @@ def test_collect_lays_package_files_over_the_skeleton(tmp_path):
     (sub / "handout" / "labs" / "lab9_toy" / "grid.py").write_text("GRID = 1\n")
     (sub / "grid.py").write_text("LOOSE = 1\n")  # a package folder in the upload wins
     found = collect_submission(sub, tmp_path / "work", ["lab9_toy"], labs)
-    assert found == {"lab9_toy/__init__.py": None,
-                     "lab9_toy/grid.py": Path("handout/labs/lab9_toy/grid.py"),
-                     "lab9_toy/walk.py": None}
+    assert found == {
+        "lab9_toy/__init__.py": None,
+        "lab9_toy/grid.py": Path("handout/labs/lab9_toy/grid.py"),
+        "lab9_toy/walk.py": None,
+    }
     work = tmp_path / "work" / "lab9_toy"
     assert (work / "grid.py").read_text() == "GRID = 1\n"
     assert (work / "walk.py").read_text() == "# skeleton walk.py\n", "left out: the skeleton's"
@@ -232,8 +279,7 @@ def test_collect_takes_loose_package_files_by_name(tmp_path):
     # None of its files handed in: the lab is missing, as a single-file lab is.
     empty = tmp_path / "empty"
     empty.mkdir()
-    assert set(collect_submission(empty, tmp_path / "none", ["lab9_toy"], labs).values()) \
-        == {None}
+    assert set(collect_submission(empty, tmp_path / "none", ["lab9_toy"], labs).values()) == {None}
     assert not (tmp_path / "none" / "lab9_toy").exists()
 
 
@@ -244,14 +290,23 @@ def _can_run_as(user: str) -> bool:
         import pwd
 
         entry = pwd.getpwnam(user)
-        return subprocess.run([sys.executable, "-c", "import torch"], user=entry.pw_uid,
-                              group=entry.pw_gid, extra_groups=[], capture_output=True,
-                              timeout=120, check=False).returncode == 0
+        return (
+            subprocess.run(
+                [sys.executable, "-c", "import torch"],
+                user=entry.pw_uid,
+                group=entry.pw_gid,
+                extra_groups=[],
+                capture_output=True,
+                timeout=120,
+                check=False,
+            ).returncode
+            == 0
+        )
     except (KeyError, OSError, subprocess.SubprocessError):
         return False
 
 
-CHEAT = '''
+CHEAT = """
 from pathlib import Path
 
 import course
@@ -260,11 +315,12 @@ from course.core.files import import_file
 _ref = import_file(Path(course.__file__).resolve().parents[1] / "solutions" / "lab0_interop.py",
                    "stolen")
 globals().update({k: v for k, v in vars(_ref).items() if not k.startswith("__")})
-'''
+"""
 
 
-@pytest.mark.skipif(not _can_run_as("nobody"),
-                    reason="needs root and an interpreter the user 'nobody' can run")
+@pytest.mark.skipif(
+    not _can_run_as("nobody"), reason="needs root and an interpreter the user 'nobody' can run"
+)
 def test_submission_cannot_read_the_references(package):
     # The worker user must reach the package and the submission: a world-readable copy.
     base = Path(tempfile.mkdtemp(prefix="rtcourse-gradescope-"))

@@ -82,31 +82,40 @@ def test_readme_states_the_settings_of_every_lab_over_the_defaults():
     for row in lab_settings():
         if not row.is_default:
             assert f"| {row.lab} |" in readme and f"{row.memory_mb} MB" in readme, (
-                f"README.md should state lab {row.lab}'s Gradescope settings")
+                f"README.md should state lab {row.lab}'s Gradescope settings"
+            )
 
 
-@pytest.mark.parametrize(("cpu_max", "affinity", "want"), [
-    ("50000 100000", None, "1"),  # Gradescope's half CPU
-    ("200000 100000", None, "2"),
-    ("max 100000", None, None),  # no quota: the CPUs this process may use
-    ("max 100000", "0", "1"),
-])
+@pytest.mark.parametrize(
+    ("cpu_max", "affinity", "want"),
+    [
+        ("50000 100000", None, "1"),  # Gradescope's half CPU
+        ("200000 100000", None, "2"),
+        ("max 100000", None, None),  # no quota: the CPUs this process may use
+        ("max 100000", "0", "1"),
+    ],
+)
 def test_run_autograder_sizes_threads_to_the_cpu_quota(tmp_path, cpu_max, affinity, want):
     script = _script(RUN_AUTOGRADER, [0])
     start = script.index('CPUS="$(nproc')
-    part = script[start:script.index("\n", script.index("MALLOC_MMAP_THRESHOLD_="))]
+    part = script[start : script.index("\n", script.index("MALLOC_MMAP_THRESHOLD_="))]
     fake = tmp_path / "cpu.max"
     fake.write_text(cpu_max + "\n")
     part = part.replace("/sys/fs/cgroup/cpu.max", str(fake))
     probe = tmp_path / "probe.sh"
-    probe.write_text(part + '\necho "$OMP_NUM_THREADS $MKL_NUM_THREADS $MALLOC_ARENA_MAX '
-                            '$MALLOC_MMAP_THRESHOLD_"\n')
+    probe.write_text(
+        part + '\necho "$OMP_NUM_THREADS $MKL_NUM_THREADS $MALLOC_ARENA_MAX '
+        '$MALLOC_MMAP_THRESHOLD_"\n'
+    )
     cmd = ["bash", str(probe)]
     if affinity is not None:
         cmd = ["taskset", "-c", affinity, *cmd]
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "MALLOC_ARENA_MAX",
-                        "MALLOC_MMAP_THRESHOLD_")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k
+        not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "MALLOC_ARENA_MAX", "MALLOC_MMAP_THRESHOLD_")
+    }
     out = subprocess.run(cmd, capture_output=True, text=True, check=True, env=env).stdout.split()
     want = want or str(min(len(os.sched_getaffinity(0)), os.cpu_count()))
     assert out == [want, want, "2", "1048576"], out

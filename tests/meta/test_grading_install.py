@@ -10,10 +10,17 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-NOTEBOOK_STACK = ("nbformat", "nbclient", "nbconvert", "ipykernel", "jupyterlab",
-                  "jupyter_client", "jupyter_server")
+NOTEBOOK_STACK = (
+    "nbformat",
+    "nbclient",
+    "nbconvert",
+    "ipykernel",
+    "jupyterlab",
+    "jupyter_client",
+    "jupyter_server",
+)
 
-BLOCKER = f'''
+BLOCKER = f"""
 import sys
 from importlib.abc import MetaPathFinder
 
@@ -26,14 +33,31 @@ class NoNotebooks(MetaPathFinder):
 sys.meta_path.insert(0, NoNotebooks())
 from course.tools.cli import main
 sys.exit(main(sys.argv[1:]))
-'''
+"""
 
 
 def test_grading_runs_without_the_notebook_stack(tmp_path):
     results = tmp_path / "results.json"
-    proc = subprocess.run([sys.executable, "-c", BLOCKER, "grade", "--impl", "labs", "--lab",
-                           "0", "-k", "pack_rgba8", "--json", str(results)], cwd=ROOT,
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            BLOCKER,
+            "grade",
+            "--impl",
+            "labs",
+            "--lab",
+            "0",
+            "-k",
+            "pack_rgba8",
+            "--json",
+            str(results),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert results.is_file(), proc.stdout[-2000:] + proc.stderr[-2000:]
     tests = json.loads(results.read_text())["tests"]
     assert tests and all("not implemented yet" in t["output"] for t in tests), tests[:2]
@@ -46,7 +70,9 @@ def test_pyproject_keeps_the_notebook_stack_in_its_extra():
     except ModuleNotFoundError:  # Python 3.10
         from pip._vendor import tomli as tomllib
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    core = {line.split(">")[0].split("=")[0].split("<")[0].strip().lower()
-            for line in project["dependencies"]}
+    core = {
+        line.split(">")[0].split("=")[0].split("<")[0].strip().lower()
+        for line in project["dependencies"]
+    }
     assert not core & set(NOTEBOOK_STACK), sorted(core & set(NOTEBOOK_STACK))
     assert f"{project['name']}[notebooks]" in project["optional-dependencies"]["dev"]

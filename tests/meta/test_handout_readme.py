@@ -32,12 +32,14 @@ def test_readme_lists_every_lab_task_and_points(handout):
     labs = lab_catalog(sorted((handout / "tests").glob("test_lab*_*.py")))
     assert labs, "the handout has no graders"
     for number, lab in labs.items():
-        assert (f"`labs/{lab.module}.py`" in text or f"`labs/{lab.module}/`" in text) \
-            and f"{lab.points():g} points" in text
+        assert (
+            f"`labs/{lab.module}.py`" in text or f"`labs/{lab.module}/`" in text
+        ) and f"{lab.points():g} points" in text
         for task, title in lab.tasks.items():
             title = title.replace("|", "\\|")
-            assert f"| {task} | {title} | {lab.points(task):g} |" in text, \
+            assert f"| {task} | {title} | {lab.points(task):g} |" in text, (
                 f"lab {number} task {task} missing from labs/README.md"
+            )
     for command in ("python -m pytest tests/test_lab", " -k ", "rtcourse grade --lab "):
         assert command in text
 
@@ -54,9 +56,13 @@ def _function_source(path: Path, names) -> dict[str, str]:
     """The source of each function of ``names`` in a lab file (or in its package's files)."""
     found = {}
     for source in (f.read_text() for f in module_files(path)):
-        found.update({node.name: ast.get_source_segment(source, node)
-                      for node in ast.parse(source).body
-                      if isinstance(node, ast.FunctionDef) and node.name in names})
+        found.update(
+            {
+                node.name: ast.get_source_segment(source, node)
+                for node in ast.parse(source).body
+                if isinstance(node, ast.FunctionDef) and node.name in names
+            }
+        )
     return found
 
 
@@ -74,9 +80,14 @@ def test_one_task_raises_the_score_by_its_points(handout, tmp_path):
     command = "rtcourse grade --lab 0 --task 1"
     assert f"`{command}`" in (handout / LABS_README).read_text()
     results = tmp_path / "results.json"
-    proc = subprocess.run([sys.executable, "-m", "course.tools.cli", *command.split()[1:],
-                           "--json", str(results)], cwd=handout, capture_output=True,
-                          text=True, timeout=600, check=False)
+    proc = subprocess.run(
+        [sys.executable, "-m", "course.tools.cli", *command.split()[1:], "--json", str(results)],
+        cwd=handout,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert results.exists(), proc.stdout[-3000:] + proc.stderr[-3000:]
     data = json.loads(results.read_text())
     lab = lab_catalog([handout / "tests" / "test_lab0_interop.py"])[0]

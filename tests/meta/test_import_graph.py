@@ -26,15 +26,15 @@ ROOT = Path(__file__).resolve().parents[2]
 # Room -> the rooms its modules may import besides their own. Read it bottom-up: core is the
 # floor; each line may only name rooms listed above it.
 ALLOWED = {
-    "core": set(),                                     # the framework: nothing of the course
-    "given": {"core"},                                 # each lab's given code
-    "measure": {"core"},                               # timing, op counts, occupancy
-    "kernels": {"core", "given", "measure"},           # fuse a lab's given work; report occupancy
+    "core": set(),  # the framework: nothing of the course
+    "given": {"core"},  # each lab's given code
+    "measure": {"core"},  # timing, op counts, occupancy
+    "kernels": {"core", "given", "measure"},  # fuse a lab's given work; report occupancy
     "grading": {"core", "given", "measure", "kernels"},  # imports what it measures
     "tools": {"core", "given", "measure", "kernels", "grading"},  # rtcourse and what it builds
-    "labs": {"core", "given", "measure"},              # student skeletons
-    "solutions": {"core", "given", "measure"},         # references: the same API as labs/
-    "mutants": {"grading"},                            # solutions/mutants/labN.py
+    "labs": {"core", "given", "measure"},  # student skeletons
+    "solutions": {"core", "given", "measure"},  # references: the same API as labs/
+    "mutants": {"grading"},  # solutions/mutants/labN.py
 }
 ROOMS = ("core", "given", "measure", "kernels", "grading", "tools")
 CLI = "course.tools.cli"
@@ -99,9 +99,13 @@ def graph():
     mods = sources()
     edges = {}
     for name, path in mods.items():
-        edges[name] = sorted({(line, dep) for line, t in imports(name, path)
-                              if (dep := resolve(t, mods)) and dep != name
-                              and not name.startswith(dep + ".")})  # a package's own parents
+        edges[name] = sorted(
+            {
+                (line, dep)
+                for line, t in imports(name, path)
+                if (dep := resolve(t, mods)) and dep != name and not name.startswith(dep + ".")
+            }
+        )  # a package's own parents
     return mods, edges
 
 
@@ -132,8 +136,7 @@ def test_imports_point_down(graph):
                 bad.append(f"{where}: nothing imports the command line")
             elif dst in ("solutions", "labs", "mutants") and src != "mutants":
                 if dep.split(".")[:2] != name.split(".")[:2]:  # a lab package's own parts
-                    bad.append(f"{where}: labs and solutions are loaded by file name, "
-                               f"not imported")
+                    bad.append(f"{where}: labs and solutions are loaded by file name, not imported")
             elif name == "course" or dep == "course":
                 if name == "course":
                     bad.append(f"{where}: course/__init__.py imports nothing")
@@ -141,8 +144,9 @@ def test_imports_point_down(graph):
                 if src == "given" and given_lab(name) != given_lab(dep):
                     bad.append(f"{where}: one lab's given code imports another lab's")
             elif dst not in ALLOWED.get(src, set()):
-                bad.append(f"{where}: {src} may import only "
-                           f"{sorted(ALLOWED.get(src, ())) or 'nothing'}")
+                bad.append(
+                    f"{where}: {src} may import only {sorted(ALLOWED.get(src, ())) or 'nothing'}"
+                )
     assert not bad, "imports that point up or sideways:\n  " + "\n  ".join(bad)
 
 
@@ -156,7 +160,7 @@ def test_no_circles(graph):
         stack.append(m)
         for d in succ.get(m, ()):
             if state.get(d) == "open":
-                cycles.append(stack[stack.index(d):] + [d])
+                cycles.append(stack[stack.index(d) :] + [d])
             elif d not in state:
                 visit(d)
         stack.pop()
@@ -191,5 +195,4 @@ def test_bench_scripts_never_import_solutions():
         for line, target in imports(module_name(path), path):
             if target.split(".")[0] in ("solutions", "labs"):
                 bad.append(f"{path.relative_to(ROOT)}:{line} imports {target}")
-    assert not bad, "bench scripts that import a lab instead of loading it:\n  " + \
-        "\n  ".join(bad)
+    assert not bad, "bench scripts that import a lab instead of loading it:\n  " + "\n  ".join(bad)

@@ -44,26 +44,52 @@ class Target:
 
     def environment(self) -> dict:
         full = f"{PYTHON}.0"
-        return {"implementation_name": "cpython", "implementation_version": full,
-                "platform_python_implementation": "CPython", "python_version": PYTHON,
-                "python_full_version": full, "platform_release": "", "platform_version": "",
-                **self.markers}
+        return {
+            "implementation_name": "cpython",
+            "implementation_version": full,
+            "platform_python_implementation": "CPython",
+            "python_version": PYTHON,
+            "python_full_version": full,
+            "platform_release": "",
+            "platform_version": "",
+            **self.markers,
+        }
 
 
 # manylinux tags are not widened by pip the way macOS ones are: list glibc 2.17 (CentOS 7)
 # up to 2.35 (Ubuntu 22.04, the WSL default).
 _MANYLINUX = tuple(f"manylinux_2_{minor}_x86_64" for minor in range(17, 36)) + (
-    "manylinux2014_x86_64",)
+    "manylinux2014_x86_64",
+)
 TARGETS = {
-    "Linux x86_64 (and WSL)": Target(_MANYLINUX, {
-        "sys_platform": "linux", "platform_system": "Linux", "os_name": "posix",
-        "platform_machine": "x86_64"}, torch_apart=True),
-    "macOS arm64": Target(("macosx_14_0_arm64",), {
-        "sys_platform": "darwin", "platform_system": "Darwin", "os_name": "posix",
-        "platform_machine": "arm64"}),
-    "Windows amd64": Target(("win_amd64",), {
-        "sys_platform": "win32", "platform_system": "Windows", "os_name": "nt",
-        "platform_machine": "AMD64"}),
+    "Linux x86_64 (and WSL)": Target(
+        _MANYLINUX,
+        {
+            "sys_platform": "linux",
+            "platform_system": "Linux",
+            "os_name": "posix",
+            "platform_machine": "x86_64",
+        },
+        torch_apart=True,
+    ),
+    "macOS arm64": Target(
+        ("macosx_14_0_arm64",),
+        {
+            "sys_platform": "darwin",
+            "platform_system": "Darwin",
+            "os_name": "posix",
+            "platform_machine": "arm64",
+        },
+    ),
+    "Windows amd64": Target(
+        ("win_amd64",),
+        {
+            "sys_platform": "win32",
+            "platform_system": "Windows",
+            "os_name": "nt",
+            "platform_machine": "AMD64",
+        },
+    ),
 }
 
 # Runs pip with the target's marker environment (argv[1], JSON) and pip's arguments.
@@ -79,7 +105,8 @@ sys.exit(main(sys.argv[2:]))
 _NETWORK_ERRORS = re.compile(
     r"NewConnectionError|Failed to establish a new connection|Temporary failure in name "
     r"resolution|Name or service not known|Network is unreachable|ConnectTimeout|"
-    r"ProxyError|Max retries exceeded|Could not fetch URL|SSLError|No route to host")
+    r"ProxyError|Max retries exceeded|Could not fetch URL|SSLError|No route to host"
+)
 
 
 def project_requirements() -> list[str]:
@@ -100,15 +127,36 @@ def project_requirements() -> list[str]:
     return list(project["dependencies"]) + list(expand(extras["dev"]))
 
 
-def _resolve_command(target: Target, requirements: list[str], report: Path, scratch: Path,
-                     fast: bool) -> list[str]:
-    cmd = [sys.executable, "-c", LAUNCHER, json.dumps(target.environment()), "install",
-           *(["--use-feature=fast-deps"] if fast else []),
-           "--dry-run", "--ignore-installed", "--only-binary=:all:",
-           "--python-version", PYTHON, "--implementation", "cp",
-           "--target", str(scratch), "--report", str(report), "--quiet",
-           "--progress-bar", "off", "--disable-pip-version-check",
-           "--timeout", "20", "--retries", "2"]
+def _resolve_command(
+    target: Target, requirements: list[str], report: Path, scratch: Path, fast: bool
+) -> list[str]:
+    cmd = [
+        sys.executable,
+        "-c",
+        LAUNCHER,
+        json.dumps(target.environment()),
+        "install",
+        *(["--use-feature=fast-deps"] if fast else []),
+        "--dry-run",
+        "--ignore-installed",
+        "--only-binary=:all:",
+        "--python-version",
+        PYTHON,
+        "--implementation",
+        "cp",
+        "--target",
+        str(scratch),
+        "--report",
+        str(report),
+        "--quiet",
+        "--progress-bar",
+        "off",
+        "--disable-pip-version-check",
+        "--timeout",
+        "20",
+        "--retries",
+        "2",
+    ]
     for platform in target.platforms:
         cmd += ["--platform", platform]
     return cmd + requirements
@@ -120,16 +168,19 @@ def _jobs(target: Target) -> list[tuple[list[str], bool]]:
     if not target.torch_apart:
         return [(reqs, False)]
     is_torch = [canonicalize_name(Requirement(r).name) == "torch" for r in reqs]
-    return [([r for r, t in zip(reqs, is_torch) if not t], False),
-            ([r for r, t in zip(reqs, is_torch) if t], True)]
+    return [
+        ([r for r, t in zip(reqs, is_torch) if not t], False),
+        ([r for r, t in zip(reqs, is_torch) if t], True),
+    ]
 
 
 def _failure(name: str, output: str) -> str:
     missing = re.findall(r"No matching distribution found for (\S+)", output)
     if missing:
-        return (f"{name}: no wheel of {', '.join(missing)} for Python {PYTHON} on this "
-                f"platform: the install fails there (pip's last words below)\n"
-                + output[-3000:])
+        return (
+            f"{name}: no wheel of {', '.join(missing)} for Python {PYTHON} on this "
+            f"platform: the install fails there (pip's last words below)\n" + output[-3000:]
+        )
     return f"{name}: pip could not resolve the dependencies\n" + output[-3000:]
 
 
@@ -138,13 +189,16 @@ def _installed(reports: list[Path]) -> dict[str, tuple[Version, str]]:
     for report in reports:
         for item in json.loads(report.read_text())["install"]:
             found[canonicalize_name(item["metadata"]["name"])] = (
-                Version(item["metadata"]["version"]), item["download_info"]["url"])
+                Version(item["metadata"]["version"]),
+                item["download_info"]["url"],
+            )
     return found
 
 
 def _start(cmd) -> subprocess.Popen:
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            stdin=subprocess.DEVNULL)
+    return subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, stdin=subprocess.DEVNULL
+    )
 
 
 def _resolve_all(tmp_path) -> dict:
@@ -155,8 +209,17 @@ def _resolve_all(tmp_path) -> dict:
         for reqs, fast in _jobs(target):
             i = len(procs)
             report, scratch = tmp_path / f"report-{i}.json", tmp_path / f"target-{i}"
-            procs.append([name, target, reqs, fast, report, scratch,
-                          _start(_resolve_command(target, reqs, report, scratch, fast))])
+            procs.append(
+                [
+                    name,
+                    target,
+                    reqs,
+                    fast,
+                    report,
+                    scratch,
+                    _start(_resolve_command(target, reqs, report, scratch, fast)),
+                ]
+            )
     runs = {}
     try:
         for job in procs:
@@ -164,8 +227,7 @@ def _resolve_all(tmp_path) -> dict:
             try:
                 output = proc.communicate(timeout=TIMEOUT)[0]
                 if proc.returncode and fast and "fast-deps" in output:  # a pip without it
-                    job[-1] = proc = _start(_resolve_command(target, reqs, report, scratch,
-                                                             False))
+                    job[-1] = proc = _start(_resolve_command(target, reqs, report, scratch, False))
                     output = proc.communicate(timeout=TIMEOUT)[0]
             except subprocess.TimeoutExpired:
                 pytest.fail(f"{name}: pip did not resolve the dependencies in {TIMEOUT} s")
@@ -184,11 +246,14 @@ def test_project_dependencies_resolve_to_wheels_everywhere(tmp_path):
     # distutils into the test process, and setuptools (which torch.compile's C++ builder
     # imports in later tests) refuses to load beside it.
     check = "import pip._internal.cli.main, pip._vendor.packaging.markers"
-    probe = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True,
-                           check=False)
+    probe = subprocess.run(
+        [sys.executable, "-c", check], capture_output=True, text=True, check=False
+    )
     if probe.returncode:
-        pytest.skip(f"pip's resolver is not importable in this environment "
-                    f"({probe.stderr.strip().splitlines()[-1:]})")
+        pytest.skip(
+            f"pip's resolver is not importable in this environment "
+            f"({probe.stderr.strip().splitlines()[-1:]})"
+        )
     runs = _resolve_all(tmp_path)
     for name, (_, _, code, output) in runs.items():
         offline = _NETWORK_ERRORS.search(output)
@@ -208,11 +273,14 @@ def test_project_dependencies_resolve_to_wheels_everywhere(tmp_path):
             if wanted and key not in installed:
                 problems.append(f"{name}: {req.name} is a dependency but pip did not pick it")
             elif wanted and installed[key][0] not in req.specifier:
-                problems.append(f"{name}: {req.name} {installed[key][0]} does not satisfy "
-                                f"{req.specifier}")
+                problems.append(
+                    f"{name}: {req.name} {installed[key][0]} does not satisfy {req.specifier}"
+                )
             elif not wanted and key in installed:
-                problems.append(f"{name}: {req.name} is marked '{req.marker}' but pip picked "
-                                f"it ({installed[key][1]})")
+                problems.append(
+                    f"{name}: {req.name} is marked '{req.marker}' but pip picked "
+                    f"it ({installed[key][1]})"
+                )
         for key, (version, url) in installed.items():
             if not url.rsplit("/", 1)[-1].endswith(".whl"):
                 problems.append(f"{name}: {key} {version} is not a wheel: {url}")
@@ -225,7 +293,9 @@ def test_triton_is_linux_only_in_the_project():
         req = Requirement(line)
         if canonicalize_name(req.name) == "triton":
             assert req.marker is not None and req.marker.evaluate(
-                TARGETS["Linux x86_64 (and WSL)"].environment()), line
+                TARGETS["Linux x86_64 (and WSL)"].environment()
+            ), line
             for name in ("macOS arm64", "Windows amd64"):
                 assert not req.marker.evaluate(TARGETS[name].environment()), (
-                    f"{line!r} would ask for Triton on {name}, where it has no wheel")
+                    f"{line!r} would ask for Triton on {name}, where it has no wheel"
+                )

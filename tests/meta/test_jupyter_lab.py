@@ -39,11 +39,22 @@ def _free_port() -> int:
 def lab_command(lab_args: list[str]) -> list[str]:
     """The command ``make lab LAB_ARGS=...`` runs, with this environment's Jupyter."""
     if shutil.which("make") is None:
-        return [sys.executable, "-m", "jupyterlab", *lab_args,
-                *(["--allow-root"] if os.geteuid() == 0 else []), "slides"]
-    out = subprocess.run(["make", "-s", "-n", "lab", f"VENV={sys.prefix}",
-                          "LAB_ARGS=" + shlex.join(lab_args)],
-                         cwd=ROOT, capture_output=True, text=True, check=True, timeout=60).stdout
+        return [
+            sys.executable,
+            "-m",
+            "jupyterlab",
+            *lab_args,
+            *(["--allow-root"] if os.geteuid() == 0 else []),
+            "slides",
+        ]
+    out = subprocess.run(
+        ["make", "-s", "-n", "lab", f"VENV={sys.prefix}", "LAB_ARGS=" + shlex.join(lab_args)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    ).stdout
     return shlex.split(out.strip().splitlines()[-1])
 
 
@@ -56,8 +67,9 @@ def test_make_lab_runs_jupyter_lab_on_the_slides():
 
 
 def _get(url: str, token: str, method="GET", body=None, timeout=10):
-    request = urllib.request.Request(url, method=method, data=body,
-                                     headers={"Authorization": f"token {token}"})
+    request = urllib.request.Request(
+        url, method=method, data=body, headers={"Authorization": f"token {token}"}
+    )
     with urllib.request.urlopen(request, timeout=timeout) as response:
         text = response.read().decode()
     return json.loads(text) if text else None
@@ -82,15 +94,33 @@ def _run_in_kernel(port: int, token: str, kernel_id: str, code: str) -> str:
 
     ws = websocket.create_connection(
         f"ws://127.0.0.1:{port}/api/kernels/{kernel_id}/channels?token={token}",
-        timeout=KERNEL_TIMEOUT)
+        timeout=KERNEL_TIMEOUT,
+    )
     try:
         msg_id = uuid.uuid4().hex
-        ws.send(json.dumps({
-            "header": {"msg_id": msg_id, "msg_type": "execute_request", "username": "test",
-                       "session": uuid.uuid4().hex, "version": "5.3"},
-            "parent_header": {}, "metadata": {}, "channel": "shell",
-            "content": {"code": code, "silent": False, "store_history": False,
-                        "user_expressions": {}, "allow_stdin": False}}))
+        ws.send(
+            json.dumps(
+                {
+                    "header": {
+                        "msg_id": msg_id,
+                        "msg_type": "execute_request",
+                        "username": "test",
+                        "session": uuid.uuid4().hex,
+                        "version": "5.3",
+                    },
+                    "parent_header": {},
+                    "metadata": {},
+                    "channel": "shell",
+                    "content": {
+                        "code": code,
+                        "silent": False,
+                        "store_history": False,
+                        "user_expressions": {},
+                        "allow_stdin": False,
+                    },
+                }
+            )
+        )
         printed, deadline = [], time.monotonic() + KERNEL_TIMEOUT
         while time.monotonic() < deadline:
             msg = json.loads(ws.recv())
@@ -110,12 +140,27 @@ def _run_in_kernel(port: int, token: str, kernel_id: str, code: str) -> str:
 
 def test_jupyter_lab_serves_the_slides_and_starts_a_kernel(tmp_path):
     port, token = _free_port(), secrets.token_hex(16)
-    args = ["--no-browser", "--ServerApp.ip=127.0.0.1", f"--ServerApp.port={port}",
-            "--ServerApp.port_retries=0", f"--IdentityProvider.token={token}"]
-    env = dict(os.environ, JUPYTER_RUNTIME_DIR=str(tmp_path / "runtime"),
-               JUPYTER_CONFIG_DIR=str(tmp_path / "config"))
-    proc = subprocess.Popen(lab_command(args), cwd=ROOT, env=env, stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    args = [
+        "--no-browser",
+        "--ServerApp.ip=127.0.0.1",
+        f"--ServerApp.port={port}",
+        "--ServerApp.port_retries=0",
+        f"--IdentityProvider.token={token}",
+    ]
+    env = dict(
+        os.environ,
+        JUPYTER_RUNTIME_DIR=str(tmp_path / "runtime"),
+        JUPYTER_CONFIG_DIR=str(tmp_path / "config"),
+    )
+    proc = subprocess.Popen(
+        lab_command(args),
+        cwd=ROOT,
+        env=env,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     base = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + START_TIMEOUT
@@ -134,15 +179,21 @@ def test_jupyter_lab_serves_the_slides_and_starts_a_kernel(tmp_path):
         listed = {item["name"] for item in _get(f"{base}/api/contents", token)["content"]}
         notebooks = {path.name for path in (ROOT / "slides").glob("*.ipynb")}
         assert notebooks and notebooks <= listed, (
-            f"the server's root is not slides/: it lists {sorted(listed)}")
+            f"the server's root is not slides/: it lists {sorted(listed)}"
+        )
 
-        kernel = _get(f"{base}/api/kernels", token, method="POST",
-                      body=json.dumps({"name": "python3"}).encode(), timeout=60)
-        printed = _run_in_kernel(port, token, kernel["id"],
-                                 "import sys, course; print(sys.prefix)")
+        kernel = _get(
+            f"{base}/api/kernels",
+            token,
+            method="POST",
+            body=json.dumps({"name": "python3"}).encode(),
+            timeout=60,
+        )
+        printed = _run_in_kernel(port, token, kernel["id"], "import sys, course; print(sys.prefix)")
         assert printed.strip() == sys.prefix, (
             f"the notebooks' kernel runs in {printed.strip()!r}, not in the course's "
-            f"environment {sys.prefix!r}")
+            f"environment {sys.prefix!r}"
+        )
     finally:
         print(_stop(proc, base, token)[-5000:])  # the server's log, shown on a failure
     assert proc.returncode is not None

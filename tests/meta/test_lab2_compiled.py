@@ -42,16 +42,20 @@ def suzanne_rays(device):
         origins.append(o)
         directions.append(d)
     axis_rays = Rays.create(torch.cat(origins), torch.cat(directions))
-    return scene.mesh, Rays.create(torch.cat((rays.origins, axis_rays.origins)),
-                                   torch.cat((rays.directions, axis_rays.directions)))
+    return scene.mesh, Rays.create(
+        torch.cat((rays.origins, axis_rays.origins)),
+        torch.cat((rays.directions, axis_rays.directions)),
+    )
 
 
 def test_compiled_walk_matches_eager(device):  # device: cpu, and cuda where present
     mesh, rays = suzanne_rays(device)
     bvh = lab.build_sah_bvh(mesh)
     walk = pack_bvh(bvh, mesh)
-    settings = [{"compile": True, "check_every": 3},
-                {"compile": True, "check_every": 5, "fuse_steps": 2, "any_hit": True}]
+    settings = [
+        {"compile": True, "check_every": 3},
+        {"compile": True, "check_every": 5, "fuse_steps": 2, "any_hit": True},
+    ]
     if torch.device(device).type == "cuda":
         settings.append({"compile": "reduce-overhead", "check_every": 4})
     for knobs in settings:
@@ -60,8 +64,16 @@ def test_compiled_walk_matches_eager(device):  # device: cpu, and cuda where pre
         hits, count = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, **knobs)
         assert int((ref_hits.triangle >= 0).sum()) > 50, "the rays should hit Suzanne"
         for key in ("steps", "tests"):
-            assert_equal(count[key].cpu(), ref[key].cpu(), where="ray",
-                         name=f"bvh_closest_hit_fast({knobs}): counters[{key!r}] against eager")
-        assert_equal(hits.triangle.cpu(), ref_hits.triangle.cpu(), where="ray",
-                     name=f"bvh_closest_hit_fast({knobs}): triangles against eager")
+            assert_equal(
+                count[key].cpu(),
+                ref[key].cpu(),
+                where="ray",
+                name=f"bvh_closest_hit_fast({knobs}): counters[{key!r}] against eager",
+            )
+        assert_equal(
+            hits.triangle.cpu(),
+            ref_hits.triangle.cpu(),
+            where="ray",
+            name=f"bvh_closest_hit_fast({knobs}): triangles against eager",
+        )
         torch.testing.assert_close(hits.t, ref_hits.t, rtol=1e-5, atol=0.0)

@@ -35,16 +35,19 @@ def test_cached_graphs_match_eager():
     bvh = build_sah_bvh(mesh)
     walk = pack_bvh(bvh, mesh)
     camera = dataclasses.replace(scene.camera, width=96, height=96)
-    moved = dataclasses.replace(camera, eye=tuple(t + 1.05 * (e - t) for e, t in
-                                                  zip(camera.eye, camera.target)))
+    moved = dataclasses.replace(
+        camera, eye=tuple(t + 1.05 * (e - t) for e, t in zip(camera.eye, camera.target))
+    )
     lab._GRAPHS.clear()
     sizes = []
     for cam, any_hit in ((camera, False), (camera, False), (moved, False), (camera, True)):
         rays = primary_rays(cam, device="cuda")
-        ref_hits, ref = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, check_every=8,
-                                                 any_hit=any_hit)
-        hits, count = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, check_every=8,
-                                               any_hit=any_hit, compile="reduce-overhead")
+        ref_hits, ref = lab.bvh_closest_hit_fast(
+            rays, mesh, bvh, walk=walk, check_every=8, any_hit=any_hit
+        )
+        hits, count = lab.bvh_closest_hit_fast(
+            rays, mesh, bvh, walk=walk, check_every=8, any_hit=any_hit, compile="reduce-overhead"
+        )
         what = f"graphs (any_hit={any_hit}, call {len(sizes) + 1})"
         assert int((ref_hits.triangle >= 0).sum()) > 1000, "the rays should hit the bunny"
         # The compiled step fuses its arithmetic, so a ray grazing an edge may pick the
@@ -54,19 +57,26 @@ def test_cached_graphs_match_eager():
         else:
             same = hits.triangle == ref_hits.triangle
         assert int((~same).sum()) <= len(rays) // 1000, (
-            f"{what}: {int((~same).sum())} of {len(rays)} rays differ from the eager walk")
+            f"{what}: {int((~same).sum())} of {len(rays)} rays differ from the eager walk"
+        )
         for key in ("steps", "tests"):
-            assert_equal(count[key][same].cpu(), ref[key][same].cpu(), where="ray",
-                         name=f"{what}: counters[{key!r}] against eager")
+            assert_equal(
+                count[key][same].cpu(),
+                ref[key][same].cpu(),
+                where="ray",
+                name=f"{what}: counters[{key!r}] against eager",
+            )
         if not any_hit:
             torch.testing.assert_close(hits.t[same], ref_hits.t[same], rtol=1e-5, atol=0.0)
         sizes.append(len(lab._GRAPHS))
         if len(sizes) == 1:  # packed inside the call: graphs of one call, none kept
-            fresh, _ = lab.bvh_closest_hit_fast(rays, mesh, bvh, check_every=8,
-                                                compile="reduce-overhead")
+            fresh, _ = lab.bvh_closest_hit_fast(
+                rays, mesh, bvh, check_every=8, compile="reduce-overhead"
+            )
             differ = int((fresh.triangle != ref_hits.triangle).sum())
             assert differ <= len(rays) // 1000, f"graphs, packed per call: {differ} rays differ"
             assert len(lab._GRAPHS) == sizes[0], "graphs of a walk packed per call were kept"
     assert sizes[1] == sizes[0], (
         f"the second traversal of the same rays captured new graphs (cached graphs per call: "
-        f"{sizes}): a warm traversal must reuse the sizes of the first")
+        f"{sizes}): a warm traversal must reuse the sizes of the first"
+    )

@@ -96,31 +96,51 @@ def _suzanne(size: int):
 def test_graph_path_matches_eager(emulated):
     mesh, bvh, camera = _suzanne(40)
     walk = pack_bvh(bvh, mesh)
-    moved = dataclasses.replace(camera, eye=tuple(t + 1.3 * (e - t) for e, t in
-                                                  zip(camera.eye, camera.target)))
+    moved = dataclasses.replace(
+        camera, eye=tuple(t + 1.3 * (e - t) for e, t in zip(camera.eye, camera.target))
+    )
     for cam, any_hit, k in ((camera, False, 4), (moved, False, 3), (camera, True, 4)):
         rays = primary_rays(cam)
         # Rays that hit first, so that a padding column written to a real ray's output
         # would show.
         first, _ = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk)
         rays = rays[torch.argsort((first.triangle < 0).int(), stable=True)]
-        ref_hits, ref = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, check_every=k,
-                                                 any_hit=any_hit)
+        ref_hits, ref = lab.bvh_closest_hit_fast(
+            rays, mesh, bvh, walk=walk, check_every=k, any_hit=any_hit
+        )
         assert int((ref_hits.triangle >= 0).sum()) > 150, "the rays should hit Suzanne"
         for packed in (walk, None):
             made = EagerGraph.made
-            hits, count = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=packed,
-                                                   check_every=k, any_hit=any_hit,
-                                                   compile="reduce-overhead")
+            hits, count = lab.bvh_closest_hit_fast(
+                rays,
+                mesh,
+                bvh,
+                walk=packed,
+                check_every=k,
+                any_hit=any_hit,
+                compile="reduce-overhead",
+            )
             what = f"emulated graphs (any_hit={any_hit}, k={k}, walk={packed is not None})"
             for key in ("steps", "tests"):
-                assert_equal(count[key], ref[key], where="ray",
-                             name=f"{what}: counters[{key!r}] against eager")
-            assert_equal(hits.triangle, ref_hits.triangle, where="ray",
-                         name=f"{what}: triangles against eager")
+                assert_equal(
+                    count[key],
+                    ref[key],
+                    where="ray",
+                    name=f"{what}: counters[{key!r}] against eager",
+                )
+            assert_equal(
+                hits.triangle,
+                ref_hits.triangle,
+                where="ray",
+                name=f"{what}: triangles against eager",
+            )
             for name in ("t", "u", "v"):
-                assert_equal(getattr(hits, name), getattr(ref_hits, name), where="ray",
-                             name=f"{what}: {name} against eager")
+                assert_equal(
+                    getattr(hits, name),
+                    getattr(ref_hits, name),
+                    where="ray",
+                    name=f"{what}: {name} against eager",
+                )
             assert EagerGraph.made - made >= 2, f"{what}: never compacted into a new graph"
     assert len(lab._GRAPHS) > 1, "the cached path should have compacted into other sizes"
 
@@ -133,7 +153,8 @@ def test_cached_graphs_are_reused(emulated):
     made, started, cached = EagerGraph.made, EagerStartGraph.made, len(lab._GRAPHS)
     again = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, compile="reduce-overhead")
     assert (EagerGraph.made, EagerStartGraph.made, len(lab._GRAPHS)) == (made, started, cached), (
-        "a second traversal of the same rays made new graphs")
+        "a second traversal of the same rays made new graphs"
+    )
     for a, b in ((first[0].triangle, again[0].triangle), (first[1]["steps"], again[1]["steps"])):
         assert_equal(b, a, where="ray", name="second traversal against the first")
     # Other rays in buffers a traversal left behind: nothing stale may leak into them.
@@ -144,17 +165,26 @@ def test_cached_graphs_are_reused(emulated):
     assert_equal(got.t, want.t, where="ray", name="half the rays' t, graph path")
     # The start graph's buffers are the same for every traversal of as many rays: results
     # handed out before must not change when the next traversal replays it.
-    moved = dataclasses.replace(camera, eye=tuple(t + 1.5 * (e - t) for e, t in
-                                                  zip(camera.eye, camera.target)))
+    moved = dataclasses.replace(
+        camera, eye=tuple(t + 1.5 * (e - t) for e, t in zip(camera.eye, camera.target))
+    )
     other = primary_rays(moved)
     started = EagerStartGraph.made
     later, _ = lab.bvh_closest_hit_fast(other, mesh, bvh, walk=walk, compile="reduce-overhead")
     assert EagerStartGraph.made == started, "as many rays again: the start graph is kept"
     assert not torch.equal(later.t, again[0].t), "the other camera should see other hits"
-    assert_equal(again[0].triangle, first[0].triangle, where="ray",
-                 name="earlier results after another traversal replayed the start graph")
-    assert_equal(again[0].t, first[0].t, where="ray",
-                 name="earlier t after another traversal replayed the start graph")
+    assert_equal(
+        again[0].triangle,
+        first[0].triangle,
+        where="ray",
+        name="earlier results after another traversal replayed the start graph",
+    )
+    assert_equal(
+        again[0].t,
+        first[0].t,
+        where="ray",
+        name="earlier t after another traversal replayed the start graph",
+    )
 
 
 def test_graphs_compact_only_from_the_floor(emulated, monkeypatch):
@@ -167,10 +197,16 @@ def test_graphs_compact_only_from_the_floor(emulated, monkeypatch):
         monkeypatch.setattr(lab, "_GRAPH_COMPACT_FROM", floor)
         monkeypatch.setattr(lab, "_GRAPHS", collections.OrderedDict())
         made = EagerGraph.made
-        got, _ = lab.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, check_every=4,
-                                          compile="reduce-overhead")
+        got, _ = lab.bvh_closest_hit_fast(
+            rays, mesh, bvh, walk=walk, check_every=4, compile="reduce-overhead"
+        )
         assert (EagerGraph.made - made >= 2) == compacts, (
             f"{started} rays started, compactions from {floor} rays: expected "
-            f"{'a compaction' if compacts else 'none'}, made {EagerGraph.made - made} graphs")
-        assert_equal(got.triangle, want.triangle, where="ray",
-                     name=f"compactions from {floor} rays: triangles against eager")
+            f"{'a compaction' if compacts else 'none'}, made {EagerGraph.made - made} graphs"
+        )
+        assert_equal(
+            got.triangle,
+            want.triangle,
+            where="ray",
+            name=f"compactions from {floor} rays: triangles against eager",
+        )

@@ -20,9 +20,15 @@ def _failures(mutant: Mutant, tmp_path) -> str:
 
 
 def test_one_step_short_is_named_by_its_step_count(tmp_path):
-    short = Mutant(name="march_one_step_short", module="lab4_march", function="march_box",
-                   find="for i in range(steps):", replace="for i in range(steps - 1):",
-                   tests=TEST, why="the loop stops one step early")
+    short = Mutant(
+        name="march_one_step_short",
+        module="lab4_march",
+        function="march_box",
+        find="for i in range(steps):",
+        replace="for i in range(steps - 1):",
+        tests=TEST,
+        why="the loop stops one step early",
+    )
     output = _failures(short, tmp_path)
     assert "samples per ray" in output and "the loop runs `steps` times" in output, output
     assert "before updating T" not in output, output

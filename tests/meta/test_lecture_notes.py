@@ -63,10 +63,13 @@ def _toy_course(root: Path):
     given = "def scale(n):\n    return 2 * n\n\n\n"
     (root / "solutions" / "lab9_toy.py").write_text(
         given + "def wave(n):\n    # BEGIN SOLUTION\n"
-        "    return [((-1) ** i) * i for i in range(n)]\n    # END SOLUTION\n")
+        "    return [((-1) ** i) * i for i in range(n)]\n    # END SOLUTION\n"
+    )
     (root / "labs" / "lab9_toy.py").write_text(  # what the release generates from it
-        given + 'def wave(n):\n    raise NotImplementedError("not implemented yet: wave")\n')
-    (root / "tests" / "test_lab9_toy.py").write_text(textwrap.dedent("""\
+        given + 'def wave(n):\n    raise NotImplementedError("not implemented yet: wave")\n'
+    )
+    (root / "tests" / "test_lab9_toy.py").write_text(
+        textwrap.dedent("""\
         import pytest
 
         LAB_MODULE = "lab9_toy"
@@ -83,14 +86,22 @@ def _toy_course(root: Path):
         @pytest.mark.points(1)
         def test_wave_alternates(impl):
             assert impl.wave(3) == [0, -1, 2]
-        """))
-    nbformat.write(new_notebook(cells=[
-        new_markdown_cell("# Toy lecture"), new_code_cell(SETUP),
-        new_code_cell("print('scale:', lab.scale(21))"),
-        new_markdown_cell("## A wave"), new_code_cell(DEMO),
-        new_code_cell("print('the wave ends at', waves['long'][-1])"),
-        new_code_cell("print('after the demo')"),
-    ]), root / "slides" / "01_toy.ipynb")
+        """)
+    )
+    nbformat.write(
+        new_notebook(
+            cells=[
+                new_markdown_cell("# Toy lecture"),
+                new_code_cell(SETUP),
+                new_code_cell("print('scale:', lab.scale(21))"),
+                new_markdown_cell("## A wave"),
+                new_code_cell(DEMO),
+                new_code_cell("print('the wave ends at', waves['long'][-1])"),
+                new_code_cell("print('after the demo')"),
+            ]
+        ),
+        root / "slides" / "01_toy.ipynb",
+    )
 
 
 @pytest.fixture(scope="module")
@@ -107,8 +118,9 @@ def test_release_ships_executed_notebooks_notes_and_figures(handout):
     assert not (out / "solutions").exists()
     shipped = nbformat.read(out / "slides" / "01_toy.ipynb", as_version=4)
     demo = shipped.cells[4]
-    assert any("image/png" in o.get("data", {}) for o in demo.outputs), \
+    assert any("image/png" in o.get("data", {}) for o in demo.outputs), (
         "the handout's notebook opens with the reference figure"
+    )
     assert "the wave ends at -7" in "".join(o.get("text", "") for o in shipped.cells[5].outputs)
     index = json.loads((out / FIGURES / INDEX).read_text())
     pngs = [o["png"] for entry in index.values() for o in entry["outputs"] if "png" in o]
@@ -127,13 +139,16 @@ def test_unwritten_demo_shows_the_reference_figure_and_one_line(handout):
     for cell in notebook.cells:
         if cell.cell_type == "code":
             cell.outputs, cell.execution_count = [], None
-    bug = new_code_cell("{}['a key that is not there']",
-                        metadata={"tags": ["raises-exception"]})
+    bug = new_code_cell("{}['a key that is not there']", metadata={"tags": ["raises-exception"]})
     notebook.cells.append(bug)
     # allow_errors=False: a cell whose reply is an error stops the run, as "run all" does,
     # except the one tagged raises-exception.
-    NotebookClient(notebook, timeout=120, kernel_name="python3",
-                   resources={"metadata": {"path": str(out / "slides")}}).execute()
+    NotebookClient(
+        notebook,
+        timeout=120,
+        kernel_name="python3",
+        resources={"metadata": {"path": str(out / "slides")}},
+    ).execute()
     cells = [c for c in notebook.cells if c.cell_type == "code"]
     setup, written, demo, after_demo, after, bug = cells
     for cell in (setup, written, demo, after_demo, after):
@@ -145,11 +160,13 @@ def test_unwritten_demo_shows_the_reference_figure_and_one_line(handout):
     assert len(images) == 1, "the reference figure, and not the half-drawn one, is shown"
     tables = [o for o in demo.outputs if "text/markdown" in o.get("data", {})]
     assert len(tables) == 1, "the reference's table once, not the stopped cell's as well"
-    assert _text(after_demo).strip() == LINE, \
+    assert _text(after_demo).strip() == LINE, (
         "a cell that fails on what the demo left unmade (its dict without the key) too"
+    )
     assert "after the demo" in _text(after)
-    assert [o.ename for o in bug.outputs if o.output_type == "error"] == ["KeyError"], \
+    assert [o.ename for o in bug.outputs if o.output_type == "error"] == ["KeyError"], (
         "any other error still shows its traceback"
+    )
 
 
 def _text(cell) -> str:
@@ -158,8 +175,12 @@ def _text(cell) -> str:
 
 def test_unwritten_function_names_lab_and_task_from_the_message_or_graders():
     namespace = {"__name__": "lab4_march"}
-    code = compile("def march_box():\n    raise NotImplementedError("
-                   "'not implemented yet: march_box (task 1)')\n", "labs/lab4_march.py", "exec")
+    code = compile(
+        "def march_box():\n    raise NotImplementedError("
+        "'not implemented yet: march_box (task 1)')\n",
+        "labs/lab4_march.py",
+        "exec",
+    )
     exec(code, namespace)  # noqa: S102  (a stand-in for the skeleton's file)
     try:
         namespace["march_box"]()
@@ -177,8 +198,10 @@ def test_unwritten_function_names_lab_and_task_from_the_message_or_graders():
 
 
 def test_names_a_cell_assigns_and_reads():
-    code = ("import numpy as np\nfor i in range(3):\n    rows[i] = f(i)\nstate.x = 1\n"
-            "def g():\n    pass\nbest = max(rows)")
+    code = (
+        "import numpy as np\nfor i in range(3):\n    rows[i] = f(i)\nstate.x = 1\n"
+        "def g():\n    pass\nbest = max(rows)"
+    )
     assert names_assigned(code) == {"np", "i", "rows", "state", "g", "best"}
     assert {"range", "rows", "f", "max"} <= names_read(code)
     assert names_assigned("%time x = 1") == set(), "IPython syntax: nothing known"
@@ -186,8 +209,12 @@ def test_names_a_cell_assigns_and_reads():
 
 def _outputs_shown(cell) -> int:
     """Figures, animations and tables a code cell shows."""
-    return sum(1 for o in cell.get("outputs", []) if o.get("output_type") in
-               ("display_data", "execute_result") and set(o.get("data", {})) - {"text/plain"})
+    return sum(
+        1
+        for o in cell.get("outputs", [])
+        if o.get("output_type") in ("display_data", "execute_result")
+        and set(o.get("data", {})) - {"text/plain"}
+    )
 
 
 def _run_on_skeletons(handout_dir: Path, name: str):
@@ -198,9 +225,12 @@ def _run_on_skeletons(handout_dir: Path, name: str):
     for cell in run.cells:
         if cell.cell_type == "code":
             cell.outputs, cell.execution_count = [], None
-    NotebookClient(run, timeout=600, kernel_name="python3",
-                   resources={"metadata": {"path": str(handout_dir / "slides")}}).execute(
-        env={**os.environ, "RTCOURSE_SMALL": "1"})
+    NotebookClient(
+        run,
+        timeout=600,
+        kernel_name="python3",
+        resources={"metadata": {"path": str(handout_dir / "slides")}},
+    ).execute(env={**os.environ, "RTCOURSE_SMALL": "1"})
     return shipped, run
 
 
@@ -209,11 +239,13 @@ def _assert_every_figure_shown(shipped, run, name):
     for number, (ref, got) in enumerate(zip(shipped.cells, run.cells)):
         if ref.cell_type != "code":
             continue
-        assert not [o for o in got.outputs if o.output_type == "error"], \
+        assert not [o for o in got.outputs if o.output_type == "error"], (
             f"{name} cell {number}: an error in the handout before any lab is written"
-        assert _outputs_shown(got) == _outputs_shown(ref), \
-            f"{name} cell {number}: shows {_outputs_shown(got)} of the references' " \
+        )
+        assert _outputs_shown(got) == _outputs_shown(ref), (
+            f"{name} cell {number}: shows {_outputs_shown(got)} of the references' "
             f"{_outputs_shown(ref)} figures and tables"
+        )
         lines += "to see your own" in _text(got)
     assert lines, f"{name}: no demo needed an unwritten function, so nothing was checked"
 

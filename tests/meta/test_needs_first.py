@@ -32,8 +32,12 @@ LABS = lab_catalog(sorted((ROOT / "tests").glob("test_lab*_*.py")))
 
 def _tasks(number: int):
     lab = LABS[number]
-    return {t.number: t for t in lab_task_needs(lab, lab_source(ROOT / "labs", lab.module),
-                                                lab_source(ROOT / "solutions", lab.module))}
+    return {
+        t.number: t
+        for t in lab_task_needs(
+            lab, lab_source(ROOT / "labs", lab.module), lab_source(ROOT / "solutions", lab.module)
+        )
+    }
 
 
 def test_a_task_needs_what_its_tests_run_through_the_lab():
@@ -63,16 +67,21 @@ def test_every_task_needs_only_other_tasks_functions():
 
 def test_the_readme_lists_the_needs():
     text = labs_readme(ROOT, hidden_root=ROOT)
-    row = next(line for line in text.splitlines() if line.startswith("| 1 |")
-               and "`march_box`" in line)
+    row = next(
+        line for line in text.splitlines() if line.startswith("| 1 |") and "`march_box`" in line
+    )
     assert "task 2 (`segment_integral`)" in row, row
     lab = LABS[4]
-    table = task_table(lab, lab_source(ROOT / "labs", lab.module), "tests/test_lab4_march.py",
-                       lab_source(ROOT / "solutions", lab.module))
+    table = task_table(
+        lab,
+        lab_source(ROOT / "labs", lab.module),
+        "tests/test_lab4_march.py",
+        lab_source(ROOT / "solutions", lab.module),
+    )
     assert any("task 2 (`segment_integral`)" in line for line in table[2:3])
 
 
-GRADER = '''
+GRADER = """
 import pytest
 from course.grading.testing import replaced
 
@@ -111,17 +120,22 @@ def test_outer_given(impl):
 @pytest.mark.points(1)
 def test_checks(impl):
     expect_error("x", impl.outer, -1)
-'''
+"""
 
 
 def test_the_grader_walk(tmp_path):
     path = tmp_path / "test_lab9_toy.py"
     path.write_text(GRADER)
     tests = grader_uses([path])
-    uses = {(u.function, tuple(sorted(u.replaced)), u.runs, u.optional)
-            for u in tests["test_outer_given"]}
-    assert uses == {("outer", ("inner",), True, False), ("outer", (), True, False),
-                    ("maybe", (), True, True)}
+    uses = {
+        (u.function, tuple(sorted(u.replaced)), u.runs, u.optional)
+        for u in tests["test_outer_given"]
+    }
+    assert uses == {
+        ("outer", ("inner",), True, False),
+        ("outer", (), True, False),
+        ("maybe", (), True, True),
+    }
     assert [(u.function, u.runs) for u in tests["test_checks"]] == [("outer", False)]
 
 
@@ -151,14 +165,23 @@ def _grade(folder: Path, written: dict[int, list[int]]) -> dict[int, tuple[float
     """Grade, in one run, each lab of ``written`` (lab -> the tasks written) on the tests of
     ``GRADED``; lab -> (score, max score)."""
     folder.mkdir(parents=True)
-    cmd = [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(folder),
-           "--trusted", "-k", " or ".join(keyword for *_, keyword in GRADED),
-           "--json", str(folder / "results.json")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "course.tools.cli",
+        "grade",
+        "--impl",
+        str(folder),
+        "--trusted",
+        "-k",
+        " or ".join(keyword for *_, keyword in GRADED),
+        "--json",
+        str(folder / "results.json"),
+    ]
     for number, task, _ in GRADED:
         _submission(number, written[number], folder)
         cmd += ["--lab", str(number), "--task", f"{number}.{task}"]
-    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300,
-                          check=False)
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
     out = folder / "results.json"
     assert out.exists(), proc.stdout[-3000:] + proc.stderr[-3000:]
     scores: dict[int, tuple[float, float]] = {}
@@ -180,16 +203,22 @@ def test_the_listed_tasks_are_needed_and_enough(tmp_path):
     # Run 0: every listed task written; run i: each lab without its i-th listed task.
     runs = [{number: [task, *needs[number]] for number, task, _ in GRADED}]
     for i in range(max(map(len, needs.values()))):
-        runs.append({number: [task, *(k for j, k in enumerate(needs[number]) if j != i)]
-                     for number, task, _ in GRADED})
+        runs.append(
+            {
+                number: [task, *(k for j, k in enumerate(needs[number]) if j != i)]
+                for number, task, _ in GRADED
+            }
+        )
     with ThreadPoolExecutor(max_workers=2) as pool:
-        results = list(pool.map(lambda i: _grade(tmp_path / f"run{i}", runs[i]),
-                                range(len(runs))))
+        results = list(pool.map(lambda i: _grade(tmp_path / f"run{i}", runs[i]), range(len(runs))))
     for number, task, _ in GRADED:
         score, top = results[0][number]
         assert top > 0 and score == pytest.approx(top), (
-            f"lab {number} task {task} with tasks {runs[0][number]} written: {score}/{top}")
+            f"lab {number} task {task} with tasks {runs[0][number]} written: {score}/{top}"
+        )
         for i, left_out in enumerate(needs[number], start=1):
             score, top = results[i][number]
-            assert score < top, (f"lab {number} task {task} passed without task {left_out}, "
-                                 f"which the README says it needs")
+            assert score < top, (
+                f"lab {number} task {task} passed without task {left_out}, "
+                f"which the README says it needs"
+            )

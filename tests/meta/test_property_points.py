@@ -10,12 +10,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 
-ZEROING = '''
+ZEROING = """
 
 def render_rotating_triangle(frame_index, out, period=120):
     out.zero_()  # in place, returned, every pixel written: and all of them wrong
     return out
-'''
+"""
 
 
 def test_zeroing_in_place_earns_no_in_place_point(tmp_path):
@@ -24,12 +24,30 @@ def test_zeroing_in_place_earns_no_in_place_point(tmp_path):
     reference = (ROOT / "solutions" / "lab0_interop.py").read_text()
     (submission / "lab0_interop.py").write_text(reference + ZEROING)
     out = tmp_path / "results.json"
-    subprocess.run([sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(submission),
-                    "--lab", "0", "-k", "render_rotating_triangle_writes_in_place", "--json",
-                    str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "course.tools.cli",
+            "grade",
+            "--impl",
+            str(submission),
+            "--lab",
+            "0",
+            "-k",
+            "render_rotating_triangle_writes_in_place",
+            "--json",
+            str(out),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     tests = json.loads(out.read_text())["tests"]
     assert tests, "the in-place test did not run"
     for test in tests:
         assert test["score"] == 0, f"{test['name']} credited a zeroed frame: {test['output']}"
-        assert "render_rotating_triangle(2, out): the frame in out" in test["output"], (
-            test["output"])
+        assert "render_rotating_triangle(2, out): the frame in out" in test["output"], test[
+            "output"
+        ]

@@ -18,14 +18,16 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_committed_skeletons_are_generated():
     problems = differences(ROOT / "solutions", ROOT / "labs")
-    assert not problems, "\n".join(problems + ["run `rtcourse skeletons` after editing a "
-                                               "reference"])
+    assert not problems, "\n".join(
+        problems + ["run `rtcourse skeletons` after editing a reference"]
+    )
 
 
 def _course_copy(tmp_path) -> Path:
     copy = tmp_path / "course"
-    shutil.copytree(ROOT / "solutions", copy / "solutions",
-                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(
+        ROOT / "solutions", copy / "solutions", ignore=shutil.ignore_patterns("__pycache__")
+    )
     shutil.copytree(ROOT / "labs", copy / "labs", ignore=shutil.ignore_patterns("__pycache__"))
     (copy / "tests").mkdir()
     (copy / "pyproject.toml").write_text("")
@@ -33,16 +35,24 @@ def _course_copy(tmp_path) -> Path:
 
 
 def _check(folder: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "course.tools.cli", "skeletons", "--check"],
-                          cwd=folder, capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "course.tools.cli", "skeletons", "--check"],
+        cwd=folder,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def test_check_names_a_hand_edit(tmp_path):
     copy = _course_copy(tmp_path)
     assert _check(copy).returncode == 0
     # A lab file or a module of a lab package: the first skeleton with a stub.
-    skeleton = next(p for p in sorted((copy / "labs").rglob("*.py"))
-                    if "raise NotImplementedError" in p.read_text())
+    skeleton = next(
+        p
+        for p in sorted((copy / "labs").rglob("*.py"))
+        if "raise NotImplementedError" in p.read_text()
+    )
     lines = skeleton.read_text().splitlines(keepends=True)
     number = next(i for i, line in enumerate(lines) if "raise NotImplementedError" in line)
     lines[number] = lines[number].replace("raise NotImplementedError", "return None  #")
@@ -121,14 +131,19 @@ def test_a_file_without_markers_is_copied():
     assert skeleton_source("x = 1\n\n\ny = 2\n") == "x = 1\n\n\ny = 2\n"
 
 
-@pytest.mark.parametrize(("text", "says"), [
-    ("# BEGIN SOLUTION\nx = 1\n", "1: BEGIN SOLUTION without an END SOLUTION"),
-    ("x = 1\n# END SOLUTION\n", "2: END SOLUTION without a BEGIN SOLUTION"),
-    ("# BEGIN SOLUTION\n# BEGIN SOLUTION\n# END SOLUTION\n", "2: BEGIN SOLUTION inside"),
-    ('def f():\n    # BEGIN SOLUTION ("x")\n    return 1\n    # END SOLUTION\n',
-     "may not hold a double quote"),
-    ("if True:\n# BEGIN SOLUTION\n    x = 1\n# END SOLUTION\n", "does not parse"),
-])
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("# BEGIN SOLUTION\nx = 1\n", "1: BEGIN SOLUTION without an END SOLUTION"),
+        ("x = 1\n# END SOLUTION\n", "2: END SOLUTION without a BEGIN SOLUTION"),
+        ("# BEGIN SOLUTION\n# BEGIN SOLUTION\n# END SOLUTION\n", "2: BEGIN SOLUTION inside"),
+        (
+            'def f():\n    # BEGIN SOLUTION ("x")\n    return 1\n    # END SOLUTION\n',
+            "may not hold a double quote",
+        ),
+        ("if True:\n# BEGIN SOLUTION\n    x = 1\n# END SOLUTION\n", "does not parse"),
+    ],
+)
 def test_bad_markers_are_named(text, says):
     with pytest.raises(MarkerError, match=r"lab\.py"):
         skeleton_source(text, "lab.py")
@@ -140,7 +155,8 @@ def test_bad_markers_are_named(text, says):
 def test_every_stub_names_its_task():
     """What a student runs into first: each stub says which function and which task."""
     for path in sorted((ROOT / "labs").rglob("lab*.py")) + sorted(
-            (ROOT / "labs").glob("lab*_*/*.py")):
+        (ROOT / "labs").glob("lab*_*/*.py")
+    ):
         for number, line in enumerate(path.read_text().splitlines(), 1):
             if "raise NotImplementedError(" in line:
                 assert "(task " in line, f"{path.relative_to(ROOT)}:{number}: {line.strip()}"

@@ -18,13 +18,17 @@ OVERVIEW = ROOT / "slides" / "00_overview.ipynb"
 
 
 def test_heading_cells_open_slides_without_touching_the_notebook():
-    nb = new_notebook(cells=[
-        new_markdown_cell("# Title\ntext"), new_code_cell("x = 1"),
-        new_markdown_cell("\n## Part"), new_markdown_cell("### Detail"),
-        new_markdown_cell("no heading here"),
-        new_markdown_cell("## Kept", metadata={"slideshow": {"slide_type": "fragment"}})])
-    types = [c.metadata.get("slideshow", {}).get("slide_type")
-             for c in with_slide_types(nb).cells]
+    nb = new_notebook(
+        cells=[
+            new_markdown_cell("# Title\ntext"),
+            new_code_cell("x = 1"),
+            new_markdown_cell("\n## Part"),
+            new_markdown_cell("### Detail"),
+            new_markdown_cell("no heading here"),
+            new_markdown_cell("## Kept", metadata={"slideshow": {"slide_type": "fragment"}}),
+        ]
+    )
+    types = [c.metadata.get("slideshow", {}).get("slide_type") for c in with_slide_types(nb).cells]
     assert types == ["slide", None, "slide", "subslide", None, "fragment"]
     assert "slideshow" not in nb.cells[0].metadata, "the input notebook must stay as it was"
 
@@ -33,20 +37,42 @@ def _toy_course(root: Path):
     (root / "tests").mkdir(parents=True)
     (root / "pyproject.toml").write_text("")
     (root / "slides").mkdir()
-    nbformat.write(new_notebook(cells=[
-        new_markdown_cell("# Toy lecture\nintro"),
-        new_code_cell("import os\nprint('SMALL=' + os.environ.get('RTCOURSE_SMALL', 'unset'))"),
-        new_markdown_cell("## A figure"),
-        new_code_cell("import matplotlib.pyplot as plt\nplt.plot([0, 1], [1, 0])\nplt.show()"),
-    ]), root / "slides" / "01_toy.ipynb")
-    nbformat.write(new_notebook(cells=[new_markdown_cell("# Broken"), new_code_cell("1 / 0"),
-                                       new_markdown_cell("## After the error")]),
-                   root / "slides" / "02_broken.ipynb")
+    nbformat.write(
+        new_notebook(
+            cells=[
+                new_markdown_cell("# Toy lecture\nintro"),
+                new_code_cell(
+                    "import os\nprint('SMALL=' + os.environ.get('RTCOURSE_SMALL', 'unset'))"
+                ),
+                new_markdown_cell("## A figure"),
+                new_code_cell(
+                    "import matplotlib.pyplot as plt\nplt.plot([0, 1], [1, 0])\nplt.show()"
+                ),
+            ]
+        ),
+        root / "slides" / "01_toy.ipynb",
+    )
+    nbformat.write(
+        new_notebook(
+            cells=[
+                new_markdown_cell("# Broken"),
+                new_code_cell("1 / 0"),
+                new_markdown_cell("## After the error"),
+            ]
+        ),
+        root / "slides" / "02_broken.ipynb",
+    )
 
 
 def _slides(root: Path, *args):
-    return subprocess.run([sys.executable, "-m", "course.tools.cli", "slides", "--out", "out", *args],
-                          cwd=root, capture_output=True, text=True, timeout=300, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "course.tools.cli", "slides", "--out", "out", *args],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
 
 
 def test_rtcourse_slides_executes_and_renders(tmp_path):
@@ -59,7 +85,7 @@ def test_rtcourse_slides_executes_and_renders(tmp_path):
     for name in ("01_toy", "02_broken"):
         assert f'href="{name}.slides.html"' in index and f'href="{name}.html"' in index
     slides = (out / "01_toy.slides.html").read_text()
-    assert "reveal" in slides and slides.count('<section') >= 2
+    assert "reveal" in slides and slides.count("<section") >= 2
     # A long code line scrolls inside its slide; an output line is never wrapped mid-number.
     assert ".jp-RenderedText pre { white-space: pre;" in slides
     assert ".jp-InputArea-editor pre, .jp-RenderedText pre { overflow-x: auto; }" in slides
@@ -84,23 +110,37 @@ def test_rtcourse_slides_no_execute_keeps_saved_outputs(tmp_path):
 def test_overview_is_saved_clean_and_executes_quickly():
     notebook = nbformat.read(OVERVIEW, as_version=4)
     code = [c for c in notebook.cells if c.cell_type == "code"]
-    assert code and all(not c.outputs and c.execution_count is None for c in code), \
+    assert code and all(not c.outputs and c.execution_count is None for c in code), (
         "save the overview without outputs"
+    )
     text = "\n".join(c.source for c in notebook.cells).lower()
-    for part in ("interop", "why ray tracing", "intersection", "acceleration structures",
-                 "organising the tracer", "ray marching", "froxel", "rasteriz"):
+    for part in (
+        "interop",
+        "why ray tracing",
+        "intersection",
+        "acceleration structures",
+        "organising the tracer",
+        "ray marching",
+        "froxel",
+        "rasteriz",
+    ):
         assert part in text, f"the lecture plan does not mention {part!r}"
     start = time.perf_counter()
     stopped = execute(notebook, OVERVIEW.parent)
     seconds = time.perf_counter() - start
     assert stopped is None and error_cells(notebook) == 0
     assert seconds < 20, f"the overview took {seconds:.1f} s to execute"
-    shown = "".join(o.get("data", {}).get("text/markdown", "") for c in notebook.cells
-                    if c.cell_type == "code" for o in c.outputs)
+    shown = "".join(
+        o.get("data", {}).get("text/markdown", "")
+        for c in notebook.cells
+        if c.cell_type == "code"
+        for o in c.outputs
+    )
     for lab in sorted((ROOT / "labs").glob("lab*_*")):  # lab files and lab packages
         name = f"{lab.name}/" if lab.is_dir() else lab.name
         assert f"labs/{name}" in shown, f"the lab table misses {name}"
     present = {lab_number(p.name) for p in (ROOT / "labs").glob("lab*_*")}
     assert shown.count("*planned*") == len(set(range(7)) - present)
-    assert any("image/png" in o.get("data", {}) for c in code for o in c.outputs), \
+    assert any("image/png" in o.get("data", {}) for c in code for o in c.outputs), (
         "the overview draws its occupancy figure"
+    )

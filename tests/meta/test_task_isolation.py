@@ -46,19 +46,35 @@ CASES = [
     Case("march_transmittance_first", 1, "march_box or segment_integral or single_scatter"),
     # Lab 2: the grid builder (task 1) fed the grid walk, closest_hit (task 5) and the
     # two-level grid's top level (task 6).
-    Case("grid_cells_one_short", 1, "grid_resolution_and_build or grid_dda or "
-         "closest_hit_entry or two_level_build or counters_show"),
+    Case(
+        "grid_cells_one_short",
+        1,
+        "grid_resolution_and_build or grid_dda or "
+        "closest_hit_entry or two_level_build or counters_show",
+    ),
     # Lab 3: the direct shading (task 1) fed every renderer (tasks 1, 2 and 4).
-    Case("specular_not_normalised", 1, "shade_direct_matches or render_whitted_matches or "
-         "render_wavefront_matches or render_persistent_matches or whole_tracer",
-         names="shade_direct"),
+    Case(
+        "specular_not_normalised",
+        1,
+        "shade_direct_matches or render_whitted_matches or "
+        "render_wavefront_matches or render_persistent_matches or whole_tracer",
+        names="shade_direct",
+    ),
     # Lab 5: the V-buffer's phase g (task 2) fed every whole frame, once graded under
     # task 7 with the application.
-    Case("g_not_scattering_weighted", 2, "voxelize or media_at or apply_froxels or "
-         "render_froxels", names="voxelize"),
+    Case(
+        "g_not_scattering_weighted",
+        2,
+        "voxelize or media_at or apply_froxels or render_froxels",
+        names="voxelize",
+    ),
     # Lab 6: the fill rule (task 2) fed rasterize (task 3) and everything after it.
-    Case("no_fill_rule", 2, "coverage_fill or rasterize_visibility or "
-         "perspective_correct_exact or hybrid or rasterize_mesh"),
+    Case(
+        "no_fill_rule",
+        2,
+        "coverage_fill or rasterize_visibility or "
+        "perspective_correct_exact or hybrid or rasterize_mesh",
+    ),
 ]
 
 SLOW_CASES = [
@@ -67,14 +83,26 @@ SLOW_CASES = [
     # Lab 4: the back-to-front update in march_box (task 1) under tasks 2 and 3.
     Case("march_back_to_front", 1, "march_box or segment_integral or single_scatter"),
     # Lab 2: the DDA (task 1) under closest_hit, 'auto' and the two-level walk.
-    Case("dda_lower_face_when_stepping_up", 1, "grid_dda or closest_hit_entry or auto_builds "
-         "or two_level_matches or two_level_mailboxing or counters_show"),
+    Case(
+        "dda_lower_face_when_stepping_up",
+        1,
+        "grid_dda or closest_hit_entry or auto_builds "
+        "or two_level_matches or two_level_mailboxing or counters_show",
+    ),
     # Lab 3: the normal offset (task 1), used by the shading and by every bounce.
-    Case("no_normal_offset", 1, "offset_origins or render_whitted or render_wavefront or "
-         "render_persistent or whole_tracer", names="offset_origins"),
+    Case(
+        "no_normal_offset",
+        1,
+        "offset_origins or render_whitted or render_wavefront or render_persistent or whole_tracer",
+        names="offset_origins",
+    ),
     # Lab 6: no near-plane clipping (task 1) under rasterize_mesh, shading and shadows.
-    Case("no_near_plane_clipping", 1, "clip_triangles or perspective_correct_exact or "
-         "shade_flat or hybrid or rasterize_mesh", names="clip_triangles"),
+    Case(
+        "no_near_plane_clipping",
+        1,
+        "clip_triangles or perspective_correct_exact or shade_flat or hybrid or rasterize_mesh",
+        names="clip_triangles",
+    ),
 ]
 
 
@@ -83,7 +111,8 @@ def end_to_end_task(lab: int) -> int | None:
     path = next((ROOT / "tests").glob(f"test_lab{lab}_*.py"))
     for node in ast.parse(path.read_text()).body:
         if isinstance(node, ast.Assign) and any(
-                isinstance(t, ast.Name) and t.id == "END_TO_END" for t in node.targets):
+            isinstance(t, ast.Name) and t.id == "END_TO_END" for t in node.targets
+        ):
             return ast.literal_eval(node.value)
     return None
 
@@ -104,20 +133,27 @@ def check_isolated(case: Case, data: dict) -> None:
             failed[task].append(test["name"])
     assert lost[case.task] > 0, (
         f"mutant {case.mutant} (lab {lab}, task {case.task}) lost no points in its own "
-        f"task: {data['output']}")
+        f"task: {data['output']}"
+    )
     elsewhere = {t: names for t, names in failed.items() if t not in (case.task, e2e)}
     assert not elsewhere, (
         f"mutant {case.mutant} of lab {lab} task {case.task} also costs points in other "
-        f"tasks (they must get the earlier tasks' results given): {elsewhere}")
+        f"tasks (they must get the earlier tasks' results given): {elsewhere}"
+    )
     if case.names is not None:
-        outputs = [t["output"] for t in data["tests"]
-                   if t["number"] == f"{lab}.{e2e}" and t["score"] < t["max_score"]]
+        outputs = [
+            t["output"]
+            for t in data["tests"]
+            if t["number"] == f"{lab}.{e2e}" and t["score"] < t["max_score"]
+        ]
         assert outputs, f"mutant {case.mutant}: the end-to-end task passed"
         # A long line of feedback wraps: compare the words, not where the lines break.
-        assert any(f"the step that is wrong: {case.names}" in " ".join(o.split())
-                   for o in outputs), (
+        assert any(
+            f"the step that is wrong: {case.names}" in " ".join(o.split()) for o in outputs
+        ), (
             f"mutant {case.mutant}: the end-to-end failure must name {case.names} as the "
-            f"wrong step: {outputs[0][:600]}")
+            f"wrong step: {outputs[0][:600]}"
+        )
 
 
 def _run(cases, tmp_path):
@@ -131,12 +167,18 @@ def test_every_chained_lab_has_an_end_to_end_task():
     for lab in (2, 3, 5, 6):
         task = end_to_end_task(lab)
         assert task is not None, f"lab {lab}: no END_TO_END task (the lab's whole chain)"
-        assert task == max(ast.literal_eval(next(
-            n.value for n in ast.parse(next((ROOT / "tests").glob(
-                f"test_lab{lab}_*.py")).read_text()).body
-            if isinstance(n, ast.Assign) and any(
-                isinstance(t, ast.Name) and t.id == "TASKS" for t in n.targets)))), \
-            f"lab {lab}: the end-to-end task should be the last task"
+        assert task == max(
+            ast.literal_eval(
+                next(
+                    n.value
+                    for n in ast.parse(
+                        next((ROOT / "tests").glob(f"test_lab{lab}_*.py")).read_text()
+                    ).body
+                    if isinstance(n, ast.Assign)
+                    and any(isinstance(t, ast.Name) and t.id == "TASKS" for t in n.targets)
+                )
+            )
+        ), f"lab {lab}: the end-to-end task should be the last task"
 
 
 def test_an_early_mistake_costs_its_own_task_only(tmp_path):

@@ -43,8 +43,9 @@ if str(REPO) not in sys.path:
 
 from course.grading.testing import OLD_INTERPRETER_REASON, triton_interpreter_too_old
 
-needs_triton = pytest.mark.skipif(importlib.util.find_spec("triton") is None,
-                                  reason="triton is not installed")
+needs_triton = pytest.mark.skipif(
+    importlib.util.find_spec("triton") is None, reason="triton is not installed"
+)
 COUNTS = ("froxels_lit", "tiles_with_media", "light_tiles", "light_evaluations")
 # Interpreted, the kernels round like the torch pipeline in float32 (measured: 6e-8 at
 # radiance 0.27); compiled, the GPU's fast exp/log/division add a few 1e-7 relative per
@@ -52,8 +53,7 @@ COUNTS = ("froxels_lit", "tiles_with_media", "light_tiles", "light_evaluations")
 RTOL, ATOL = 2e-5, 2e-5
 
 
-old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(),
-                                     reason=OLD_INTERPRETER_REASON)
+old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(), reason=OLD_INTERPRETER_REASON)
 
 
 def _texture(n: int, g: torch.Generator) -> torch.Tensor:
@@ -90,57 +90,107 @@ def cases() -> dict:
     angle = 0.6
     ca, sa = math.cos(angle), math.sin(angle)
     street = Scene(
-        media=(HeightFog(scattering=(0.03, 0.035, 0.04), extinction=0.05, g=0.3, base=0.0,
-                         falloff=0.3),
-               ConstantFog(scattering=(0.004, 0.005, 0.006), extinction=0.008,
-                           emissive=(0.001, 0.0, 0.002), g=-0.2),
-               FogVolume(center=(-1.5, 1.2, -6.0), half_size=(1.5, 1.0, 2.0),
-                         scattering=(0.3, 0.25, 0.2), extinction=0.35, g=0.5, shape="box",
-                         rotation=((ca, 0.0, -sa), (0.0, 1.0, 0.0), (sa, 0.0, ca)),
-                         density=_texture(6, g)),
-               FogVolume(center=(1.8, 1.5, -9.0), half_size=(2.0, 1.5, 2.5),
-                         scattering=(0.2, 0.2, 0.25), extinction=0.3, g=0.7,
-                         shape="ellipsoid", density=_texture(5, g))),
-        lights=(DirectionalLight(direction=(0.4, 0.8, -0.45), irradiance=(3.0, 2.8, 2.5)),
-                PointLight(position=(1.6, 1.4, -8.5), intensity=(4.0, 3.0, 2.0), range=5.0),
-                SpotLight(position=(-2.0, 4.0, -5.0), direction=(0.3, -1.0, -0.2),
-                          intensity=(20.0, 18.0, 15.0), range=9.0, inner_deg=12.0,
-                          outer_deg=30.0),
-                PointLight(position=(30.0, 2.0, 5.0), intensity=(9.0, 9.0, 9.0), range=3.0)),
+        media=(
+            HeightFog(
+                scattering=(0.03, 0.035, 0.04), extinction=0.05, g=0.3, base=0.0, falloff=0.3
+            ),
+            ConstantFog(
+                scattering=(0.004, 0.005, 0.006),
+                extinction=0.008,
+                emissive=(0.001, 0.0, 0.002),
+                g=-0.2,
+            ),
+            FogVolume(
+                center=(-1.5, 1.2, -6.0),
+                half_size=(1.5, 1.0, 2.0),
+                scattering=(0.3, 0.25, 0.2),
+                extinction=0.35,
+                g=0.5,
+                shape="box",
+                rotation=((ca, 0.0, -sa), (0.0, 1.0, 0.0), (sa, 0.0, ca)),
+                density=_texture(6, g),
+            ),
+            FogVolume(
+                center=(1.8, 1.5, -9.0),
+                half_size=(2.0, 1.5, 2.5),
+                scattering=(0.2, 0.2, 0.25),
+                extinction=0.3,
+                g=0.7,
+                shape="ellipsoid",
+                density=_texture(5, g),
+            ),
+        ),
+        lights=(
+            DirectionalLight(direction=(0.4, 0.8, -0.45), irradiance=(3.0, 2.8, 2.5)),
+            PointLight(position=(1.6, 1.4, -8.5), intensity=(4.0, 3.0, 2.0), range=5.0),
+            SpotLight(
+                position=(-2.0, 4.0, -5.0),
+                direction=(0.3, -1.0, -0.2),
+                intensity=(20.0, 18.0, 15.0),
+                range=9.0,
+                inner_deg=12.0,
+                outer_deg=30.0,
+            ),
+            PointLight(position=(30.0, 2.0, 5.0), intensity=(9.0, 9.0, 9.0), range=3.0),
+        ),
         ambient=(0.05, 0.06, 0.08),
-        occluders=(Box((-4.0, 3.0, -9.0), (0.0, 3.5, -5.0)),))
-    camera = Camera(eye=(0.0, 1.6, 2.0), target=(0.0, 1.7, -20.0), fov_y=55.0, width=36,
-                    height=20)
-    base = {"tile": 8, "near": 0.1, "far": 20.0, "shadow_resolution": 16,
-            "volume_resolution": 8}
+        occluders=(Box((-4.0, 3.0, -9.0), (0.0, 3.5, -5.0)),),
+    )
+    camera = Camera(eye=(0.0, 1.6, 2.0), target=(0.0, 1.7, -20.0), fov_y=55.0, width=36, height=20)
+    base = {"tile": 8, "near": 0.1, "far": 20.0, "shadow_resolution": 16, "volume_resolution": 8}
     depth, opaque = _images(camera, g, 0.1, 20.0)
-    dense = Scene(media=(ConstantFog(scattering=(500.0, 400.0, 300.0), extinction=1e4,
-                                     g=0.4),),
-                  lights=(DirectionalLight(direction=(0.2, 1.0, 0.1)),
-                          PointLight(position=(0.0, 1.6, 1.0), intensity=(5.0, 5.0, 5.0))),
-                  ambient=(0.1, 0.1, 0.1))
-    emissive = Scene(media=(ConstantFog(scattering=(0.0, 0.0, 0.0), extinction=0.0,
-                                        emissive=(0.02, 0.01, 0.005)),
-                            FogVolume(center=(0.0, 1.5, -6.0), half_size=(2.0, 2.0, 2.0),
-                                      scattering=(0.0, 0.0, 0.0), extinction=0.0,
-                                      emissive=(0.1, 0.2, 0.3), shape="ellipsoid")),
-                     lights=street.lights, ambient=(0.2, 0.2, 0.2))
-    small = Camera(eye=(0.0, 1.6, 2.0), target=(0.0, 1.7, -20.0), fov_y=55.0, width=24,
-                   height=16)
+    dense = Scene(
+        media=(ConstantFog(scattering=(500.0, 400.0, 300.0), extinction=1e4, g=0.4),),
+        lights=(
+            DirectionalLight(direction=(0.2, 1.0, 0.1)),
+            PointLight(position=(0.0, 1.6, 1.0), intensity=(5.0, 5.0, 5.0)),
+        ),
+        ambient=(0.1, 0.1, 0.1),
+    )
+    emissive = Scene(
+        media=(
+            ConstantFog(scattering=(0.0, 0.0, 0.0), extinction=0.0, emissive=(0.02, 0.01, 0.005)),
+            FogVolume(
+                center=(0.0, 1.5, -6.0),
+                half_size=(2.0, 2.0, 2.0),
+                scattering=(0.0, 0.0, 0.0),
+                extinction=0.0,
+                emissive=(0.1, 0.2, 0.3),
+                shape="ellipsoid",
+            ),
+        ),
+        lights=street.lights,
+        ambient=(0.2, 0.2, 0.2),
+    )
+    small = Camera(eye=(0.0, 1.6, 2.0), target=(0.0, 1.7, -20.0), fov_y=55.0, width=24, height=16)
     d_small, o_small = _images(small, g, 0.1, 20.0)
     lab5 = _lab5_grader()
     fog = {}
-    for name, box, light, cam in (("lamp in fog", lab5.LAMP_BOX, lab5.LAMP, lab5.LAMP_CAMERA),
-                                  ("sun in a fog box", lab5.SUN_BOX, lab5.FOG_SUN,
-                                   lab5.SUN_CAMERA)):
-        fog[name] = (Scene(media=(lab5.fog_box(*box),), lights=(light,)), cam,
-                     *lab5.sky_images(cam), {})
+    for name, box, light, cam in (
+        ("lamp in fog", lab5.LAMP_BOX, lab5.LAMP, lab5.LAMP_CAMERA),
+        ("sun in a fog box", lab5.SUN_BOX, lab5.FOG_SUN, lab5.SUN_CAMERA),
+    ):
+        fog[name] = (
+            Scene(media=(lab5.fog_box(*box),), lights=(light,)),
+            cam,
+            *lab5.sky_images(cam),
+            {},
+        )
     return {
         "street": (street, camera, depth, opaque, {**base, "slices": 16}),
-        "street, schlick, naive, no volumetric shadows, 12 slices":
-            (street, camera, depth, opaque,
-             {**base, "slices": 12, "phase": "schlick", "integration": "naive",
-              "volumetric_shadows": False}),
+        "street, schlick, naive, no volumetric shadows, 12 slices": (
+            street,
+            camera,
+            depth,
+            opaque,
+            {
+                **base,
+                "slices": 12,
+                "phase": "schlick",
+                "integration": "naive",
+                "volumetric_shadows": False,
+            },
+        ),
         "dense": (dense, small, d_small, o_small, {**base, "slices": 16}),
         "emissive": (emissive, small, d_small, o_small, {**base, "slices": 16}),
         **fog,
@@ -149,8 +199,9 @@ def cases() -> dict:
 
 def _lab5_grader():
     """Lab 5's grader module (its fog box scenes and quadrature)."""
-    spec = importlib.util.spec_from_file_location("lab5_grader", REPO / "tests" /
-                                                  "test_lab5_froxel.py")
+    spec = importlib.util.spec_from_file_location(
+        "lab5_grader", REPO / "tests" / "test_lab5_froxel.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -161,8 +212,9 @@ def run_kernels(data: dict, device: str) -> dict:
 
     out = {}
     for name, (scene, camera, depth, opaque, kwargs) in data.items():
-        image, report = render_froxels_fused(scene, camera, depth.to(device),
-                                             opaque.to(device), **kwargs)
+        image, report = render_froxels_fused(
+            scene, camera, depth.to(device), opaque.to(device), **kwargs
+        )
         out[name] = (image.cpu(), {k: report[k] for k in COUNTS})
     return out
 
@@ -172,12 +224,14 @@ def compare_images(got, want, where: str, outliers: float = 0.0, worst: float = 
     of the pixels (froxels next to a discontinuity), which must stay within ``worst`` of
     the largest radiance."""
     got, want = got.detach().to("cpu", torch.float64), want.detach().to("cpu", torch.float64)
-    assert got.shape == want.shape, f"{where}: image shape {tuple(got.shape)}, " \
-                                    f"expected {tuple(want.shape)}"
+    assert got.shape == want.shape, (
+        f"{where}: image shape {tuple(got.shape)}, expected {tuple(want.shape)}"
+    )
     finite = torch.isfinite(want)
-    assert torch.equal(torch.isfinite(got), finite), \
-        f"{where}: {int((torch.isfinite(got) != finite).sum())} values are non-finite " \
+    assert torch.equal(torch.isfinite(got), finite), (
+        f"{where}: {int((torch.isfinite(got) != finite).sum())} values are non-finite "
         "where the torch pipeline's are finite (or the other way round)"
+    )
     scale = want[finite].abs().max().item()
     diff = torch.where(finite, (got - want).abs(), 0.0)
     bad = (diff > RTOL * want.abs() + ATOL * scale).any(-1)
@@ -190,10 +244,12 @@ def compare_images(got, want, where: str, outliers: float = 0.0, worst: float = 
             f"more than {RTOL:g} x value + {ATOL:g} x max radiance ({scale:.4g}); "
             f"{outliers:.2%} allowed. First at pixel (row, col) {divmod(i, w)}: got "
             f"{got.reshape(-1, 3)[i].tolist()}, expected {want.reshape(-1, 3)[i].tolist()}; "
-            f"worst at {divmod(j, w)}: off by {diff.max().item():.3g}")
+            f"worst at {divmod(j, w)}: off by {diff.max().item():.3g}"
+        )
     assert diff.max().item() <= max(worst, ATOL) * scale + RTOL * want.abs().max().item(), (
         f"{where}: the worst pixel is off by {diff.max().item():.4g} = "
-        f"{diff.max().item() / scale:.3%} of the largest radiance (allowed {worst:.1%})")
+        f"{diff.max().item() / scale:.3%} of the largest radiance (allowed {worst:.1%})"
+    )
 
 
 def check(data: dict, out: dict, where: str) -> None:
@@ -205,15 +261,18 @@ def check(data: dict, out: dict, where: str) -> None:
         got, counts = out[name]
         compare_images(got, want, f"{where}, {name}")
         for key in COUNTS:
-            assert counts[key] == report[key], (f"{where}, {name}: report[{key!r}] is "
-                                                f"{counts[key]}, the lab's {report[key]}")
+            assert counts[key] == report[key], (
+                f"{where}, {name}: report[{key!r}] is {counts[key]}, the lab's {report[key]}"
+            )
         if name == "dense":
             inside = (depth > kwargs["near"]).unsqueeze(-1)
-            assert torch.equal(got[inside.expand_as(got)].isfinite(),
-                               torch.ones_like(got[inside.expand_as(got)], dtype=torch.bool)), \
-                f"{where}, {name}: non-finite radiance in a fully opaque medium"
-            assert (got - want).abs().max() <= ATOL * want.abs().max(), \
+            assert torch.equal(
+                got[inside.expand_as(got)].isfinite(),
+                torch.ones_like(got[inside.expand_as(got)], dtype=torch.bool),
+            ), f"{where}, {name}: non-finite radiance in a fully opaque medium"
+            assert (got - want).abs().max() <= ATOL * want.abs().max(), (
                 f"{where}, {name}: the dense medium differs"
+            )
         if name == "emissive":
             assert counts["froxels_lit"] == 0, f"{where}, {name}: lit froxels without scattering"
         if name in ("lamp in fog", "sun in a fog box"):
@@ -221,8 +280,10 @@ def check(data: dict, out: dict, where: str) -> None:
             box = lab5.LAMP_BOX if name == "lamp in fog" else lab5.SUN_BOX
             quad = lab5.fog_box_quadrature(camera, *box, scene.lights[0], 0.1)
             err, allowed = lab5.mean_error(got, quad), 0.01 if name == "lamp in fog" else 0.02
-            assert abs(err) <= allowed, (f"{where}, {name}: mean radiance {err:+.2%} off the "
-                                         f"quadrature (allowed {allowed:.0%})")
+            assert abs(err) <= allowed, (
+                f"{where}, {name}: mean radiance {err:+.2%} off the "
+                f"quadrature (allowed {allowed:.0%})"
+            )
 
 
 @needs_triton
@@ -231,8 +292,9 @@ def test_interpreted_matches_the_lab(tmp_path):
     from course.grading.testing import run_in_triton_interpreter
 
     data = cases()
-    check(data, run_in_triton_interpreter(__file__, data, tmp_path, timeout=600),
-          "TRITON_INTERPRET=1")
+    check(
+        data, run_in_triton_interpreter(__file__, data, tmp_path, timeout=600), "TRITON_INTERPRET=1"
+    )
 
 
 @needs_triton
@@ -241,8 +303,9 @@ def test_scene_without_media_returns_a_copy():
     from course.kernels.triton_froxel import render_froxels_fused
 
     _, camera, depth, opaque, kwargs = cases()["emissive"]
-    image, report = render_froxels_fused(Scene(lights=(PointLight(),)), camera, depth, opaque,
-                                         **kwargs)
+    image, report = render_froxels_fused(
+        Scene(lights=(PointLight(),)), camera, depth, opaque, **kwargs
+    )
     assert torch.equal(image, opaque), "a scene without media must return the opaque image"
     assert image.data_ptr() != opaque.data_ptr(), "expected a copy, got the input itself"
     assert report["froxels_lit"] == 0 and report["light_tiles"] == [0], report
@@ -273,8 +336,7 @@ def test_compiled_1080p_frame_matches_the_lab():
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: nothing is compiled")
-    spec = importlib.util.spec_from_file_location("bench_lab5", REPO / "bench" /
-                                                  "lab5_froxel.py")
+    spec = importlib.util.spec_from_file_location("bench_lab5", REPO / "bench" / "lab5_froxel.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     lab = load_lab("lab5_froxel", "solutions")
@@ -286,8 +348,9 @@ def test_compiled_1080p_frame_matches_the_lab():
     got, counts = render_froxels_fused(scene, camera, depth, opaque, **kwargs)
     compare_images(got, want, "compiled, 1080p", outliers=1e-3, worst=0.1)
     for key in ("froxels_lit", "tiles_with_media", "light_evaluations"):
-        assert abs(counts[key] - report[key]) <= 1e-4 * report[key], \
+        assert abs(counts[key] - report[key]) <= 1e-4 * report[key], (
             f"1080p: report[{key!r}] is {counts[key]}, the lab's {report[key]}"
+        )
 
 
 def _tiny_frame():
@@ -317,16 +380,26 @@ def test_bad_arguments_are_named():
         ("depth_image", TypeError, "int64 depths", camera, depth.long(), opaque),
         ("depth_image", TypeError, "float16 images", camera, depth.half(), opaque.half()),
         ("depth_image", ValueError, "depths of shape (W, H)", camera, depth.T, opaque),
-        ("depth_image", ValueError, "depths with a channel axis", camera, depth[..., None],
-         opaque),
+        ("depth_image", ValueError, "depths with a channel axis", camera, depth[..., None], opaque),
         ("opaque_image", TypeError, "None as the opaque image", camera, depth, None),
-        ("opaque_image", TypeError, "a float64 opaque image with float32 depths", camera,
-         depth, opaque.double()),
-        ("opaque_image", ValueError, "an RGBA opaque image", camera, depth,
-         torch.zeros(8, 12, 4)),
+        (
+            "opaque_image",
+            TypeError,
+            "a float64 opaque image with float32 depths",
+            camera,
+            depth,
+            opaque.double(),
+        ),
+        ("opaque_image", ValueError, "an RGBA opaque image", camera, depth, torch.zeros(8, 12, 4)),
         ("opaque_image", ValueError, "an (H, W) opaque image", camera, depth, depth),
-        ("opaque_image", ValueError, "the opaque image on another device than the depths",
-         camera, depth, opaque.to("meta")),
+        (
+            "opaque_image",
+            ValueError,
+            "the opaque image on another device than the depths",
+            camera,
+            depth,
+            opaque.to("meta"),
+        ),
     ]
     keywords = [  # (name, kind, case, keyword arguments)
         ("tile", ValueError, "tile = 0", {"tile": 0}),
@@ -341,26 +414,46 @@ def test_bad_arguments_are_named():
         ("phase", ValueError, "an unknown phase function", {"phase": "rayleigh"}),
         ("integration", ValueError, "an unknown integration", {"integration": "trapezoid"}),
         ("shadow_resolution", ValueError, "shadow_resolution = 0", {"shadow_resolution": 0}),
-        ("shadow_resolution", ValueError, "shadow_resolution = True",
-         {"shadow_resolution": True}),
-        ("shadow_resolution", ValueError, "shadow_resolution = 16.0",
-         {"shadow_resolution": 16.0}),
-        ("volume_resolution", ValueError, "volume_resolution = 1 (one depth sample)",
-         {"volume_resolution": 1}),
+        ("shadow_resolution", ValueError, "shadow_resolution = True", {"shadow_resolution": True}),
+        ("shadow_resolution", ValueError, "shadow_resolution = 16.0", {"shadow_resolution": 16.0}),
+        (
+            "volume_resolution",
+            ValueError,
+            "volume_resolution = 1 (one depth sample)",
+            {"volume_resolution": 1},
+        ),
         ("num_warps", ValueError, "num_warps = 3", {"num_warps": 3}),
         ("num_warps", ValueError, "num_warps = 64", {"num_warps": 64}),
         ("num_warps", ValueError, "num_warps = 0", {"num_warps": 0}),
         ("num_warps", ValueError, "num_warps = 2.0", {"num_warps": 2.0}),
     ]
-    expect_error("scene", render_froxels_fused, [ConstantFog()], camera, depth, opaque,
-                 kinds=(TypeError,), case="a list of media as the scene")
+    expect_error(
+        "scene",
+        render_froxels_fused,
+        [ConstantFog()],
+        camera,
+        depth,
+        opaque,
+        kinds=(TypeError,),
+        case="a list of media as the scene",
+    )
     for media, sc in (("with media", scene), ("without media", Scene())):
         for name, kind, case, *args in positional:
-            expect_error(name, render_froxels_fused, sc, *args, kinds=(kind,),
-                         case=f"{case} ({media})")
+            expect_error(
+                name, render_froxels_fused, sc, *args, kinds=(kind,), case=f"{case} ({media})"
+            )
         for name, kind, case, kwargs in keywords:
-            expect_error(name, render_froxels_fused, sc, camera, depth, opaque, **kwargs,
-                         kinds=(kind,), case=f"{case} ({media})")
+            expect_error(
+                name,
+                render_froxels_fused,
+                sc,
+                camera,
+                depth,
+                opaque,
+                **kwargs,
+                kinds=(kind,),
+                case=f"{case} ({media})",
+            )
 
 
 @needs_triton
@@ -373,8 +466,13 @@ def test_cpu_images_need_the_interpreter():
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: CPU tensors are accepted")
-    expect_error("depth_image", render_froxels_fused, *_tiny_frame(), kinds=(ValueError,),
-                 case="CPU images without TRITON_INTERPRET=1")
+    expect_error(
+        "depth_image",
+        render_froxels_fused,
+        *_tiny_frame(),
+        kinds=(ValueError,),
+        case="CPU images without TRITON_INTERPRET=1",
+    )
 
 
 if __name__ == "__main__":

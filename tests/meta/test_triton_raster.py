@@ -39,18 +39,23 @@ if str(REPO) not in sys.path:
 
 from course.grading.testing import OLD_INTERPRETER_REASON, triton_interpreter_too_old
 
-needs_triton = pytest.mark.skipif(importlib.util.find_spec("triton") is None,
-                                  reason="triton is not installed")
-RUNS = {"32": {"depth_bits": 32}, "24": {"depth_bits": 24},
-        "cull": {"depth_bits": 32, "cull_backfaces": True}}
+needs_triton = pytest.mark.skipif(
+    importlib.util.find_spec("triton") is None, reason="triton is not installed"
+)
+RUNS = {
+    "32": {"depth_bits": 32},
+    "24": {"depth_bits": 24},
+    "cull": {"depth_bits": 32, "cull_backfaces": True},
+}
 # The raster kernels' knobs per run (not the lab's: the keys must not depend on them). The
 # 24-bit run sends boxes over 200 pixels to the split path of huge triangles.
-KNOBS = {"32": {"small_box": 32}, "24": {"small_box": 32, "huge_box": 200},
-         "cull": {"small_box": 32}}
+KNOBS = {
+    "32": {"small_box": 32},
+    "24": {"small_box": 32, "huge_box": 200},
+    "cull": {"small_box": 32},
+}
 
-old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(),
-                                     reason=OLD_INTERPRETER_REASON)
-
+old_interpreter = pytest.mark.skipif(triton_interpreter_too_old(), reason=OLD_INTERPRETER_REASON)
 
 
 def cases() -> dict:
@@ -74,14 +79,21 @@ def cases() -> dict:
     quads = torch.cat([torch.stack([a, b, c], -2), torch.stack([a, c, d], -2)]).reshape(-1, 3, 2)
     depth = 0.2 + 0.6 * torch.rand(len(quads), 3, 1, generator=g, dtype=torch.float64)
     grid = torch.cat([quads, depth * 2 - 1, 1 / (1 + 4 * depth)], -1)
-    special = torch.tensor([
-        [[-500, -400, 0.3, 0.5], [900, -300, 0.1, 0.6], [10, 800, 0.2, 0.7]],  # fills the screen
-        [[60, 60, 0.0, 1.0], [80, 60, 0.0, 1.0], [70, 90, 0.0, 1.0]],          # off screen
-        [[5, 5, 0.0, 1.0], [15, 5, 0.0, 1.0], [25, 5, 0.0, 1.0]],              # zero area
-        [[5, 5, float("nan"), 1.0], [15, 5, 0.0, 1.0], [5, 15, 0.0, 1.0]],     # NaN depth
-        [[5, 5, 0.0, 1.0], [float("nan"), 5, 0.0, 1.0], [5, 15, 0.0, 1.0]],    # NaN position
-        [[30, 2, -0.9, 0.9], [30, 20, -0.9, 0.9], [2, 11, 1.5, 0.9]],          # past the far plane
-    ], dtype=torch.float64)
+    special = torch.tensor(
+        [
+            [
+                [-500, -400, 0.3, 0.5],
+                [900, -300, 0.1, 0.6],
+                [10, 800, 0.2, 0.7],
+            ],  # fills the screen
+            [[60, 60, 0.0, 1.0], [80, 60, 0.0, 1.0], [70, 90, 0.0, 1.0]],  # off screen
+            [[5, 5, 0.0, 1.0], [15, 5, 0.0, 1.0], [25, 5, 0.0, 1.0]],  # zero area
+            [[5, 5, float("nan"), 1.0], [15, 5, 0.0, 1.0], [5, 15, 0.0, 1.0]],  # NaN depth
+            [[5, 5, 0.0, 1.0], [float("nan"), 5, 0.0, 1.0], [5, 15, 0.0, 1.0]],  # NaN position
+            [[30, 2, -0.9, 0.9], [30, 20, -0.9, 0.9], [2, 11, 1.5, 0.9]],  # past the far plane
+        ],
+        dtype=torch.float64,
+    )
     mixed = torch.cat([grid, special]).float()
     return {"suzanne": (suzanne, width, height), "mixed": (mixed, width, height)}
 
@@ -90,9 +102,12 @@ def run_kernels(data: dict, device: str) -> dict:
     from course.kernels.triton_raster import rasterize_triton
 
     # Suzanne with the default knobs only: the interpreter runs every lane in Python.
-    return {(name, run): rasterize_triton(screen.to(device), w, h, **KNOBS[run], **knobs).cpu()
-            for name, (screen, w, h) in data.items() for run, knobs in RUNS.items()
-            if name == "mixed" or run == "32"}
+    return {
+        (name, run): rasterize_triton(screen.to(device), w, h, **KNOBS[run], **knobs).cpu()
+        for name, (screen, w, h) in data.items()
+        for run, knobs in RUNS.items()
+        if name == "mixed" or run == "32"
+    }
 
 
 def check(data: dict, out: dict, where: str) -> None:
@@ -104,15 +119,18 @@ def check(data: dict, out: dict, where: str) -> None:
         want = lab.rasterize(screen, w, h, **RUNS[run])
         ids, want_ids = lab.triangle_ids(keys), lab.triangle_ids(want)
         differ = (ids != want_ids).double().mean().item()
-        assert differ <= 0.004, (f"{where}, {name}, depth/cull {run}: the visible triangle "
-                                 f"differs from the reference on {differ:.2%} of the pixels "
-                                 f"(allowed: 0.4%)")
+        assert differ <= 0.004, (
+            f"{where}, {name}, depth/cull {run}: the visible triangle "
+            f"differs from the reference on {differ:.2%} of the pixels "
+            f"(allowed: 0.4%)"
+        )
         # Where the same triangle wins, its depth field may differ only by a few last bits
         # (32-bit float depth) or one unorm step (24-bit).
         same = (ids == want_ids) & (ids >= 0)
         steps = ((keys[same] >> 32) - (want[same] >> 32)).abs()
-        assert steps.max().item() <= (4 if run != "24" else 1) if len(steps) else True, \
+        assert steps.max().item() <= (4 if run != "24" else 1) if len(steps) else True, (
             f"{where}, {name}, {run}: depths differ by up to {steps.max().item()} units"
+        )
         if name == "mixed" and run != "cull":
             assert (keys != lab.EMPTY).all(), f"{where}, {name}, {run}: a pixel left empty"
 
@@ -123,8 +141,9 @@ def interpreted(tmp_path_factory):
     from course.grading.testing import run_in_triton_interpreter
 
     data = {"raster": cases(), "mesh": mesh_cases()}
-    return data, run_in_triton_interpreter(__file__, data, tmp_path_factory.mktemp("interp"),
-                                           timeout=600)
+    return data, run_in_triton_interpreter(
+        __file__, data, tmp_path_factory.mktemp("interp"), timeout=600
+    )
 
 
 @needs_triton
@@ -158,14 +177,21 @@ def test_fast_setup_matches_the_lab_pipeline():
     lab = load_lab("lab6_raster", "solutions")
     mesh = load_scene("suzanne", device="cpu").mesh
     centre = mesh.vertices.mean(0).tolist()
-    inside = Camera(eye=tuple(centre), target=(centre[0] + 1.0, centre[1], centre[2] + 0.3),
-                    fov_y=90.0, width=48, height=40, near=0.05, far=50.0)
-    outside = dataclasses.replace(load_scene("suzanne", device="cpu").camera, width=48,
-                                  height=40)
+    inside = Camera(
+        eye=tuple(centre),
+        target=(centre[0] + 1.0, centre[1], centre[2] + 0.3),
+        fov_y=90.0,
+        width=48,
+        height=40,
+        near=0.05,
+        far=50.0,
+    )
+    outside = dataclasses.replace(load_scene("suzanne", device="cpu").camera, width=48, height=40)
     for name, camera in (("inside", inside), ("outside", outside)):
         clip = lab.to_clip_space(mesh.vertices, camera.view_projection(torch.float64))
-        screen, source = screen_triangles_fast(clip, mesh.faces, 48, 40, lab.clip_triangles,
-                                               lab.to_screen)
+        screen, source = screen_triangles_fast(
+            clip, mesh.faces, 48, 40, lab.clip_triangles, lab.to_screen
+        )
         clipped, want_source, _ = lab.clip_triangles(clip[mesh.faces])
         if name == "inside":
             d = clip[mesh.faces][..., 2] + clip[mesh.faces][..., 3]
@@ -176,8 +202,10 @@ def test_fast_setup_matches_the_lab_pipeline():
         got = torch.where(got >= 0, source[got.clamp(min=0)], -1)
         want = torch.where(want >= 0, want_source[want.clamp(min=0)], -1)
         assert (got >= 0).any(), f"{name}: nothing visible: the test sees nothing"
-        assert torch.equal(got, want), (f"{name}: {(got != want).sum().item()} pixels see "
-                                        f"another triangle than the lab's pipeline")
+        assert torch.equal(got, want), (
+            f"{name}: {(got != want).sum().item()} pixels see "
+            f"another triangle than the lab's pipeline"
+        )
 
 
 # --------------------------------------------------------------------------------------
@@ -195,12 +223,25 @@ def soup_mesh() -> tuple[torch.Tensor, torch.Tensor, int]:
     n = 80
     vertices = (torch.rand(3 * n, 3, generator=g, dtype=torch.float64) - 0.5) * 4
     vertices[:, 2] -= 0.6  # a little more in front of the eye than behind
-    special = torch.tensor([[float("nan"), 0.0, -2.0], [0.0, float("inf"), -2.0],
-                            [0.3, 0.3, -1.5], [0.0, 0.0, -float("inf")]], dtype=torch.float64)
+    special = torch.tensor(
+        [
+            [float("nan"), 0.0, -2.0],
+            [0.0, float("inf"), -2.0],
+            [0.3, 0.3, -1.5],
+            [0.0, 0.0, -float("inf")],
+        ],
+        dtype=torch.float64,
+    )
     faces = torch.arange(3 * n).reshape(n, 3)
     base = 3 * n
-    extra = torch.tensor([[base, base + 2, 1], [base + 1, 0, base + 2], [base + 3, 2, 4],
-                          [base + 2, base + 2, base + 2]]) # NaN, inf, -inf, degenerate
+    extra = torch.tensor(
+        [
+            [base, base + 2, 1],
+            [base + 1, 0, base + 2],
+            [base + 3, 2, 4],
+            [base + 2, base + 2, base + 2],
+        ]
+    )  # NaN, inf, -inf, degenerate
     return (torch.cat([vertices, special]).float(), torch.cat([faces, extra]), len(extra))
 
 
@@ -214,16 +255,34 @@ def mesh_cases() -> dict:
     scene = load_scene("suzanne", device="cpu")
     mesh = scene.mesh
     centre = mesh.vertices.mean(0).tolist()
-    inside = Camera(eye=tuple(centre), target=(centre[0] + 1.0, centre[1], centre[2] + 0.3),
-                    fov_y=90.0, width=24, height=18, near=0.05, far=50.0)
+    inside = Camera(
+        eye=tuple(centre),
+        target=(centre[0] + 1.0, centre[1], centre[2] + 0.3),
+        fov_y=90.0,
+        width=24,
+        height=18,
+        near=0.05,
+        far=50.0,
+    )
     outside = dataclasses.replace(scene.camera, width=40, height=30)
     vertices, faces, _ = soup_mesh()
-    eye = Camera(eye=(0.0, 0.0, 0.0), target=(0.0, 0.0, -1.0), fov_y=70.0, width=24, height=18,
-                 near=0.3, far=10.0)
-    return {name: (v, f, cam.view_projection(torch.float64), cam.width, cam.height)
-            for name, v, f, cam in (("suzanne outside", mesh.vertices, mesh.faces, outside),
-                                    ("suzanne inside", mesh.vertices, mesh.faces, inside),
-                                    ("soup", vertices, faces, eye))}
+    eye = Camera(
+        eye=(0.0, 0.0, 0.0),
+        target=(0.0, 0.0, -1.0),
+        fov_y=70.0,
+        width=24,
+        height=18,
+        near=0.3,
+        far=10.0,
+    )
+    return {
+        name: (v, f, cam.view_projection(torch.float64), cam.width, cam.height)
+        for name, v, f, cam in (
+            ("suzanne outside", mesh.vertices, mesh.faces, outside),
+            ("suzanne inside", mesh.vertices, mesh.faces, inside),
+            ("soup", vertices, faces, eye),
+        )
+    }
 
 
 def run_mesh_stages(data: dict, device: str) -> dict:
@@ -257,9 +316,10 @@ def check_screen(data: dict, out: dict, where: str) -> None:
     for name, (v, f, mvp, w, h) in data.items():
         got = out[("screen", name)]
         F = len(f)
-        assert got.shape == (2 * F, 3, 4) and got.dtype == torch.float32, \
-            f"{where}, {name}: screen is {tuple(got.shape)} {got.dtype}, " \
+        assert got.shape == (2 * F, 3, 4) and got.dtype == torch.float32, (
+            f"{where}, {name}: screen is {tuple(got.shape)} {got.dtype}, "
             f"expected ({2 * F}, 3, 4) float32"
+        )
         want, _, slots = lab_pieces(lab, v, f, mvp, w, h)
         empty = torch.isnan(got).all(-1).all(-1)
         filled = (~empty).nonzero()[:, 0]
@@ -269,7 +329,8 @@ def check_screen(data: dict, out: dict, where: str) -> None:
         assert not missing and not extra, (
             f"{where}, {name}: slots holding a triangle differ from the lab's pieces: "
             f"missing {missing[:8]} ({len(missing)}), unexpected {extra[:8]} ({len(extra)}) "
-            f"(slot i: face i, slot {F} + i: the second piece of face i)")
+            f"(slot i: face i, slot {F} + i: the second piece of face i)"
+        )
         a, b = got[filled], want[order]
         same = (a == b) | (torch.isnan(a) & torch.isnan(b))
         if not same.all():
@@ -279,7 +340,8 @@ def check_screen(data: dict, out: dict, where: str) -> None:
                 f"{where}, {name}: {(~same).sum().item()} screen coordinates differ from "
                 f"to_screen(clip_triangles(...)); first: slot {filled[bad[0]].item()}, corner "
                 f"{bad[1]}, component {bad[2]}: {a[tuple(bad)].item()!r} vs "
-                f"{b[tuple(bad)].item()!r}; up to {ulps.max().item()} float32 ulps")
+                f"{b[tuple(bad)].item()!r}; up to {ulps.max().item()} float32 ulps"
+            )
 
 
 def test_soup_exercises_every_clipping_case():
@@ -318,9 +380,10 @@ def check_ids(data: dict, out: dict, where: str) -> None:
         screen, source, _ = lab_pieces(lab, v, f, mvp, w, h)
         k = lab.triangle_ids(lab.rasterize(screen, w, h, **MESH_RUNS[run]))
         want = torch.where(k >= 0, source[k.clamp(min=0)], -1).reshape(h, w)
-        assert ids.shape == (h, w) and ids.dtype == torch.int64, \
-            f"{where}, {name}, {run}: ids are {tuple(ids.shape)} {ids.dtype}, " \
+        assert ids.shape == (h, w) and ids.dtype == torch.int64, (
+            f"{where}, {name}, {run}: ids are {tuple(ids.shape)} {ids.dtype}, "
             f"expected ({h}, {w}) int64"
+        )
         covered = (want >= 0) | (ids >= 0)
         assert covered.double().mean() > 0.05, f"{where}, {name}, {run}: nothing to compare"
         differ = ((ids != want) & covered).double().sum().item() / covered.sum().item()
@@ -329,9 +392,11 @@ def check_ids(data: dict, out: dict, where: str) -> None:
             first = f"; first at (row {r}, col {c}): {ids[r, c].item()} vs {want[r, c].item()}"
         else:
             first = ""
-        assert differ <= 0.004, (f"{where}, {name}, {run}: the visible face differs from the "
-                                 f"lab's pipeline on {differ:.2%} of the covered pixels "
-                                 f"(allowed: 0.4%){first}")
+        assert differ <= 0.004, (
+            f"{where}, {name}, {run}: the visible face differs from the "
+            f"lab's pipeline on {differ:.2%} of the covered pixels "
+            f"(allowed: 0.4%){first}"
+        )
 
 
 @needs_triton
@@ -362,8 +427,13 @@ def test_compiled_fused_pipeline():
     data = mesh_cases()
     scene = load_scene("suzanne", device="cpu")
     cam = dataclasses.replace(scene.camera, width=640, height=480)
-    data["suzanne 640x480"] = (scene.mesh.vertices, scene.mesh.faces,
-                               cam.view_projection(torch.float64), 640, 480)
+    data["suzanne 640x480"] = (
+        scene.mesh.vertices,
+        scene.mesh.faces,
+        cam.view_projection(torch.float64),
+        640,
+        480,
+    )
     out = run_mesh_stages(data, "cuda")
     check_screen(data, out, "compiled")
     check_ids(data, out, "compiled")
@@ -467,11 +537,27 @@ def test_bad_mesh_arguments_are_named(entry):
     for name, case, *args in cases:
         expect_error(name, fn, *args, kinds=(ValueError,), case=case)
     if entry != "screen_triangles_triton":  # the raster knobs
-        for name, value in (("depth_bits", 16), ("depth_bits", None), ("small_box", -1),
-                            ("small_box", None), ("small_box", 2.5), ("small_box", "32"),
-                            ("small_box", True)):
-            expect_error(name, fn, v, f, mvp, w, h, **{name: value}, kinds=(ValueError,),
-                         case=f"{name}={value!r}")
+        for name, value in (
+            ("depth_bits", 16),
+            ("depth_bits", None),
+            ("small_box", -1),
+            ("small_box", None),
+            ("small_box", 2.5),
+            ("small_box", "32"),
+            ("small_box", True),
+        ):
+            expect_error(
+                name,
+                fn,
+                v,
+                f,
+                mvp,
+                w,
+                h,
+                **{name: value},
+                kinds=(ValueError,),
+                case=f"{name}={value!r}",
+            )
 
 
 @needs_triton
@@ -483,8 +569,13 @@ def test_cpu_mesh_needs_the_interpreter(entry):
 
     if interpreting():
         pytest.skip("TRITON_INTERPRET=1 is set in this process: CPU tensors are accepted")
-    expect_error("vertices", _mesh_entry(entry), *_tiny_mesh(), kinds=(ValueError,),
-                 case="a CPU mesh without TRITON_INTERPRET=1")
+    expect_error(
+        "vertices",
+        _mesh_entry(entry),
+        *_tiny_mesh(),
+        kinds=(ValueError,),
+        case="a CPU mesh without TRITON_INTERPRET=1",
+    )
 
 
 @needs_triton
@@ -500,8 +591,11 @@ def test_fused_visibility_call_checks_the_matrix(device, monkeypatch):
         monkeypatch.setattr(fused, "interpreting", lambda: True)
     v, f, mvp, w, h = _tiny_mesh()
     frame = fused.FusedVisibility(v.to(device), f.to(device), w, h)
-    for bad, case in ((mvp.tolist(), "a nested list"), (mvp[:3, :3], "a (3, 3) matrix"),
-                      (mvp.long(), "an int64 matrix")):
+    for bad, case in (
+        (mvp.tolist(), "a nested list"),
+        (mvp[:3, :3], "a (3, 3) matrix"),
+        (mvp.long(), "an int64 matrix"),
+    ):
         expect_error("mvp", frame, bad, kinds=(ValueError,), case=case)
     assert frame._graph is None, "a graph was recorded for a bad matrix"
 
@@ -514,15 +608,16 @@ def test_bad_raster_arguments_are_named():
 
     screen = torch.zeros(2, 3, 4)
     for name, case, args, kwargs in (
-            ("screen", "a list", (screen.tolist(), 8, 6), {}),
-            ("screen", "(K, 3, 3) triangles", (screen[..., :3], 8, 6), {}),
-            ("screen", "int32 triangles", (screen.int(), 8, 6), {}),
-            ("width", "width = 0", (screen, 0, 6), {}),
-            ("height", "height = 2**15", (screen, 8, 2**15), {}),
-            ("depth_bits", "depth_bits=16", (screen, 8, 6), {"depth_bits": 16}),
-            ("small_box", "small_box=-1", (screen, 8, 6), {"small_box": -1}),
-            ("huge_box", "huge_box=-1", (screen, 8, 6), {"huge_box": -1}),
-            ("huge_box", "huge_box=2.5", (screen, 8, 6), {"huge_box": 2.5})):
+        ("screen", "a list", (screen.tolist(), 8, 6), {}),
+        ("screen", "(K, 3, 3) triangles", (screen[..., :3], 8, 6), {}),
+        ("screen", "int32 triangles", (screen.int(), 8, 6), {}),
+        ("width", "width = 0", (screen, 0, 6), {}),
+        ("height", "height = 2**15", (screen, 8, 2**15), {}),
+        ("depth_bits", "depth_bits=16", (screen, 8, 6), {"depth_bits": 16}),
+        ("small_box", "small_box=-1", (screen, 8, 6), {"small_box": -1}),
+        ("huge_box", "huge_box=-1", (screen, 8, 6), {"huge_box": -1}),
+        ("huge_box", "huge_box=2.5", (screen, 8, 6), {"huge_box": 2.5}),
+    ):
         expect_error(name, rasterize_triton, *args, **kwargs, kinds=(ValueError,), case=case)
 
 
@@ -533,5 +628,10 @@ if __name__ == "__main__":
     # GPU's defaults run these cases three times faster (the results must not change).
     fused.BLOCK_TRIANGLES, fused.BLOCK_FACES = 256, 512
     data = torch.load(sys.argv[1], weights_only=False)
-    torch.save({"raster": run_kernels(data["raster"], "cpu"),
-                "mesh": run_mesh_stages(data["mesh"], "cpu")}, sys.argv[2])
+    torch.save(
+        {
+            "raster": run_kernels(data["raster"], "cpu"),
+            "mesh": run_mesh_stages(data["mesh"], "cpu"),
+        },
+        sys.argv[2],
+    )

@@ -15,9 +15,11 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-TRITON_TESTS = sorted(str(p.relative_to(ROOT)) for pattern in
-                      ("tests/test_triton_*.py", "tests/meta/test_triton_*.py")
-                      for p in ROOT.glob(pattern))
+TRITON_TESTS = sorted(
+    str(p.relative_to(ROOT))
+    for pattern in ("tests/test_triton_*.py", "tests/meta/test_triton_*.py")
+    for p in ROOT.glob(pattern)
+)
 
 HIDE_TRITON = """\
 import sys
@@ -75,8 +77,14 @@ print("OUTCOMES " + json.dumps({"code": int(code), "rows": outcomes.rows}))
 
 
 def _run(script: str, *args, hide=True, timeout=300) -> str:
-    proc = subprocess.run([sys.executable, "-c", (HIDE_TRITON if hide else "") + script, *args],
-                          check=False, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.run(
+        [sys.executable, "-c", (HIDE_TRITON if hide else "") + script, *args],
+        check=False,
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     return proc.stdout
 
@@ -84,7 +92,8 @@ def _run(script: str, *args, hide=True, timeout=300) -> str:
 def test_import_course_does_not_import_triton():
     data = json.loads(_run(IMPORT_ALL, hide=False).splitlines()[-1])
     assert not data["imported_triton"], (
-        f"importing {data['imported_triton'][0]} imported triton: only course.kernels.triton_* may")
+        f"importing {data['imported_triton'][0]} imported triton: only course.kernels.triton_* may"
+    )
 
 
 def test_course_modules_import_without_triton():
@@ -92,7 +101,8 @@ def test_course_modules_import_without_triton():
     assert "course.kernels.triton_intersect" in data["modules"]
     assert data["message"] and "triton" in data["message"], (
         f"a fused kernel without Triton should raise an ImportError naming it, got "
-        f"{data['message']!r}")
+        f"{data['message']!r}"
+    )
 
 
 def test_triton_tests_skip_with_a_reason_without_triton():
@@ -101,9 +111,11 @@ def test_triton_tests_skip_with_a_reason_without_triton():
     data = json.loads(out.split("OUTCOMES ", 1)[1])
     failed = [row for row in data["rows"] if row[2] == "failed"]
     assert not failed and data["code"] == 0, (
-        f"without Triton these failed: {[row[0] for row in failed]}\n{out[-3000:]}")
+        f"without Triton these failed: {[row[0] for row in failed]}\n{out[-3000:]}"
+    )
     skipped = [row for row in data["rows"] if row[2] == "skipped"]
     for nodeid, _, _, reason in skipped:
         assert reason and "\n" not in reason.strip(), f"{nodeid}: skip reason {reason!r}"
     assert any("triton" in reason.lower() for *_, reason in skipped), (
-        "no test skipped for want of Triton: are the Triton tests still guarded?")
+        "no test skipped for want of Triton: are the Triton tests still guarded?"
+    )

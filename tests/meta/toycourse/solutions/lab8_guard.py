@@ -3,7 +3,6 @@ and bad input. Its hostile submissions (tests/meta/hostile/*/lab8_guard.py) each
 one bound."""
 
 
-
 def scale(x, factor):
     """Task 1. x: (N,) float, factor: float -> x * factor (a new tensor)."""
     return x * factor

@@ -32,8 +32,11 @@ def test_scale_into(impl):
 def probe_as_view(lab, n):
     x = torch.arange(2.0 * n).reshape(2, n)
     y = lab.as_view(x)
-    return {"tensor": isinstance(y, torch.Tensor), "same": y.data_ptr() == x.data_ptr(),
-            "shape": tuple(y.shape)}
+    return {
+        "tensor": isinstance(y, torch.Tensor),
+        "same": y.data_ptr() == x.data_ptr(),
+        "shape": tuple(y.shape),
+    }
 
 
 @pytest.mark.task(3)
