@@ -10,6 +10,11 @@ with and without overlapping the download of frame i-1 with the rendering of fra
 On the CPU there is no device: the "copy" rows time a host-to-host copy (pinned memory
 needs CUDA, so there is one row per size) and overlap cannot help; read those numbers as
 the baseline the GPU rows are compared with, not as interop costs.
+
+The rows are those of ``course.tools.trade.lab0`` (the staging paths of ``rtcourse bench
+--lab 0``, which puts a student's points over the reference's), at this script's sizes: the
+frame loop renders a known pattern, so each row also says which fraction of the frames
+was displayed wrong (``error``).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 from course.core.device import default_device
 from course.measure.bench import ResultTable, device_name, load_lab
+from course.tools.trade import lab0 as trade
 
 KIB, MIB = 1 << 10, 1 << 20
 COPY_SIZES = [64 * KIB, 256 * KIB, MIB, 4 * MIB, 16 * MIB, 64 * MIB, 128 * MIB]
@@ -30,30 +36,38 @@ FRAME_SIZES = [(512, 512), (1080, 1920), (2160, 3840)]  # (H, W)
 
 
 def measure(lab, device, quick: bool) -> ResultTable:
+    """The rows of ``course.tools.trade.lab0`` (what ``rtcourse bench --lab 0`` measures, with
+    the same error: frames displayed wrong) at this script's sizes."""
     table = ResultTable("lab0 interop: device-to-host copies and the frame loop", device)
     cuda = device.type == "cuda"
-    sizes = COPY_SIZES[:4] if quick else COPY_SIZES
-    for nbytes in sizes:
-        for pinned in ([False, True] if cuda else [False]):
-            gbps = lab.measure_copy_bandwidth(nbytes, pinned, device, repeats=10)
-            kind = ("d2h " + ("pinned" if pinned else "pageable")) if cuda else "host copy"
-            table.add(kind="copy", setting=kind, nbytes=nbytes, pinned=pinned,
-                      seconds=nbytes / gbps / 1e9, GB_per_s=gbps)
-            print(f"  {kind:<13} {nbytes / MIB:9.3f} MiB  {gbps:8.2f} GB/s")
+    ctx = trade.prepare(device, quick)
+    ctx["sizes"] = COPY_SIZES[:4] if quick else COPY_SIZES
+    ctx["repeats"] = 10
     frames = FRAME_SIZES[:1] if quick else FRAME_SIZES if cuda else FRAME_SIZES[:2]
+    ctx["frames"] = 60 if cuda else 5
+    knobs = [k for k in trade.knobs(ctx) if k["kind"] == "copy"]
     for height, width in frames:
-        n_frames = 60 if cuda else 5
-        # warm-up: the first frames pay for allocator growth and kernel loading
-        lab.run_frame_loop(lab.render_rotating_triangle, 3, (height, width), device)
-        for overlap in (False, True):
-            result = lab.run_frame_loop(lab.render_rotating_triangle, n_frames,
-                                        (height, width), device, overlap=overlap)
+        ctx["frame"] = (height, width)
+        knobs += [dict(k, height=height, width=width) for k in trade.knobs(ctx)
+                  if k["kind"] == "frame_loop"]
+    for knob in knobs:
+        if knob["kind"] == "frame_loop":
+            ctx["frame"] = (knob["height"], knob["width"])
+        row = trade.measure(lab, ctx, knob)
+        if knob["kind"] == "copy":
+            kind = ("d2h " + ("pinned" if knob["pinned"] else "pageable")) if cuda \
+                else "host copy"
+            table.add(kind="copy", setting=kind, nbytes=knob["bytes"], pinned=knob["pinned"],
+                      seconds=row["seconds"], GB_per_s=row["GB_per_s"], error=row["error"])
+            print(f"  {kind:<13} {knob['bytes'] / MIB:9.3f} MiB  {row['GB_per_s']:8.2f} GB/s")
+        else:
+            width, height, overlap = knob["width"], knob["height"], knob["overlap"]
             table.add(kind="frame_loop", setting=f"{width}x{height} overlap={overlap}",
-                      width=width, height=height, overlap=overlap, frames=n_frames,
-                      seconds=result["seconds"] / n_frames,
-                      frames_per_second=result["frames_per_second"])
+                      width=width, height=height, overlap=overlap, frames=row["frames"],
+                      seconds=row["seconds"], frames_per_second=row["frames_per_second"],
+                      error=row["error"])
             print(f"  frame loop {width}x{height} overlap={overlap!s:<5} "
-                  f"{result['frames_per_second']:8.1f} frames/s")
+                  f"{row['frames_per_second']:8.1f} frames/s, {row['error']:.0%} shown wrong")
     return table
 
 

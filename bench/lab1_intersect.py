@@ -8,7 +8,8 @@ precision (fp16, bf16, fp32, fp64) it measures
 
 * throughput: ray-triangle tests per second (``rays x triangles / seconds``), brute force
   over a random soup;
-* error against a float64 watertight reference on the same rays: the hit/miss
+* error against the exact hits on the same rays (float64 brute force, course code, as
+  ``rtcourse bench --lab 1`` measures it: ``error``, the rays whose hit differs): the hit/miss
   disagreement rate, the rate of hits on another triangle, and the median and maximum
   relative error of t where both chose the same triangle;
 * the crack (pass-through) rate: rays aimed at the vertices and at points of the shared
@@ -57,16 +58,18 @@ from course.measure.bench import (
     load_lab,
     pareto_plot,
     time_fn,
+    trade_plot,
 )
 from course.measure.occupancy import PRESETS, occupancy
+from course.tools.trade import lab1 as trade
+from course.tools.trade.common import exact_hits
 
 # The kernels measured: the references in the course repository, the student's labs/ in the
 # handout (RTCOURSE_IMPL, or --impl, picks another); main() reloads them for --impl.
 LAB = load_lab("lab1_intersect", os.environ.get("RTCOURSE_IMPL"), root=REPO)
 VARIANTS, closest_hit, moller_trumbore = LAB.VARIANTS, LAB.closest_hit, LAB.moller_trumbore
 
-DTYPES = {"fp16": torch.float16, "bf16": torch.bfloat16, "fp32": torch.float32,
-          "fp64": torch.float64}
+DTYPES = trade.DTYPES
 OFFSETS = {"0": 0.0, "1e5": 1e5, "1e6": 1e6, "1e7": 1e7}
 
 # Sizes: (rays, triangles) of the torch variants, rays of the Triton kernels, icosphere level;
@@ -145,13 +148,7 @@ def _icosphere_fallback(level: int) -> Mesh:
     return Mesh(vertices=vertices / vertices.norm(dim=1, keepdim=True), faces=faces)
 
 
-def soup_rays(n: int, seed: int = 1) -> Rays:
-    """Rays from a sphere of radius 2 around the unit cube, aimed at random points in it."""
-    g = torch.Generator().manual_seed(seed)
-    target = torch.rand(n, 3, dtype=torch.float64, generator=g)
-    out = torch.randn(n, 3, dtype=torch.float64, generator=g)
-    origins = 0.5 + 2.0 * out / out.norm(dim=1, keepdim=True)
-    return Rays.create(origins, target - origins)
+soup_rays = trade.soup_rays  # the rays of rtcourse bench --lab 1
 
 
 def crack_scene(mesh: Mesh, offset: float, dtype: torch.dtype):
@@ -238,7 +235,8 @@ def crack_table(ico_level: int, device, dtype: torch.dtype = torch.float32,
         cells = [f"{_pct(rates[v][f'crack_out_{name}'])} / {_pct(rates[v][f'crack_in_{name}'])}"
                  for v in variants]
         lines.append(name.ljust(10) + "  ".join(c.ljust(width) for c in cells).rstrip())
-    lines += [rule, "", "Largest |t - 1| of the rays that hit there (t = 1 at the aimed point):", "",
+    lines += [rule, "",
+              "Largest |t - 1| of the rays that hit there (t = 1 at the aimed point):", "",
               rule, "offset    " + "  ".join(v.ljust(width) for v in variants).rstrip(), rule]
     for name in OFFSETS:
         cells = [f"{rates[v][f'aim_err_{name}']:.1g}" for v in variants]
@@ -247,7 +245,8 @@ def crack_table(ico_level: int, device, dtype: torch.dtype = torch.float32,
     distinct = ", ".join(str(v) for v, _ in shape.values())
     flat = ", ".join(_pct(z) for _, z in shape.values())
     offsets = ", ".join(OFFSETS)
-    lines += [rule, "", f"The mesh after rounding, offsets {offsets}: distinct vertices {distinct};",
+    lines += [rule, "",
+              f"The mesh after rounding, offsets {offsets}: distinct vertices {distinct};",
               f"zero-area triangles {flat}."]
     return "\n".join(lines)
 
@@ -297,17 +296,20 @@ def bench_torch(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hits
     for variant in variants:
         for dname in dtypes:
             dtype = DTYPES[dname]
-            r, m = rays.to(device, dtype), soup.to(device, dtype)
 
             def trace(r, m, variant=variant):
                 return closest_hit(r, m, variant=variant, memory_budget_bytes=cfg["memory"])
 
             started = time.perf_counter()
-            timing = time_fn(trace, r, m, repeats=cfg["repeats"], warmup=cfg["warmup"])
-            hits = trace(r, m)
+            # The row rtcourse bench --lab 1 measures (seconds, error against the exact
+            # hits), then this script's own columns on the same hits.
+            ctx = {"device": device, "repeats": cfg["repeats"], "rays": rays, "soup": soup,
+                   "exact": (ref.t, ref.triangle), "pairs": pairs, "memory": cfg["memory"]}
+            shared = trade.measure(LAB, ctx, {"variant": variant, "dtype": dname})
             row = table.add(impl="torch", variant=variant, dtype=dname, rays=len(rays),
-                            tris=soup.num_faces, seconds=timing.median,
-                            tests_per_s=pairs / timing.median, **accuracy(hits, ref),
+                            tris=soup.num_faces, seconds=shared["seconds"],
+                            tests_per_s=pairs / shared["seconds"], error=shared["error"],
+                            **accuracy(shared["hits"], ref),
                             **crack_rates(trace, ico, dtype, device))
             _log(row, started)
 
@@ -462,8 +464,9 @@ def write_outputs(table: ResultTable, out: Path) -> None:
     meta = table.metadata
     device = (f"Device: {meta['device']}; torch {meta['torch']}, triton {meta.get('triton')}; "
               f"{meta['date']}.")
-    legend = ("tests_per_s: ray-triangle tests per second; disagreement: hit/miss differs from "
-              "the float64 watertight reference; wrong_triangle: both hit, other triangle; "
+    legend = ("tests_per_s: ray-triangle tests per second; error: the hit differs from the "
+              "exact one (float64 brute force; rtcourse bench --lab 1's error); disagreement: "
+              "hit/miss differs from it; wrong_triangle: both hit, other triangle; "
               "t_rel_err_*: on rays where both chose the same triangle; crack_*: fraction of "
               "rays aimed at shared edges/vertices of a closed icosphere whose first hit is "
               "not a triangle sharing them (crack_out_X: from outside, crack_in_X: from the "
@@ -471,7 +474,11 @@ def write_outputs(table: ResultTable, out: Path) -> None:
     header = [f"# {table.name}", "", device, "", f"Command: `{meta['command']}`", "", legend, ""]
     (out / "lab1_intersect.md").write_text("\n".join(header) + table.to_markdown() + "\n")
     rows = plot_rows(table)
-    for y, title in (("disagreement", "hit/miss disagreement with float64 watertight"),
+    # The plot rtcourse bench --lab 1 draws, from the same rows: seconds against error.
+    trade_plot([r for r in rows if r["impl"] == "torch"], [],
+               [r for r in rows if r["impl"] != "torch"], path=out / "pareto_error.png",
+               title="Lab 1: seconds against hits differing from exact")
+    for y, title in (("disagreement", "hit/miss disagreement with the exact hits"),
                      ("crack_1e6", "crack rate, closed icosphere moved by 1e6")):
         fig = pareto_plot(rows, x="tests_per_s", y=y, label="setting", group="series",
                           title=title)
@@ -538,7 +545,8 @@ def main(argv: list[str] | None = None) -> None:
         else shlex.join(["python", "bench/lab1_intersect.py", *argv]),
         triton=_triton_version(), scenes=source, sizes=cfg, cpu_threads=threads,
         load_average=list(os.getloadavg()), crack_rays=len(crack_scene(ico, 0.0, torch.float64)[0]),
-        icosphere_faces=ico.num_faces, reference="closest_hit(variant='watertight'), float64",
+        icosphere_faces=ico.num_faces,
+        reference="float64 brute force (course.tools.trade.common.exact_hits)",
         lab_file=str(LAB.__file__))
     print(f"{table.metadata['device']}: {cfg}, scenes from {source}", flush=True)
 
@@ -546,12 +554,16 @@ def main(argv: list[str] | None = None) -> None:
     def reference(r: Rays, m: Mesh) -> Hits:
         return closest_hit(r, m, variant="watertight", memory_budget_bytes=cfg["memory"])
 
+    # Every row is compared with the exact hits (float64 brute force, course code), as
+    # rtcourse bench --lab 1 compares them: a wrong closest_hit cannot be its own yardstick.
+    exact_t, exact_triangle = exact_hits(rays, soup)
+    ref = Hits(t=exact_t, triangle=exact_triangle, u=torch.zeros_like(exact_t),
+               v=torch.zeros_like(exact_t))
     try:
-        ref = reference(rays.to(device), soup.to(device))
         ref_cracks = crack_rates(reference, ico, torch.float64, device)
-    except NotImplementedError as exc:  # the handout: every row compares with closest_hit
-        raise SystemExit(f"lab1_intersect: every row is compared with the lab's own "
-                         f"closest_hit in float64; write it first ({exc})") from None
+    except NotImplementedError as exc:  # the handout: every row runs closest_hit
+        raise SystemExit(f"lab1_intersect: every row runs the lab's closest_hit; write it "
+                         f"first ({exc})") from None
     print(f"reference: {ref.hit.double().mean().item():.1%} of the rays hit, "
           f"reference cracks {ref_cracks} ({time.perf_counter() - started:.1f} s)", flush=True)
 

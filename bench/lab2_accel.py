@@ -8,8 +8,12 @@ costs and buys, against brute force (and, on the CPU, trimesh) in the same run.
     python bench/lab2_accel.py --device cpu --parts embree  # Embree against the walks, CPU
     python bench/lab2_accel.py --small --impl labs      # your labs/ (the handout's default)
 
-Three parts, each a table of the same ResultTable (column ``part``):
+Parts, each a table of the same ResultTable (column ``part``):
 
+* ``trade``: the rows of ``rtcourse bench --lab 2`` (``course.tools.trade.lab2``: brute
+  force, grid densities, the two-level grid, LBVH, SAH leaf sizes, the kd-tree on suzanne's
+  primary rays; error against float64 brute force), measured on this lab and plotted as a
+  student's plot is (``pareto_trade.png``);
 * ``structures``: per scene (suzanne 1K, bunny 69K, bunny_x4 278K, bunny_x16 1.1M,
   teapot_in_stadium, a random soup) and structure (uniform grid, two-level grid, LBVH,
   binned-SAH BVH with the stack traversal and with the sync-free one, kd-tree): build time,
@@ -65,10 +69,9 @@ sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
 from course.core.camera import primary_rays
 from course.core.device import allowed_cpus, default_device, free_cpus, set_cpu_threads
-from course.core.raymath import masked_result
 from course.core.scenes import load_scene
 from course.core.types import Hits, Rays
-from course.given.lab2 import intersect_pairs, moller_trumbore_rows, new_closest, pack_bvh
+from course.given.lab2 import intersect_pairs, new_closest, pack_bvh
 from course.measure.bench import (
     ResultTable,
     add_impl_option,
@@ -76,7 +79,9 @@ from course.measure.bench import (
     load_lab,
     pareto_plot,
     time_fn,
+    trade_plot,
 )
+from course.tools.trade import lab2 as trade
 
 lab = None  # the Lab 2 module measured: main() loads it from --impl
 
@@ -110,10 +115,26 @@ STRUCTURES = [
 ]
 
 
-def intersect(origins, directions, v0, v1, v2, t_min, t_max):
-    """The triangle kernel the structures call: Lab 1's Möller–Trumbore (given code)."""
-    t, u, v, hit = moller_trumbore_rows(origins, directions, v0, v1 - v0, v2 - v0, t_min, t_max)
-    return masked_result(hit, t, u, v)
+# The triangle kernel the structures call: Lab 1's Möller–Trumbore (given code), the one
+# rtcourse bench --lab 2 gives them.
+intersect = trade.intersect
+
+
+def run_trade(mode, device, table, log):
+    """The rows of ``rtcourse bench --lab 2`` (``course.tools.trade.lab2``: its scene, its
+    structures and parameters, error against float64 brute force), measured on this
+    script's lab, and their plot (``pareto_trade.png``), made as the student's is."""
+    from course.tools.trade import measure_rows
+
+    ctx = trade.prepare(device, quick=mode["size"] <= MODES["small"]["size"])
+    rows, skipped = measure_rows(trade, lab, ctx, "reference", log)
+    for reason in skipped:
+        log(f"  trade {reason}")
+    for row in rows:
+        table.add(part="trade", scene="suzanne", **{k: v for k, v in row.items()
+                                                    if k != "impl"})
+        log(f"  trade {row['setting']:<24} {row['seconds'] * 1e3:9.2f} ms  error "
+            f"{row['error']:.3g}")
 
 
 def given_brute_force(rays: Rays, mesh):
@@ -522,7 +543,7 @@ def main(argv=None):
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
     parser.add_argument("--small", action="store_true", help="the CPU run of a few minutes")
     parser.add_argument("--scenes", default=None, help=f"comma-separated (default: {ALL_SCENES})")
-    parser.add_argument("--parts", default="structures,fast,lbvh")
+    parser.add_argument("--parts", default="trade,structures,fast,lbvh")
     parser.add_argument("--size", type=int, default=None)
     parser.add_argument("--fast-size", type=int, default=None)
     parser.add_argument("--out", default=None, help="output folder")
@@ -584,6 +605,9 @@ def main(argv=None):
     if "fast" in parts:
         run_fast_knobs(mode, device, table, log, headline=args.headline)
         write(table, out, mode)
+    if "trade" in parts:
+        run_trade(mode, device, table, log)
+        write(table, out, mode)
     if "structures" in parts:
         for name in mode["scenes"].split(","):
             run_scene(name, mode, device, table, log)
@@ -612,6 +636,10 @@ def write(table, out: Path, mode: dict):
         f"# Lab 2: acceleration structures on {meta['device']}\n\n"
         f"`{meta['command']}` (torch {meta['torch']}, {meta['date']}, "
         f"{meta['cpu_threads']} CPU threads)\n\n" + "\n".join(parts))
+    rows = [r for r in table.rows if r.get("part") == "trade"]
+    if rows:
+        trade_plot(rows, [], path=out / "pareto_trade.png",
+                   title="suzanne: trace seconds against hits differing from exact")
     for name in ("bunny", "teapot_in_stadium"):  # two plots: the device returns few files
         rows = [r for r in table.rows if r.get("part") == "structures" and r["scene"] == name
                 and r["build_s"] > 0 and math.isfinite(r["rays_per_s"])]

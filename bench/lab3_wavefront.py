@@ -29,6 +29,10 @@ The tracer is ``course.kernels.trace.trace_bvh`` (a flattened binned-SAH BVH) wh
 else brute force. Also measured: the three geometry layouts of task 5 (bytes per triangle,
 the time of a brute-force pass over each, agreement with the reference tracer).
 
+The rows ``rtcourse bench --lab 3`` measures (``course.tools.trade.lab3``) are measured on
+the same lab too and written as ``trade.csv`` with their plot ``pareto_trade.png``, drawn
+as a student's is.
+
 Writes ``lab3_wavefront.json`` (a ResultTable with the command line), ``lab3_wavefront.md``,
 two Pareto plots per scene (error against images/s; lanes traced against images/s) and the
 persistent pool's active lanes per step into ``--out``, by default
@@ -64,6 +68,7 @@ from course.measure.bench import (
     pareto_plot,
     time_fn,
 )
+from course.tools.trade import bench_rows
 
 lab = None  # the Lab 3 module measured: main() loads it from --impl
 
@@ -313,6 +318,10 @@ def main(argv=None):
         if any("active_lanes" in stats for stats in results.values()):
             lanes_plot(results, out / f"lanes_{name}.png",
                        f"{name}: active lanes per step of the persistent pool")
+    # The rows of rtcourse bench --lab 3 (course.tools.trade.lab3: the organisations on the
+    # Cornell box, error against render_reference), measured on this lab and plotted as a
+    # student's are: trade.csv and pareto_trade.png.
+    bench_rows(3, lab, device, args.quick, out, lambda text: print(text, flush=True))
     table.to_json(out / "lab3_wavefront.json")
     renders = ResultTable(rows=[r for r in table.rows if r["kind"] != "layout"])
     layouts = ResultTable(rows=[r for r in table.rows if r["kind"] == "layout"])

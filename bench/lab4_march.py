@@ -9,7 +9,9 @@ a series that calls a function not written yet is skipped with the reason.
 Every row is one knob setting, timed (median of several runs) and compared with an
 analytic or exact reference computed in float64 on the same rays:
 
-* ``march``: ``march_box`` with ``integrator`` "riemann" / "exact" and 1 .. 256 steps, on a
+* ``march``: the rows of ``rtcourse bench --lab 4`` (``course.tools.trade.lab4``, at this
+  script's sizes; their plot as a student's is drawn: ``pareto_trade.png``):
+  ``march_box`` with ``integrator`` "riemann" / "exact" and 1 .. 256 steps, on a
   homogeneous box (closed form ``q (1 - e^{-s D}) / s``) and on a linear density ramp with
   constant emission (closed form with ``erfcx``); ``order`` is the observed convergence
   order ``log2(error(n/2) / error(n))``.
@@ -66,7 +68,9 @@ from course.measure.bench import (
     load_lab,
     pareto_plot,
     time_fn,
+    trade_plot,
 )
+from course.tools.trade import lab4 as trade
 
 lab = None  # the Lab 4 module measured: main() loads it from --impl
 
@@ -87,45 +91,9 @@ SIZES = {"cpu": {"rays": 1024, "trace_rays": 1024, "grid": 24, "max_steps": 128,
 # Rays and references (float64)
 # --------------------------------------------------------------------------------------
 
-def x_face_rays(n: int, seed: int = 0):
-    """Rays entering [0, 1]^3 through x = 0 and leaving through x = 1 (unit directions)."""
-    g = torch.Generator().manual_seed(seed)
-    entry = torch.cat([torch.zeros(n, 1, dtype=F64), 0.3 + 0.4 * torch.rand(n, 2, generator=g,
-                                                                            dtype=F64)], 1)
-    d = torch.cat([torch.ones(n, 1, dtype=F64), 0.4 * torch.rand(n, 2, generator=g,
-                                                                 dtype=F64) - 0.2], 1)
-    d = d / d.norm(dim=1, keepdim=True)
-    return entry - 0.5 * d, d
-
-
-def phi(x):
-    """(1 - e^{-x}) / x, 1 at x = 0."""
-    return torch.where(x > 0, -torch.expm1(-x) / x.clamp(min=1e-300), torch.ones_like(x))
-
-
-def chord(o, d, lo, hi):
-    """(t_near, t_far) of rays that hit the box, float64 (unit directions)."""
-    lo, hi = torch.tensor(lo, dtype=F64), torch.tensor(hi, dtype=F64)
-    t0, t1 = (lo - o) / d, (hi - o) / d
-    near = torch.minimum(t0, t1).amax(-1).clamp(min=0)
-    far = torch.maximum(t0, t1).amin(-1)
-    return near, far
-
-
-def ramp_density(p):
-    return 0.5 + 2.0 * p[:, 0]
-
-
-def ramp_reference(o, d, q):
-    """Constant emission q in sigma = 0.5 + 2 x over [0, 1]^3 (see the grader)."""
-    near, far = chord(o, d, [0.0] * 3, [1.0] * 3)
-    length = far - near
-    a = 0.5 + 2.0 * (o[:, 0] + near * d[:, 0])
-    b = 2.0 * d[:, 0]
-    root = torch.sqrt(2 * b)
-    tau = a * length + b * length ** 2 / 2
-    return q * math.sqrt(math.pi) / root * (torch.special.erfcx(a / root) - torch.exp(-tau)
-                                            * torch.special.erfcx((a + b * length) / root))
+# The rays, the closed forms and the ramp of rtcourse bench --lab 4, shared with it.
+x_face_rays, phi, chord = trade.x_face_rays, trade.phi, trade.chord
+ramp_density, ramp_reference = trade.ramp_density, trade.ramp_reference
 
 
 BOWL = (0.5, 0.4, 0.6)
@@ -195,33 +163,25 @@ def rel_error(got, want):
 
 
 def bench_march(table, device, cfg):
-    n = cfg["rays"]
-    o, d = x_face_rays(n)
-    q, sigma = 0.7, 1.3
-    near, far = chord(o, d, [0.0] * 3, [1.0] * 3)
-    refs = {"homogeneous": q * (far - near) * phi(sigma * (far - near)),
-            "ramp": ramp_reference(o, d, q)}
-    media = {"homogeneous": torch.full((1, 1, 1), sigma, dtype=torch.float32, device=device),
-             "ramp": ramp_density}
-    emis = torch.full((1, 1, 1), q, dtype=torch.float32, device=device)
-    oo, dd = o.float().to(device), d.float().to(device)
-    for medium, density in media.items():
-        for integrator in lab.INTEGRATORS:
-            previous = None
-            for steps in step_counts(cfg):
-                result, seconds = timed(cfg, lab.march_box, oo, dd, [0.0] * 3, [1.0] * 3,
-                                        density, emis, steps, integrator=integrator)
-                error = rel_error(result["radiance"], refs[medium])
-                # No order where the error is float32 rounding (the exact integrator on a
-                # homogeneous box): rounding does not converge.
-                order = (math.log2(previous / error) if previous is not None and error > 1e-5
-                         else None)
-                table.add(series="march", setting=f"{medium} {integrator} {steps}",
-                          medium=medium, integrator=integrator, steps=steps, dtype="fp32",
-                          rays=n, seconds=seconds, rays_per_s=n / seconds, error=error,
-                          order=order)
-                previous = error
-        print(f"  march {medium}: done", flush=True)
+    """The rows of ``rtcourse bench --lab 4`` (``course.tools.trade.lab4``: medium x integrator
+    x steps, error against the closed forms) at this script's sizes, with the observed
+    convergence order."""
+    ctx = trade.prepare(device, False, rays=cfg["rays"], max_steps=cfg["max_steps"],
+                        repeats=cfg["repeats"])
+    n, previous = ctx["rays"], {}
+    for knob in trade.knobs(ctx):
+        row = trade.measure(lab, ctx, knob)
+        error, key = row["error"], (knob["medium"], knob["integrator"])
+        # No order where the error is float32 rounding (the exact integrator on a
+        # homogeneous box): rounding does not converge.
+        order = (math.log2(previous[key] / error) if key in previous and error > 1e-5
+                 else None)
+        table.add(series="march", setting=knob["setting"], medium=knob["medium"],
+                  integrator=knob["integrator"], steps=knob["steps"], dtype="fp32", rays=n,
+                  seconds=row["seconds"], rays_per_s=n / row["seconds"], error=error,
+                  order=order)
+        previous[key] = error
+    print("  march: done", flush=True)
 
 
 def bench_early_exit(table, device, cfg):
@@ -549,6 +509,10 @@ def write_outputs(table: ResultTable, out: Path) -> None:
     (out / "lab4_march.md").write_text("\n".join(header) + table.to_markdown() + "\n")
     if any(r["series"] == "march" for r in table.rows):
         convergence_plot(table, out / "convergence.png")
+        # The plot rtcourse bench --lab 4 draws a student's points over, from the same rows.
+        trade_plot([r for r in table.rows if r["series"] == "march"], [],
+                   path=out / "pareto_trade.png", title=f"{trade.TITLE}\nerror: "
+                   f"{trade.ERROR_NAME}")
     for series, title in (("frame", "single scattering frame: seconds against error"),
                           ("march", "march_box: seconds against error"),
                           ("scatter", "march_single_scatter: seconds against error"),

@@ -37,6 +37,10 @@ reference radiance; ``seconds`` is the median time of one frame (after warm-up).
   pipeline fused into five Triton kernels), without and with its counts, and its error
   against the torch pipeline's image is recorded (``error_vs_torch``, ``max_error_vs_torch``).
 
+* ``trade``: the rows ``rtcourse bench --lab 5`` measures (``course.tools.trade.lab5``:
+  tile x slices, without volumetric shadows, temporal reuse), written as ``trade.csv`` with
+  their plot ``pareto_trade.png``, drawn as a student's is.
+
 Writes ``lab5_froxel.json`` (a ResultTable with the command line), ``lab5_froxel.md`` and
 Pareto plots (seconds against error) into ``--out``, by default
 ``bench/results/<device_name>/lab5/``. On the CPU only ratios between rows mean anything.
@@ -76,6 +80,7 @@ from course.measure.bench import (
     pareto_plot,
     time_fn,
 )
+from course.tools.trade import bench_rows
 
 lab = None  # the Lab 5 module measured: main() loads it from --impl
 
@@ -428,7 +433,8 @@ def main(argv=None):
     parser.add_argument("--gpu-target", action="store_true",
                         help="time only the talk's 1080p frame and print ms/frame")
     parser.add_argument("--out", default=None)
-    parser.add_argument("--only", choices=("resolution", "volumes", "temporal", "frame"),
+    parser.add_argument("--only", choices=("trade", "resolution", "volumes", "temporal",
+                                           "frame"),
                         default=None, help="run one series, into lab5_froxel_<series>.*")
     add_impl_option(parser)
     args = parser.parse_args(argv)
@@ -448,8 +454,11 @@ def main(argv=None):
     table.metadata["lab_file"] = str(lab.__file__)
     mode = next(name for name, sizes in SIZES.items() if sizes is cfg)
     print(f"Lab 5 bench on {device} ({mode})", flush=True)
-    run = {args.only} if args.only else {"resolution", "volumes", "temporal", "frame"}
-    series = {"resolution": lambda: bench_resolution(table, cfg, device),
+    run = {args.only} if args.only else {"trade", "resolution", "volumes", "temporal", "frame"}
+    # The rows of rtcourse bench --lab 5 (course.tools.trade.lab5), measured on this lab and
+    # plotted as a student's are: trade.csv and pareto_trade.png.
+    series = {"trade": lambda: bench_rows(5, lab, device, cfg is not SIZES["full"], out),
+              "resolution": lambda: bench_resolution(table, cfg, device),
               "volumes": lambda: bench_volumes(table, cfg, device),
               "temporal": lambda: [bench_temporal(table, cfg, device, lights=lights)
                                    for lights in cfg.get("temporal_lights", ("all", "sun"))]}

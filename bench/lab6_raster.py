@@ -46,6 +46,11 @@ frame of ``--frames`` (512x512, 1920x1080, 3840x2160 on a GPU), the ``frame`` se
 fused raster (e.g. ``--only frames --quick --scenes suzanne bunny bunny_x4 --frames
 1920x1080`` on a GPU: a few minutes, most of it building bunny_x4 and compiling).
 
+``trade``: the rows ``rtcourse bench --lab 6`` measures (``course.tools.trade.lab6``: raster
+with 32- and 24-bit depth and a small fragment budget against BVH-traced visibility, error
+against float64 brute-force primary rays), written as ``trade.csv`` with their plot
+``pareto_trade.png``, drawn as a student's is.
+
 Writes ``lab6_raster.json`` (a ResultTable with the command line), ``lab6_raster.md``,
 ``throughput.png`` (pixels/s by resolution, both methods) and ``zfighting.png`` into
 ``--out``, by default ``bench/results/<device_name>/lab6/``. On the CPU only ratios between
@@ -72,6 +77,7 @@ from course.core.device import default_device
 from course.core.scenes import load_scene
 from course.core.types import Mesh, Rays
 from course.measure.bench import ResultTable, add_impl_option, device_name, load_lab, time_fn
+from course.tools.trade import bench_rows
 
 # The references in the course repository, the student's labs/ in the handout (RTCOURSE_IMPL,
 # or --impl, picks another): main() loads them.
@@ -484,7 +490,8 @@ def main(argv: list[str] | None = None) -> None:
                         "knob sweeps")
     parser.add_argument("--scenes", nargs="+", help="scenes of the frame series")
     parser.add_argument("--frames", nargs="+", help="frame sizes WxH of the frame series")
-    parser.add_argument("--only", nargs="+", choices=("sizes", "knobs", "zfight", "frames"),
+    parser.add_argument("--only", nargs="+",
+                        choices=("trade", "sizes", "knobs", "zfight", "frames"),
                         help="run only these parts")
     parser.add_argument("--quick", action="store_true", help="frame series: only the "
                         "BVH-traced visibility and the end-to-end fused raster")
@@ -525,7 +532,10 @@ def main(argv: list[str] | None = None) -> None:
     print(f"{table.metadata['device']}: {args.scene} ({scene.mesh.num_faces} triangles), "
           f"sizes {cfg['sizes']}", flush=True)
     started = time.perf_counter()
-    parts = {"sizes": lambda: bench_resolutions(table, scene.mesh, scene.camera, cfg),
+    # "trade": the rows of rtcourse bench --lab 6 (course.tools.trade.lab6), measured on this
+    # lab and plotted as a student's are (trade.csv, pareto_trade.png).
+    parts = {"trade": lambda: bench_rows(6, lab, device, device.type == "cpu", out),
+             "sizes": lambda: bench_resolutions(table, scene.mesh, scene.camera, cfg),
              "knobs": lambda: bench_knobs(table, scene.mesh, scene.camera, cfg),
              "zfight": lambda: bench_zfighting(table, device),
              "frames": lambda: bench_frames(table, device, cfg)}

@@ -1458,7 +1458,8 @@ def test_closest_hit_matches_reference(impl, device):
 
 
 def probe_largest_tensor(lab, rays, mesh, variant, budget):
-    """Run closest_hit (on the given Möller–Trumbore) and report the largest tensor (bytes) any op created, and the hits."""
+    """Run closest_hit (on the given Möller–Trumbore) and report the largest tensor (bytes)
+    any op created, and the hits."""
     from torch.utils._python_dispatch import TorchDispatchMode
 
     class Largest(TorchDispatchMode):
@@ -1572,8 +1573,9 @@ def test_op_counts(impl):
         for key in ("mul", "add", "div", "sqrt", "fma", "compare", "cycles_bound"):
             assert key in got, f"op_counts({variant!r}): missing key {key!r} (got {sorted(got)})"
             assert abs(got[key] - want[key]) < 1e-9, (
-                f"op_counts({variant!r})[{key!r}] = {got[key]}, but course.measure.accounting.count_ops "
-                f"on your {variant} for the documented ray and triangle gives {want[key]}")
+                f"op_counts({variant!r})[{key!r}] = {got[key]}, but "
+                f"course.measure.accounting.count_ops on your {variant} for the documented "
+                f"ray and triangle gives {want[key]}")
         counts[variant] = got
     expect_error("variant", impl.op_counts, "nope", case="an unknown variant name")
     for variant, lecture in LECTURE_MUL.items():
@@ -1596,8 +1598,9 @@ def test_register_estimate_and_occupancy(impl):
         got = impl.register_estimate(variant)
         want = math.ceil(impl.probe(probe_accounting, variant)["peak_last_use"])
         assert got == want, (
-            f"register_estimate({variant!r}) = {got!r}, but course.measure.accounting.live_values on "
-            f"your {variant} gives peak_last_use rounded up = {want}")
+            f"register_estimate({variant!r}) = {got!r}, but "
+            f"course.measure.accounting.live_values on your {variant} gives peak_last_use "
+            f"rounded up = {want}")
         assert 8 <= got <= 128, f"register_estimate({variant!r}) = {got}: implausible"
         for arch, block in (("g80", 64), ("hopper_h100", 256)):
             occ = impl.occupancy_for(variant, arch, block)

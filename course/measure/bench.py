@@ -352,8 +352,9 @@ def load_lab(name: str, impl: str | None = None, root=None):
     ``impl`` is ``solutions`` (the default where it exists), ``labs`` (the default in
     the student handout) or a folder holding lab files (see
     :func:`course.core.labs.implementation_folder`); ``root``: the course folder (default:
-    the one the current folder lies in; a bench script passes its own). Trusted code only: this imports
-    the module into the calling process. FileNotFoundError names a missing folder or lab.
+    the one the current folder lies in; a bench script passes its own). Trusted code only:
+    this imports the module into the calling process. FileNotFoundError names a missing
+    folder or lab.
     """
     from course.core.labs import load_lab as load
 
@@ -492,11 +493,17 @@ def trade_plot(reference: Sequence[dict], yours: Sequence[dict], extra: Sequence
                         alpha=0.5, zorder=1)
         ax.scatter([r[x] for r in yours], [r[y] for r in yours], marker="*", s=110,
                    color="tab:red", label=yours_name, zorder=3)
-    for r in yours or reference:
+    # Labels on your points where they are few, else on the reference's front only: twenty
+    # labels on top of each other are read by nobody.
+    named = yours if 0 < len(yours) <= 12 else \
+        [reference[i] for i in pareto_front(reference, x, y)] if reference else yours
+    for r in named:
         ax.annotate(str(r.get(label, "")), (r[x], r[y]), textcoords="offset points",
                     xytext=(4, 3), fontsize=7)
     _log_scale(ax.set_xscale, [r[x] for r in everything])
     _log_scale(ax.set_yscale, [r[y] for r in everything])
+    if min(r[y] for r in everything) >= 0:  # errors: a symlog axis need not show negatives
+        ax.set_ylim(bottom=0 if ax.get_yscale() == "symlog" else None)
     ax.set_xlabel(f"{x} (lower is better)")
     ax.set_ylabel(f"{y} (lower is better)")
     ax.grid(True, which="both", alpha=0.3)

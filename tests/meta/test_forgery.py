@@ -71,8 +71,8 @@ def _copy_course(base: Path) -> Path:
     return course
 
 
-def _submission(base: Path, name: str, flag, on: bool) -> Path:
-    folder = base / "subs" / f"{name}-{'on' if on else 'off'}"
+def _submission(base: Path, tag: str, name: str, flag, on: bool) -> Path:
+    folder = base / "subs" / tag
     if name == "reference":
         shutil.copytree(ROOT / "solutions", folder, ignore=shutil.ignore_patterns(
             "__pycache__", "mutants"))
@@ -112,8 +112,8 @@ def graded():
         jobs = []
         for key, (name, lab, tasks, flag) in RUNS.items():
             for on in (True, False) if flag else (True,):
-                impl = _submission(base, name, flag, on)
-                jobs.append((f"{key}-{'on' if on else 'off'}", impl, lab, tasks))
+                tag = f"{key}-{'on' if on else 'off'}"
+                jobs.append((tag, _submission(base, tag, name, flag, on), lab, tasks))
         for path in (base / "subs").rglob("*"):
             path.chmod(0o755 if path.is_dir() else 0o644)
         with ThreadPoolExecutor(max_workers=2) as pool:

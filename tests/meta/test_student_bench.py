@@ -32,8 +32,8 @@ from course.tools.trade import LABS, REFERENCE_DIR, trade_module
 ROOT = Path(__file__).resolve().parents[2]
 # A mistake per lab that the lab's bench scenes see (its error column shows it).
 MUTANTS = {0: "loop_drops_last_frame", 1: "mt_no_u_plus_v", 2: "grid_first_hit_ends_walk",
-           3: "whitted_throughput_not_multiplied", 4: "march_transmittance_first",
-           5: "point_lights_unattenuated", 6: "viewport_y_not_flipped"}
+           3: "point_light_without_falloff", 4: "march_transmittance_first",
+           5: "linear_slicing", 6: "viewport_y_not_flipped"}
 
 
 @pytest.fixture(scope="module")

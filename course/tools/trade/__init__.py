@@ -1,7 +1,7 @@
 """Your point on the plot: every lab's knobs measured on your code and on the reference.
 
-``rtcourse bench --lab N`` runs one lab's knobs (``LABS[N]``, a module of this package:
-its scenes, its settings and its error, in one place, also used by ``bench/labN_*.py``) on
+``rtcourse bench --lab N`` runs one lab's knobs (``labN.py`` of this package: the lab's
+scenes, settings and error in one place, also used by the ``bench/labN_*.py`` scripts) on
 an implementation (by default the student's ``labs/``) and on the reference in the same
 run, and writes a CSV of every row, a Pareto plot with the student's points marked over the
 reference's front, and a table of the student's time and error beside the reference's.
@@ -19,16 +19,18 @@ Where the reference's rows come from:
   (:func:`course.measure.bench.calibration_seconds`) on the machine that measured them.
   The student's run times the same workload and scales the shipped times by the ratio of
   the two, so the ratio to the reference compares like with like (approximately: see
-  there). The table's header and the CSV's ``seconds_source`` column say which it was.
+  there). ``--quick`` on the CPU runs on one thread on both sides. The table's header and
+  the CSV's ``seconds_source`` column say which it was.
 
 On CUDA the fused kernels of ``course.kernels`` add rows of their own (``impl`` "fused")
 where a lab has one.
 
-A lab's trade module provides ``MODULE`` (the lab module's name), ``TITLE``, ``ERROR`` (what
-its error column measures), ``prepare(device, quick) -> ctx`` (scenes and exact answers,
-course code only), ``knobs(ctx) -> [dict]`` (each with a ``setting`` label),
-``measure(lab, ctx, knob) -> dict`` (``seconds``, ``error`` and any work counters) and
-optionally ``fused(ctx) -> [dict]`` (rows of the fused kernels, CUDA).
+A lab's trade module provides ``MODULE`` (the lab module's name), ``TITLE``, ``ERROR`` and
+``ERROR_NAME`` (what its error column measures, in a sentence and in a few words),
+``prepare(device, quick) -> ctx`` (scenes and exact answers, course code only),
+``knobs(ctx) -> [dict]`` (each with a ``setting`` label), ``measure(lab, ctx, knob) ->
+dict`` (``seconds``, ``error`` and any work counters) and optionally ``fused(ctx) ->
+[dict]`` (rows of the fused kernels, CUDA).
 """
 
 from __future__ import annotations
@@ -85,8 +87,9 @@ def measure_rows(trade, lab, ctx: dict, impl: str, log=print, bar=None) -> tuple
                 f"{str(exc).splitlines()[0][:120] if str(exc) else ''}")
             measured = {"seconds": math.nan, "error": math.nan,
                         "failed": f"{type(exc).__name__}"}
-        if measured is not None:
-            rows.append({"impl": impl, **knob, **measured})
+        if measured is not None:  # dataclass results (Lab 1's hits, for its script) stay out
+            rows.append({"impl": impl, **knob, **{k: v for k, v in measured.items()
+                                                  if not hasattr(v, "__dataclass_fields__")}})
         if bar is not None:
             bar.update(1)
     return rows, skipped
@@ -106,29 +109,43 @@ def run(number: int, impl: str | None = None, device=None, quick: bool = False, 
     ``impl`` could be measured because its functions raise NotImplementedError.
     ``reference``: False measures ``impl`` alone (the release's reference rows).
     """
+    import torch
+
     from course.core.device import default_device, set_cpu_threads
     from course.core.files import repo_root
-    from course.core.labs import implementation_folder, load_lab
-    from course.core.progress import progress
-    from course.measure.bench import calibration_seconds, device_name, trade_plot, write_rows_csv
 
     started = time.perf_counter()
     trade = trade_module(number)
     root = Path(repo_root() if root is None else root)
     device = default_device(device)
-    impl = impl or "labs"
+    out = Path(out) if out is not None else root / "out" / "bench" / f"lab{number}"
+    # --quick on the CPU runs on one thread, as the shipped reference rows were measured:
+    # its batches are too small to gain from more, and one core's speed is what the
+    # calibration can compare between machines (a thread count would scale its large
+    # batch and not the small ones). Full runs use the free cores.
+    threads, previous = None, torch.get_num_threads()
+    if device.type == "cpu":
+        threads = set_cpu_threads(1 if quick else None)
+    try:
+        return _run(number, trade, root, device, quick, impl or "labs", out, log, reference,
+                    threads, started)
+    finally:
+        torch.set_num_threads(previous)  # the caller's (a release, a notebook) as it was
+
+
+def _run(number, trade, root, device, quick, impl, out, log, reference, threads, started):
+    from course.core.labs import implementation_folder, load_lab
+    from course.core.progress import progress
+    from course.measure.bench import calibration_seconds, device_name, trade_plot, write_rows_csv
+
     folder = implementation_folder(root, impl)
     solutions = root / "solutions"
     is_reference = solutions.is_dir() and folder.resolve() == solutions.resolve()
-    out = Path(out) if out is not None else root / "out" / "bench" / f"lab{number}"
     ctx = trade.prepare(device, quick)
     ctx.setdefault("device", device)
     ctx.setdefault("quick", quick)
-    threads = set_cpu_threads() if device.type == "cpu" else None  # the free cores
-    calibration = calibration_seconds(device)
+    before = calibration_seconds(device)
     name = device_name(device)
-    common = {"lab": number, "device": name, "calibration_s": calibration,
-              "cpu_threads": threads}
 
     live_reference = reference and solutions.is_dir() and not is_reference
     knobs = len(trade.knobs(ctx))
@@ -142,6 +159,11 @@ def run(number: int, impl: str | None = None, device=None, quick: bool = False, 
             raise NotWritten(f"{folder.name}/{trade.MODULE}: {_first_task(skipped)}; write it "
                              f"to measure your trade (nothing else of lab {number} was "
                              f"measured)")
+        # Calibrated before and after the rows: on a shared machine the load moves, and
+        # the mean of the two follows it better than either.
+        calibration = (before + calibration_seconds(device)) / 2
+        common = {"lab": number, "device": name, "calibration_s": calibration,
+                  "cpu_threads": threads}
         source = "measured in this run"
         ref_rows: list[dict] = []
         if is_reference:
@@ -150,14 +172,21 @@ def run(number: int, impl: str | None = None, device=None, quick: bool = False, 
             ref_rows, _ = measure_rows(trade, load_lab(trade.MODULE, "solutions", root), ctx,
                                        "reference", log, bar)
         elif reference:
-            ref_rows, source = shipped_reference(root, number, calibration)
+            ref_rows, source = shipped_reference(root, number, calibration, device)
     finally:
         bar.close()
-    fused = trade.fused(ctx) if device.type == "cuda" and hasattr(trade, "fused") else []
+    fused = []
+    if device.type == "cuda" and hasattr(trade, "fused"):
+        try:
+            fused = trade.fused(ctx)
+        except Exception as exc:  # noqa: BLE001  (a Triton that cannot compile a kernel)
+            log(f"  fused kernels of lab {number}: not measured: {type(exc).__name__}: "
+                f"{str(exc).strip().splitlines()[-1][:160] if str(exc).strip() else ''}")
     for row in fused:
         row.setdefault("impl", "fused")
     measured_source = "measured in this run"
-    rows = ([dict(common, **r, seconds_source=measured_source) for r in yours]
+    rows = ([dict(common, **r, implementation=str(folder), seconds_source=measured_source)
+             for r in yours]
             + [dict(common, **r) if "seconds_source" in r
                else dict(common, **r, seconds_source=source) for r in ref_rows]
             + [dict(common, **r, seconds_source=measured_source) for r in fused])
@@ -171,16 +200,39 @@ def run(number: int, impl: str | None = None, device=None, quick: bool = False, 
                    yours_name=f"yours ({folder.name})")
     except ValueError:  # no finite row at all (every row failed): the CSV says why
         png = None
-    table = format_table(number, trade, yours, ref_rows, source, skipped)
+    table = format_table(number, trade, yours, ref_rows, source, skipped, fused)
     return TradeResult(rows=rows, csv=csv, png=png, table=table, skipped=skipped,
                        seconds=time.perf_counter() - started)
 
 
-def shipped_reference(root: Path, number: int, calibration: float) -> tuple[list, str]:
+def bench_rows(number: int, lab, device, quick: bool, out, log=print) -> list[dict]:
+    """The rows of ``rtcourse bench --lab N`` measured on the lab module ``lab`` (a bench
+    script's), written as ``trade.csv`` and plotted as ``pareto_trade.png`` into ``out``
+    the way a student's plot is drawn, so the lecture's figure and the student's come from
+    one measurement. Knobs ``lab`` has not written are skipped with the reason."""
+    from course.measure.bench import trade_plot, write_rows_csv
+
+    trade = trade_module(number)
+    ctx = trade.prepare(device, quick)
+    rows, skipped = measure_rows(trade, lab, ctx, "reference", log)
+    for reason in skipped:
+        log(f"  trade rows: skipped {reason}")
+    if rows:
+        out = Path(out)
+        write_rows_csv([dict(r, error_metric=trade.ERROR_NAME) for r in rows],
+                       out / "trade.csv")
+        trade_plot(rows, [], path=out / "pareto_trade.png",
+                   title=f"{trade.TITLE}\nerror: {trade.ERROR_NAME}")
+    return rows
+
+
+def shipped_reference(root: Path, number: int, calibration: float,
+                      calibration_device="cpu") -> tuple[list, str]:
     """The handout's reference rows of lab ``number`` with their seconds scaled to this
     machine (``calibration``: this machine's calibration seconds), and the sentence saying
-    so; ``([], why)`` where the handout has none."""
-    from course.measure.bench import read_rows_csv
+    so (``calibration_device``: where ``calibration`` was timed); ``([], why)`` where the
+    handout has none."""
+    from course.measure.bench import device_name, read_rows_csv
 
     path = Path(root) / REFERENCE_DIR / f"lab{number}.csv"
     if not path.is_file():
@@ -193,6 +245,9 @@ def shipped_reference(root: Path, number: int, calibration: float) -> tuple[list
     source = (f"shipped ({REFERENCE_DIR / path.name}, measured on {where}), times x{scale:.3g} "
               f"by calibration (this machine {calibration * 1e3:.3g} ms, theirs "
               f"{(theirs or math.nan) * 1e3:.3g} ms)")
+    here = device_name(calibration_device)
+    if here.split("-")[0] != str(where).split("-")[0]:  # a GPU against CPU rows
+        source += f"; you run on {here}, another kind of device: read the ratio as rough"
     scaled = []
     for row in rows:
         seconds = row.get("seconds")
@@ -206,20 +261,23 @@ def shipped_reference(root: Path, number: int, calibration: float) -> tuple[list
 
 
 def _num(value, fmt: str) -> str:
-    if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-        return "-"
+    """A cell: the number, "nan"/"inf" for one that is not finite (a wrong result says so),
+    "-" for none."""
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        return format("-", f">{fmt.split('.')[0]}")
     return format(value, fmt)
 
 
 def format_table(number: int, trade, yours: list, reference: list, source: str,
-                 skipped: list) -> str:
+                 skipped: list, fused: list = ()) -> str:
     """The terminal table: per setting, your seconds and error beside the reference's, and
-    your time as a multiple of the reference's (below 1: faster)."""
+    your time as a multiple of the reference's (below 1: faster); the fused kernels' rows
+    after them, timed in this run."""
     ref = {r["setting"]: r for r in reference}
     lines = [f"Lab {number}: {trade.TITLE}",
              f"error: {trade.ERROR}",
              f"reference times: {source}"]
-    width = max([len(r["setting"]) for r in (yours or reference)] + [7])
+    width = max([len(r["setting"]) for r in [*(yours or reference), *fused]] + [7])
     head = (f"{'setting':<{width}}  {'your s':>10}  {'ref s':>10}  {'ratio':>6}  "
             f"{'your error':>10}  {'ref error':>10}")
     lines += ["", head, "-" * len(head)]
@@ -227,10 +285,14 @@ def format_table(number: int, trade, yours: list, reference: list, source: str,
         twin = ref.get(row["setting"], {})
         mine = row if yours else {}
         ratio = (mine.get("seconds", math.nan) / twin["seconds"]
-                 if yours and twin.get("seconds") else math.nan)
+                 if yours and twin.get("seconds") else None)
+        error = (f"{'failed':>10}" if mine.get("failed") else _num(mine.get("error"), "10.3g"))
         lines.append(f"{row['setting']:<{width}}  {_num(mine.get('seconds'), '10.3g')}  "
                      f"{_num(twin.get('seconds'), '10.3g')}  {_num(ratio, '6.2f')}  "
-                     f"{_num(mine.get('error'), '10.3g')}  {_num(twin.get('error'), '10.3g')}")
+                     f"{error}  {_num(twin.get('error'), '10.3g')}")
+    for row in fused:
+        lines.append(f"{row['setting']:<{width}}  {'':>10}  {_num(row.get('seconds'), '10.3g')}"
+                     f"  {'':>6}  {'':>10}  {_num(row.get('error'), '10.3g')}")
     lines.append("ratio: your seconds / the reference's at the same setting (below 1: faster)")
     if skipped:
         lines.append(f"not measured ({len(skipped)}): " + "; ".join(skipped[:3])
@@ -253,5 +315,5 @@ def write_reference_rows(root, out, labs=LABS, log=print) -> list[Path]:
     return written
 
 
-__all__ = ["LABS", "NotWritten", "TradeResult", "format_table", "measure_rows", "run",
-           "shipped_reference", "trade_module", "write_reference_rows"]
+__all__ = ["LABS", "NotWritten", "TradeResult", "bench_rows", "format_table", "measure_rows",
+           "run", "shipped_reference", "trade_module", "write_reference_rows"]

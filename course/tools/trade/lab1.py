@@ -51,9 +51,10 @@ def knobs(ctx: dict) -> list[dict]:
 def measure(lab, ctx: dict, knob: dict) -> dict:
     dtype = DTYPES[knob["dtype"]]
     rays, mesh = ctx["rays"].to(ctx["device"], dtype), ctx["soup"].to(ctx["device"], dtype)
-    hits, seconds = timed(ctx, lab.closest_hit, rays, mesh, variant=knob["variant"])
+    budget = {"memory_budget_bytes": ctx["memory"]} if ctx.get("memory") else {}
+    hits, seconds = timed(ctx, lab.closest_hit, rays, mesh, variant=knob["variant"], **budget)
     return {"seconds": seconds, "error": hit_disagreement(hits.t, hits.triangle, *ctx["exact"]),
-            "tests": ctx["pairs"]}
+            "tests": ctx["pairs"], "hits": hits}
 
 
 def fused(ctx: dict) -> list[dict]:

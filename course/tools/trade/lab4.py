@@ -65,12 +65,16 @@ def ramp_reference(o, d, q):
                                             * torch.special.erfcx((a + b * length) / root))
 
 
-def prepare(device, quick: bool) -> dict:
-    n = 256 if quick else (1 << 18 if device.type == "cuda" else 4096)
+def prepare(device, quick: bool, rays: int | None = None, max_steps: int | None = None,
+            repeats: int | None = None) -> dict:
+    """The rays and exact radiances; ``rays``, ``max_steps``, ``repeats`` override the sizes
+    ``quick`` and the device choose (bench/lab4_march.py passes its own)."""
+    n = rays or (256 if quick else (1 << 18 if device.type == "cuda" else 4096))
     o, d = x_face_rays(n)
     near, far = chord(o, d, *BOX)
-    return {"device": device, "quick": quick, "repeats": 2 if quick else 5, "rays": n,
-            "max_steps": 16 if quick else 256, "origins": o.float().to(device),
+    return {"device": device, "quick": quick, "repeats": repeats or (2 if quick else 5),
+            "rays": n, "max_steps": max_steps or (16 if quick else 256),
+            "origins": o.float().to(device),
             "directions": d.float().to(device),
             "exact": {"homogeneous": Q * (far - near) * phi(SIGMA * (far - near)),
                       "ramp": ramp_reference(o, d, Q)},
@@ -105,12 +109,15 @@ def fused(ctx: dict) -> list[dict]:
     if not triton_available():
         return []
     rows = []
-    density = ctx["density"]["homogeneous"]
+    # The same homogeneous medium as a 2^3 grid: Triton specialises an int argument equal
+    # to 1 (a grid's size) into a constant, which the kernel's size arithmetic cannot take.
+    density = torch.full((2, 2, 2), SIGMA, device=ctx["device"])
+    emission = torch.full((2, 2, 2), Q, device=ctx["device"])
     for knob in knobs(ctx):
         if knob["medium"] != "homogeneous" or knob["integrator"] != "exact":
             continue
         result, seconds = timed(ctx, march_grid_triton, ctx["origins"], ctx["directions"],
-                                *BOX, density, ctx["emission"], knob["steps"])
+                                *BOX, density, emission, knob["steps"])
         rows.append({**knob, "setting": f"fused {knob['setting']}", "seconds": seconds,
                      "error": relative_error(result["radiance"], ctx["exact"]["homogeneous"]),
                      "rays": ctx["rays"], "steps": knob["steps"]})

@@ -3,8 +3,8 @@
 Knobs: ``render_froxels`` at tile sizes x slice counts, without volumetric shadows at one
 of them (a modelling error, measured), and with temporal integration after several frames
 of a static camera (the reprojected history blended in: each frame costs one frame, the
-error is the accumulated frame's), on a fog scene (height fog, a textured fog volume, the
-sun with a shadow-casting occluder, two point lights) in front of a ground and a wall.
+error is the accumulated frame's), on a fog scene (height fog, two textured fog volumes, the
+sun with two shadow-casting occluders, two point lights) in front of a ground and a wall.
 ``froxels`` and ``light_evaluations`` are the pipeline's work. Error: the mean absolute
 error over the mean reference radiance, against ``course.given.lab5_reference`` (brute-force
 single scattering, float64, exact shadow rays) on every n-th pixel (``--quick``: light-space
@@ -59,12 +59,16 @@ def fog_scene(device) -> Scene:
                       falloff=0.25, g=0.3),
             FogVolume(center=(0.5, 1.8, -7.0), half_size=(2.5, 1.5, 2.0),
                       scattering=(0.25,) * 3, extinction=0.3, g=0.5, shape="ellipsoid",
-                      density=density_texture(8, 0).to(device)))
+                      density=density_texture(8, 0).to(device)),
+            FogVolume(center=(-3.0, 1.5, -13.0), half_size=(2.0, 1.5, 2.0),
+                      scattering=(0.2,) * 3, extinction=0.25, g=0.4, shape="box",
+                      density=density_texture(8, 1).to(device)))
     lights = (DirectionalLight(direction=(0.4, 0.8, -0.45), irradiance=(3.0, 2.8, 2.5)),
               PointLight(position=(-1.5, 1.5, -5.0), intensity=(6.0, 5.0, 4.0), range=6.0),
               PointLight(position=(2.0, 2.5, -9.0), intensity=(3.0, 4.0, 6.0), range=6.0))
     return Scene(media=fogs, lights=lights, ambient=(0.05, 0.06, 0.08),
-                 occluders=(Box((-6.0, 5.0, -20.0), (-1.0, 6.0, -12.0)),))
+                 occluders=(Box((-6.0, 5.0, -20.0), (-1.0, 6.0, -12.0)),
+                            Box((2.0, 4.0, -30.0), (7.0, 5.0, -26.0))))
 
 
 def camera_at(width: int, height: int) -> Camera:
