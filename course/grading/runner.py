@@ -111,7 +111,7 @@ def grade(
         and user
         and os.environ.get("RTCOURSE_WORKER_CHECKED") != user
     ):  # run_autograder checked
-        from course.grading.sandbox import worker_python_problem
+        from course.grading.worker_user import worker_python_problem
 
         try:
             problem = worker_python_problem()

@@ -64,13 +64,13 @@ grader's process (this one) or in the worker's keeper, which never import it. So
 * **Hidden graders and results are out of reach.** A probe's function and arguments are
   loaded by the probe's process while it still has the grader's rights, before it drops to
   ``RTCOURSE_WORKER_USER`` and imports the submission; as root the grader withholds
-  ``tests/hidden/`` and ``solutions/`` from other users (:func:`withhold`), and the
+  ``tests/hidden/`` and ``solutions/`` from other users (``worker_user.withhold``), and the
   autograder its results folder. The worker's environment holds no path of the grader's
-  (:data:`SCRUBBED`). Without a worker user (a student's own ``rtcourse grade``) there is
+  (``worker_user.SCRUBBED``). Without a worker user (a student's own ``rtcourse grade``) there is
   nothing to hide: the student owns every file. Hidden lines are still removed from any
   text the worker sends back (:class:`course.grading.sources.Redactor`), a second line of
   defence, not the first.
-* **The worker's interpreter must run as the worker user.** :func:`worker_python_problem`
+* **The worker's interpreter must run as the worker user.** ``worker_user.worker_python_problem``
   checks, before grading, that ``RTCOURSE_WORKER_USER`` can run this Python and import the
   standard library and the course's dependencies; otherwise grading stops with one line
   (a missing module would otherwise be scored as the student's failure).
@@ -89,158 +89,55 @@ import tempfile
 import time
 from multiprocessing.connection import Connection
 
-import torch
-
 from course.grading import wire
-from course.grading.input_check import Changed, check_written, too_large_message
 from course.grading.input_check import LocalLab as LocalLab  # the trusted lab, re-exported
+from course.grading.input_check import too_large_message
 from course.grading.proctree import memory_room, tree_bytes
+from course.grading.remote import RemoteCallable, RemoteObject
+from course.grading.sandbox_errors import (
+    ForgedReply as ForgedReply,
+)
+from course.grading.sandbox_errors import (
+    MemoryLimitExceeded as MemoryLimitExceeded,
+)
+from course.grading.sandbox_errors import (
+    ReplyTooLarge as ReplyTooLarge,
+)
+from course.grading.sandbox_errors import (
+    TimeBudgetExceeded as TimeBudgetExceeded,
+)
+from course.grading.sandbox_errors import (
+    TimeLimitExceeded as TimeLimitExceeded,
+)
+from course.grading.sandbox_errors import (  # re-exported: the grader catches them from here
+    WorkerCrashed as WorkerCrashed,
+)
+from course.grading.sandbox_errors import (
+    _raise_student_error,
+)
 from course.grading.sources import Redactor, reference_file, reference_signatures
+from course.grading.worker_user import _as_user, withhold, worker_env
+from course.grading.worker_user import main as check_worker
+from course.grading.worker_user import worker_python_problem as worker_python_problem
 
 DEFAULT_LAB_TIME_BUDGET = 100.0  # seconds per lab of what tests run past SLOW_TEST
 DEFAULT_SLOW_TEST = 10.0  # seconds of a test's submitted code that never count
 DEFAULT_LAB_TIME_CAP = 600.0  # seconds of submitted code per lab, all counted
 DEFAULT_REPLY_MB = 256.0
 _MEMORY_POLL = 0.2  # seconds between looks at the worker tree's memory
-BUDGET_MESSAGE = ("the time budget of the lab used up: {why}, so {where} was not run (a "
-                  "hang or a slow loop in an earlier test?)")
-BUDGET_STOP_MESSAGE = ("the time budget of the lab used up while {where} ran, and it was "
-                       "stopped: {why} (a hang or a slow loop?)")
-
-
-class WorkerCrashed(RuntimeError):
-    """The submission ended or broke the worker process."""
-
-
-class TimeLimitExceeded(TimeoutError):
-    """A call ran past the test's time limit; the worker was killed."""
-
-
-class TimeBudgetExceeded(TimeLimitExceeded):
-    """The submission's code used up the lab's time budget."""
-
-
-class MemoryLimitExceeded(MemoryError):
-    """A call used more memory than allowed; the worker was killed."""
-
-
-class ReplyTooLarge(RuntimeError):
-    """A call's result is bigger than a reply may be."""
-
-
-class ForgedReply(AssertionError):
-    """A probe's reply that its process's trusted code did not write."""
+BUDGET_MESSAGE = (
+    "the time budget of the lab used up: {why}, so {where} was not run (a "
+    "hang or a slow loop in an earlier test?)"
+)
+BUDGET_STOP_MESSAGE = (
+    "the time budget of the lab used up while {where} ran, and it was "
+    "stopped: {why} (a hang or a slow loop?)"
+)
 
 
 def _env_float(name, default):
     value = os.environ.get(name)
     return float(value) if value else default
-
-
-def _raise_student_error(err: dict, where: str, redact=None):
-    """Re-raise a submission's exception as the closest builtin exception type,
-    so ``pytest.raises(ValueError)`` works across the process boundary."""
-    __tracebackhide__ = True  # a student's failure report shows their call, not the sandbox
-    import builtins
-
-    redact = redact or (lambda t: t)
-    if not isinstance(err, dict) or not all(isinstance(err.get(k), str) for k in
-                                            ("type", "message", "traceback")):
-        raise WorkerCrashed(f"the worker sent a malformed error during {where}")
-    # Cut first: a hostile worker's megabytes of text must not cost the grader time.
-    message, trace = redact(err["message"][:4000]), redact(err["traceback"][:4000])
-    kind = err["type"][:100]
-    text = f"{kind}: {message}" if kind != "NotImplementedError" else message
-    kinds = err.get("kinds") if isinstance(err.get("kinds"), list) else []
-    for name in kinds:
-        cls = getattr(builtins, name, None) if isinstance(name, str) else None
-        if isinstance(cls, type) and issubclass(cls, Exception) and cls is not Exception:
-            if cls is NotImplementedError:
-                raise NotImplementedError(message)
-            tail = f"\n(raised in {where}" + (f"; {trace}" if trace else ")")
-            raise cls(text + tail)
-    raise RuntimeError(f"{text}\n(raised in {where})\n{trace}")
-
-
-def _as_user(name: str | None):
-    """(uid, gid) the submission runs as (None when unset)."""
-    if not name:
-        return None
-    import pwd
-
-    try:
-        entry = pwd.getpwnam(name)
-    except KeyError:
-        raise RuntimeError(f"RTCOURSE_WORKER_USER={name}: no such user") from None
-    if os.geteuid() != 0:
-        raise RuntimeError(f"RTCOURSE_WORKER_USER={name}: only a grader running as root can "
-                           f"start the worker as another user")
-    return entry.pw_uid, entry.pw_gid
-
-
-# Names of the grader's environment the worker never sees: where the results and the
-# submission lie, the test node running (a hidden test's name) and the course's own paths.
-SCRUBBED = ("RTCOURSE_RESULTS_DIR", "RTCOURSE_SUBMISSION_DIR", "RTCOURSE_TEST_RESULTS",
-            "RTCOURSE_TEST_CWD", "RTCOURSE_FAILURE_DIR", "RTCOURSE_PYTHON",
-            "PYTEST_CURRENT_TEST", "PYTEST_ADDOPTS", "OLDPWD")
-# What the worker user must import for grading to mean anything: a few modules of the
-# standard library that the course and its dependencies import lazily, and the course.
-WORKER_IMPORTS = ("html", "json", "email.message", "decimal", "fractions", "sqlite3",
-                  "xml.etree.ElementTree", "numpy", "torch", "scipy", "matplotlib",
-                  "trimesh", "networkx", "PIL", "mpmath", "tqdm", "course.grading.worker")
-
-
-def worker_env() -> dict:
-    """The grader's environment less what the worker must not see."""
-    return {k: v for k, v in os.environ.items() if k not in SCRUBBED}
-
-
-def withhold(root) -> list[str]:
-    """As root with a worker user: take every right of other users on the hidden graders
-    and the references of the course at ``root``; return the folders changed."""
-    if root is None or not os.environ.get("RTCOURSE_WORKER_USER") or os.geteuid() != 0:
-        return []
-    changed = []
-    for sub in ("tests/hidden", "solutions"):
-        path = os.path.join(str(root), sub)
-        if os.path.isdir(path) and os.stat(path).st_mode & 0o077:
-            os.chmod(path, os.stat(path).st_mode & 0o700)
-            changed.append(path)
-    return changed
-
-
-def worker_python_problem(user: str | None = None, python: str | None = None) -> str | None:
-    """One line saying why ``user`` (default ``RTCOURSE_WORKER_USER``) cannot run the
-    worker's interpreter and import what grading needs, or None when it can (or when no
-    other user runs the worker)."""
-    user = os.environ.get("RTCOURSE_WORKER_USER") if user is None else user
-    if not user:
-        return None
-    uid, gid = _as_user(user)
-    python = python or sys.executable
-    code = ("import importlib, sys\n"
-            f"for name in {WORKER_IMPORTS!r}:\n"
-            "    try:\n        importlib.import_module(name)\n"
-            "    except ImportError as exc:\n"
-            "        sys.exit(f'cannot import {name}: {exc}')\n")
-    why = None
-    try:
-        proc = subprocess.run([python, "-c", code], user=uid, group=gid, extra_groups=[],
-                              cwd="/", env=worker_env(), stdin=subprocess.DEVNULL,
-                              capture_output=True, text=True, timeout=300, check=False)
-        if proc.returncode != 0:
-            lines = (proc.stderr or proc.stdout).strip().splitlines()
-            why = lines[-1] if lines else f"exit status {proc.returncode}"
-    except (OSError, subprocess.SubprocessError) as exc:
-        why = f"{type(exc).__name__}: {exc}"
-    if why is None:
-        return None
-    return (f"the worker user {user} cannot run the grader's Python {python} ({why[:200]}): "
-            f"install the course in an interpreter under /usr or /opt, or make this one and "
-            f"its packages readable by {user} (chmod -R o+rX on its folder and o+x on the "
-            f"folders above it), or set RTCOURSE_WORKER_USER= (empty) to run the submission "
-            f"as the grader's own user, which gives up hiding the reference solutions, the "
-            f"hidden tests and the results from it")
 
 
 # The worker tree's own Python and torch, before the submission allocates anything.
@@ -261,8 +158,14 @@ class Worker:
     its lab, whose module is imported again in the fresh process.
     """
 
-    def __init__(self, folder: str, *, memory_bytes: int, startup_timeout: float = 60.0,
-                 reply_bytes: int | None = None):
+    def __init__(
+        self,
+        folder: str,
+        *,
+        memory_bytes: int,
+        startup_timeout: float = 60.0,
+        reply_bytes: int | None = None,
+    ):
         self.folder = folder
         self.memory_bytes = memory_bytes
         # The whole tree's limit: the extra memory asked for on top of the baseline, but no
@@ -271,12 +174,13 @@ class Worker:
         self.tree_limit = memory_bytes + BASELINE_BYTES
         if room is not None:
             self.tree_limit = min(self.tree_limit, max(room - GRADER_RESERVE, MIN_TREE_BYTES))
-        self.reply_bytes = int(reply_bytes or _env_float("RTCOURSE_REPLY_MB",
-                                                         DEFAULT_REPLY_MB) * 2**20)
+        self.reply_bytes = int(
+            reply_bytes or _env_float("RTCOURSE_REPLY_MB", DEFAULT_REPLY_MB) * 2**20
+        )
         self.startup_timeout = startup_timeout
         self.proc = None
-        self.conn = None      # to the server: calls
-        self.control = None   # to the keeper: probes
+        self.conn = None  # to the server: calls
+        self.control = None  # to the keeper: probes
         self.workdir = None
         self.starting = False
         self.redact = Redactor()
@@ -294,13 +198,28 @@ class Worker:
             os.chown(self.workdir, *user)
         ctl_parent, ctl_child = socket.socketpair()
         data_parent, data_child = socket.socketpair()
-        env = dict(worker_env(), PYTHONUNBUFFERED="1", TMPDIR=self.workdir,
-                   PYTORCH_NVML_BASED_CUDA_CHECK="1")
+        env = dict(
+            worker_env(),
+            PYTHONUNBUFFERED="1",
+            TMPDIR=self.workdir,
+            PYTORCH_NVML_BASED_CUDA_CHECK="1",
+        )
         fds = (ctl_child.fileno(), data_child.fileno())
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "course.grading.worker", *map(str, fds), self.folder,
-             str(self.memory_bytes), str(self.reply_bytes), *map(str, user or ())],
-            pass_fds=fds, stdin=subprocess.DEVNULL, env=env, cwd=self.workdir,
+            [
+                sys.executable,
+                "-m",
+                "course.grading.worker",
+                *map(str, fds),
+                self.folder,
+                str(self.memory_bytes),
+                str(self.reply_bytes),
+                *map(str, user or ()),
+            ],
+            pass_fds=fds,
+            stdin=subprocess.DEVNULL,
+            env=env,
+            cwd=self.workdir,
             start_new_session=True,
         )
         ctl_child.close()
@@ -373,7 +292,8 @@ class Worker:
         if "crashed" in reply:
             raise WorkerCrashed(
                 f"the submission ended the process of {where} (exit code {reply['crashed']}): "
-                f"sys.exit/os._exit or a crash in native code ends the grading of that call")
+                f"sys.exit/os._exit or a crash in native code ends the grading of that call"
+            )
         self._keep_output(reply)
         return reply
 
@@ -408,10 +328,12 @@ class Worker:
             raise WorkerCrashed(
                 f"the worker process was killed (SIGKILL) during {where}: the machine ran "
                 f"out of memory (the kernel ends the submission's processes first), or the "
-                f"submission killed itself")
+                f"submission killed itself"
+            )
         raise WorkerCrashed(
             f"the submission ended the worker process (exit code {code}) during {where}: "
-            f"sys.exit/os._exit or a crash in native code ends the grading of that call")
+            f"sys.exit/os._exit or a crash in native code ends the grading of that call"
+        )
 
     def _receive(self, conn, deadline: float, where: str) -> dict:
         next_look = 0.0
@@ -425,11 +347,14 @@ class Worker:
                     self.stop()
                     raise MemoryLimitExceeded(
                         f"{where} used more than {self.tree_limit / 2**30:.2f} GiB of "
-                        f"memory (the grader's limit on this machine) and was stopped")
+                        f"memory (the grader's limit on this machine) and was stopped"
+                    )
             if now > deadline:
                 self.stop()
-                raise TimeLimitExceeded(f"{where} did not finish within the time limit and "
-                                        f"was stopped (an infinite loop?)")
+                raise TimeLimitExceeded(
+                    f"{where} did not finish within the time limit and "
+                    f"was stopped (an infinite loop?)"
+                )
         try:
             # The length comes first: a longer message is refused before it is read.
             data = conn.recv_bytes(self.reply_bytes + 2**20)
@@ -439,31 +364,22 @@ class Worker:
             if "bad message length" not in str(exc):
                 self._crashed(where)
             self.stop()
-            raise ReplyTooLarge(too_large_message(where, self.reply_bytes + 2**20,
-                                                  self.reply_bytes).replace(
-                "returned", "returned more than")) from None
+            raise ReplyTooLarge(
+                too_large_message(where, self.reply_bytes + 2**20, self.reply_bytes).replace(
+                    "returned", "returned more than"
+                )
+            ) from None
         try:
             reply = wire.loads_plain(data)
         except Exception as exc:  # a reply that is not plain data: a hostile submission
             self.stop()
-            raise WorkerCrashed(f"the worker sent a malformed reply during {where}: {exc}") \
-                from exc
+            raise WorkerCrashed(f"the worker sent a malformed reply during {where}: {exc}") from exc
         finally:
             del data
         if not isinstance(reply, dict):
             self.stop()
             raise WorkerCrashed(f"the worker sent a malformed reply during {where}")
         return reply
-
-
-def _changed(reply, where) -> list[Changed]:
-    try:
-        return [Changed(pos, key, path, value) for pos, key, path, value in
-                reply.get("written", ())
-                if (pos is None or type(pos) is int) and (key is None or type(key) is str)
-                and type(path) is str]
-    except (TypeError, ValueError):
-        raise WorkerCrashed(f"the worker sent a malformed reply during {where}") from None
 
 
 class SandboxedLab:
@@ -482,7 +398,7 @@ class SandboxedLab:
         self._budget = _env_float("RTCOURSE_LAB_TIME_BUDGET", DEFAULT_LAB_TIME_BUDGET)
         self._slow = _env_float("RTCOURSE_SLOW_TEST", DEFAULT_SLOW_TEST)
         self._cap = _env_float("RTCOURSE_LAB_TIME_CAP", DEFAULT_LAB_TIME_CAP)
-        self._spent = 0.0       # submitted code's seconds in this lab
+        self._spent = 0.0  # submitted code's seconds in this lab
         self._slow_spent = 0.0  # of which past the first SLOW_TEST seconds of their test
         self._test_spent = 0.0  # in the current test
         self._timed_out: dict[str, str] = {}  # where -> the message it failed with
@@ -506,8 +422,10 @@ class SandboxedLab:
             slow_left += max(0.0, self._slow - self._test_spent)
         cap_left = self._cap - self._spent
         if slow_left <= cap_left:
-            return slow_left, (f"the tests of this lab that ran longer than {self._slow:.0f} s "
-                               f"used up the {self._budget:.0f} s allowed past that")
+            return slow_left, (
+                f"the tests of this lab that ran longer than {self._slow:.0f} s "
+                f"used up the {self._budget:.0f} s allowed past that"
+            )
         return cap_left, f"the submission's code ran for {self._cap:.0f} s in this lab"
 
     def _request(self, message, where, probe=False):
@@ -521,12 +439,10 @@ class SandboxedLab:
         test_left = self._remaining_deadline() - time.monotonic()
         by_budget = left < test_left
         try:
-            return self._worker.request(message, max(0.0, min(test_left, left)), where,
-                                        probe=probe)
+            return self._worker.request(message, max(0.0, min(test_left, left)), where, probe=probe)
         except TimeLimitExceeded as exc:
             if by_budget:
-                raise TimeBudgetExceeded(BUDGET_STOP_MESSAGE.format(why=why, where=where)) \
-                    from None
+                raise TimeBudgetExceeded(BUDGET_STOP_MESSAGE.format(why=why, where=where)) from None
             self._timed_out[where] = str(exc)
             raise
         finally:
@@ -546,8 +462,11 @@ class SandboxedLab:
 
     def _decode(self, value, where="the call"):
         try:
-            return wire.decode(value, make_ref=lambda i, t: RemoteObject(self, i, t),
-                               limit=self._worker.reply_bytes)
+            return wire.decode(
+                value,
+                make_ref=lambda i, t: RemoteObject(self, i, t),
+                limit=self._worker.reply_bytes,
+            )
         except wire.TooLarge as exc:
             # The worker checks what it sends, so only a reply written past that check (a
             # hostile submission) decodes too large: its server may be ending right now, so
@@ -583,15 +502,27 @@ class SandboxedLab:
         its plain result."""
         where = f"probe {fn.__name__} of {self._name}"
         nonce = secrets.token_hex(16)
-        reply = self._request({"op": "probe", "probe": wire.encode(fn), "ref": None,
-                               "args": wire.encode(args), "kwargs": wire.encode(kwargs),
-                               "signatures": self._signatures, "nonce": nonce}, where,
-                              probe=True)
-        if not (isinstance(reply.get("nonce"), str)
-                and secrets.compare_digest(reply["nonce"], nonce)):
-            raise ForgedReply(f"the reply to {where} did not come from the probe: the "
-                              f"submission wrote its own onto the probe's channel, so the "
-                              f"test fails")
+        reply = self._request(
+            {
+                "op": "probe",
+                "probe": wire.encode(fn),
+                "ref": None,
+                "args": wire.encode(args),
+                "kwargs": wire.encode(kwargs),
+                "signatures": self._signatures,
+                "nonce": nonce,
+            },
+            where,
+            probe=True,
+        )
+        if not (
+            isinstance(reply.get("nonce"), str) and secrets.compare_digest(reply["nonce"], nonce)
+        ):
+            raise ForgedReply(
+                f"the reply to {where} did not come from the probe: the "
+                f"submission wrote its own onto the probe's channel, so the "
+                f"test fails"
+            )
         self._fail(reply, where)
         return self._decode(reply.get("value"), where)
 
@@ -599,66 +530,10 @@ class SandboxedLab:
         return f"<sandboxed lab {self._name} from {self._worker.folder}>"
 
 
-class RemoteCallable:
-    def __init__(self, lab: SandboxedLab, ref, name, where, key):
-        self._lab, self._ref, self._name, self._where = lab, ref, name, where
-        self._key = key  # the reference's name for it: "fn", "Class" or "Class.method"
-
-    def __call__(self, *args, **kwargs):
-        __tracebackhide__ = True
-        lab = self._lab
-        reply = lab._request(
-            {"op": "call", "ref": self._ref, "name": self._name,
-             "args": wire.encode(args), "kwargs": wire.encode(kwargs)}, self._where)
-        outputs = check_written(_changed(reply, self._where), self._where,
-                                lab._positional(self._key))
-        lab._fail(reply, self._where)
-        for c in outputs:
-            target = kwargs.get(c.keyword) if c.position is None else args[c.position]
-            if isinstance(target, torch.Tensor) and c.value is not None:
-                value = lab._decode(c.value, self._where)
-                if isinstance(value, torch.Tensor) and value.shape == target.shape:
-                    with torch.no_grad():
-                        target.copy_(value.to(target.device))
-        value = lab._decode(reply.get("value"), self._where)
-        if isinstance(value, RemoteObject) and lab._signatures is not None \
-                and self._key in lab._signatures and "." not in self._key:
-            value._key = self._key  # an instance of the reference's class of that name
-        return value
-
-
-class RemoteObject:
-    """An object that stays in the worker (e.g. an instance of a class the lab defines)."""
-
-    def __init__(self, lab: SandboxedLab, ref_id: int, type_name: str):
-        self._lab, self._ref, self._type = lab, ref_id, str(type_name)
-        self._key = self._type
-
-    def __getattr__(self, name):
-        if name.startswith("_"):
-            raise AttributeError(name)
-        return self._lab._getattr(self._ref, name, f"{self._type}.{name}",
-                                  f"{self._key}.{name}")
-
-    def __repr__(self):
-        return f"<{self._type} in the sandboxed worker>"
-
-
 def main(argv=None) -> int:
-    """``python -m course.grading.sandbox check-worker [USER]``: exit 2 with one line when
-    the worker user cannot run this interpreter (run_autograder runs it before grading)."""
-    argv = sys.argv[1:] if argv is None else argv
-    if not argv or argv[0] != "check-worker":
-        print("usage: python -m course.grading.sandbox check-worker [USER]", file=sys.stderr)
-        return 2
-    try:
-        problem = worker_python_problem(argv[1] if len(argv) > 1 else None)
-    except RuntimeError as exc:
-        problem = str(exc)
-    if problem:
-        print(f"rtcourse: {problem}", file=sys.stderr)
-        return 2
-    return 0
+    """``python -m course.grading.sandbox check-worker [USER]``: see
+    :func:`course.grading.worker_user.main` (run_autograder runs it before grading)."""
+    return check_worker(argv)
 
 
 if __name__ == "__main__":
