@@ -48,26 +48,44 @@ def measure(lab, device, quick: bool) -> ResultTable:
     knobs = [k for k in trade.knobs(ctx) if k["kind"] == "copy"]
     for height, width in frames:
         ctx["frame"] = (height, width)
-        knobs += [dict(k, height=height, width=width) for k in trade.knobs(ctx)
-                  if k["kind"] == "frame_loop"]
+        knobs += [
+            dict(k, height=height, width=width)
+            for k in trade.knobs(ctx)
+            if k["kind"] == "frame_loop"
+        ]
     for knob in knobs:
         if knob["kind"] == "frame_loop":
             ctx["frame"] = (knob["height"], knob["width"])
         row = trade.measure(lab, ctx, knob)
         if knob["kind"] == "copy":
-            kind = ("d2h " + ("pinned" if knob["pinned"] else "pageable")) if cuda \
-                else "host copy"
-            table.add(kind="copy", setting=kind, nbytes=knob["bytes"], pinned=knob["pinned"],
-                      seconds=row["seconds"], GB_per_s=row["GB_per_s"], error=row["error"])
+            kind = ("d2h " + ("pinned" if knob["pinned"] else "pageable")) if cuda else "host copy"
+            table.add(
+                kind="copy",
+                setting=kind,
+                nbytes=knob["bytes"],
+                pinned=knob["pinned"],
+                seconds=row["seconds"],
+                GB_per_s=row["GB_per_s"],
+                error=row["error"],
+            )
             print(f"  {kind:<13} {knob['bytes'] / MIB:9.3f} MiB  {row['GB_per_s']:8.2f} GB/s")
         else:
             width, height, overlap = knob["width"], knob["height"], knob["overlap"]
-            table.add(kind="frame_loop", setting=f"{width}x{height} overlap={overlap}",
-                      width=width, height=height, overlap=overlap, frames=row["frames"],
-                      seconds=row["seconds"], frames_per_second=row["frames_per_second"],
-                      error=row["error"])
-            print(f"  frame loop {width}x{height} overlap={overlap!s:<5} "
-                  f"{row['frames_per_second']:8.1f} frames/s, {row['error']:.0%} shown wrong")
+            table.add(
+                kind="frame_loop",
+                setting=f"{width}x{height} overlap={overlap}",
+                width=width,
+                height=height,
+                overlap=overlap,
+                frames=row["frames"],
+                seconds=row["seconds"],
+                frames_per_second=row["frames_per_second"],
+                error=row["error"],
+            )
+            print(
+                f"  frame loop {width}x{height} overlap={overlap!s:<5} "
+                f"{row['frames_per_second']:8.1f} frames/s, {row['error']:.0%} shown wrong"
+            )
     return table
 
 
@@ -79,8 +97,9 @@ def plot(table: ResultTable, path: Path):
     copies = [r for r in table.rows if r["kind"] == "copy"]
     for setting in dict.fromkeys(r["setting"] for r in copies):
         rows = [r for r in copies if r["setting"] == setting]
-        left.plot([r["nbytes"] / MIB for r in rows], [r["GB_per_s"] for r in rows], "o-",
-                  label=setting)
+        left.plot(
+            [r["nbytes"] / MIB for r in rows], [r["GB_per_s"] for r in rows], "o-", label=setting
+        )
     left.set_xscale("log")
     left.set_xlabel("block size (MiB)")
     left.set_ylabel("GB/s (higher is better)")
@@ -88,10 +107,14 @@ def plot(table: ResultTable, path: Path):
     left.grid(True, which="both", alpha=0.3)
     left.legend()
     loops = [r for r in table.rows if r["kind"] == "frame_loop"]
-    labels = [f"{r['width']}x{r['height']}\n{'overlap' if r['overlap'] else 'serial'}"
-              for r in loops]
-    right.bar(range(len(loops)), [r["frames_per_second"] for r in loops],
-              color=["tab:blue" if r["overlap"] else "tab:gray" for r in loops])
+    labels = [
+        f"{r['width']}x{r['height']}\n{'overlap' if r['overlap'] else 'serial'}" for r in loops
+    ]
+    right.bar(
+        range(len(loops)),
+        [r["frames_per_second"] for r in loops],
+        color=["tab:blue" if r["overlap"] else "tab:gray" for r in loops],
+    )
     right.set_xticks(range(len(loops)), labels, fontsize=8)
     right.set_ylabel("frames/s (higher is better)")
     right.set_title("render -> download -> display")
@@ -104,10 +127,17 @@ def plot(table: ResultTable, path: Path):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
-    parser.add_argument("--out", default=None, help="result JSON (default: "
-                        "bench/results/<device>/lab0_interop.json); the plot goes next to it")
-    parser.add_argument("--impl", default=None, help="solutions (the default where it "
-                        "exists), labs, or a folder holding lab0_interop.py")
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="result JSON (default: "
+        "bench/results/<device>/lab0_interop.json); the plot goes next to it",
+    )
+    parser.add_argument(
+        "--impl",
+        default=None,
+        help="solutions (the default where it exists), labs, or a folder holding lab0_interop/",
+    )
     parser.add_argument("--quick", action="store_true", help="small sizes only")
     args = parser.parse_args(argv)
     device = default_device(args.device)

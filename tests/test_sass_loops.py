@@ -76,9 +76,13 @@ def test_triton_walk_loops_stay_lean():
         loops = sorted(found[name], key=lambda loop: loop["instructions"])
         assert len(loops) >= 3, f"{name}: expected TRAVERSE, INTERSECT and a round, got {loops}"
         intersect, traverse = loops[0]["instructions"], loops[1]["instructions"]
-        # 85 and 97 when measured (CUDA C: 64 and 83; before: 110 and 118).
-        assert intersect <= 92 and traverse <= 104, (
+        # 85 and 109 when measured (CUDA C: 64 and 83; 110 and 118 before one address per
+        # row and the one-min inside test). The conservative box test (each box's exit and
+        # the closest hit widened by their rounding, the sign taken into account: a select
+        # and a multiply per bound) costs 12 of TRAVERSE's 109: 97 without it.
+        assert intersect <= 92 and traverse <= 116, (
             f"{name}: the walk's inner loops are {intersect} and {traverse} instructions "
-            f"(at most 92 and 104 expected: 85 and 97 measured, 110 and 118 before one "
-            f"address per row and the one-min inside test); see bench/sass_loops.py"
+            f"(at most 92 and 116 expected: 85 and 109 measured, 97 before the conservative "
+            f"box test, 110 and 118 before one address per row and the one-min inside "
+            f"test); see bench/sass_loops.py"
         )

@@ -45,6 +45,11 @@ ties in t the lower triangle index wins. No parallel-ray epsilon: ``det`` that r
 to exactly 0 misses, a tiny nonzero one is trusted. Degenerate triangles
 (zero area, also the padding of the layouts) and rays parallel to a triangle never hit.
 NaN coordinates give misses, never NaN outputs.
+
+Its parts: :mod:`~course.kernels.triton_intersect_kernels` (Triton, the device functions
+and the kernels) and :mod:`~course.kernels.triton_intersect_layouts` (the triangle layouts);
+this module launches them and reports the compiled kernels, and re-exports what the other
+Triton kernels import from it (``_jit``, ``tl``, ``triton``, ``_store_hits``).
 """
 
 from __future__ import annotations
@@ -55,18 +60,17 @@ from dataclasses import dataclass
 
 import torch
 
-try:
-    import triton
-    import triton.language as tl
-except ImportError as _err:  # the rest of the course works without Triton
-    triton = tl = None
-    _TRITON_IMPORT_ERROR: ImportError | None = _err
-
-    def _jit(fn):
-        return fn
-else:
-    _TRITON_IMPORT_ERROR = None
-    _jit = triton.jit
+from course.kernels.triton_intersect_kernels import (
+    _TRITON_IMPORT_ERROR,
+    _mt_closest_kernel,
+    _unit_closest_kernel,
+    triton,
+)
+from course.kernels.triton_intersect_kernels import _jit as _jit
+from course.kernels.triton_intersect_kernels import _mt_terms as _mt_terms
+from course.kernels.triton_intersect_kernels import _store_hits as _store_hits
+from course.kernels.triton_intersect_kernels import tl as tl
+from course.kernels.triton_intersect_layouts import PAD, TriangleLayout, mt_layout, unit_layout
 
 __all__ = [
     "KernelInfo",
@@ -79,9 +83,6 @@ __all__ = [
     "unit_layout",
 ]
 
-# Layouts pad the triangle count to a multiple of this, so an unrolled loop of any
-# power-of-two factor up to PAD needs no bounds mask; padding triangles never hit.
-PAD = 16
 
 # Launch defaults from bench/lab1_intersect.py's sweep (1M rays x 2K triangles; figures in
 # bench/results/nvidia-h200/lab1/): what matters is rays per thread, block_rays / (32
@@ -90,335 +91,6 @@ PAD = 16
 DEFAULT_BLOCK_RAYS = 256
 DEFAULT_NUM_WARPS = 2
 DEFAULT_UNROLL = 4
-
-
-# --------------------------------------------------------------------------------------
-# Triangle layouts (built once per mesh, like an acceleration structure)
-# --------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class TriangleLayout:
-    """Per-triangle data in structure-of-arrays form, padded for the kernels.
-
-    data: (R, M_pad) float32 contiguous, one row per coordinate (R = 9 for ``"mt"``:
-        v0, e1, e2; R = 12 for ``"unit"``: the 3x4 transform row by row);
-    count: M, the number of real triangles (columns ``M..M_pad-1`` are padding);
-    kind: ``"mt"`` or ``"unit"``.
-    """
-
-    data: torch.Tensor
-    count: int
-    kind: str
-
-    @property
-    def padded_count(self) -> int:
-        return self.data.shape[1]
-
-
-def _check_triangles(triangles: torch.Tensor) -> torch.Tensor:
-    if not isinstance(triangles, torch.Tensor):
-        raise TypeError(
-            f"triangles: expected a (M, 3, 3) float tensor or a TriangleLayout, "
-            f"got {type(triangles).__name__}"
-        )
-    if triangles.ndim != 3 or triangles.shape[1:] != (3, 3):
-        raise ValueError(
-            f"triangles: expected shape (M, 3, 3) (corners x xyz), got {tuple(triangles.shape)}"
-        )
-    if not triangles.is_floating_point():
-        raise TypeError(f"triangles: expected a floating-point tensor, got {triangles.dtype}")
-    return triangles
-
-
-def _soa(rows: torch.Tensor, count: int, kind: str, pad_row: torch.Tensor) -> TriangleLayout:
-    """(M, R) per-triangle rows -> (R, M_pad) float32, padding columns set to ``pad_row``."""
-    padded = max(1, -(-count // PAD)) * PAD  # never empty: the epilogue reads column 0
-    data = pad_row.to(rows.device, torch.float32)[:, None].repeat(1, padded)
-    data[:, :count] = rows.T.to(torch.float32)
-    return TriangleLayout(data.contiguous(), count, kind)
-
-
-def mt_layout(triangles: torch.Tensor) -> TriangleLayout:
-    """Möller–Trumbore's precomputed layout: rows ``v0x v0y v0z e1x e1y e1z e2x e2y e2z``.
-
-    triangles: (M, 3, 3) float, corners ``v0, v1, v2`` of each triangle. The edges are
-    formed in the input dtype (so a float64 mesh gives correctly rounded fp32 edges).
-    Padding triangles have zero edges: ``det = 0``, never a hit.
-    """
-    tri = _check_triangles(triangles)
-    v0, v1, v2 = tri.unbind(1)
-    rows = torch.cat([v0, v1 - v0, v2 - v0], dim=1)  # (M, 9)
-    return _soa(rows, tri.shape[0], "mt", torch.zeros(9))
-
-
-def unit_layout(triangles: torch.Tensor) -> TriangleLayout:
-    """Woop's unit-triangle layout: the 3x4 affine map ``M`` from world to triangle space.
-
-    triangles: (M, 3, 3) float. ``M`` sends ``v0 -> (0,0,0)``, ``v1 -> (1,0,0)``,
-    ``v2 -> (0,1,0)`` and ``n = e1 x e2`` to ``(0,0,1)``, so a ray hits where its
-    transformed ``z`` is 0, at barycentrics ``(u, v) = (x, y)``. It is the inverse of
-    ``[e1 e2 n | v0]``, in closed form: rows ``(e2 x n, n x e1, n) / |n|^2`` (computed in
-    float64, then rounded to fp32). Degenerate triangles (``|n| = 0`` or non-finite) get
-    the padding transform, whose ``z`` never reaches 0 and whose ``u`` is -1: never a hit.
-    """
-    tri = _check_triangles(triangles).to(torch.float64)
-    v0, v1, v2 = tri.unbind(1)
-    e1, e2 = v1 - v0, v2 - v0
-    n = torch.linalg.cross(e1, e2)
-    n2 = (n * n).sum(-1, keepdim=True)
-    rot = (
-        torch.stack([torch.linalg.cross(e2, n), torch.linalg.cross(n, e1), n], dim=1)
-        / n2[..., None]
-    )
-    shift = -(rot @ v0[..., None])  # (M, 3, 1): maps v0 to the origin
-    rows = torch.cat([rot, shift], dim=2).reshape(-1, 12)
-    never = torch.tensor([0.0, 0, 0, -1, 0, 0, 0, -1, 0, 0, 0, 1], dtype=torch.float64)
-    good = (n2[:, 0] > 0) & torch.isfinite(rows).all(dim=1)
-    rows = torch.where(good[:, None], rows, never.to(rows.device))
-    return _soa(rows, tri.shape[0], "unit", never)
-
-
-# --------------------------------------------------------------------------------------
-# Kernels
-# --------------------------------------------------------------------------------------
-
-
-@_jit
-def _load_mt(ptr, stride, idx):
-    """Column ``idx`` of the (9, stride) Möller–Trumbore layout: v0, e1, e2.
-
-    ``idx`` is a scalar (one triangle, broadcast to the ray block) in the loop and a
-    per-ray vector (each ray's winner: a gather) in the epilogue."""
-    return (
-        tl.load(ptr + 0 * stride + idx),
-        tl.load(ptr + 1 * stride + idx),
-        tl.load(ptr + 2 * stride + idx),
-        tl.load(ptr + 3 * stride + idx),
-        tl.load(ptr + 4 * stride + idx),
-        tl.load(ptr + 5 * stride + idx),
-        tl.load(ptr + 6 * stride + idx),
-        tl.load(ptr + 7 * stride + idx),
-        tl.load(ptr + 8 * stride + idx),
-    )
-
-
-@_jit
-def _load_unit(ptr, stride, idx):
-    """Column ``idx`` of the (12, stride) unit-triangle layout: the 3x4 transform by rows."""
-    return (
-        tl.load(ptr + 0 * stride + idx),
-        tl.load(ptr + 1 * stride + idx),
-        tl.load(ptr + 2 * stride + idx),
-        tl.load(ptr + 3 * stride + idx),
-        tl.load(ptr + 4 * stride + idx),
-        tl.load(ptr + 5 * stride + idx),
-        tl.load(ptr + 6 * stride + idx),
-        tl.load(ptr + 7 * stride + idx),
-        tl.load(ptr + 8 * stride + idx),
-        tl.load(ptr + 9 * stride + idx),
-        tl.load(ptr + 10 * stride + idx),
-        tl.load(ptr + 11 * stride + idx),
-    )
-
-
-@_jit
-def _mt_terms(ox, oy, oz, dx, dy, dz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z):
-    """Möller–Trumbore by Cramer's rule: ``det`` and the numerators of ``u, v, t``.
-
-    With ``s = o - v0``, ``p = d x e2``, ``q = s x e1``: ``det = e1 . p``,
-    ``u = (s . p) / det``, ``v = (d . q) / det``, ``t = (e2 . q) / det``.
-    """
-    sx = ox - v0x
-    sy = oy - v0y
-    sz = oz - v0z
-    px = dy * e2z - dz * e2y
-    py = dz * e2x - dx * e2z
-    pz = dx * e2y - dy * e2x
-    det = e1x * px + e1y * py + e1z * pz
-    u_num = sx * px + sy * py + sz * pz
-    qx = sy * e1z - sz * e1y
-    qy = sz * e1x - sx * e1z
-    qz = sx * e1y - sy * e1x
-    v_num = dx * qx + dy * qy + dz * qz
-    t_num = e2x * qx + e2y * qy + e2z * qz
-    return det, u_num, v_num, t_num
-
-
-@_jit
-def _load_rays(o_ptr, d_ptr, tmin_ptr, tmax_ptr, ray, live):
-    """Rays ``ray`` (a block of indices); dead lanes get a zero direction, which misses."""
-    ox = tl.load(o_ptr + ray * 3 + 0, mask=live, other=0.0)
-    oy = tl.load(o_ptr + ray * 3 + 1, mask=live, other=0.0)
-    oz = tl.load(o_ptr + ray * 3 + 2, mask=live, other=0.0)
-    dx = tl.load(d_ptr + ray * 3 + 0, mask=live, other=0.0)
-    dy = tl.load(d_ptr + ray * 3 + 1, mask=live, other=0.0)
-    dz = tl.load(d_ptr + ray * 3 + 2, mask=live, other=0.0)
-    t_lo = tl.load(tmin_ptr + ray, mask=live, other=0.0)
-    t_hi = tl.load(tmax_ptr + ray, mask=live, other=0.0)
-    return ox, oy, oz, dx, dy, dz, t_lo, t_hi
-
-
-@_jit
-def _store_hits(t_ptr, id_ptr, u_ptr, v_ptr, ray, live, best_t, best_id, u, v):
-    """Write one block of hits; misses get t = inf, id = -1, u = v = 0 (the Hits contract)."""
-    found = best_id >= 0
-    tl.store(t_ptr + ray, tl.where(found, best_t, float("inf")), mask=live)
-    tl.store(id_ptr + ray, best_id.to(tl.int64), mask=live)
-    tl.store(u_ptr + ray, tl.where(found, u, 0.0), mask=live)
-    tl.store(v_ptr + ray, tl.where(found, v, 0.0), mask=live)
-
-
-@_jit
-def _mt_closest_kernel(
-    o_ptr,
-    d_ptr,
-    tmin_ptr,
-    tmax_ptr,
-    tri_ptr,
-    t_ptr,
-    id_ptr,
-    u_ptr,
-    v_ptr,
-    n_rays,
-    m_pad,
-    BLOCK_RAYS: tl.constexpr,
-    UNROLL: tl.constexpr,
-    DIVISION_FREE: tl.constexpr,
-):
-    ray = tl.program_id(0) * BLOCK_RAYS + tl.arange(0, BLOCK_RAYS)
-    live = ray < n_rays
-    ox, oy, oz, dx, dy, dz, t_lo, t_hi = _load_rays(o_ptr, d_ptr, tmin_ptr, tmax_ptr, ray, live)
-
-    # The best hit is the fraction best_num / best_den. The reciprocal variant divides
-    # every pair and keeps best_den = 1; the division-free one keeps (t' * sign, |det|).
-    best_num = t_hi
-    best_den = tl.full([BLOCK_RAYS], 1.0, tl.float32)
-    best_id = tl.full([BLOCK_RAYS], -1, tl.int32)
-    # A while loop rather than `for base in range(0, m_pad, UNROLL)`: the same code
-    # compiled (measured), and older Triton interpreters cannot range over a runtime int.
-    base = 0
-    while base < m_pad:
-        # Unrolled so the next triangle's loads are in flight during this one's math.
-        for k in tl.static_range(UNROLL):
-            j = base + k
-            v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z = _load_mt(tri_ptr, m_pad, j)
-            det, u_num, v_num, t_num = _mt_terms(
-                ox, oy, oz, dx, dy, dz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z
-            )
-            if DIVISION_FREE:
-                # Fold det's sign into the numerators, then test u, v, t scaled by |det|:
-                # u >= 0, v >= 0, u + v <= 1, t_min <= t < best become comparisons of
-                # products. det = 0 (parallel ray, padding) fails "t_lo*0 <= t < best*0"
-                # (or gives NaN = false), so it needs no test of its own.
-                flip = det < 0.0
-                adet = tl.abs(det)
-                su = tl.where(flip, -u_num, u_num)
-                sv = tl.where(flip, -v_num, v_num)
-                st = tl.where(flip, -t_num, t_num)
-                hit = (
-                    (su >= 0.0)
-                    & (sv >= 0.0)
-                    & (su + sv <= adet)
-                    & (st >= t_lo * adet)
-                    & (st * best_den < best_num * adet)
-                )
-                best_num = tl.where(hit, st, best_num)
-                best_den = tl.where(hit, adet, best_den)
-            else:
-                # det = 0 makes inv_det infinite and u or v inf or NaN, which fails
-                # the interval tests: parallel rays and padding need no branch.
-                inv_det = 1.0 / det
-                u = u_num * inv_det
-                v = v_num * inv_det
-                t = t_num * inv_det
-                hit = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t >= t_lo) & (t < best_num)
-                best_num = tl.where(hit, t, best_num)
-            best_id = tl.where(hit, j, best_id)
-        base += UNROLL
-
-    # Epilogue, once per ray: barycentrics of the winner (a gather by best_id).
-    # Misses read column 0 (a layout always has one) and are overwritten by the store.
-    winner = tl.maximum(best_id, 0)
-    v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z = _load_mt(tri_ptr, m_pad, winner)
-    det, u_num, v_num, t_num = _mt_terms(
-        ox, oy, oz, dx, dy, dz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z
-    )
-    inv_det = 1.0 / det
-    _store_hits(
-        t_ptr,
-        id_ptr,
-        u_ptr,
-        v_ptr,
-        ray,
-        live,
-        best_num / best_den,
-        best_id,
-        u_num * inv_det,
-        v_num * inv_det,
-    )
-
-
-@_jit
-def _unit_terms(ox, oy, oz, dx, dy, dz, m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23):
-    """Woop's unit-triangle test: transform the ray, intersect the plane z = 0.
-
-    ``t = -o'z / d'z``; the hit point's ``(x, y)`` in triangle space are ``(u, v)``.
-    """
-    oz_ = m20 * ox + m21 * oy + m22 * oz + m23
-    dz_ = m20 * dx + m21 * dy + m22 * dz
-    t = -oz_ / dz_
-    u = (m00 * ox + m01 * oy + m02 * oz + m03) + t * (m00 * dx + m01 * dy + m02 * dz)
-    v = (m10 * ox + m11 * oy + m12 * oz + m13) + t * (m10 * dx + m11 * dy + m12 * dz)
-    return t, u, v
-
-
-@_jit
-def _unit_closest_kernel(
-    o_ptr,
-    d_ptr,
-    tmin_ptr,
-    tmax_ptr,
-    tri_ptr,
-    t_ptr,
-    id_ptr,
-    u_ptr,
-    v_ptr,
-    n_rays,
-    m_pad,
-    BLOCK_RAYS: tl.constexpr,
-    UNROLL: tl.constexpr,
-):
-    ray = tl.program_id(0) * BLOCK_RAYS + tl.arange(0, BLOCK_RAYS)
-    live = ray < n_rays
-    ox, oy, oz, dx, dy, dz, t_lo, t_hi = _load_rays(o_ptr, d_ptr, tmin_ptr, tmax_ptr, ray, live)
-
-    best_t = t_hi
-    best_id = tl.full([BLOCK_RAYS], -1, tl.int32)
-    base = 0
-    while base < m_pad:
-        for k in tl.static_range(UNROLL):
-            j = base + k
-            (m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23) = _load_unit(
-                tri_ptr, m_pad, j
-            )
-            t, u, v = _unit_terms(
-                ox, oy, oz, dx, dy, dz, m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23
-            )
-            # A ray parallel to the plane gives t = +-inf or NaN and u, v = NaN: no hit.
-            hit = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t >= t_lo) & (t < best_t)
-            best_t = tl.where(hit, t, best_t)
-            best_id = tl.where(hit, j, best_id)
-        base += UNROLL
-
-    winner = tl.maximum(best_id, 0)
-    (m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23) = _load_unit(
-        tri_ptr, m_pad, winner
-    )
-    t, u, v = _unit_terms(
-        ox, oy, oz, dx, dy, dz, m00, m01, m02, m03, m10, m11, m12, m13, m20, m21, m22, m23
-    )
-    _store_hits(t_ptr, id_ptr, u_ptr, v_ptr, ray, live, best_t, best_id, u, v)
 
 
 # --------------------------------------------------------------------------------------

@@ -85,10 +85,11 @@ def graded(package, tmp_path_factory):
     base = tmp_path_factory.mktemp("submission")
     submission = base / "submission"
     (submission / "labs").mkdir(parents=True)
-    shutil.copy(ROOT / "solutions" / "lab0_interop.py", submission / "labs")
-    (submission / "lab1_intersect.py").write_text(
+    shutil.copytree(ROOT / "solutions" / "lab0_interop", submission / "labs" / "lab0_interop")
+    (submission / "lab1_intersect").mkdir()
+    (submission / "lab1_intersect" / "moller_trumbore.py").write_text(
         "import torch\n\ndef moller_trumbore(:\n    pass\n"
-    )  # a syntax error: lab 1 fails
+    )  # a syntax error in one file of the package: all of lab 1 fails to import
     (submission / "notes.txt").write_text("not a lab file")
     return _run_autograder(package["dir"], submission, base / "results")
 
@@ -101,7 +102,9 @@ def test_package_layout(package):
     for script in ("setup.sh", "run_autograder"):
         assert script in names and modes[script] & stat.S_IXUSR, f"{script}: not executable"
     assert f"rtcourse/{HIDDEN}" in names, "the hidden graders ship in the autograder"
-    assert "rtcourse/solutions/lab0_interop.py" in names, "the references ship for instructors"
+    assert "rtcourse/solutions/lab0_interop/__init__.py" in names, (
+        "the references ship for instructors"
+    )
     packages = [
         f
         for folder in ("labs", "solutions")
@@ -169,14 +172,19 @@ def test_submitted_lab_full_marks_others_zero(graded):
     assert data["score"] == pytest.approx(scores[0][0])
     lab1 = [t["output"] for t in data["tests"] if t["number"].startswith("1.")]
     assert all("failed to import" in o and "SyntaxError" in o for o in lab1), lab1[0][:2000]
-    assert "lab0_interop.py          found: labs/lab0_interop.py" in proc.stdout
+    assert "lab0_interop/packing.py  found: labs/lab0_interop/packing.py" in proc.stdout
     missing = [t["output"] for t in data["tests"] if int(t["number"].split(".")[0]) > 1]
     assert all("must contain the file" in o for o in missing)
     # Named as handed in, never the autograder's temporary folder.
     assert all(" in the submission: " in o and "'notes.txt'" in o for o in missing), missing[0]
     assert "/tmp" not in data["output"] and not any("/tmp" in t["output"] for t in data["tests"])
-    assert "files graded: lab 0: 'labs/lab0_interop.py'" in data["output"]
-    assert data["extra_data"]["graded_files"]["lab0_interop"] == "'labs/lab0_interop.py'"
+    package = ROOT / "labs" / "lab0_interop"  # handed in whole: every file graded as its own
+    shown = ", ".join(
+        repr(f"labs/lab0_interop/{p.relative_to(package).as_posix()}")
+        for p in module_files(package)
+    )
+    assert f"files graded: lab 0: {shown}" in data["output"]
+    assert data["extra_data"]["graded_files"]["lab0_interop"] == shown
 
 
 def test_hidden_tests_graded_with_their_visibility(graded):
@@ -312,7 +320,7 @@ from pathlib import Path
 import course
 from course.core.files import import_file
 
-_ref = import_file(Path(course.__file__).resolve().parents[1] / "solutions" / "lab0_interop.py",
+_ref = import_file(Path(course.__file__).resolve().parents[1] / "solutions" / "lab0_interop",
                    "stolen")
 globals().update({k: v for k, v in vars(_ref).items() if not k.startswith("__")})
 """

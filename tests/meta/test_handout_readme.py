@@ -69,10 +69,12 @@ def _function_source(path: Path, names) -> dict[str, str]:
 def test_one_task_raises_the_score_by_its_points(handout, tmp_path):
     # The student writes pack_rgba8 and unpack_rgba8 (here: the reference's bodies).
     names = ("pack_rgba8", "unpack_rgba8")
-    lab_file = handout / "labs" / "lab0_interop.py"
+    lab_file = handout / "labs" / "lab0_interop" / "packing.py"  # task 1's module
     text = lab_file.read_text()
     skeleton = _function_source(lab_file, names)
-    for name, solution in _function_source(ROOT / "solutions" / lab_file.name, names).items():
+    for name, solution in _function_source(
+        ROOT / "solutions" / "lab0_interop" / lab_file.name, names
+    ).items():
         text = text.replace(skeleton[name], solution)
     lab_file.write_text(text)
 

@@ -4,6 +4,7 @@ the values are right too: a submission that zeroes what it is given earns nothin
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -20,9 +21,9 @@ def render_rotating_triangle(frame_index, out, period=120):
 
 def test_zeroing_in_place_earns_no_in_place_point(tmp_path):
     submission = tmp_path / "submission"
-    submission.mkdir()
-    reference = (ROOT / "solutions" / "lab0_interop.py").read_text()
-    (submission / "lab0_interop.py").write_text(reference + ZEROING)
+    shutil.copytree(ROOT / "solutions" / "lab0_interop", submission / "lab0_interop")
+    task4 = submission / "lab0_interop" / "frame_loop.py"  # the package's task-4 module
+    task4.write_text(task4.read_text() + ZEROING)
     out = tmp_path / "results.json"
     subprocess.run(
         [

@@ -15,7 +15,7 @@ import course
 from course.core.files import import_file
 
 _ref = import_file(Path(course.__file__).resolve().parent.parent / "solutions" /
-                   "lab0_interop.py", "zeroer_reference")
+                   "lab0_interop", "zeroer_reference")
 
 
 def _arrays(value):

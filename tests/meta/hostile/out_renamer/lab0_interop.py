@@ -12,7 +12,7 @@ import course
 from course.core.files import import_file
 
 _ref = import_file(Path(course.__file__).resolve().parent.parent / "solutions" /
-                   "lab0_interop.py", "renamer_reference")
+                   "lab0_interop", "renamer_reference")
 
 
 def _zero(a):
