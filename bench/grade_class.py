@@ -63,7 +63,7 @@ def make_class(folder: Path, lab: int, n: int) -> dict[str, str]:
         except ValueError as exc:
             print(f"  left out: {exc}", flush=True)
     cycle = ["reference", "skeleton", *(f"mutant:{m.name}" for m in mutants)]
-    kinds = list(SPECIAL[:max(0, min(3, n - 2))])
+    kinds = list(SPECIAL[: max(0, min(3, n - 2))])
     kinds += [cycle[i % len(cycle)] for i in range(n - len(kinds))]
     first = skeleton_functions(skeleton)[0]
     students = {}
@@ -76,8 +76,11 @@ def make_class(folder: Path, lab: int, n: int) -> dict[str, str]:
         elif kind.startswith("mutant:"):
             mutant = next(m for m in mutants if m.name == kind.split(":", 1)[1])
             path = defining_file(solution, mutant.function)
-            copy_module(solution, dest, {relative_name(solution, path):
-                                         apply_mutant(mutant, path.read_text())})
+            copy_module(
+                solution,
+                dest,
+                {relative_name(solution, path): apply_mutant(mutant, path.read_text())},
+            )
         else:
             entry = _entry_file(copy_module(solution, dest))
             text = entry.read_text()
@@ -86,8 +89,9 @@ def make_class(folder: Path, lab: int, n: int) -> dict[str, str]:
             elif kind == "crash_import":
                 entry.write_text("import os\nos._exit(3)\n" + text)
             elif kind == "hang_function":
-                entry.write_text(text + f"\n\ndef {first}(*args, **kwargs):\n"
-                                        f"    while True:\n        pass\n")
+                entry.write_text(
+                    text + f"\n\ndef {first}(*args, **kwargs):\n    while True:\n        pass\n"
+                )
         students[student] = kind
     return students
 
@@ -109,8 +113,21 @@ def bench_lab(lab: int, n: int, jobs: int, tasks, time_limit, scratch: Path) -> 
     env = dict(os.environ, RTCOURSE_PROGRESS="0", CUDA_VISIBLE_DEVICES="")
     selection = [a for t in tasks for a in ("--task", str(t))]
     limit = ["--time-limit", str(time_limit)] if time_limit else []
-    cmd = [sys.executable, "-m", "course.tools.cli", "grade-class", str(folder), "--lab",
-           str(lab), "--out", str(out), "--jobs", str(jobs), *selection, *limit]
+    cmd = [
+        sys.executable,
+        "-m",
+        "course.tools.cli",
+        "grade-class",
+        str(folder),
+        "--lab",
+        str(lab),
+        "--out",
+        str(out),
+        "--jobs",
+        str(jobs),
+        *selection,
+        *limit,
+    ]
     print(f"lab {lab}: grading {n} students in bulk ({jobs} workers)", flush=True)
     wall, cpu, proc = _run(cmd, env)
     if proc.returncode != 0:
@@ -130,33 +147,56 @@ def bench_lab(lab: int, n: int, jobs: int, tasks, time_limit, scratch: Path) -> 
             continue
         student = picks[kind]
         json_path = scratch / f"one{lab}_{student}.json"
-        cmd1 = [sys.executable, "-m", "course.tools.cli", "grade", "--impl",
-                str(folder / student), "--lab", str(lab), "--json", str(json_path),
-                *selection]
+        cmd1 = [
+            sys.executable,
+            "-m",
+            "course.tools.cli",
+            "grade",
+            "--impl",
+            str(folder / student),
+            "--lab",
+            str(lab),
+            "--json",
+            str(json_path),
+            *selection,
+        ]
         print(f"lab {lab}: one-off grade of {student}", flush=True)
         w1, c1, done = _run(cmd1, one_env)
         if not json_path.is_file():
             print(f"  no results: {(done.stdout + done.stderr)[-1500:]}", flush=True)
             continue
         score = json.loads(json_path.read_text())["score"]
-        one_off.append({"student": student, "kind": kind, "wall_s": round(w1, 2),
-                        "cpu_s": round(c1, 2), "score": score,
-                        "bulk_score": float(rows[student]["score"]),
-                        "bulk_seconds": float(rows[student]["seconds"])})
+        one_off.append(
+            {
+                "student": student,
+                "kind": kind,
+                "wall_s": round(w1, 2),
+                "cpu_s": round(c1, 2),
+                "score": score,
+                "bulk_score": float(rows[student]["score"]),
+                "bulk_seconds": float(rows[student]["seconds"]),
+            }
+        )
     if not one_off:
         raise SystemExit(f"lab {lab}: no one-off grade wrote its results")
     one_wall = sum(o["wall_s"] for o in one_off) / len(one_off)
     one_cpu = sum(o["cpu_s"] for o in one_off) / len(one_off)
     same_wall = sum(o["bulk_seconds"] for o in one_off) / len(one_off)
     return {
-        "lab": lab, "n": n, "jobs": jobs, "tasks": list(tasks), "time_limit": time_limit,
+        "lab": lab,
+        "n": n,
+        "jobs": jobs,
+        "tasks": list(tasks),
+        "time_limit": time_limit,
         "kinds": {k: len(v) for k, v in by_kind.items()},
-        "bulk": {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
-                 "students_per_minute": round(n / wall * 60, 2),
-                 "per_student_wall_x_jobs_s": round(wall * jobs / n, 2),
-                 "per_student_cpu_s": round(cpu / n, 2),
-                 "mean_seconds_by_kind": {k: round(sum(v) / len(v), 2)
-                                          for k, v in by_kind.items()}},
+        "bulk": {
+            "wall_s": round(wall, 2),
+            "cpu_s": round(cpu, 2),
+            "students_per_minute": round(n / wall * 60, 2),
+            "per_student_wall_x_jobs_s": round(wall * jobs / n, 2),
+            "per_student_cpu_s": round(cpu / n, 2),
+            "mean_seconds_by_kind": {k: round(sum(v) / len(v), 2) for k, v in by_kind.items()},
+        },
         "one_off": one_off,
         "ratio": {
             "same_students_bulk_over_one_off_wall": round(same_wall / one_wall, 3),
@@ -173,17 +213,23 @@ def main(argv=None):
     parser.add_argument("--n", type=int, default=100)
     parser.add_argument("--lab", type=int, action="append")
     parser.add_argument("--jobs", type=int, default=None)
-    parser.add_argument("--task", action="append", default=[],
-                        help="grade only this task of each lab (repeatable)")
-    parser.add_argument("--time-limit", type=float, default=None,
-                        help="seconds per test of student code (the grader's default: 120)")
+    parser.add_argument(
+        "--task", action="append", default=[], help="grade only this task of each lab (repeatable)"
+    )
+    parser.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        help="seconds per test of student code (the grader's default: 120)",
+    )
     parser.add_argument("--out", default=str(ROOT / "bench/results/cpu-2cores/grade_class"))
     args = parser.parse_args(argv)
     labs, jobs = args.lab or [2, 5], args.jobs or allowed_cpus()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    command = "python bench/grade_class.py " + shlex.join(argv if argv is not None
-                                                          else sys.argv[1:])
+    command = "python bench/grade_class.py " + shlex.join(
+        argv if argv is not None else sys.argv[1:]
+    )
     results = []
     with tempfile.TemporaryDirectory(prefix="rtcourse-bench-class-") as scratch:
         for lab in labs:
@@ -191,9 +237,12 @@ def main(argv=None):
             results.append(row)
             print(json.dumps({k: v for k, v in row.items() if k != "summary"}, indent=1))
             print(row["summary"])
-            data = {"command": command, "machine": f"{os.cpu_count()} cores, "
-                    f"{allowed_cpus()} usable, load {os.getloadavg()[0]:.1f} at the end",
-                    "labs": results}
+            data = {
+                "command": command,
+                "machine": f"{os.cpu_count()} cores, "
+                f"{allowed_cpus()} usable, load {os.getloadavg()[0]:.1f} at the end",
+                "labs": results,
+            }
             (out / "grade_class.json").write_text(json.dumps(data, indent=1) + "\n")
     (out / "command.txt").write_text(command + "\n")
     print(f"wrote {out / 'grade_class.json'}")

@@ -80,7 +80,7 @@ def _portable(word: str, index: int) -> str:
     if index == 0 and word.startswith("/"):
         return Path(word).name
     tmp = tempfile.gettempdir().rstrip("/") + "/"
-    return "$TMPDIR/" + word[len(tmp):] if word.startswith(tmp) else word
+    return "$TMPDIR/" + word[len(tmp) :] if word.startswith(tmp) else word
 
 
 def tree_pss(pid: int) -> dict[int, tuple[int, int, str]]:
@@ -90,12 +90,17 @@ def tree_pss(pid: int) -> dict[int, tuple[int, int, str]]:
         p = todo.pop()
         todo += kids.get(p, [])
         try:
-            fields = dict(line.split(":", 1) for line in
-                          Path(f"/proc/{p}/smaps_rollup").read_text().splitlines()[1:])
+            fields = dict(
+                line.split(":", 1)
+                for line in Path(f"/proc/{p}/smaps_rollup").read_text().splitlines()[1:]
+            )
         except (OSError, ValueError):  # exited between the listing and the read
             continue
-        found[p] = (int(fields["Pss"].split()[0]) * 1024,
-                    int(fields.get("Pss_Anon", "0 kB").split()[0]) * 1024, _command(p))
+        found[p] = (
+            int(fields["Pss"].split()[0]) * 1024,
+            int(fields.get("Pss_Anon", "0 kB").split()[0]) * 1024,
+            _command(p),
+        )
     return found
 
 
@@ -128,17 +133,27 @@ def measure_lab(lab: int, module: str, work: Path, interval: float, cpus: str) -
     submission.mkdir()
     # As a student hands it in: the lab's file, or every file of its package.
     copy_module(lab_source(ROOT / "solutions", module), submission)
-    env = dict(os.environ, CUDA_VISIBLE_DEVICES="", RTCOURSE_SUBMISSION_DIR=str(submission),
-               RTCOURSE_RESULTS_DIR=str(results), RTCOURSE_PYTHON=sys.executable)
-    for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "MALLOC_ARENA_MAX",
-                 "MALLOC_MMAP_THRESHOLD_"):
+    env = dict(
+        os.environ,
+        CUDA_VISIBLE_DEVICES="",
+        RTCOURSE_SUBMISSION_DIR=str(submission),
+        RTCOURSE_RESULTS_DIR=str(results),
+        RTCOURSE_PYTHON=sys.executable,
+    )
+    for name in (
+        "OMP_NUM_THREADS",
+        "MKL_NUM_THREADS",
+        "MALLOC_ARENA_MAX",
+        "MALLOC_MMAP_THRESHOLD_",
+    ):
         env.pop(name, None)  # run_autograder sets them as on Gradescope
     cmd = ["bash", str(source / "run_autograder")]
     if cpus and shutil.which("taskset"):
         cmd = ["taskset", "-c", cpus, *cmd]
     start = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, cwd=folder, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+    proc = subprocess.Popen(
+        cmd, env=env, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
     sampler = PeakSampler(proc.pid, interval)
     sampler.start()
     output = proc.stdout.read()
@@ -151,12 +166,20 @@ def measure_lab(lab: int, module: str, work: Path, interval: float, cpus: str) -
     data = json.loads(path.read_text()) if path.is_file() else {}
     if proc.returncode != 0 or not data.get("max_score"):
         raise RuntimeError(f"lab {lab}: the autograder failed\n{output[-4000:]}")
-    processes = [{"command": command, "pss_mb": pss / 2**20, "anon_pss_mb": anon / 2**20}
-                 for pss, anon, command in sorted(sampler.at_peak.values(), reverse=True)]
-    return {"lab": lab, "peak_pss_mb": sampler.peak / 2**20,
-            "cpu_seconds": usage.ru_utime + usage.ru_stime, "seconds": seconds,
-            "score": data["score"], "max_score": data["max_score"],
-            "largest_process_rss_mb": usage.ru_maxrss / 1024, "at_peak": processes}
+    processes = [
+        {"command": command, "pss_mb": pss / 2**20, "anon_pss_mb": anon / 2**20}
+        for pss, anon, command in sorted(sampler.at_peak.values(), reverse=True)
+    ]
+    return {
+        "lab": lab,
+        "peak_pss_mb": sampler.peak / 2**20,
+        "cpu_seconds": usage.ru_utime + usage.ru_stime,
+        "seconds": seconds,
+        "score": data["score"],
+        "max_score": data["max_score"],
+        "largest_process_rss_mb": usage.ru_maxrss / 1024,
+        "at_peak": processes,
+    }
 
 
 def _grade_seconds(impl: str, trusted: bool) -> tuple[float, float]:
@@ -181,57 +204,77 @@ def isolation(repeats: int, out: Path):
     with tempfile.TemporaryDirectory() as tmp:
         copy = Path(tmp) / "submission"
         shutil.copytree(ROOT / "solutions", copy, ignore=shutil.ignore_patterns("mutants"))
-        for mode, impl, trusted in (("in-process", "solutions", True),
-                                    ("sandboxed", str(copy), False)):
+        for mode, impl, trusted in (
+            ("in-process", "solutions", True),
+            ("sandboxed", str(copy), False),
+        ):
             runs = sorted(_grade_seconds(impl, trusted) for _ in range(repeats))
             wall, cpu = runs[len(runs) // 2]
             table.add(mode=mode, seconds=wall, cpu_seconds=cpu, runs=len(runs))
             print(f"{mode:<11} {wall:7.2f} s wall, {cpu:7.2f} s CPU")
     rows = table.rows
     table.metadata["ratio_sandboxed_over_in_process"] = rows[1]["seconds"] / rows[0]["seconds"]
-    table.metadata["cpu_ratio_sandboxed_over_in_process"] = (rows[1]["cpu_seconds"]
-                                                             / rows[0]["cpu_seconds"])
+    table.metadata["cpu_ratio_sandboxed_over_in_process"] = (
+        rows[1]["cpu_seconds"] / rows[0]["cpu_seconds"]
+    )
     table.metadata["cpus"] = len(os.sched_getaffinity(0))
     print(f"wrote {table.to_json(out)}")
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--lab", type=int, action="append", help="only this lab (repeatable)")
     parser.add_argument("--cpus", default="0", help="taskset CPU list (default: core 0)")
     parser.add_argument("--interval", type=float, default=0.1, help="PSS sampling, seconds")
-    parser.add_argument("--out", default=None, help="default: bench/results/cpu-2cores/"
-                        "grading_cost.json (grading_isolation.json with --isolation)")
-    parser.add_argument("--isolation", action="store_true",
-                        help="in-process vs sandboxed, the whole suite, instead")
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="default: bench/results/cpu-2cores/"
+        "grading_cost.json (grading_isolation.json with --isolation)",
+    )
+    parser.add_argument(
+        "--isolation", action="store_true", help="in-process vs sandboxed, the whole suite, instead"
+    )
     parser.add_argument("--repeats", type=int, default=2, help="with --isolation")
     args = parser.parse_args()
     if not (ROOT / "solutions").is_dir():  # the student handout
-        raise SystemExit("grading_cost: it grades the reference solutions with the Gradescope "
-                         "autograder (rtcourse gradescope), and this folder has no solutions/; "
-                         "run it in the course repository")
+        raise SystemExit(
+            "grading_cost: it grades the reference solutions with the Gradescope "
+            "autograder (rtcourse gradescope), and this folder has no solutions/; "
+            "run it in the course repository"
+        )
     results = ROOT / "bench" / "results" / "cpu-2cores"
     if args.isolation:
         return isolation(args.repeats, Path(args.out or results / "grading_isolation.json"))
     import torch
 
     labs = lab_catalog(lab_test_files(ROOT, args.lab))
-    table = ResultTable("grading cost per lab: Gradescope's autograder, reference submitted",
-                        device="cpu", total=len(labs))
+    table = ResultTable(
+        "grading cost per lab: Gradescope's autograder, reference submitted",
+        device="cpu",
+        total=len(labs),
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for number, info in sorted(labs.items()):
             row = measure_lab(number, info.module, Path(tmp), args.interval, args.cpus)
             table.add(**row)
-            print(f"lab {number}: {row['peak_pss_mb']:7.1f} MB peak PSS, "
-                  f"{row['cpu_seconds']:7.1f} s CPU, {row['seconds']:7.1f} s wall, "
-                  f"score {row['score']:g}/{row['max_score']:g}", flush=True)
+            print(
+                f"lab {number}: {row['peak_pss_mb']:7.1f} MB peak PSS, "
+                f"{row['cpu_seconds']:7.1f} s CPU, {row['seconds']:7.1f} s wall, "
+                f"score {row['score']:g}/{row['max_score']:g}",
+                flush=True,
+            )
     table.metadata.update(
-        cpus=args.cpus, torch=torch.__version__, interval_s=args.interval,
+        cpus=args.cpus,
+        torch=torch.__version__,
+        interval_s=args.interval,
         command=shlex.join([Path(sys.executable).name, *sys.argv]),
         note="run_autograder of `rtcourse gradescope --lab N` with the reference as the "
-             "submission, CUDA hidden, pinned to one core; PSS of the whole process tree, "
-             "sampled. Wall time is on a shared machine: cpu_seconds is the steadier number.")
+        "submission, CUDA hidden, pinned to one core; PSS of the whole process tree, "
+        "sampled. Wall time is on a shared machine: cpu_seconds is the steadier number.",
+    )
     out = table.to_json(args.out or results / "grading_cost.json")
     print(f"wrote {out}")
 

@@ -64,8 +64,9 @@ def hit_rates(lab, scale: float, mode: str) -> dict:
 
 
 def measure(lab) -> dict:
-    return {mode: {f"{s:g}": hit_rates(lab, s, mode) for s in SCALES}
-            for mode in ("unit", "scaled")}
+    return {
+        mode: {f"{s:g}": hit_rates(lab, s, mode) for s in SCALES} for mode in ("unit", "scaled")
+    }
 
 
 def _rate(x: float) -> str:
@@ -76,13 +77,21 @@ def table(results: dict) -> str:
     """The rST table quoted in Lab 1's docstring."""
     rule = "========  " + "  ".join(["=================="] * len(VARIANTS))
     head = "scale S   " + "  ".join(f"{v:<18}" for v in VARIANTS)
-    lines = ["Far field (fp32, icosphere level 1 scaled by S: 80 rays aimed at its triangles'",
-             "centroids from 3 S away; hit rate with unit directions / with directions of",
-             "length ~S):", "", rule, head.rstrip(), rule]
+    lines = [
+        "Far field (fp32, icosphere level 1 scaled by S: 80 rays aimed at its triangles'",
+        "centroids from 3 S away; hit rate with unit directions / with directions of",
+        "length ~S):",
+        "",
+        rule,
+        head.rstrip(),
+        rule,
+    ]
     for s in SCALES:
         key = f"{s:g}"
-        cells = [f"{_rate(results['unit'][key][v])} / {_rate(results['scaled'][key][v])}"
-                 for v in VARIANTS]
+        cells = [
+            f"{_rate(results['unit'][key][v])} / {_rate(results['scaled'][key][v])}"
+            for v in VARIANTS
+        ]
         lines.append((f"{key:<8}  " + "  ".join(f"{c:<18}" for c in cells)).rstrip())
     lines.append(rule)
     return "\n".join(lines)
@@ -99,9 +108,17 @@ def main(argv=None) -> None:
     print(table(results))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"command": "python bench/lab1_far.py --json " +
-                                         str(args.json), "scales": list(SCALES),
-                                         "hit_rate": results}, indent=1) + "\n")
+        args.json.write_text(
+            json.dumps(
+                {
+                    "command": "python bench/lab1_far.py --json " + str(args.json),
+                    "scales": list(SCALES),
+                    "hit_rate": results,
+                },
+                indent=1,
+            )
+            + "\n"
+        )
 
 
 if __name__ == "__main__":

@@ -75,10 +75,26 @@ OFFSETS = {"0": 0.0, "1e5": 1e5, "1e6": 1e6, "1e7": 1e7}
 # Sizes: (rays, triangles) of the torch variants, rays of the Triton kernels, icosphere level;
 # memory: closest_hit's budget for its (rays, triangles) tiles; on a GPU a small budget
 # makes tiles so small that kernel launches, not arithmetic, set the time.
-SIZES = {"cpu": {"rays": 1024, "tris": 256, "triton_rays": 0, "ico_level": 2, "repeats": 5,
-                 "warmup": 1, "memory": 2**28},
-         "cuda": {"rays": 65536, "tris": 2048, "triton_rays": 1 << 20, "ico_level": 4,
-                  "repeats": 10, "warmup": 2, "memory": 2**32}}
+SIZES = {
+    "cpu": {
+        "rays": 1024,
+        "tris": 256,
+        "triton_rays": 0,
+        "ico_level": 2,
+        "repeats": 5,
+        "warmup": 1,
+        "memory": 2**28,
+    },
+    "cuda": {
+        "rays": 65536,
+        "tris": 2048,
+        "triton_rays": 1 << 20,
+        "ico_level": 4,
+        "repeats": 10,
+        "warmup": 2,
+        "memory": 2**32,
+    },
+}
 
 # The Triton sweep: num_warps x rays per thread (block_rays = 32 * num_warps * rays/thread).
 NUM_WARPS = (1, 2, 4, 8)
@@ -94,6 +110,7 @@ TRITON_KERNELS = {  # row name: (function, layout builder, extra keywords)
 # --------------------------------------------------------------------------------------
 # Scenes and rays (built in float64, cast per precision)
 # --------------------------------------------------------------------------------------
+
 
 def load_meshes(tris: int, ico_level: int) -> tuple[Mesh, Mesh, str]:
     """(random soup, icosphere, where they came from), float64 on the CPU.
@@ -113,10 +130,12 @@ def load_meshes(tris: int, ico_level: int) -> tuple[Mesh, Mesh, str]:
 def _soup_fallback(n: int, seed: int) -> Mesh:
     """course.core.scenes' random_soup, step for step (same triangles for a seed)."""
     g = torch.Generator().manual_seed(seed)
-    size = torch.exp(torch.empty(n, dtype=torch.float64).uniform_(math.log(1e-3), math.log(0.25),
-                                                                 generator=g))
-    centre = size[:, None] + (1 - 2 * size[:, None]) * torch.rand(n, 3, dtype=torch.float64,
-                                                                  generator=g)
+    size = torch.exp(
+        torch.empty(n, dtype=torch.float64).uniform_(math.log(1e-3), math.log(0.25), generator=g)
+    )
+    centre = size[:, None] + (1 - 2 * size[:, None]) * torch.rand(
+        n, 3, dtype=torch.float64, generator=g
+    )
     offsets = (2 * torch.rand(n, 3, 3, dtype=torch.float64, generator=g) - 1) * size[:, None, None]
     vertices = (centre[:, None, :] + offsets).reshape(-1, 3)
     return Mesh(vertices=vertices, faces=torch.arange(3 * n).reshape(n, 3))
@@ -127,14 +146,47 @@ def _icosphere_fallback(level: int) -> Mesh:
     times, the vertices pushed to the sphere after each split. Closed: every edge is
     shared by two faces."""
     phi = (1 + 5**0.5) / 2
-    vertices = torch.tensor([[-1, phi, 0], [1, phi, 0], [-1, -phi, 0], [1, -phi, 0],
-                             [0, -1, phi], [0, 1, phi], [0, -1, -phi], [0, 1, -phi],
-                             [phi, 0, -1], [phi, 0, 1], [-phi, 0, -1], [-phi, 0, 1]],
-                            dtype=torch.float64)
-    faces = torch.tensor([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-                          [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-                          [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-                          [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    vertices = torch.tensor(
+        [
+            [-1, phi, 0],
+            [1, phi, 0],
+            [-1, -phi, 0],
+            [1, -phi, 0],
+            [0, -1, phi],
+            [0, 1, phi],
+            [0, -1, -phi],
+            [0, 1, -phi],
+            [phi, 0, -1],
+            [phi, 0, 1],
+            [-phi, 0, -1],
+            [-phi, 0, 1],
+        ],
+        dtype=torch.float64,
+    )
+    faces = torch.tensor(
+        [
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ]
+    )
     for _ in range(level):
         edges = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).sort(1).values
         unique, index = edges.unique(dim=0, return_inverse=True)
@@ -143,8 +195,9 @@ def _icosphere_fallback(level: int) -> Mesh:
         vertices = vertices / vertices.norm(dim=1, keepdim=True)
         a, b, c = faces.unbind(1)
         ab, bc, ca = mid
-        faces = torch.cat([torch.stack(f, 1) for f in
-                           ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
+        faces = torch.cat(
+            [torch.stack(f, 1) for f in ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))]
+        )
     return Mesh(vertices=vertices / vertices.norm(dim=1, keepdim=True), faces=faces)
 
 
@@ -166,8 +219,9 @@ def crack_scene(mesh: Mesh, offset: float, dtype: torch.dtype):
     faces = mesh.faces
     edges = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     edges = edges.sort(1).values.unique(dim=0)
-    targets = torch.cat([exact] + [exact[edges[:, 0]] * (1 - f) + exact[edges[:, 1]] * f
-                                   for f in (0.5, 0.25)])
+    targets = torch.cat(
+        [exact] + [exact[edges[:, 0]] * (1 - f) + exact[edges[:, 1]] * f for f in (0.5, 0.25)]
+    )
     has = (faces[None, :, :] == torch.arange(len(exact))[:, None, None]).any(-1)  # (V, F)
     on_edge = has[edges[:, 0]] & has[edges[:, 1]]
     incident = torch.cat([has, on_edge, on_edge]).repeat(2, 1)
@@ -205,13 +259,11 @@ def crack_rates(trace, ico: Mesh, dtype: torch.dtype, device) -> dict:
         rates[f"crack_out_{name}"] = passed[:half].double().mean().item()
         rates[f"crack_in_{name}"] = passed[half:].double().mean().item()
         if name in ("0", "1e6"):
-            rates["crack_origin" if name == "0" else "crack_1e6"] = \
-                passed.double().mean().item()
+            rates["crack_origin" if name == "0" else "crack_1e6"] = passed.double().mean().item()
     return rates
 
 
-def crack_table(ico_level: int, device, dtype: torch.dtype = torch.float32,
-                variants=None) -> str:
+def crack_table(ico_level: int, device, dtype: torch.dtype = torch.float32, variants=None) -> str:
     """The pass-through table of the lab's docstring: every variant in ``dtype`` on the
     icosphere of ``ico_level``, rays from outside / from the centre, per offset."""
     variants = list(variants or VARIANTS)
@@ -219,25 +271,39 @@ def crack_table(ico_level: int, device, dtype: torch.dtype = torch.float32,
     rays, _, _ = crack_scene(ico, 0.0, dtype)
     rates = {}
     for variant in variants:
+
         def trace(r, m, variant=variant):
             return closest_hit(r, m, variant=variant)
+
         rates[variant] = crack_rates(trace, ico, dtype, device)
     dname = next(k for k, v in DTYPES.items() if v == dtype)
-    first = (f"Pass-throughs ({dname}, icosphere level {ico_level}: {len(rays) // 2} rays aimed "
-             f"at its {ico.num_vertices} vertices")
-    second = ("and at 1/2 and 1/4 of its edges, from outside / from the centre; the sphere moved "
-              "by the offset):")
+    first = (
+        f"Pass-throughs ({dname}, icosphere level {ico_level}: {len(rays) // 2} rays aimed "
+        f"at its {ico.num_vertices} vertices"
+    )
+    second = (
+        "and at 1/2 and 1/4 of its edges, from outside / from the centre; the sphere moved "
+        "by the offset):"
+    )
     lines = [first, second, ""]
     width = max(len(v) for v in variants) + 2
     rule = "=" * 8 + "  " + "  ".join("=" * width for _ in variants)
     lines += [rule, "offset    " + "  ".join(v.ljust(width) for v in variants).rstrip(), rule]
     for name in OFFSETS:
-        cells = [f"{_pct(rates[v][f'crack_out_{name}'])} / {_pct(rates[v][f'crack_in_{name}'])}"
-                 for v in variants]
+        cells = [
+            f"{_pct(rates[v][f'crack_out_{name}'])} / {_pct(rates[v][f'crack_in_{name}'])}"
+            for v in variants
+        ]
         lines.append(name.ljust(10) + "  ".join(c.ljust(width) for c in cells).rstrip())
-    lines += [rule, "",
-              "Largest |t - 1| of the rays that hit there (t = 1 at the aimed point):", "",
-              rule, "offset    " + "  ".join(v.ljust(width) for v in variants).rstrip(), rule]
+    lines += [
+        rule,
+        "",
+        "Largest |t - 1| of the rays that hit there (t = 1 at the aimed point):",
+        "",
+        rule,
+        "offset    " + "  ".join(v.ljust(width) for v in variants).rstrip(),
+        rule,
+    ]
     for name in OFFSETS:
         cells = [f"{rates[v][f'aim_err_{name}']:.1g}" for v in variants]
         lines.append(name.ljust(10) + "  ".join(c.ljust(width) for c in cells).rstrip())
@@ -245,9 +311,12 @@ def crack_table(ico_level: int, device, dtype: torch.dtype = torch.float32,
     distinct = ", ".join(str(v) for v, _ in shape.values())
     flat = ", ".join(_pct(z) for _, z in shape.values())
     offsets = ", ".join(OFFSETS)
-    lines += [rule, "",
-              f"The mesh after rounding, offsets {offsets}: distinct vertices {distinct};",
-              f"zero-area triangles {flat}."]
+    lines += [
+        rule,
+        "",
+        f"The mesh after rounding, offsets {offsets}: distinct vertices {distinct};",
+        f"zero-area triangles {flat}.",
+    ]
     return "\n".join(lines)
 
 
@@ -258,8 +327,10 @@ def _rounded_mesh(ico: Mesh, dtype: torch.dtype) -> dict:
         _, mesh, _ = crack_scene(ico, offset, dtype)
         tri = mesh.triangles().double()
         normal = torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        shape[name] = (len(mesh.vertices.unique(dim=0)),
-                       (normal == 0).all(-1).double().mean().item())
+        shape[name] = (
+            len(mesh.vertices.unique(dim=0)),
+            (normal == 0).all(-1).double().mean().item(),
+        )
     return shape
 
 
@@ -274,24 +345,37 @@ def _pct(rate: float) -> str:
 # Errors
 # --------------------------------------------------------------------------------------
 
+
 def accuracy(hits: Hits, ref: Hits) -> dict:
     """Disagreement with the float64 reference: hit/miss, triangle, and t where both agree."""
     got, want = hits.hit.cpu(), ref.hit.cpu()
     same = got & want & (hits.triangle.cpu() == ref.triangle.cpu())
     t, t_ref = hits.t.cpu().double()[same], ref.t.cpu()[same]
     rel = (t - t_ref).abs() / t_ref.abs()
-    return {"disagreement": (got != want).double().mean().item(),
-            "wrong_triangle": (got & want & ~same).double().mean().item(),
-            "t_rel_err_median": rel.median().item() if len(rel) else math.nan,
-            "t_rel_err_max": rel.max().item() if len(rel) else math.nan}
+    return {
+        "disagreement": (got != want).double().mean().item(),
+        "wrong_triangle": (got & want & ~same).double().mean().item(),
+        "t_rel_err_median": rel.median().item() if len(rel) else math.nan,
+        "t_rel_err_max": rel.max().item() if len(rel) else math.nan,
+    }
 
 
 # --------------------------------------------------------------------------------------
 # The torch variants
 # --------------------------------------------------------------------------------------
 
-def bench_torch(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hits,
-                device, cfg: dict, variants, dtypes) -> None:
+
+def bench_torch(
+    table: ResultTable,
+    soup: Mesh,
+    ico: Mesh,
+    rays: Rays,
+    ref: Hits,
+    device,
+    cfg: dict,
+    variants,
+    dtypes,
+) -> None:
     pairs = len(rays) * soup.num_faces
     for variant in variants:
         for dname in dtypes:
@@ -303,20 +387,35 @@ def bench_torch(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hits
             started = time.perf_counter()
             # The row rtcourse bench --lab 1 measures (seconds, error against the exact
             # hits), then this script's own columns on the same hits.
-            ctx = {"device": device, "repeats": cfg["repeats"], "rays": rays, "soup": soup,
-                   "exact": (ref.t, ref.triangle), "pairs": pairs, "memory": cfg["memory"]}
+            ctx = {
+                "device": device,
+                "repeats": cfg["repeats"],
+                "rays": rays,
+                "soup": soup,
+                "exact": (ref.t, ref.triangle),
+                "pairs": pairs,
+                "memory": cfg["memory"],
+            }
             shared = trade.measure(LAB, ctx, {"variant": variant, "dtype": dname})
-            row = table.add(impl="torch", variant=variant, dtype=dname, rays=len(rays),
-                            tris=soup.num_faces, seconds=shared["seconds"],
-                            tests_per_s=pairs / shared["seconds"], error=shared["error"],
-                            **accuracy(shared["hits"], ref),
-                            **crack_rates(trace, ico, dtype, device))
+            row = table.add(
+                impl="torch",
+                variant=variant,
+                dtype=dname,
+                rays=len(rays),
+                tris=soup.num_faces,
+                seconds=shared["seconds"],
+                tests_per_s=pairs / shared["seconds"],
+                error=shared["error"],
+                **accuracy(shared["hits"], ref),
+                **crack_rates(trace, ico, dtype, device),
+            )
             _log(row, started)
 
 
 def _compiled_mt_closest():
     """``torch.compile`` of one tile of Möller–Trumbore brute force plus its min-reduction:
     the compiler fuses the (rays, triangles) tile away."""
+
     def tile(o, d, v0, v1, v2):
         t, _, _ = moller_trumbore(o[:, None], d[:, None], v0[None], v1[None], v2[None])
         t_best, index = t.min(dim=1)
@@ -325,8 +424,16 @@ def _compiled_mt_closest():
     return torch.compile(tile, dynamic=False)
 
 
-def bench_compile(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hits,
-                  device, cfg: dict, chunk: int = 8192) -> None:
+def bench_compile(
+    table: ResultTable,
+    soup: Mesh,
+    ico: Mesh,
+    rays: Rays,
+    ref: Hits,
+    device,
+    cfg: dict,
+    chunk: int = 8192,
+) -> None:
     tile = _compiled_mt_closest()
 
     def trace(r: Rays, m: Mesh) -> Hits:
@@ -335,7 +442,9 @@ def bench_compile(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hi
         pad = -n % chunk  # whole chunks only: one compiled shape
         o = torch.nn.functional.pad(r.origins, (0, 0, 0, pad))
         d = torch.nn.functional.pad(r.directions, (0, 0, 0, pad))
-        parts = [tile(o[i:i + chunk], d[i:i + chunk], v0, v1, v2) for i in range(0, n + pad, chunk)]
+        parts = [
+            tile(o[i : i + chunk], d[i : i + chunk], v0, v1, v2) for i in range(0, n + pad, chunk)
+        ]
         t = torch.cat([p[0] for p in parts])[:n]
         index = torch.cat([p[1] for p in parts])[:n]
         hit = torch.isfinite(t)
@@ -346,11 +455,17 @@ def bench_compile(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hi
     r, m = rays.to(device, torch.float32), soup.to(device, torch.float32)
     trace(r, m)  # compile outside the timing
     timing = time_fn(trace, r, m, repeats=cfg["repeats"], warmup=cfg["warmup"])
-    row = table.add(impl="torch.compile", variant="moller_trumbore", dtype="fp32",
-                    rays=len(rays), tris=soup.num_faces, seconds=timing.median,
-                    tests_per_s=len(rays) * soup.num_faces / timing.median,
-                    **accuracy(trace(r, m), ref),
-                    **crack_rates(trace, ico, torch.float32, device))
+    row = table.add(
+        impl="torch.compile",
+        variant="moller_trumbore",
+        dtype="fp32",
+        rays=len(rays),
+        tris=soup.num_faces,
+        seconds=timing.median,
+        tests_per_s=len(rays) * soup.num_faces / timing.median,
+        **accuracy(trace(r, m), ref),
+        **crack_rates(trace, ico, torch.float32, device),
+    )
     _log(row, started)
 
 
@@ -358,24 +473,31 @@ def bench_compile(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hi
 # The Triton kernels
 # --------------------------------------------------------------------------------------
 
+
 def arch_preset(device):
     """The course.measure.occupancy preset of the device's generation (the newest not newer)."""
     major, minor = torch.cuda.get_device_capability(device)
-    older = [a for a in PRESETS.values()
-             if tuple(map(int, a.compute_capability.split("."))) <= (major, minor)]
+    older = [
+        a
+        for a in PRESETS.values()
+        if tuple(map(int, a.compute_capability.split("."))) <= (major, minor)
+    ]
     return max(older, key=lambda a: tuple(map(int, a.compute_capability.split("."))))
 
 
 def _triton_trace(fn, builder, extra):
     def trace(r: Rays, m: Mesh) -> Hits:
-        t, index, u, v = fn(r.origins, r.directions, builder(m.triangles()), r.t_min, r.t_max,
-                            **extra)
+        t, index, u, v = fn(
+            r.origins, r.directions, builder(m.triangles()), r.t_min, r.t_max, **extra
+        )
         return Hits(t=t, triangle=index, u=u, v=v)
+
     return trace
 
 
-def bench_triton(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hits,
-                 device, n_rays: int, cfg: dict) -> None:
+def bench_triton(
+    table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hits, device, n_rays: int, cfg: dict
+) -> None:
     arch = arch_preset(device)
     big = soup_rays(n_rays).to(device, torch.float32)
     pairs = n_rays * soup.num_faces
@@ -383,29 +505,54 @@ def bench_triton(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hit
     for name, (fn, builder, extra) in TRITON_KERNELS.items():
         started = time.perf_counter()
         trace = _triton_trace(fn, builder, extra)
-        errors = {**accuracy(trace(rays.to(device, torch.float32),
-                                   soup.to(device, torch.float32)), ref),
-                  **crack_rates(trace, ico, torch.float32, device)}
+        errors = {
+            **accuracy(trace(rays.to(device, torch.float32), soup.to(device, torch.float32)), ref),
+            **crack_rates(trace, ico, torch.float32, device),
+        }
         layout = builder(triangles)  # built once, like an acceleration structure
         configs = [(w, k * 32 * w, ti.DEFAULT_UNROLL) for w in NUM_WARPS for k in RAYS_PER_THREAD]
-        configs += [(ti.DEFAULT_NUM_WARPS, ti.DEFAULT_BLOCK_RAYS, u) for u in UNROLLS
-                    if u != ti.DEFAULT_UNROLL]
+        configs += [
+            (ti.DEFAULT_NUM_WARPS, ti.DEFAULT_BLOCK_RAYS, u)
+            for u in UNROLLS
+            if u != ti.DEFAULT_UNROLL
+        ]
         for num_warps, block_rays, unroll in configs:
             launch = dict(block_rays=block_rays, num_warps=num_warps, unroll=unroll, **extra)
             info = ti.compiled_kernel_info(fn, big.origins, big.directions, layout, **launch)
-            occ = (occupancy(arch, info.n_regs, info.threads_per_block, info.shared_bytes or 0)
-                   if info.n_regs else None)
-            timing = time_fn(fn, big.origins, big.directions, layout, repeats=2 * cfg["repeats"],
-                             warmup=cfg["warmup"], **launch)
-            row = table.add(impl="triton", variant=name, dtype="fp32", rays=n_rays,
-                            tris=soup.num_faces, seconds=timing.median,
-                            tests_per_s=pairs / timing.median, num_warps=num_warps,
-                            block_rays=block_rays, rays_per_thread=block_rays // (32 * num_warps),
-                            unroll=unroll, n_regs=info.n_regs, n_spills=info.n_spills,
-                            occupancy=occ.occupancy if occ else None,
-                            warps_per_sm=occ.active_warps if occ else None,
-                            occupancy_limit=occ.limiter if occ else None,
-                            occupancy_arch=arch.name, **errors)
+            occ = (
+                occupancy(arch, info.n_regs, info.threads_per_block, info.shared_bytes or 0)
+                if info.n_regs
+                else None
+            )
+            timing = time_fn(
+                fn,
+                big.origins,
+                big.directions,
+                layout,
+                repeats=2 * cfg["repeats"],
+                warmup=cfg["warmup"],
+                **launch,
+            )
+            row = table.add(
+                impl="triton",
+                variant=name,
+                dtype="fp32",
+                rays=n_rays,
+                tris=soup.num_faces,
+                seconds=timing.median,
+                tests_per_s=pairs / timing.median,
+                num_warps=num_warps,
+                block_rays=block_rays,
+                rays_per_thread=block_rays // (32 * num_warps),
+                unroll=unroll,
+                n_regs=info.n_regs,
+                n_spills=info.n_spills,
+                occupancy=occ.occupancy if occ else None,
+                warps_per_sm=occ.active_warps if occ else None,
+                occupancy_limit=occ.limiter if occ else None,
+                occupancy_arch=arch.name,
+                **errors,
+            )
             _log(row, started)
 
 
@@ -413,21 +560,30 @@ def bench_triton(table: ResultTable, soup: Mesh, ico: Mesh, rays: Rays, ref: Hit
 # Output
 # --------------------------------------------------------------------------------------
 
+
 def _log(row: dict, started: float) -> None:
-    keys = ("impl", "variant", "dtype", "num_warps", "block_rays", "unroll", "n_regs",
-            "occupancy")
-    label = " ".join(f"{row[k]}" if k in ("impl", "variant", "dtype") else f"{k}={row[k]}"
-                     for k in keys if row.get(k) is not None)
-    print(f"{label}: {row['tests_per_s'] / 1e9:.3g} G tests/s, disagreement "
-          f"{row['disagreement']:.2%}, crack@1e6 {row['crack_1e6']:.2%} "
-          f"({time.perf_counter() - started:.1f} s)", flush=True)
+    keys = ("impl", "variant", "dtype", "num_warps", "block_rays", "unroll", "n_regs", "occupancy")
+    label = " ".join(
+        f"{row[k]}" if k in ("impl", "variant", "dtype") else f"{k}={row[k]}"
+        for k in keys
+        if row.get(k) is not None
+    )
+    print(
+        f"{label}: {row['tests_per_s'] / 1e9:.3g} G tests/s, disagreement "
+        f"{row['disagreement']:.2%}, crack@1e6 {row['crack_1e6']:.2%} "
+        f"({time.perf_counter() - started:.1f} s)",
+        flush=True,
+    )
 
 
 def plot_rows(table: ResultTable) -> list[dict]:
     """What the Pareto plots show: every torch row and the fastest config of each Triton kernel."""
     # Colour = variant (series), label = precision: short labels keep the plot readable.
-    rows = [dict(r, series=r["variant"] if r["impl"] == "torch" else r["impl"],
-                 setting=r["dtype"]) for r in table.rows if r["impl"] != "triton"]
+    rows = [
+        dict(r, series=r["variant"] if r["impl"] == "torch" else r["impl"], setting=r["dtype"])
+        for r in table.rows
+        if r["impl"] != "triton"
+    ]
     for name in TRITON_KERNELS:
         sweep = [r for r in table.rows if r["impl"] == "triton" and r["variant"] == name]
         if sweep:
@@ -444,12 +600,20 @@ def occupancy_plot(table: ResultTable, path: Path) -> None:
     ax = fig.add_subplot()
     for name in TRITON_KERNELS:
         rows = [r for r in table.rows if r["variant"] == name and r.get("occupancy") is not None]
-        ax.scatter([r["occupancy"] for r in rows], [r["tests_per_s"] / 1e9 for r in rows],
-                   label=name, alpha=0.8)
+        ax.scatter(
+            [r["occupancy"] for r in rows],
+            [r["tests_per_s"] / 1e9 for r in rows],
+            label=name,
+            alpha=0.8,
+        )
         for r in rows:
-            ax.annotate(f"{r['n_regs']}r w{r['num_warps']} x{r['rays_per_thread']}",
-                        (r["occupancy"], r["tests_per_s"] / 1e9), textcoords="offset points",
-                        xytext=(3, 3), fontsize=6)
+            ax.annotate(
+                f"{r['n_regs']}r w{r['num_warps']} x{r['rays_per_thread']}",
+                (r["occupancy"], r["tests_per_s"] / 1e9),
+                textcoords="offset points",
+                xytext=(3, 3),
+                fontsize=6,
+            )
     ax.set_xlabel("occupancy (active warps / max warps per SM)")
     ax.set_ylabel("G ray-triangle tests / s")
     ax.set_title("Triton brute force: occupancy is not speed")
@@ -462,26 +626,35 @@ def write_outputs(table: ResultTable, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     table.to_json(out / "lab1_intersect.json")
     meta = table.metadata
-    device = (f"Device: {meta['device']}; torch {meta['torch']}, triton {meta.get('triton')}; "
-              f"{meta['date']}.")
-    legend = ("tests_per_s: ray-triangle tests per second; error: the hit differs from the "
-              "exact one (float64 brute force; rtcourse bench --lab 1's error); disagreement: "
-              "hit/miss differs from it; wrong_triangle: both hit, other triangle; "
-              "t_rel_err_*: on rays where both chose the same triangle; crack_*: fraction of "
-              "rays aimed at shared edges/vertices of a closed icosphere whose first hit is "
-              "not a triangle sharing them (crack_out_X: from outside, crack_in_X: from the "
-              "centre, the sphere moved by X; crack_origin, crack_1e6: both sides).")
+    device = (
+        f"Device: {meta['device']}; torch {meta['torch']}, triton {meta.get('triton')}; "
+        f"{meta['date']}."
+    )
+    legend = (
+        "tests_per_s: ray-triangle tests per second; error: the hit differs from the "
+        "exact one (float64 brute force; rtcourse bench --lab 1's error); disagreement: "
+        "hit/miss differs from it; wrong_triangle: both hit, other triangle; "
+        "t_rel_err_*: on rays where both chose the same triangle; crack_*: fraction of "
+        "rays aimed at shared edges/vertices of a closed icosphere whose first hit is "
+        "not a triangle sharing them (crack_out_X: from outside, crack_in_X: from the "
+        "centre, the sphere moved by X; crack_origin, crack_1e6: both sides)."
+    )
     header = [f"# {table.name}", "", device, "", f"Command: `{meta['command']}`", "", legend, ""]
     (out / "lab1_intersect.md").write_text("\n".join(header) + table.to_markdown() + "\n")
     rows = plot_rows(table)
     # The plot rtcourse bench --lab 1 draws, from the same rows: seconds against error.
-    trade_plot([r for r in rows if r["impl"] == "torch"], [],
-               [r for r in rows if r["impl"] != "torch"], path=out / "pareto_error.png",
-               title="Lab 1: seconds against hits differing from exact")
-    for y, title in (("disagreement", "hit/miss disagreement with the exact hits"),
-                     ("crack_1e6", "crack rate, closed icosphere moved by 1e6")):
-        fig = pareto_plot(rows, x="tests_per_s", y=y, label="setting", group="series",
-                          title=title)
+    trade_plot(
+        [r for r in rows if r["impl"] == "torch"],
+        [],
+        [r for r in rows if r["impl"] != "torch"],
+        path=out / "pareto_error.png",
+        title="Lab 1: seconds against hits differing from exact",
+    )
+    for y, title in (
+        ("disagreement", "hit/miss disagreement with the exact hits"),
+        ("crack_1e6", "crack rate, closed icosphere moved by 1e6"),
+    ):
+        fig = pareto_plot(rows, x="tests_per_s", y=y, label="setting", group="series", title=title)
         fig.axes[0].set_ylim(bottom=0)  # rates: the symlog axis need not show negatives
         fig.savefig(out / f"pareto_{y}.png", dpi=150)
     if any(r.get("occupancy") is not None for r in table.rows):
@@ -490,9 +663,11 @@ def write_outputs(table: ResultTable, out: Path) -> None:
 
 # --------------------------------------------------------------------------------------
 
+
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
     parser.add_argument("--rays", type=int, help="rays of the torch variants")
     parser.add_argument("--tris", type=int, help="triangles of the random soup")
@@ -502,13 +677,20 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--dtypes", nargs="+", default=list(DTYPES), choices=list(DTYPES))
     parser.add_argument("--no-compile", action="store_true", help="skip torch.compile (CUDA)")
-    parser.add_argument("--threads", type=int, default=None,
-                        help="CPU threads for torch (default: the free cores, "
-                             "course.core.device.free_cpus)")
-    parser.add_argument("--crack-table", action="store_true",
-                        help="print only the float32 pass-through table of the lab's docstring")
-    parser.add_argument("--out", type=Path, help="output folder "
-                        "(default: bench/results/<device_name>/lab1)")
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="CPU threads for torch (default: the free cores, course.core.device.free_cpus)",
+    )
+    parser.add_argument(
+        "--crack-table",
+        action="store_true",
+        help="print only the float32 pass-through table of the lab's docstring",
+    )
+    parser.add_argument(
+        "--out", type=Path, help="output folder (default: bench/results/<device_name>/lab1)"
+    )
     add_impl_option(parser)
     args = parser.parse_args(argv)
     global LAB, closest_hit, moller_trumbore
@@ -525,13 +707,15 @@ def main(argv: list[str] | None = None) -> None:
 
     if args.crack_table:
         text = crack_table(cfg["ico_level"], device, variants=args.variants)
-        command = shlex.join(["python", "bench/lab1_intersect.py",
-                              *(sys.argv[1:] if argv is None else argv)])
+        command = shlex.join(
+            ["python", "bench/lab1_intersect.py", *(sys.argv[1:] if argv is None else argv)]
+        )
         out.mkdir(parents=True, exist_ok=True)
         (out / "lab1_cracks.md").write_text(
             f"# Lab 1: pass-throughs at shared edges and vertices\n\nDevice: "
             f"{device_name(device)}; torch {torch.__version__}.\n\nCommand: `{command}`\n\n"
-            f"```\n{text}\n```\n")
+            f"```\n{text}\n```\n"
+        )
         print(text)
         print(f"wrote {out / 'lab1_cracks.md'}")
         return
@@ -541,31 +725,43 @@ def main(argv: list[str] | None = None) -> None:
     rays = soup_rays(cfg["rays"])
     table = ResultTable("Lab 1: ray/triangle intersection, speed against accuracy", device)
     table.metadata.update(
-        command=shlex.join([Path(sys.executable).name, *sys.argv]) if argv is None
+        command=shlex.join([Path(sys.executable).name, *sys.argv])
+        if argv is None
         else shlex.join(["python", "bench/lab1_intersect.py", *argv]),
-        triton=_triton_version(), scenes=source, sizes=cfg, cpu_threads=threads,
-        load_average=list(os.getloadavg()), crack_rays=len(crack_scene(ico, 0.0, torch.float64)[0]),
+        triton=_triton_version(),
+        scenes=source,
+        sizes=cfg,
+        cpu_threads=threads,
+        load_average=list(os.getloadavg()),
+        crack_rays=len(crack_scene(ico, 0.0, torch.float64)[0]),
         icosphere_faces=ico.num_faces,
         reference="float64 brute force (course.tools.trade.common.exact_hits)",
-        lab_file=str(LAB.__file__))
+        lab_file=str(LAB.__file__),
+    )
     print(f"{table.metadata['device']}: {cfg}, scenes from {source}", flush=True)
 
     started = time.perf_counter()
+
     def reference(r: Rays, m: Mesh) -> Hits:
         return closest_hit(r, m, variant="watertight", memory_budget_bytes=cfg["memory"])
 
     # Every row is compared with the exact hits (float64 brute force, course code), as
     # rtcourse bench --lab 1 compares them: a wrong closest_hit cannot be its own yardstick.
     exact_t, exact_triangle = exact_hits(rays, soup)
-    ref = Hits(t=exact_t, triangle=exact_triangle, u=torch.zeros_like(exact_t),
-               v=torch.zeros_like(exact_t))
+    ref = Hits(
+        t=exact_t, triangle=exact_triangle, u=torch.zeros_like(exact_t), v=torch.zeros_like(exact_t)
+    )
     try:
         ref_cracks = crack_rates(reference, ico, torch.float64, device)
     except NotImplementedError as exc:  # the handout: every row runs closest_hit
-        raise SystemExit(f"lab1_intersect: every row runs the lab's closest_hit; write it "
-                         f"first ({exc})") from None
-    print(f"reference: {ref.hit.double().mean().item():.1%} of the rays hit, "
-          f"reference cracks {ref_cracks} ({time.perf_counter() - started:.1f} s)", flush=True)
+        raise SystemExit(
+            f"lab1_intersect: every row runs the lab's closest_hit; write it first ({exc})"
+        ) from None
+    print(
+        f"reference: {ref.hit.double().mean().item():.1%} of the rays hit, "
+        f"reference cracks {ref_cracks} ({time.perf_counter() - started:.1f} s)",
+        flush=True,
+    )
 
     bench_torch(table, soup, ico, rays, ref, device, cfg, args.variants, args.dtypes)
     if device.type == "cuda":

@@ -89,18 +89,51 @@ ALL_SCENES = "suzanne,bunny,bunny_x4,bunny_x16,teapot_in_stadium,random_soup"
 # size: primary rays size^2 for the per-step-compacting traversals; fast_size: for the
 # sync-free one; brute_rays: rays checked against (and timed with) brute force.
 MODES = {
-    "small": {"scenes": "suzanne,bunny,bunny_x4,teapot_in_stadium,random_soup", "size": 32,
-              "fast_size": 256, "brute_rays": 32, "trimesh_rays": 48, "repeats": 1,
-              "warmup": 1, "teapot": 1, "soup": 10_000, "max_slow": 100_000, "lbvh_builds": 3,
-              "compile": (), "knob_compile": True},
-    "cpu": {"scenes": ALL_SCENES, "size": 64, "fast_size": 256, "brute_rays": 64,
-            "trimesh_rays": 64, "repeats": 2, "warmup": 1, "teapot": 2, "soup": 100_000,
-            "max_slow": 300_000, "lbvh_builds": 3, "compile": ("default",),
-            "knob_compile": True},
-    "cuda": {"scenes": ALL_SCENES, "size": 256, "fast_size": 1024, "brute_rays": 4096,
-             "trimesh_rays": 0, "repeats": 3, "warmup": 1, "teapot": 2, "soup": 100_000,
-             "max_slow": 300_000, "lbvh_builds": 10, "compile": ("default",),
-             "knob_compile": True},
+    "small": {
+        "scenes": "suzanne,bunny,bunny_x4,teapot_in_stadium,random_soup",
+        "size": 32,
+        "fast_size": 256,
+        "brute_rays": 32,
+        "trimesh_rays": 48,
+        "repeats": 1,
+        "warmup": 1,
+        "teapot": 1,
+        "soup": 10_000,
+        "max_slow": 100_000,
+        "lbvh_builds": 3,
+        "compile": (),
+        "knob_compile": True,
+    },
+    "cpu": {
+        "scenes": ALL_SCENES,
+        "size": 64,
+        "fast_size": 256,
+        "brute_rays": 64,
+        "trimesh_rays": 64,
+        "repeats": 2,
+        "warmup": 1,
+        "teapot": 2,
+        "soup": 100_000,
+        "max_slow": 300_000,
+        "lbvh_builds": 3,
+        "compile": ("default",),
+        "knob_compile": True,
+    },
+    "cuda": {
+        "scenes": ALL_SCENES,
+        "size": 256,
+        "fast_size": 1024,
+        "brute_rays": 4096,
+        "trimesh_rays": 0,
+        "repeats": 3,
+        "warmup": 1,
+        "teapot": 2,
+        "soup": 100_000,
+        "max_slow": 300_000,
+        "lbvh_builds": 10,
+        "compile": ("default",),
+        "knob_compile": True,
+    },
 }
 
 # (label, kind, build knobs, traversal): traversal "slow" = lab.closest_hit, "fast" = the
@@ -131,10 +164,10 @@ def run_trade(mode, device, table, log):
     for reason in skipped:
         log(f"  trade {reason}")
     for row in rows:
-        table.add(part="trade", scene="suzanne", **{k: v for k, v in row.items()
-                                                    if k != "impl"})
-        log(f"  trade {row['setting']:<24} {row['seconds'] * 1e3:9.2f} ms  error "
-            f"{row['error']:.3g}")
+        table.add(part="trade", scene="suzanne", **{k: v for k, v in row.items() if k != "impl"})
+        log(
+            f"  trade {row['setting']:<24} {row['seconds'] * 1e3:9.2f} ms  error {row['error']:.3g}"
+        )
 
 
 def given_brute_force(rays: Rays, mesh):
@@ -147,8 +180,15 @@ def given_brute_force(rays: Rays, mesh):
     tile = max(1, 2**20 // mesh.num_faces)  # rays per call: about a million pairs
     for start in range(0, len(rays), tile):
         ray = torch.arange(start, min(len(rays), start + tile), device=rays.origins.device)
-        intersect_pairs(intersect, rays, corners, ray.repeat_interleave(len(tris)),
-                        tris.repeat(len(ray)), closest, counters)
+        intersect_pairs(
+            intersect,
+            rays,
+            corners,
+            ray.repeat_interleave(len(tris)),
+            tris.repeat(len(ray)),
+            closest,
+            counters,
+        )
     return Hits(**closest), counters
 
 
@@ -176,8 +216,7 @@ def load(name: str, mode: dict, device):
 
 
 def camera_rays(scene, size: int, device) -> Rays:
-    return primary_rays(dataclasses.replace(scene.camera, width=size, height=size),
-                        device=device)
+    return primary_rays(dataclasses.replace(scene.camera, width=size, height=size), device=device)
 
 
 def shadow_rays(rays: Rays, hits, mesh) -> Rays:
@@ -186,24 +225,31 @@ def shadow_rays(rays: Rays, hits, mesh) -> Rays:
     points = rays.origins[hit] + hits.t[hit, None] * rays.directions[hit]
     v = mesh.vertices
     lo, hi = v.amin(0), v.amax(0)
-    light = (lo + hi) / 2 + torch.tensor([0.3, 1.0, 0.2], device=v.device,
-                                         dtype=v.dtype) * (hi - lo).norm()
+    light = (lo + hi) / 2 + torch.tensor([0.3, 1.0, 0.2], device=v.device, dtype=v.dtype) * (
+        hi - lo
+    ).norm()
     scale = float((hi - lo).norm())
-    return Rays.create(points, light - points, 1e-5 * scale / float((light - points).norm(
-        dim=1).amax().clamp(min=1e-30)), 1 - 1e-4)
+    return Rays.create(
+        points,
+        light - points,
+        1e-5 * scale / float((light - points).norm(dim=1).amax().clamp(min=1e-30)),
+        1 - 1e-4,
+    )
 
 
 def nbytes(structure) -> int:
-    return sum(x.numel() * x.element_size() for x in structure.values()
-               if isinstance(x, torch.Tensor))
+    return sum(
+        x.numel() * x.element_size() for x in structure.values() if isinstance(x, torch.Tensor)
+    )
 
 
 def trace(label_kind, structure, rays, mesh, traversal, any_hit=False):
     if traversal == "slow":
         return lab.closest_hit(rays, mesh, structure, intersect)
     mode = traversal.split("+")[1] if "+" in traversal else False
-    return lab.bvh_closest_hit_fast(rays, mesh, structure, any_hit=any_hit, check_every=8,
-                                    compile=mode)
+    return lab.bvh_closest_hit_fast(
+        rays, mesh, structure, any_hit=any_hit, check_every=8, compile=mode
+    )
 
 
 def run_scene(name, mode, device, table, log):
@@ -211,36 +257,56 @@ def run_scene(name, mode, device, table, log):
     mesh, f = scene.mesh, scene.mesh.num_faces
     slow_rays = camera_rays(scene, mode["size"], device)
     fast_rays = camera_rays(scene, mode["fast_size"], device)
-    check = torch.linspace(0, len(fast_rays) - 1, min(len(fast_rays), mode["brute_rays"]),
-                           device=device).long().unique()
+    check = (
+        torch.linspace(
+            0, len(fast_rays) - 1, min(len(fast_rays), mode["brute_rays"]), device=device
+        )
+        .long()
+        .unique()
+    )
     sample = fast_rays[check]
     brute = "brute force"
     try:
-        (reference, _), brute_s = seconds(lab.brute_force_closest_hit, sample, mesh, intersect,
-                                          device=device)
+        (reference, _), brute_s = seconds(
+            lab.brute_force_closest_hit, sample, mesh, intersect, device=device
+        )
     except NotImplementedError as error:  # the handout before task 5: the given code's
         log(f"  brute force of the lab: {error}; the given intersect_pairs instead")
         brute = "brute force (given intersect_pairs)"
         (reference, _), brute_s = seconds(given_brute_force, sample, mesh, device=device)
-    log(f"{name}: {f:,} triangles; {brute} {len(sample) / brute_s:,.0f} rays/s "
-        f"({len(sample)} rays)")
+    log(
+        f"{name}: {f:,} triangles; {brute} {len(sample) / brute_s:,.0f} rays/s ({len(sample)} rays)"
+    )
     common = {"part": "structures", "scene": name, "triangles": f}
-    table.add(**common, setting=brute, rays=len(sample), build_s=0.0,
-              rays_per_s=len(sample) / brute_s, shadow_rays_per_s=math.nan, steps=0.0,
-              tests=float(f), bytes=0, error=0.0)
+    table.add(
+        **common,
+        setting=brute,
+        rays=len(sample),
+        build_s=0.0,
+        rays_per_s=len(sample) / brute_s,
+        shadow_rays_per_s=math.nan,
+        steps=0.0,
+        tests=float(f),
+        bytes=0,
+        error=0.0,
+    )
     if mode["trimesh_rays"] and device.type == "cpu":
         trimesh_row(mesh, fast_rays, mode, table, common, log)
     for label, kind, knobs, traversal in STRUCTURES:
-        if (kind == "kd" and f > 300_000) or (traversal == "slow" and f > mode["max_slow"]
-                                                 and kind != "bvh"):
+        if (kind == "kd" and f > 300_000) or (
+            traversal == "slow" and f > mode["max_slow"] and kind != "bvh"
+        ):
             log(f"  {label:<26} skipped: its build or walk takes minutes at {f:,} triangles")
             continue
         if kind == "kd" and f > mode["max_slow"]:
             continue
         # Compiled rows on the bunny only: every scene (and any-hit) recompiles the step,
         # tens of seconds each; the knob part measures compile on the bunny in full.
-        variants = [traversal] + ([f"fast+{m}" for m in mode["compile"]]
-                                  if traversal == "fast" and name == "bunny" else [])
+        variants = [traversal] + (
+            [f"fast+{m}" for m in mode["compile"]]
+            if traversal == "fast" and name == "bunny"
+            else []
+        )
         try:
             structure, build_s = seconds(lab.build, mesh, kind, device=device, **dict(knobs))
         except NotImplementedError as error:  # the handout: a structure not written yet
@@ -252,40 +318,76 @@ def run_scene(name, mode, device, table, log):
                 continue
             try:
                 trace(kind, structure, rays[:64], mesh, variant)  # warm up (and compile)
-                (hits, counters), trace_s = seconds(trace, kind, structure, rays, mesh, variant,
-                                                    device=device)
+                (hits, counters), trace_s = seconds(
+                    trace, kind, structure, rays, mesh, variant, device=device
+                )
                 if mode["repeats"] > 1:
-                    timing = time_fn(trace, kind, structure, rays, mesh, variant,
-                                     repeats=mode["repeats"], warmup=0, device=device)
+                    timing = time_fn(
+                        trace,
+                        kind,
+                        structure,
+                        rays,
+                        mesh,
+                        variant,
+                        repeats=mode["repeats"],
+                        warmup=0,
+                        device=device,
+                    )
                     trace_s = timing.median
                 shadow = shadow_rays(rays, hits, mesh)
                 trace(kind, structure, shadow[:64], mesh, variant, any_hit=True)
-                _, shadow_s = seconds(trace, kind, structure, shadow, mesh, variant,
-                                      any_hit=variant.startswith("fast"), device=device)
+                _, shadow_s = seconds(
+                    trace,
+                    kind,
+                    structure,
+                    shadow,
+                    mesh,
+                    variant,
+                    any_hit=variant.startswith("fast"),
+                    device=device,
+                )
             except RuntimeError as error:  # a failed variant (no compiler, out of memory): a row
                 log(f"  {label} [{variant}]: failed: {type(error).__name__}: {error}")
-                table.add(**common, setting=f"{label} [{variant}]", rays=len(rays),
-                          build_s=build_s, rays_per_s=math.nan, shadow_rays_per_s=math.nan,
-                          steps=math.nan, tests=math.nan, bytes=nbytes(structure),
-                          error=math.nan, failed=f"{type(error).__name__}")
+                table.add(
+                    **common,
+                    setting=f"{label} [{variant}]",
+                    rays=len(rays),
+                    build_s=build_s,
+                    rays_per_s=math.nan,
+                    shadow_rays_per_s=math.nan,
+                    steps=math.nan,
+                    tests=math.nan,
+                    bytes=nbytes(structure),
+                    error=math.nan,
+                    failed=f"{type(error).__name__}",
+                )
                 continue
             if variant.startswith("fast"):
                 got = hits[check]
             else:
                 got, _ = trace(kind, structure, sample, mesh, variant)
             wrong = (got.triangle != reference.triangle) & ~(
-                (got.t - reference.t).abs() <= 1e-5 * reference.t.abs())
+                (got.t - reference.t).abs() <= 1e-5 * reference.t.abs()
+            )
             setting = label if variant in ("slow", "fast") else f"{label}, compile={variant[5:]}"
-            row = table.add(**common, setting=setting, rays=len(rays), build_s=build_s,
-                            rays_per_s=len(rays) / trace_s,
-                            shadow_rays_per_s=len(shadow) / shadow_s,
-                            steps=counters["steps"].double().mean().item(),
-                            tests=counters["tests"].double().mean().item(),
-                            bytes=nbytes(structure), error=wrong.double().mean().item())
-            log(f"  {setting:<40} build {build_s:7.3f} s  primary {row['rays_per_s']:>13,.0f} "
+            row = table.add(
+                **common,
+                setting=setting,
+                rays=len(rays),
+                build_s=build_s,
+                rays_per_s=len(rays) / trace_s,
+                shadow_rays_per_s=len(shadow) / shadow_s,
+                steps=counters["steps"].double().mean().item(),
+                tests=counters["tests"].double().mean().item(),
+                bytes=nbytes(structure),
+                error=wrong.double().mean().item(),
+            )
+            log(
+                f"  {setting:<40} build {build_s:7.3f} s  primary {row['rays_per_s']:>13,.0f} "
                 f"rays/s  shadow {row['shadow_rays_per_s']:>13,.0f} rays/s  steps "
                 f"{row['steps']:6.1f}  tests {row['tests']:7.1f}  "
-                f"{row['bytes'] / 2**20:6.1f} MiB  error {row['error']:.3g}")
+                f"{row['bytes'] / 2**20:6.1f} MiB  error {row['error']:.3g}"
+            )
 
 
 def trimesh_row(mesh, rays, mode, table, common, log):
@@ -294,12 +396,15 @@ def trimesh_row(mesh, rays, mode, table, common, log):
     all of them."""
     import trimesh
 
-    tm = trimesh.Trimesh(mesh.vertices.cpu().double().numpy(), mesh.faces.cpu().numpy(),
-                         process=False)
+    tm = trimesh.Trimesh(
+        mesh.vertices.cpu().double().numpy(), mesh.faces.cpu().numpy(), process=False
+    )
     n = min(len(rays), mode["trimesh_rays"])
     pick = torch.linspace(0, len(rays) - 1, n).long().unique()
-    queries = [("RayMeshIntersector", "trimesh.ray.ray_triangle", pick),
-               ("Embree", "trimesh.ray.ray_pyembree", torch.arange(len(rays)))]
+    queries = [
+        ("RayMeshIntersector", "trimesh.ray.ray_triangle", pick),
+        ("Embree", "trimesh.ray.ray_pyembree", torch.arange(len(rays))),
+    ]
     for kind, module, rows in queries:
         o = rays.origins[rows].cpu().double().numpy()
         d = rays.directions[rows].cpu().double().numpy()
@@ -314,9 +419,18 @@ def trimesh_row(mesh, rays, mode, table, common, log):
             continue
         elapsed = time.perf_counter() - start
         log(f"  trimesh ({kind}) {len(rows) / elapsed:,.0f} rays/s ({len(rows)} rays)")
-        table.add(**common, setting=f"trimesh {kind}", rays=len(rows), build_s=math.nan,
-                  rays_per_s=len(rows) / elapsed, shadow_rays_per_s=math.nan, steps=math.nan,
-                  tests=math.nan, bytes=0, error=math.nan)
+        table.add(
+            **common,
+            setting=f"trimesh {kind}",
+            rays=len(rows),
+            build_s=math.nan,
+            rays_per_s=len(rows) / elapsed,
+            shadow_rays_per_s=math.nan,
+            steps=math.nan,
+            tests=math.nan,
+            bytes=0,
+            error=math.nan,
+        )
 
 
 def run_fast_knobs(mode, device, table, log, headline=False):
@@ -330,23 +444,36 @@ def run_fast_knobs(mode, device, table, log, headline=False):
     rays = camera_rays(scene, mode["fast_size"], device)
     log(f"fast path knobs: bunny, {len(rays):,} primary rays")
     if mode["trimesh_rays"] and device.type == "cpu":  # the same rays, in the same run
-        trimesh_row(mesh, rays, mode, table, {"part": "fast", "scene": "bunny",
-                                              "triangles": mesh.num_faces}, log)
+        trimesh_row(
+            mesh,
+            rays,
+            mode,
+            table,
+            {"part": "fast", "scene": "bunny", "triangles": mesh.num_faces},
+            log,
+        )
     # (k, compile, leaf size, compact, packed per call, steps fused per compiled call)
-    settings = [(8, False, 4, True, False, 1), (1, False, 4, True, False, 1),
-                (32, False, 4, True, False, 1), (8, False, 4, False, False, 1)]
+    settings = [
+        (8, False, 4, True, False, 1),
+        (1, False, 4, True, False, 1),
+        (32, False, 4, True, False, 1),
+        (8, False, 4, False, False, 1),
+    ]
     first = (mode["compile"] or ("default",))[0]
     compiled = [(k, first, 4, True, False, 1) for k in (8, 16, 32)]
     if device.type == "cuda":  # the same compiled step replayed from CUDA graphs
         compiled += [(k, "reduce-overhead", 4, True, False, 1) for k in (16, 32, 64)]
-        compiled += [(16, "reduce-overhead", 4, True, True, 1),
-                     (16, "reduce-overhead", 4, False, False, 1)]
+        compiled += [
+            (16, "reduce-overhead", 4, True, True, 1),
+            (16, "reduce-overhead", 4, False, False, 1),
+        ]
     graphs = "reduce-overhead" if device.type == "cuda" else first
     compiled += [(16, graphs, leaf, True, False, 1) for leaf in (2, 8)]
     compiled += [(16, graphs, 4, True, False, 8)]  # last: the longest compile
     if headline:  # leaf 4; on a GPU one step per compiled call (8 compile for minutes)
-        settings = settings[:1] + [c for c in compiled
-                                   if c[2] == 4 and (c[5] == 1 or device.type == "cpu")]
+        settings = settings[:1] + [
+            c for c in compiled if c[2] == 4 and (c[5] == 1 or device.type == "cpu")
+        ]
     elif mode["knob_compile"]:
         settings += compiled
     bvhs, walks, reference = {}, {}, {}
@@ -357,46 +484,83 @@ def run_fast_knobs(mode, device, table, log, headline=False):
             except NotImplementedError as error:
                 log(f"  fast path knobs skipped: {error}")
                 return
-            timing = time_fn(pack_bvh, bvhs[leaf], mesh, repeats=mode["repeats"], warmup=1,
-                             device=device)
+            timing = time_fn(
+                pack_bvh, bvhs[leaf], mesh, repeats=mode["repeats"], warmup=1, device=device
+            )
             walks[leaf] = pack_bvh(bvhs[leaf], mesh)
-            table.add(part="fast", scene="bunny", setting=f"pack_bvh, leaf {leaf}",
-                      triangles=mesh.num_faces, build_s=timing.median, leaf_size=leaf)
+            table.add(
+                part="fast",
+                scene="bunny",
+                setting=f"pack_bvh, leaf {leaf}",
+                triangles=mesh.num_faces,
+                build_s=timing.median,
+                leaf_size=leaf,
+            )
             log(f"  pack_bvh (8 octants), leaf {leaf}: {timing.median * 1e3:.1f} ms")
         bvh = bvhs[leaf]
         walk = None if per_call else walks[leaf]
-        label = (f"k={k}, compile={compile_mode or 'off'}, leaf {leaf}"
-                 + (f", {fuse} steps per kernel" if fuse > 1 else "")
-                 + ("" if compact else ", no compaction")
-                 + (", packed per call" if per_call else ""))
-        knobs = {"check_every": k, "compile": compile_mode, "compact": compact, "walk": walk,
-                 "fuse_steps": fuse}
+        label = (
+            f"k={k}, compile={compile_mode or 'off'}, leaf {leaf}"
+            + (f", {fuse} steps per kernel" if fuse > 1 else "")
+            + ("" if compact else ", no compaction")
+            + (", packed per call" if per_call else "")
+        )
+        knobs = {
+            "check_every": k,
+            "compile": compile_mode,
+            "compact": compact,
+            "walk": walk,
+            "fuse_steps": fuse,
+        }
         try:
             kernels = inductor_metrics.generated_kernel_count
-            (hits, counters), warm_s = seconds(lab.bvh_closest_hit_fast, rays, mesh, bvh,
-                                               device=device, **knobs)  # warm up (and compile)
+            (hits, counters), warm_s = seconds(
+                lab.bvh_closest_hit_fast, rays, mesh, bvh, device=device, **knobs
+            )  # warm up (and compile)
             kernels = inductor_metrics.generated_kernel_count - kernels
             repeats = mode["repeats"]
             if compile_mode == "reduce-overhead":  # milliseconds a call: a median of 20,
-                repeats = max(repeats, 20)         # where 3 moved by a fifth between runs
-            timing = time_fn(lab.bvh_closest_hit_fast, rays, mesh, bvh, repeats=repeats,
-                             warmup=1, device=device, **knobs)
+                repeats = max(repeats, 20)  # where 3 moved by a fifth between runs
+            timing = time_fn(
+                lab.bvh_closest_hit_fast,
+                rays,
+                mesh,
+                bvh,
+                repeats=repeats,
+                warmup=1,
+                device=device,
+                **knobs,
+            )
         except RuntimeError as error:
             log(f"  {label}: failed: {type(error).__name__}: {error}")
             continue
         # The same leaf size must find the same triangles whatever the other knobs.
         first_hits = reference.setdefault(leaf, hits.triangle)
         differ = (hits.triangle != first_hits).double().mean().item()
-        row = table.add(part="fast", scene="bunny", setting=label, triangles=mesh.num_faces,
-                        rays=len(rays), build_s=math.nan, rays_per_s=len(rays) / timing.median,
-                        differ_from_first_row=differ,
-                        check_every=k, compile=str(compile_mode), leaf_size=leaf,
-                        compact=compact, packed_per_call=per_call, fuse_steps=fuse,
-                        first_call_s=warm_s, kernels_generated=kernels,
-                        steps=counters["steps"].double().mean().item(),
-                        tests=counters["tests"].double().mean().item())
-        log(f"  {label:<60} {row['rays_per_s']:>14,.0f} rays/s  (first call {warm_s:6.1f} s, "
-            f"{kernels} kernels generated, {differ:.2g} differ)")
+        row = table.add(
+            part="fast",
+            scene="bunny",
+            setting=label,
+            triangles=mesh.num_faces,
+            rays=len(rays),
+            build_s=math.nan,
+            rays_per_s=len(rays) / timing.median,
+            differ_from_first_row=differ,
+            check_every=k,
+            compile=str(compile_mode),
+            leaf_size=leaf,
+            compact=compact,
+            packed_per_call=per_call,
+            fuse_steps=fuse,
+            first_call_s=warm_s,
+            kernels_generated=kernels,
+            steps=counters["steps"].double().mean().item(),
+            tests=counters["tests"].double().mean().item(),
+        )
+        log(
+            f"  {label:<60} {row['rays_per_s']:>14,.0f} rays/s  (first call {warm_s:6.1f} s, "
+            f"{kernels} kernels generated, {differ:.2g} differ)"
+        )
 
 
 def run_lbvh_build(mode, device, table, log):
@@ -407,14 +571,27 @@ def run_lbvh_build(mode, device, table, log):
         log(f"LBVH build skipped: {error}")
         return
     timing = time_fn(lab.build_lbvh, mesh, repeats=mode["lbvh_builds"], warmup=0, device=device)
-    log(f"LBVH build, bunny_x16 ({mesh.num_faces:,} triangles): {timing.median * 1e3:.1f} ms "
-        f"(median of {mode['lbvh_builds']})")
-    table.add(part="lbvh", scene="bunny_x16", setting="LBVH leaf 4 build",
-              triangles=mesh.num_faces, build_s=timing.median)
+    log(
+        f"LBVH build, bunny_x16 ({mesh.num_faces:,} triangles): {timing.median * 1e3:.1f} ms "
+        f"(median of {mode['lbvh_builds']})"
+    )
+    table.add(
+        part="lbvh",
+        scene="bunny_x16",
+        setting="LBVH leaf 4 build",
+        triangles=mesh.num_faces,
+        build_s=timing.median,
+    )
 
 
-EMBREE_WALKS = ("Embree", "sync-free walk, compiled", "sync-free walk, eager",
-                "SAH stack traversal", "SAH stackless traversal", "flat_bvh.trace_bvh")
+EMBREE_WALKS = (
+    "Embree",
+    "sync-free walk, compiled",
+    "sync-free walk, eager",
+    "SAH stack traversal",
+    "SAH stackless traversal",
+    "flat_bvh.trace_bvh",
+)
 
 
 def embree_tracer(mesh):
@@ -428,8 +605,11 @@ def embree_tracer(mesh):
     import numpy as np
 
     scene = rtcore_scene.EmbreeScene()
-    TriangleMesh(scene=scene, vertices=mesh.vertices.cpu().float().numpy(),
-                 indices=mesh.faces.cpu().numpy().astype(np.int32))
+    TriangleMesh(
+        scene=scene,
+        vertices=mesh.vertices.cpu().float().numpy(),
+        indices=mesh.faces.cpu().numpy().astype(np.int32),
+    )
 
     def trace(origins, directions):
         return scene.run(origins, directions)
@@ -462,15 +642,21 @@ def run_embree_one(mode, table, log, threads: int, rounds: int, budget: float):
     walk = pack_bvh(bvh, mesh)
     calls = {
         "Embree": lambda: torch.from_numpy(embree(o32, d32).astype("int64")),
-        "sync-free walk, compiled": lambda: lab.bvh_closest_hit_fast(
-            rays, mesh, bvh, check_every=8, compile=True, walk=walk)[0].triangle,
-        "sync-free walk, eager": lambda: lab.bvh_closest_hit_fast(
-            rays, mesh, bvh, check_every=8, walk=walk)[0].triangle,
+        "sync-free walk, compiled": lambda: (
+            lab.bvh_closest_hit_fast(rays, mesh, bvh, check_every=8, compile=True, walk=walk)[
+                0
+            ].triangle
+        ),
+        "sync-free walk, eager": lambda: (
+            lab.bvh_closest_hit_fast(rays, mesh, bvh, check_every=8, walk=walk)[0].triangle
+        ),
         "SAH stack traversal": lambda: lab.bvh_closest_hit(rays, mesh, bvh, intersect)[0].triangle,
-        "SAH stackless traversal": lambda: lab.bvh_closest_hit_stackless(
-            rays, mesh, bvh, intersect)[0].triangle,
-        "flat_bvh.trace_bvh": lambda: trace.trace_bvh(
-            mesh, rays.origins, rays.directions, rays.t_min, rays.t_max).triangle,
+        "SAH stackless traversal": lambda: (
+            lab.bvh_closest_hit_stackless(rays, mesh, bvh, intersect)[0].triangle
+        ),
+        "flat_bvh.trace_bvh": lambda: (
+            trace.trace_bvh(mesh, rays.origins, rays.directions, rays.t_min, rays.t_max).triangle
+        ),
     }
     first, warm = {}, {}
     for name, call in list(calls.items()):  # warm: Embree's build, torch.compile, flat BVH
@@ -495,16 +681,28 @@ def run_embree_one(mode, table, log, threads: int, rounds: int, budget: float):
     for name in calls:
         median = sorted(times[name])[len(times[name]) // 2]
         agree = (first[name] == first["Embree"]).double().mean().item()
-        row = table.add(part="embree", scene="bunny", setting=name, threads=threads,
-                        triangles=mesh.num_faces, rays=len(rays), rays_per_s=len(rays) / median,
-                        seconds_median=median, seconds_min=min(times[name]),
-                        seconds_max=max(times[name]), rounds=len(times[name]),
-                        first_call_s=warm[name],
-                        ratio_to_embree=embree_s / median, same_triangle_as_embree=agree)
-        log(f"  {threads} thread(s): {name:<26} {row['rays_per_s']:>13,.0f} rays/s  "
+        row = table.add(
+            part="embree",
+            scene="bunny",
+            setting=name,
+            threads=threads,
+            triangles=mesh.num_faces,
+            rays=len(rays),
+            rays_per_s=len(rays) / median,
+            seconds_median=median,
+            seconds_min=min(times[name]),
+            seconds_max=max(times[name]),
+            rounds=len(times[name]),
+            first_call_s=warm[name],
+            ratio_to_embree=embree_s / median,
+            same_triangle_as_embree=agree,
+        )
+        log(
+            f"  {threads} thread(s): {name:<26} {row['rays_per_s']:>13,.0f} rays/s  "
             f"x{row['ratio_to_embree']:.3f} Embree  (min {len(rays) / max(times[name]):,.0f}, "
             f"max {len(rays) / min(times[name]):,.0f}; same triangle as Embree "
-            f"{agree:.2%})")
+            f"{agree:.2%})"
+        )
 
 
 def run_embree(args, mode, table, log):
@@ -515,14 +713,32 @@ def run_embree(args, mode, table, log):
     import tempfile
 
     counts = sorted({1, free_cpus(), allowed_cpus()})
-    table.metadata.update(embree_threads=counts, allowed_cpus=allowed_cpus(),
-                          free_cpus=free_cpus(), load_average=list(os.getloadavg()))
+    table.metadata.update(
+        embree_threads=counts,
+        allowed_cpus=allowed_cpus(),
+        free_cpus=free_cpus(),
+        load_average=list(os.getloadavg()),
+    )
     for threads in counts:
         with tempfile.TemporaryDirectory() as folder:
-            command = [sys.executable, str(Path(__file__).resolve()), "--device", "cpu",
-                       "--parts", "embree-one", "--threads", str(threads), "--out", folder,
-                       "--fast-size", str(mode["fast_size"]), "--rounds", str(args.rounds),
-                       "--walk-budget", str(args.walk_budget)]
+            command = [
+                sys.executable,
+                str(Path(__file__).resolve()),
+                "--device",
+                "cpu",
+                "--parts",
+                "embree-one",
+                "--threads",
+                str(threads),
+                "--out",
+                folder,
+                "--fast-size",
+                str(mode["fast_size"]),
+                "--rounds",
+                str(args.rounds),
+                "--walk-budget",
+                str(args.walk_budget),
+            ]
             command += ["--impl", args.impl] if args.impl else []
             log(f"embree part, {threads} thread(s): {' '.join(command[1:])}")
             done = subprocess.run(command, check=False, capture_output=True, text=True)
@@ -547,30 +763,43 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=None)
     parser.add_argument("--fast-size", type=int, default=None)
     parser.add_argument("--out", default=None, help="output folder")
-    parser.add_argument("--threads", type=int, default=None,
-                        help="CPU threads for torch (default: the free cores, "
-                             "course.core.device.free_cpus); with --parts embree-one the process "
-                             "is also pinned to that many cores")
-    parser.add_argument("--rounds", type=int, default=7,
-                        help="embree part: timed rounds of every walk (median reported)")
-    parser.add_argument("--walk-budget", type=float, default=20.0,
-                        help="embree part: seconds of timed calls after which a walk sits "
-                             "out the remaining rounds")
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="CPU threads for torch (default: the free cores, "
+        "course.core.device.free_cpus); with --parts embree-one the process "
+        "is also pinned to that many cores",
+    )
+    parser.add_argument(
+        "--rounds",
+        type=int,
+        default=7,
+        help="embree part: timed rounds of every walk (median reported)",
+    )
+    parser.add_argument(
+        "--walk-budget",
+        type=float,
+        default=20.0,
+        help="embree part: seconds of timed calls after which a walk sits out the remaining rounds",
+    )
     parser.add_argument("--no-compile", action="store_true", help="skip torch.compile rows")
-    parser.add_argument("--headline", action="store_true",
-                        help="only the LBVH build and the headline traversal rows (bunny, "
-                             "eager / compiled / CUDA graphs): ~2 minutes on a GPU")
+    parser.add_argument(
+        "--headline",
+        action="store_true",
+        help="only the LBVH build and the headline traversal rows (bunny, "
+        "eager / compiled / CUDA graphs): ~2 minutes on a GPU",
+    )
     add_impl_option(parser)
     args = parser.parse_args(argv)
     global lab
     lab = load_lab("lab2_accel", args.impl, root=REPO)
     if args.parts == "embree-one" and hasattr(os, "sched_setaffinity"):
         cores = sorted(os.sched_getaffinity(0))
-        os.sched_setaffinity(0, cores[:args.threads or 1])  # before Embree sizes its pool
+        os.sched_setaffinity(0, cores[: args.threads or 1])  # before Embree sizes its pool
     threads = set_cpu_threads(args.threads)
     device = default_device(args.device)
-    mode = dict(MODES["small" if args.small else device.type if device.type == "cuda"
-                      else "cpu"])
+    mode = dict(MODES["small" if args.small else device.type if device.type == "cuda" else "cpu"])
     if args.no_compile:
         mode.update(compile=(), knob_compile=False)
     for key in ("scenes", "size", "fast_size"):
@@ -579,9 +808,12 @@ def main(argv=None):
     folder = "lab2_embree" if args.parts == "embree" else "lab2"
     out = Path(args.out) if args.out else REPO / "bench" / "results" / device_name(device) / folder
     table = ResultTable("lab2 acceleration structures", device=device)
-    table.metadata.update(mode={k: v for k, v in mode.items()}, cpu_threads=threads,
-                          kernel="course.given.lab2.moller_trumbore_rows float32; sync-free path: "
-                                 "inline, float32", lab_file=str(lab.__file__))
+    table.metadata.update(
+        mode={k: v for k, v in mode.items()},
+        cpu_threads=threads,
+        kernel="course.given.lab2.moller_trumbore_rows float32; sync-free path: inline, float32",
+        lab_file=str(lab.__file__),
+    )
     start = time.perf_counter()
 
     def log(text):
@@ -622,10 +854,12 @@ def write(table, out: Path, mode: dict):
     table.to_json(out / "lab2_accel.json")
     meta = table.metadata
     parts = []
-    for part, title in (("structures", "Structures: build, primary and shadow rays, work"),
-                        ("fast", "The sync-free BVH traversal: one knob at a time (bunny)"),
-                        ("lbvh", "LBVH build of bunny_x16"),
-                        ("embree", "Embree and the lab's walks, same rays, warm (bunny)")):
+    for part, title in (
+        ("structures", "Structures: build, primary and shadow rays, work"),
+        ("fast", "The sync-free BVH traversal: one knob at a time (bunny)"),
+        ("lbvh", "LBVH build of bunny_x16"),
+        ("embree", "Embree and the lab's walks, same rays, warm (bunny)"),
+    ):
         rows = [r for r in table.rows if r.get("part") == part]
         if rows:
             sub = ResultTable(part)
@@ -635,21 +869,38 @@ def write(table, out: Path, mode: dict):
     (out / "lab2_accel.md").write_text(
         f"# Lab 2: acceleration structures on {meta['device']}\n\n"
         f"`{meta['command']}` (torch {meta['torch']}, {meta['date']}, "
-        f"{meta['cpu_threads']} CPU threads)\n\n" + "\n".join(parts))
+        f"{meta['cpu_threads']} CPU threads)\n\n" + "\n".join(parts)
+    )
     rows = [r for r in table.rows if r.get("part") == "trade"]
     if rows:
-        trade_plot(rows, [], path=out / "pareto_trade.png",
-                   title="suzanne: trace seconds against hits differing from exact")
+        trade_plot(
+            rows,
+            [],
+            path=out / "pareto_trade.png",
+            title="suzanne: trace seconds against hits differing from exact",
+        )
     for name in ("bunny", "teapot_in_stadium"):  # two plots: the device returns few files
-        rows = [r for r in table.rows if r.get("part") == "structures" and r["scene"] == name
-                and r["build_s"] > 0 and math.isfinite(r["rays_per_s"])]
+        rows = [
+            r
+            for r in table.rows
+            if r.get("part") == "structures"
+            and r["scene"] == name
+            and r["build_s"] > 0
+            and math.isfinite(r["rays_per_s"])
+        ]
         if rows:
-            pareto_plot(rows, x="rays_per_s", y="build_s", label="setting",
-                        path=out / f"pareto_{name}_trace_vs_build.png",
-                        title=f"{name}: primary rays/s against build time")
+            pareto_plot(
+                rows,
+                x="rays_per_s",
+                y="build_s",
+                label="setting",
+                path=out / f"pareto_{name}_trace_vs_build.png",
+                title=f"{name}: primary rays/s against build time",
+            )
     rows = [r for r in table.rows if r.get("part") == "fast" and "rays_per_s" in r]
     if rows:
         import matplotlib
+
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 

@@ -41,25 +41,33 @@ def main(argv=None):
     add_impl_option(parser)
     args = parser.parse_args(argv)
     if not torch.cuda.is_available():
-        raise SystemExit("lab2_profile: it profiles the traversal on CUDA, and this machine "
-                         "has no CUDA device (bench/lab2_accel.py measures it on the CPU)")
+        raise SystemExit(
+            "lab2_profile: it profiles the traversal on CUDA, and this machine "
+            "has no CUDA device (bench/lab2_accel.py measures it on the CPU)"
+        )
     lab = load_lab("lab2_accel", args.impl, root=REPO)
     scene = load_scene("bunny", device="cuda")
     mesh = scene.mesh
     bvh = lab.build_sah_bvh(mesh)
     walk = pack_bvh(bvh, mesh)
-    rays = primary_rays(dataclasses.replace(scene.camera, width=args.size, height=args.size),
-                        device="cuda")
-    knobs = {"check_every": args.check_every, "compile": args.compile, "walk": walk,
-             "compact": not args.no_compact}
+    rays = primary_rays(
+        dataclasses.replace(scene.camera, width=args.size, height=args.size), device="cuda"
+    )
+    knobs = {
+        "check_every": args.check_every,
+        "compile": args.compile,
+        "walk": walk,
+        "compact": not args.no_compact,
+    }
     _, counters = lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)  # compile, warm up
     lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)
     torch.cuda.synchronize()
     # Warm traversals before any profiler runs in this process (the device's activity
     # tracing, once started, can stay attached and slow every later launch).
     before = wall_time(lambda: lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs), len(rays))
-    with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU,
-                                            torch.profiler.ProfilerActivity.CUDA]) as prof:
+    with torch.profiler.profile(
+        activities=[torch.profiler.ProfilerActivity.CPU, torch.profiler.ProfilerActivity.CUDA]
+    ) as prof:
         lab.bvh_closest_hit_fast(rays, mesh, bvh, **knobs)
         torch.cuda.synchronize()
     table = prof.key_averages().table(sort_by="cuda_time_total", row_limit=25)
@@ -69,10 +77,16 @@ def main(argv=None):
     idle = idle_report(trace_path)
     steps = counters["steps"] + counters["tests"]
     started = int((steps > 0).sum())
-    lines = [(f"{len(rays):,} rays, {started:,} start (hit the root box); steps per ray: "
-              f"mean {steps.double().mean():.1f}, max {int(steps.max())}"),
-             ("still running after s steps: " + ", ".join(
-                 f"{s}: {int((steps > s).sum()):,}" for s in (16, 32, 48, 64, 96, 128, 192)))]
+    lines = [
+        (
+            f"{len(rays):,} rays, {started:,} start (hit the root box); steps per ray: "
+            f"mean {steps.double().mean():.1f}, max {int(steps.max())}"
+        ),
+        (
+            "still running after s steps: "
+            + ", ".join(f"{s}: {int((steps > s).sum()):,}" for s in (16, 32, 48, 64, 96, 128, 192))
+        ),
+    ]
     text = "\n".join(lines) + "\n\n" + idle + "\n\n" + table
     print(text)
     (Path(args.out) / "profile.txt").write_text(f"{' '.join(sys.argv)}\n\n{text}\n")
@@ -90,9 +104,11 @@ def idle_report(trace_path: Path, gap_us: float = 5.0, shown: int = 12) -> str:
     import json
 
     events = json.loads(trace_path.read_text())["traceEvents"]
-    device = sorted((e["ts"], e["ts"] + e.get("dur", 0)) for e in events
-                    if e.get("ph") == "X" and e.get("cat") in ("kernel", "gpu_memcpy",
-                                                               "gpu_memset"))
+    device = sorted(
+        (e["ts"], e["ts"] + e.get("dur", 0))
+        for e in events
+        if e.get("ph") == "X" and e.get("cat") in ("kernel", "gpu_memcpy", "gpu_memset")
+    )
     host = [e for e in events if e.get("ph") == "X" and e.get("cat") == "cpu_op"]
     if not device:
         return "no device events in the trace"
@@ -113,11 +129,17 @@ def idle_report(trace_path: Path, gap_us: float = 5.0, shown: int = 12) -> str:
     for length, at in long:
         op = running(at)
         by_op[op] = by_op.get(op, 0.0) + length
-    lines = [(f"device busy {busy / 1e3:.2f} ms of {wall / 1e3:.2f} ms from its first event "
-              f"to its last; {len(long)} gaps over {gap_us:g} us, "
-              f"{sum(g for g, _ in long) / 1e3:.2f} ms in all; the host was in (total gap ms):")]
-    lines += [f"  {ms / 1e3:7.3f}  {name}" for name, ms in
-              sorted(by_op.items(), key=lambda kv: -kv[1])[:shown]]
+    lines = [
+        (
+            f"device busy {busy / 1e3:.2f} ms of {wall / 1e3:.2f} ms from its first event "
+            f"to its last; {len(long)} gaps over {gap_us:g} us, "
+            f"{sum(g for g, _ in long) / 1e3:.2f} ms in all; the host was in (total gap ms):"
+        )
+    ]
+    lines += [
+        f"  {ms / 1e3:7.3f}  {name}"
+        for name, ms in sorted(by_op.items(), key=lambda kv: -kv[1])[:shown]
+    ]
     return "\n".join(lines)
 
 
@@ -139,11 +161,16 @@ def host_time(trace, n_rays: int, repeats: int = 10) -> str:
     pstats.Stats(profiler, stream=listing).sort_stats("cumulative").print_stats(40)
     # Paths relative to the repository and to torch's folder: the report reads the same on
     # any machine.
-    text = listing.getvalue().replace(f"{REPO}/", "").replace(
-        f"{Path(torch.__file__).parent.parent}/", "<site-packages>/")
-    return (f"{_wall_text(walls, n_rays)}\n\n"
-            f"one traversal under cProfile (host time per Python function; a sync is "
-            f"time spent waiting in the call that reads the device):\n{text}")
+    text = (
+        listing.getvalue()
+        .replace(f"{REPO}/", "")
+        .replace(f"{Path(torch.__file__).parent.parent}/", "<site-packages>/")
+    )
+    return (
+        f"{_wall_text(walls, n_rays)}\n\n"
+        f"one traversal under cProfile (host time per Python function; a sync is "
+        f"time spent waiting in the call that reads the device):\n{text}"
+    )
 
 
 def _walls(trace, repeats: int) -> list:
@@ -164,8 +191,10 @@ def _wall_text(walls: list, n_rays: int) -> str:
     import statistics
 
     wall = statistics.median(walls)
-    return (f"warm traversal, no profiler: median {wall * 1e3:.2f} ms of {len(walls)} "
-            f"({n_rays / wall / 1e6:.0f} M rays/s); min {min(walls) * 1e3:.2f} ms")
+    return (
+        f"warm traversal, no profiler: median {wall * 1e3:.2f} ms of {len(walls)} "
+        f"({n_rays / wall / 1e6:.0f} M rays/s); min {min(walls) * 1e3:.2f} ms"
+    )
 
 
 def wall_time(trace, n_rays: int, repeats: int = 10) -> str:

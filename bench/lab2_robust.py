@@ -35,21 +35,31 @@ def plain_slab_test(origins, inv_directions, lo, hi, t_lo, t_hi):
     near, far = torch.minimum(t0, t1), torch.maximum(t0, t1)
     t_near = torch.fmax(t_lo, torch.fmax(torch.fmax(near[..., 0], near[..., 1]), near[..., 2]))
     t_far = torch.fmin(t_hi, torch.fmin(torch.fmin(far[..., 0], far[..., 1]), far[..., 2]))
-    valid = (torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1)
-             & (lo <= hi).all(-1))
+    valid = (
+        torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1) & (lo <= hi).all(-1)
+    )
     return t_near, t_far, (t_near <= t_far) & (t_near < math.inf) & valid
 
 
 @contextlib.contextmanager
 def without_widening(lab):
     """The lab's walks with ``reach`` the identity and the plain slab test."""
-    mods = [sys.modules[lab.__name__ + "." + m] for m in
-            ("grid", "two_level", "bvh_walk", "kdtree", "fast")]
-    saved = [(m, k, getattr(m, k)) for m in mods for k in ("reach", "slab_test", "gamma")
-             if hasattr(m, k)]
+    mods = [
+        sys.modules[lab.__name__ + "." + m]
+        for m in ("grid", "two_level", "bvh_walk", "kdtree", "fast")
+    ]
+    saved = [
+        (m, k, getattr(m, k))
+        for m in mods
+        for k in ("reach", "slab_test", "gamma")
+        if hasattr(m, k)
+    ]
     for m, k, _ in saved:
-        setattr(m, k, {"reach": lambda t: t, "slab_test": plain_slab_test,
-                       "gamma": lambda n, dtype: 0.0}[k])
+        setattr(
+            m,
+            k,
+            {"reach": lambda t: t, "slab_test": plain_slab_test, "gamma": lambda n, dtype: 0.0}[k],
+        )
     try:
         yield
     finally:
@@ -61,16 +71,27 @@ def mt(o, d, a, b, c, t_min=0.0, t_max=math.inf):
     """The fast walk's kernel, broadcast: brute force with the same bits per pair."""
     o, d, a, b, c = torch.broadcast_tensors(o, d, a, b, c)
     shape = o.shape[:-1]
-    t, u, v, hit = moller_trumbore_rows(o, d, a, b - a, c - a,
-                                        torch.as_tensor(t_min, dtype=o.dtype).expand(shape),
-                                        torch.as_tensor(t_max, dtype=o.dtype).expand(shape))
+    t, u, v, hit = moller_trumbore_rows(
+        o,
+        d,
+        a,
+        b - a,
+        c - a,
+        torch.as_tensor(t_min, dtype=o.dtype).expand(shape),
+        torch.as_tensor(t_max, dtype=o.dtype).expand(shape),
+    )
     return torch.where(hit, t, math.inf), torch.where(hit, u, 0.0), torch.where(hit, v, 0.0)
 
 
 def brute(rays, mesh):
     tri = mesh.triangles()
-    t, _, _ = mt(rays.origins[:, None], rays.directions[:, None], tri[None, :, 0],
-                 tri[None, :, 1], tri[None, :, 2])
+    t, _, _ = mt(
+        rays.origins[:, None],
+        rays.directions[:, None],
+        tri[None, :, 0],
+        tri[None, :, 1],
+        tri[None, :, 2],
+    )
     best = t.argmin(1)
     return torch.where(t.gather(1, best[:, None])[:, 0] < math.inf, best, -1)
 
@@ -89,21 +110,24 @@ def workloads(shift: float):
     origins = (lo + hi) / 2 + float((hi - lo).norm()) * out / out.norm(dim=1, keepdim=True)
     anywhere = lo + (hi - lo) * torch.rand(len(at), 3, generator=g, dtype=torch.float64)
     label = f"suzanne+{shift:g}" if shift else "suzanne"
-    return [(f"{label} vertices", mesh, Rays.create(origins.float(), (at - origins).float())),
-            (f"{label} random", mesh, Rays.create(origins.float(),
-                                                  (anywhere - origins).float()))]
+    return [
+        (f"{label} vertices", mesh, Rays.create(origins.float(), (at - origins).float())),
+        (f"{label} random", mesh, Rays.create(origins.float(), (anywhere - origins).float())),
+    ]
 
 
 def walks(lab, mesh):
     grid, grid2 = lab.build_grid(mesh), lab.build_two_level_grid(mesh)
     lbvh, sah, kd = lab.build_lbvh(mesh), lab.build_sah_bvh(mesh), lab.build_kdtree(mesh)
-    return {"grid": lambda r: lab.grid_closest_hit(r, mesh, grid, mt),
-            "grid2": lambda r: lab.two_level_closest_hit(r, mesh, grid2, mt),
-            "lbvh": lambda r: lab.bvh_closest_hit(r, mesh, lbvh, mt),
-            "sah": lambda r: lab.bvh_closest_hit(r, mesh, sah, mt),
-            "sah stackless": lambda r: lab.bvh_closest_hit_stackless(r, mesh, sah, mt),
-            "kd": lambda r: lab.kd_closest_hit(r, mesh, kd, mt),
-            "fast": lambda r: lab.bvh_closest_hit_fast(r, mesh, sah)}
+    return {
+        "grid": lambda r: lab.grid_closest_hit(r, mesh, grid, mt),
+        "grid2": lambda r: lab.two_level_closest_hit(r, mesh, grid2, mt),
+        "lbvh": lambda r: lab.bvh_closest_hit(r, mesh, lbvh, mt),
+        "sah": lambda r: lab.bvh_closest_hit(r, mesh, sah, mt),
+        "sah stackless": lambda r: lab.bvh_closest_hit_stackless(r, mesh, sah, mt),
+        "kd": lambda r: lab.kd_closest_hit(r, mesh, kd, mt),
+        "fast": lambda r: lab.bvh_closest_hit_fast(r, mesh, sah),
+    }
 
 
 def run(lab, fn, rays, ref, repeats):
@@ -112,9 +136,12 @@ def run(lab, fn, rays, ref, repeats):
         t0 = time.perf_counter()
         hits, count = fn(rays)
         best = min(best, time.perf_counter() - t0)
-    return {"steps": float(count["steps"].double().mean()),
-            "tests": float(count["tests"].double().mean()), "seconds": best,
-            "wrong": int((hits.triangle != ref).sum())}
+    return {
+        "steps": float(count["steps"].double().mean()),
+        "tests": float(count["tests"].double().mean()),
+        "seconds": best,
+        "wrong": int((hits.triangle != ref).sum()),
+    }
 
 
 def main(argv=None) -> None:
@@ -132,18 +159,29 @@ def main(argv=None) -> None:
                 robust = run(lab, fn, rays, ref, args.repeats)
                 with without_widening(lab):
                     plain = run(lab, fn, rays, ref, args.repeats)
-                rows.append({"rays": name, "n": len(rays), "walk": walk, "robust": robust,
-                             "plain": plain})
-                print(f"{name:<24} {walk:<14} steps {plain['steps']:7.2f} -> "
-                      f"{robust['steps']:7.2f}  tests {plain['tests']:7.2f} -> "
-                      f"{robust['tests']:7.2f}  time {plain['seconds']:.3f} -> "
-                      f"{robust['seconds']:.3f} s  wrong {plain['wrong']} -> {robust['wrong']}",
-                      flush=True)
+                rows.append(
+                    {"rays": name, "n": len(rays), "walk": walk, "robust": robust, "plain": plain}
+                )
+                print(
+                    f"{name:<24} {walk:<14} steps {plain['steps']:7.2f} -> "
+                    f"{robust['steps']:7.2f}  tests {plain['tests']:7.2f} -> "
+                    f"{robust['tests']:7.2f}  time {plain['seconds']:.3f} -> "
+                    f"{robust['seconds']:.3f} s  wrong {plain['wrong']} -> {robust['wrong']}",
+                    flush=True,
+                )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"command": "python bench/lab2_robust.py --json "
-                                         + str(args.json), "threads": 1, "rows": rows},
-                                        indent=1) + "\n")
+        args.json.write_text(
+            json.dumps(
+                {
+                    "command": "python bench/lab2_robust.py --json " + str(args.json),
+                    "threads": 1,
+                    "rows": rows,
+                },
+                indent=1,
+            )
+            + "\n"
+        )
 
 
 assert lab2_blocks.slab_test  # the widened test the walks import (course.given.lab2_blocks)

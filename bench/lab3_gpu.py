@@ -72,22 +72,49 @@ UNIFORM = [True, False]  # skip stages no lane needs / run every stage masked
 # The Triton walk's launches and knobs (trace_flat_triton's keywords): one warp per program
 # with the stack's top in registers first, then one knob changed at a time.
 TRITON_LAUNCHES = [
-    {"block": b, "num_warps": w, "uniform_branches": u, "stack_regs": r, "tris_per_step": k,
-     "speculate": sp, "loop": lp, "stack": st, "refill": 0}
+    {
+        "block": b,
+        "num_warps": w,
+        "uniform_branches": u,
+        "stack_regs": r,
+        "tris_per_step": k,
+        "speculate": sp,
+        "loop": lp,
+        "stack": st,
+        "refill": 0,
+    }
     for b, w, u, r, k, sp, lp, st in [
-        (32, 1, True, 4, 1, False, "if", "global"), (32, 1, True, 0, 1, False, "if", "global"),
-        (32, 1, True, 4, 2, False, "if", "global"), (32, 1, True, 4, 1, True, "if", "global"),
-        (32, 1, True, 4, 2, True, "if", "global"), (32, 1, False, 4, 1, False, "if", "global"),
-        (64, 1, True, 4, 1, False, "if", "global"), (64, 1, True, 4, 1, True, "if", "global"),
+        (32, 1, True, 4, 1, False, "if", "global"),
+        (32, 1, True, 0, 1, False, "if", "global"),
+        (32, 1, True, 4, 2, False, "if", "global"),
+        (32, 1, True, 4, 1, True, "if", "global"),
+        (32, 1, True, 4, 2, True, "if", "global"),
+        (32, 1, False, 4, 1, False, "if", "global"),
+        (64, 1, True, 4, 1, False, "if", "global"),
+        (64, 1, True, 4, 1, True, "if", "global"),
         (64, 2, True, 4, 1, False, "if", "global"),
         # the CUDA C kernel's loop shape, then its stack's place
-        (32, 1, True, 0, 1, False, "while", "global"), (32, 1, True, 4, 1, False, "while", "global"),
-        (32, 1, True, 0, 1, True, "while", "global"), (32, 1, True, 0, 1, False, "if", "local"),
-        (32, 1, True, 0, 1, True, "if", "local"), (32, 1, True, 0, 1, False, "while", "local"),
-        (32, 1, True, 0, 1, True, "while", "local"), (32, 1, True, 0, 2, True, "while", "local")]
+        (32, 1, True, 0, 1, False, "while", "global"),
+        (32, 1, True, 4, 1, False, "while", "global"),
+        (32, 1, True, 0, 1, True, "while", "global"),
+        (32, 1, True, 0, 1, False, "if", "local"),
+        (32, 1, True, 0, 1, True, "if", "local"),
+        (32, 1, True, 0, 1, False, "while", "local"),
+        (32, 1, True, 0, 1, True, "while", "local"),
+        (32, 1, True, 0, 2, True, "while", "local"),
+    ]
 ] + [  # persistent programs taking new rays once `refill` lanes are free (32: whole batches)
-    {"block": 32, "num_warps": 1, "uniform_branches": True, "stack_regs": 0, "tris_per_step": k,
-     "speculate": True, "loop": "while", "stack": "local", "refill": refill}
+    {
+        "block": 32,
+        "num_warps": 1,
+        "uniform_branches": True,
+        "stack_regs": 0,
+        "tris_per_step": k,
+        "speculate": True,
+        "loop": "while",
+        "stack": "local",
+        "refill": refill,
+    }
     for refill, k in ((32, 1), (16, 1), (8, 1), (4, 1), (2, 1), (1, 1), (4, 2), (2, 2), (1, 2))
 ]
 CUDA_BLOCKS = [64, 128, 256]
@@ -136,22 +163,29 @@ def hit_errors(scene, origins, directions, hits, sample: int) -> dict:
     idx = torch.linspace(0, len(origins) - 1, sample, device=origins.device).long()
     s64 = scene.to(torch.float64)
     o, d = origins[idx].double(), directions[idx].double()
-    ref = trace_brute_force(s64, o, d, torch.zeros_like(o[:, 0]), torch.full_like(o[:, 0],
-                                                                                  math.inf))
+    ref = trace_brute_force(
+        s64, o, d, torch.zeros_like(o[:, 0]), torch.full_like(o[:, 0], math.inf)
+    )
     tri = hits.triangle[idx]
     same = tri == ref.triangle
     both = same & (tri >= 0)
     rel = ((hits.t[idx].double() - ref.t).abs() / ref.t.abs())[both]
-    return {"mismatch": 1 - same.double().mean().item(),
-            "t_rel_err": rel.max().item() if len(rel) else 0.0}
+    return {
+        "mismatch": 1 - same.double().mean().item(),
+        "t_rel_err": rel.max().item() if len(rel) else 0.0,
+    }
 
 
 def triton_row(info) -> dict:
     occ = info.occupancy()
-    return {"regs": info.n_regs, "spills": info.n_spills, "local_bytes": info.local_bytes,
-            "threads_per_block": 32 * info.num_warps,
-            "occupancy_model": None if occ is None else occ.occupancy,
-            "occupancy_cuda": None}
+    return {
+        "regs": info.n_regs,
+        "spills": info.n_spills,
+        "local_bytes": info.local_bytes,
+        "threads_per_block": 32 * info.num_warps,
+        "occupancy_model": None if occ is None else occ.occupancy,
+        "occupancy_cuda": None,
+    }
 
 
 def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repeats, sample):
@@ -182,19 +216,27 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
                 dev = time_replayed(fn, bvh, rays_o, rays_d, repeats=repeats, **kw)
                 info = cuda_tracer.cuda_kernel_info(block=block, stack=stack, capped=capped)
                 report = ptxas.get((False, stack, capped), {})
-                row = table.add(scene=scene_name, rays=kind, impl="CUDA C",
-                                launch=f"{block} thr" + (", <= 40 regs" if capped else ""),
-                                n_rays=n, ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
-                                ms_device=dev.median * 1e3,
-                                grays_device=n / dev.median / 1e9, regs=info.num_regs,
-                                spills=report.get("spill_stores"),
-                                spill_loads=report.get("spill_loads"),
-                                local_bytes=info.local_bytes, stack_entries=stack,
-                                threads_per_block=block,
-                                occupancy_model=info.occupancy_model,
-                                occupancy_cuda=info.occupancy_cuda,
-                                same_as_first=agreement(hits, reference),
-                                **hit_errors(scene, rays_o, rays_d, hits, sample))
+                row = table.add(
+                    scene=scene_name,
+                    rays=kind,
+                    impl="CUDA C",
+                    launch=f"{block} thr" + (", <= 40 regs" if capped else ""),
+                    n_rays=n,
+                    ms=t.median * 1e3,
+                    grays_per_s=n / t.median / 1e9,
+                    ms_device=dev.median * 1e3,
+                    grays_device=n / dev.median / 1e9,
+                    regs=info.num_regs,
+                    spills=report.get("spill_stores"),
+                    spill_loads=report.get("spill_loads"),
+                    local_bytes=info.local_bytes,
+                    stack_entries=stack,
+                    threads_per_block=block,
+                    occupancy_model=info.occupancy_model,
+                    occupancy_cuda=info.occupancy_cuda,
+                    same_as_first=agreement(hits, reference),
+                    **hit_errors(scene, rays_o, rays_d, hits, sample),
+                )
                 _keep_fastest(fastest, "CUDA C", row["grays_device"], fn, kw)
                 print(_line(row), flush=True)
         else:
@@ -210,32 +252,56 @@ def bench_rays(table, scene_name, scene, bvh, rays_o, rays_d, kind, device, repe
                 continue
             reference = reference or hits
             t = time_fn(fn, bvh, rays_o, rays_d, repeats=repeats, warmup=1, **kw)
-            dev = (time_replayed(fn, bvh, rays_o, rays_d, repeats=repeats, warmup=1, **kw)
-                   if device.type == "cuda" else t)  # the interpreter: the same figure
-            launch = (_launch(kw["block"], kw["num_warps"], kw["uniform_branches"])
-                      + f", stack top {kw['stack_regs']} in registers, "
-                      f"{kw['tris_per_step']} tri/step"
-                      + (", speculative" if kw["speculate"] else "")
-                      + f", {kw['loop']}-{kw['loop']} loop, {kw['stack']} stack"
-                      + (f", refill at {kw['refill']} free lanes" if kw["refill"] else ""))
-            row = table.add(scene=scene_name, rays=kind, impl="Triton", launch=launch, n_rays=n,
-                            stack_regs=kw["stack_regs"], tris_per_step=kw["tris_per_step"],
-                            speculate=kw["speculate"], loop=kw["loop"], stack=kw["stack"],
-                            refill=kw["refill"],
-                            ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
-                            ms_device=dev.median * 1e3, grays_device=n / dev.median / 1e9,
-                            **triton_row(info), same_as_first=agreement(hits, reference),
-                            **hit_errors(scene, rays_o, rays_d, hits, sample))
+            dev = (
+                time_replayed(fn, bvh, rays_o, rays_d, repeats=repeats, warmup=1, **kw)
+                if device.type == "cuda"
+                else t
+            )  # the interpreter: the same figure
+            launch = (
+                _launch(kw["block"], kw["num_warps"], kw["uniform_branches"])
+                + f", stack top {kw['stack_regs']} in registers, "
+                f"{kw['tris_per_step']} tri/step"
+                + (", speculative" if kw["speculate"] else "")
+                + f", {kw['loop']}-{kw['loop']} loop, {kw['stack']} stack"
+                + (f", refill at {kw['refill']} free lanes" if kw["refill"] else "")
+            )
+            row = table.add(
+                scene=scene_name,
+                rays=kind,
+                impl="Triton",
+                launch=launch,
+                n_rays=n,
+                stack_regs=kw["stack_regs"],
+                tris_per_step=kw["tris_per_step"],
+                speculate=kw["speculate"],
+                loop=kw["loop"],
+                stack=kw["stack"],
+                refill=kw["refill"],
+                ms=t.median * 1e3,
+                grays_per_s=n / t.median / 1e9,
+                ms_device=dev.median * 1e3,
+                grays_device=n / dev.median / 1e9,
+                **triton_row(info),
+                same_as_first=agreement(hits, reference),
+                **hit_errors(scene, rays_o, rays_d, hits, sample),
+            )
             _keep_fastest(fastest, "Triton", row["grays_device"], fn, kw)
             print(_line(row), flush=True)
     if device.type == "cpu":
         t = time_fn(trace_flat_torch, bvh, rays_o, rays_d, repeats=repeats, warmup=1)
         hits = trace_flat_torch(bvh, rays_o, rays_d)
         reference = reference or hits
-        row = table.add(scene=scene_name, rays=kind, impl="torch (CPU fallback)", launch="-",
-                        n_rays=n, ms=t.median * 1e3, grays_per_s=n / t.median / 1e9,
-                        same_as_first=agreement(hits, reference),
-                        **hit_errors(scene, rays_o, rays_d, hits, sample))
+        row = table.add(
+            scene=scene_name,
+            rays=kind,
+            impl="torch (CPU fallback)",
+            launch="-",
+            n_rays=n,
+            ms=t.median * 1e3,
+            grays_per_s=n / t.median / 1e9,
+            same_as_first=agreement(hits, reference),
+            **hit_errors(scene, rays_o, rays_d, hits, sample),
+        )
         print(_line(row), flush=True)
     return fastest
 
@@ -265,14 +331,26 @@ def head_to_head(table, kind, fastest, bvh, rays_o, rays_d, rounds: int, repeats
             t = time_fn(fn, bvh, rays_o, rays_d, repeats=repeats, warmup=1, **kw)
             call[impl] = len(rays_o) / t.median / 1e9
         ratios.append(speed["Triton"] / speed["CUDA C"])
-        table.add(scene="bunny", rays=kind, impl="head to head", launch=f"round {r + 1}",
-                  n_rays=len(rays_o), cuda_grays=speed["CUDA C"], triton_grays=speed["Triton"],
-                  ratio=ratios[-1], cuda_grays_call=call["CUDA C"],
-                  triton_grays_call=call["Triton"], ratio_call=call["Triton"] / call["CUDA C"])
-        print(f"{kind} round {r + 1}: kernels CUDA C {speed['CUDA C']:.3g} G, Triton "
-              f"{speed['Triton']:.3g} G rays/s: {ratios[-1]:.0%}; per call from the host "
-              f"{call['CUDA C']:.3g} G, {call['Triton']:.3g} G: "
-              f"{call['Triton'] / call['CUDA C']:.0%}", flush=True)
+        table.add(
+            scene="bunny",
+            rays=kind,
+            impl="head to head",
+            launch=f"round {r + 1}",
+            n_rays=len(rays_o),
+            cuda_grays=speed["CUDA C"],
+            triton_grays=speed["Triton"],
+            ratio=ratios[-1],
+            cuda_grays_call=call["CUDA C"],
+            triton_grays_call=call["Triton"],
+            ratio_call=call["Triton"] / call["CUDA C"],
+        )
+        print(
+            f"{kind} round {r + 1}: kernels CUDA C {speed['CUDA C']:.3g} G, Triton "
+            f"{speed['Triton']:.3g} G rays/s: {ratios[-1]:.0%}; per call from the host "
+            f"{call['CUDA C']:.3g} G, {call['Triton']:.3g} G: "
+            f"{call['Triton'] / call['CUDA C']:.0%}",
+            flush=True,
+        )
     return statistics.median(ratios), min(ratios), max(ratios)
 
 
@@ -293,8 +371,11 @@ def ray_sets(bvh, camera, device, seed: int = SEED) -> dict:
     """
     primary = primary_rays(camera, device)
     o, d = primary.origins.contiguous(), primary.directions.contiguous()
-    hits = trace_flat_torch(bvh, o, d) if device.type == "cpu" else \
-        triton_tracer.trace_flat_triton(bvh, o, d)
+    hits = (
+        trace_flat_torch(bvh, o, d)
+        if device.type == "cpu"
+        else triton_tracer.trace_flat_triton(bvh, o, d)
+    )
     bo, bd = diffuse_rays(bvh, o, d, hits, len(o), seed=seed)
     return {"primary": (o, d), "diffuse": (bo, bd)}
 
@@ -304,19 +385,32 @@ def describe_rays(sets: dict, camera, seed: int, first: int = 4) -> dict:
     the float32 bytes of origins then directions) and their first rays."""
     import hashlib
 
-    out = {"how": "bench/lab3_gpu.py ray_sets(bvh, camera, device, seed): primary rays of the "
-                  "bunny's camera at this size, diffuse bounces from their hits",
-           "camera": {"eye": list(camera.eye), "target": list(camera.target),
-                      "fov_y": camera.fov_y, "width": camera.width, "height": camera.height},
-           "seed": seed, "sets": {}}
+    out = {
+        "how": "bench/lab3_gpu.py ray_sets(bvh, camera, device, seed): primary rays of the "
+        "bunny's camera at this size, diffuse bounces from their hits",
+        "camera": {
+            "eye": list(camera.eye),
+            "target": list(camera.target),
+            "fov_y": camera.fov_y,
+            "width": camera.width,
+            "height": camera.height,
+        },
+        "seed": seed,
+        "sets": {},
+    }
     for kind, (o, d) in sets.items():
         digest = hashlib.sha256()
         for x in (o, d):
             digest.update(x.detach().to("cpu", torch.float32).contiguous().numpy().tobytes())
-        out["sets"][kind] = {"n": len(o), "sha256": digest.hexdigest(),
-                             "first_origins": o[:first].tolist(),
-                             "first_directions": d[:first].tolist()}
+        out["sets"][kind] = {
+            "n": len(o),
+            "sha256": digest.hexdigest(),
+            "first_origins": o[:first].tolist(),
+            "first_directions": d[:first].tolist(),
+        }
     return out
+
+
 def bench_frames(table, device, frame, repeats, ref_grid, shapes):
     for name in ("cornell_mirror", "bunny_mirror"):
         scene = whitted_scene(name, device=device)
@@ -331,16 +425,31 @@ def bench_frames(table, device, frame, repeats, ref_grid, shapes):
         for (block, warps), uniform in itertools.product(shapes, UNIFORM):
             kw = {"block": block, "num_warps": warps, "uniform_branches": uniform}
             rgb, info = render(scene, rays.origins, rays.directions, return_info=True, **kw)
-            t = time_fn(render, scene, rays.origins, rays.directions, bvh=bvh, repeats=repeats,
-                        warmup=1, **kw)
+            t = time_fn(
+                render,
+                scene,
+                rays.origins,
+                rays.directions,
+                bvh=bvh,
+                repeats=repeats,
+                warmup=1,
+                **kw,
+            )
             err = (rgb[idx].double() - want).abs().amax(1) / want.abs().amax(1).clamp(min=1e-3)
-            row = table.add(scene=name, rays=f"Whitted frame {frame}x{frame}, 2 bounces",
-                            impl="Triton uber", launch=_launch(block, warps, uniform),
-                            n_rays=None, n_pixels=frame * frame, ms=t.median * 1e3,
-                            gpixels_per_s=frame * frame / t.median / 1e9, **triton_row(info),
-                            mismatch=(err > 1e-3).double().mean().item(),
-                            image_rel_err_median=err.median().item(),
-                            image_rel_err_max=err.max().item())
+            row = table.add(
+                scene=name,
+                rays=f"Whitted frame {frame}x{frame}, 2 bounces",
+                impl="Triton uber",
+                launch=_launch(block, warps, uniform),
+                n_rays=None,
+                n_pixels=frame * frame,
+                ms=t.median * 1e3,
+                gpixels_per_s=frame * frame / t.median / 1e9,
+                **triton_row(info),
+                mismatch=(err > 1e-3).double().mean().item(),
+                image_rel_err_median=err.median().item(),
+                image_rel_err_max=err.max().item(),
+            )
             print(_line(row), flush=True)
 
 
@@ -349,8 +458,7 @@ def _launch(block: int, warps: int, uniform: bool) -> str:
 
 
 def _line(row: dict) -> str:
-    cells = [f"{row['scene']}", row["rays"], row["impl"], row["launch"],
-             f"{row['ms']:.3f} ms"]
+    cells = [f"{row['scene']}", row["rays"], row["impl"], row["launch"], f"{row['ms']:.3f} ms"]
     if row.get("grays_per_s") is not None:
         cells.append(f"{row['grays_per_s']:.3g} G rays/s")
     if row.get("grays_device") is not None:
@@ -391,21 +499,29 @@ def main(argv=None) -> None:
 
     scene = whitted_scene("bunny_mirror", device=device)
     bunny_faces = scene.faces[scene.material == 0]  # the bunny alone, without the floor
-    bunny = dataclasses.replace(scene, faces=bunny_faces,
-                                material=scene.material[: len(bunny_faces)])
+    bunny = dataclasses.replace(
+        scene, faces=bunny_faces, material=scene.material[: len(bunny_faces)]
+    )
     start = time.perf_counter()
     bvh = build_flat_bvh(bunny.vertices, bunny.faces, leaf_size=4)
     if device.type == "cuda":
         torch.cuda.synchronize()
     build_s = time.perf_counter() - start
-    table.metadata.update(bunny_triangles=len(bunny_faces), bvh_nodes=bvh.num_nodes,
-                          bvh_depth=bvh.depth, bvh_bytes=bvh.nbytes, bvh_build_s=build_s)
-    print(f"bunny: {len(bunny_faces)} triangles, BVH {bvh.num_nodes} nodes, depth {bvh.depth}, "
-          f"{bvh.nbytes / 1e6:.1f} MB, built in {build_s:.2f} s on {device}", flush=True)
+    table.metadata.update(
+        bunny_triangles=len(bunny_faces),
+        bvh_nodes=bvh.num_nodes,
+        bvh_depth=bvh.depth,
+        bvh_bytes=bvh.nbytes,
+        bvh_build_s=build_s,
+    )
+    print(
+        f"bunny: {len(bunny_faces)} triangles, BVH {bvh.num_nodes} nodes, depth {bvh.depth}, "
+        f"{bvh.nbytes / 1e6:.1f} MB, built in {build_s:.2f} s on {device}",
+        flush=True,
+    )
     from course.core.scenes import load_scene
 
-    camera = dataclasses.replace(load_scene("bunny", device="cpu").camera, width=size,
-                                 height=size)
+    camera = dataclasses.replace(load_scene("bunny", device="cpu").camera, width=size, height=size)
     sets = ray_sets(bvh, camera, device)
     out.mkdir(parents=True, exist_ok=True)
     described = describe_rays(sets, camera, SEED)
@@ -414,44 +530,59 @@ def main(argv=None) -> None:
     if args.save_rays:
         args.save_rays.mkdir(parents=True, exist_ok=True)
         for kind, (ro, rd) in sets.items():
-            torch.save({"origins": ro.cpu(), "directions": rd.cpu(), "seed": SEED},
-                       args.save_rays / f"{kind}_rays.pt")
+            torch.save(
+                {"origins": ro.cpu(), "directions": rd.cpu(), "seed": SEED},
+                args.save_rays / f"{kind}_rays.pt",
+            )
     speeds = {}
     for kind, (ro, rd) in sets.items():
-        speeds[kind] = bench_rays(table, "bunny", bunny, bvh, ro, rd, kind, device, repeats,
-                                  sample)
+        speeds[kind] = bench_rays(table, "bunny", bunny, bvh, ro, rd, kind, device, repeats, sample)
     if device.type == "cuda" or triton_tracer.interpreting():
-        bench_frames(table, device, frame, repeats, ref_grid=64 if not small else 4,
-                     shapes=TRITON_SHAPES[:2] if device.type == "cuda" else TRITON_SHAPES[:1])
+        bench_frames(
+            table,
+            device,
+            frame,
+            repeats,
+            ref_grid=64 if not small else 4,
+            shapes=TRITON_SHAPES[:2] if device.type == "cuda" else TRITON_SHAPES[:1],
+        )
     for kind, best in speeds.items():
         if "CUDA C" in best:
             cuda = best["CUDA C"][0]
             table.metadata[f"cuda_best_grays_{kind}"] = cuda
             if kind == "primary":
-                print(f"primary: best CUDA C {cuda:.3g} G rays/s "
-                      f"(target >= {CUDA_TARGET}: {'met' if cuda >= CUDA_TARGET else 'NOT met'})")
+                print(
+                    f"primary: best CUDA C {cuda:.3g} G rays/s "
+                    f"(target >= {CUDA_TARGET}: {'met' if cuda >= CUDA_TARGET else 'NOT met'})"
+                )
         if "CUDA C" in best and "Triton" in best:
             ratio = best["Triton"][0] / best["CUDA C"][0]
             table.metadata[f"triton_over_cuda_{kind}"] = ratio
             table.metadata[f"triton_best_launch_{kind}"] = best["Triton"][2]
-            print(f"{kind}: best Triton / best CUDA C = {ratio:.0%} (best rows, kernels' "
-                  f"device time; target >= {TRITON_TARGET:.0%}: "
-                  f"{'met' if ratio >= TRITON_TARGET else 'NOT met'})")
+            print(
+                f"{kind}: best Triton / best CUDA C = {ratio:.0%} (best rows, kernels' "
+                f"device time; target >= {TRITON_TARGET:.0%}: "
+                f"{'met' if ratio >= TRITON_TARGET else 'NOT met'})"
+            )
             ro, rd = sets[kind]
             # Head to head: the best CUDA C launch against the Triton walk's defaults (what
             # a caller gets without knobs), so one launch has to meet the target on both sets.
-            pair = {"CUDA C": best["CUDA C"],
-                    "Triton": (None, triton_tracer.trace_flat_triton, {})}
-            mid, low, high = head_to_head(table, kind, pair, bvh, ro, rd, rounds=HEAD_ROUNDS,
-                                          repeats=HEAD_REPEATS)
+            pair = {"CUDA C": best["CUDA C"], "Triton": (None, triton_tracer.trace_flat_triton, {})}
+            mid, low, high = head_to_head(
+                table, kind, pair, bvh, ro, rd, rounds=HEAD_ROUNDS, repeats=HEAD_REPEATS
+            )
             table.metadata[f"head_to_head_{kind}"] = {"median": mid, "min": low, "max": high}
-            print(f"{kind}: head to head, Triton (defaults) / CUDA C = {mid:.0%} (median of "
-                  f"{HEAD_ROUNDS} rounds, {low:.0%}-{high:.0%}; target >= {TRITON_TARGET:.0%}: "
-                  f"{'met' if mid >= TRITON_TARGET else 'NOT met'})", flush=True)
+            print(
+                f"{kind}: head to head, Triton (defaults) / CUDA C = {mid:.0%} (median of "
+                f"{HEAD_ROUNDS} rounds, {low:.0%}-{high:.0%}; target >= {TRITON_TARGET:.0%}: "
+                f"{'met' if mid >= TRITON_TARGET else 'NOT met'})",
+                flush=True,
+            )
     json_path = table.to_json(out / "lab3_gpu.json")
     (out / "lab3_gpu.md").write_text(
         f"# Lab 3 GPU tracers on {table.metadata['device']}\n\n"
-        f"Command: `{table.metadata['command']}`\n\n{table.to_markdown()}\n")
+        f"Command: `{table.metadata['command']}`\n\n{table.to_markdown()}\n"
+    )
     print(f"wrote {json_path} and lab3_gpu.md")
 
 

@@ -77,12 +77,17 @@ try:  # the fast tracer of the GPU track (a flattened BVH), where it exists
 except ImportError:  # pragma: no cover - older checkouts
     trace_bvh = None
 
-SIZES = {"cpu": {"size": 32, "reference_pixels": 256, "repeats": 2, "warmup": 1,
-                 "layout_rays": 64},
-         "cuda": {"size": 1024, "reference_pixels": 4096, "repeats": 5, "warmup": 2,
-                  "layout_rays": 4096},
-         "quick": {"size": 16, "reference_pixels": 64, "repeats": 1, "warmup": 1,
-                   "layout_rays": 16}}
+SIZES = {
+    "cpu": {"size": 32, "reference_pixels": 256, "repeats": 2, "warmup": 1, "layout_rays": 64},
+    "cuda": {
+        "size": 1024,
+        "reference_pixels": 4096,
+        "repeats": 5,
+        "warmup": 2,
+        "layout_rays": 4096,
+    },
+    "quick": {"size": 16, "reference_pixels": 64, "repeats": 1, "warmup": 1, "layout_rays": 16},
+}
 MAX_DEPTH = 2
 FLIP = 1e-3  # a pixel off by more than this (relative) took another shading decision
 
@@ -94,16 +99,23 @@ def sync(device):
 
 def organisations(n: int, compile_uber: bool, device) -> list[tuple[str, str, object, dict]]:
     """(label, kind, renderer, keywords) of every organisation measured."""
-    rows = [("whitted (full-size loop)", "loop", lab.render_whitted, {}),
-            ("wavefront", "wavefront", lab.render_wavefront, {}),
-            ("wavefront sorted by material", "wavefront", lab.render_wavefront,
-             {"sort_by_material": True}),
-            ("uber (eager)", "uber", lab.render_uber, {})]
+    rows = [
+        ("whitted (full-size loop)", "loop", lab.render_whitted, {}),
+        ("wavefront", "wavefront", lab.render_wavefront, {}),
+        (
+            "wavefront sorted by material",
+            "wavefront",
+            lab.render_wavefront,
+            {"sort_by_material": True},
+        ),
+        ("uber (eager)", "uber", lab.render_uber, {}),
+    ]
     if compile_uber:
         rows.append(("uber (torch.compile)", "uber", lab.render_uber, {"compile": True}))
     for pool in sorted({max(1, n // 4), n}):
-        rows.append((f"persistent, pool {pool}", "persistent", lab.render_persistent,
-                     {"pool_size": pool}))
+        rows.append(
+            (f"persistent, pool {pool}", "persistent", lab.render_persistent, {"pool_size": pool})
+        )
     return rows
 
 
@@ -125,8 +137,10 @@ def errors(image: torch.Tensor, sample: torch.Tensor, reference: torch.Tensor) -
     rel = ((got - reference).abs() / reference.abs().clamp(min=1e-3)).amax(1)
     flipped = rel > FLIP
     agree = rel[~flipped]
-    return {"max_rel_error": float(agree.max()) if len(agree) else math.nan,
-            "flipped": float(flipped.double().mean())}
+    return {
+        "max_rel_error": float(agree.max()) if len(agree) else math.nan,
+        "flipped": float(flipped.double().mean()),
+    }
 
 
 def lanes(kind: str, n: int, lights: int, wave: dict, extra: dict) -> tuple[int, int]:
@@ -134,9 +148,9 @@ def lanes(kind: str, n: int, lights: int, wave: dict, extra: dict) -> tuple[int,
     they depend on the live rays and the lab's wavefront renderer is not written yet)."""
     live_closest, live_shadow = sum(wave["closest_rays"]), sum(wave["shadow_rays"])
     bounces = len(wave["closest_rays"])
-    if kind == "loop":   # every lane traced every bounce; shadow rays only for hits
+    if kind == "loop":  # every lane traced every bounce; shadow rays only for hits
         return n * bounces, live_shadow
-    if kind == "uber":   # every lane and every shadow lane, every bounce
+    if kind == "uber":  # every lane and every shadow lane, every bounce
         return n * (MAX_DEPTH + 1), n * lights * (MAX_DEPTH + 1)
     if kind == "persistent":
         return extra["work_processed"], extra["shadow_rays"]
@@ -157,71 +171,124 @@ def run_scene(name, sizes, device, table, compile_uber, log):
     o, d, n = rays.origins, rays.directions, len(rays)
     trace = trace_bvh or trace_brute_force
     start = time.perf_counter()
-    trace(scene, o[:1], d[:1], torch.zeros(1, device=device), torch.full((1,), math.inf,
-                                                                        device=device), False)
+    trace(
+        scene,
+        o[:1],
+        d[:1],
+        torch.zeros(1, device=device),
+        torch.full((1,), math.inf, device=device),
+        False,
+    )
     sync(device)
-    log(f"{name}: {scene.num_faces} triangles, {n} primary rays, tracer {trace.__name__} "
-        f"(first call, with its build: {time.perf_counter() - start:.2f} s)")
+    log(
+        f"{name}: {scene.num_faces} triangles, {n} primary rays, tracer {trace.__name__} "
+        f"(first call, with its build: {time.perf_counter() - start:.2f} s)"
+    )
     g = torch.Generator().manual_seed(0)
-    sample = torch.randperm(n, generator=g)[:min(n, sizes["reference_pixels"])].to(device)
+    sample = torch.randperm(n, generator=g)[: min(n, sizes["reference_pixels"])].to(device)
     start = time.perf_counter()
     reference = render_reference(scene, o[sample], d[sample], MAX_DEPTH)
-    log(f"  reference (float64 brute force) on {len(sample)} pixels: "
-        f"{time.perf_counter() - start:.1f} s")
+    log(
+        f"  reference (float64 brute force) on {len(sample)} pixels: "
+        f"{time.perf_counter() - start:.1f} s"
+    )
     lights = scene.num_point_lights + scene.num_dir_lights
     try:
         _, wave = lab.render_wavefront(scene, o, d, trace, MAX_DEPTH)
-        log(f"  live rays per bounce: closest {wave['closest_rays']}, shadow "
-            f"{wave['shadow_rays']}")
+        log(f"  live rays per bounce: closest {wave['closest_rays']}, shadow {wave['shadow_rays']}")
     except NotImplementedError as exc:  # the handout: the live-ray counts are unknown
         wave = None
         log(f"  live rays per bounce unknown: {exc}")
     results = {}
     for label, kind, render, kw in organisations(n, compile_uber, device):
         try:
-            timing = time_fn(render, scene, o, d, trace, MAX_DEPTH, repeats=sizes["repeats"],
-                             warmup=sizes["warmup"], device=device, **kw)
+            timing = time_fn(
+                render,
+                scene,
+                o,
+                d,
+                trace,
+                MAX_DEPTH,
+                repeats=sizes["repeats"],
+                warmup=sizes["warmup"],
+                device=device,
+                **kw,
+            )
         except Exception as exc:  # noqa: BLE001  (e.g. torch.compile without a C++ compiler)
             log(f"  {label:<32} failed: {type(exc).__name__}: {str(exc).splitlines()[0][:80]}")
             continue
         out = render(scene, o, d, trace, MAX_DEPTH, **kw)
         image, extra = out if isinstance(out, tuple) else (out, {})
         closest, shadow = lanes_or_nan(kind, n, lights, wave, extra)
-        row = table.add(scene=name, organisation=label, kind=kind, triangles=scene.num_faces,
-                        pixels=n, seconds=timing.median, images_per_s=1 / timing.median,
-                        rays_per_s=(closest + shadow) / timing.median, closest_lanes=closest,
-                        shadow_lanes=shadow, lanes=closest + shadow,
-                        **errors(image, sample, reference),
-                        **stage_columns(extra if kind == "wavefront" else {}),
-                        **pool_columns(extra if kind == "persistent" else {}))
+        row = table.add(
+            scene=name,
+            organisation=label,
+            kind=kind,
+            triangles=scene.num_faces,
+            pixels=n,
+            seconds=timing.median,
+            images_per_s=1 / timing.median,
+            rays_per_s=(closest + shadow) / timing.median,
+            closest_lanes=closest,
+            shadow_lanes=shadow,
+            lanes=closest + shadow,
+            **errors(image, sample, reference),
+            **stage_columns(extra if kind == "wavefront" else {}),
+            **pool_columns(extra if kind == "persistent" else {}),
+        )
         results[label] = extra
-        log(f"  {label:<32} {row['images_per_s']:9.3f} images/s  {row['rays_per_s']:>13,.0f} "
+        log(
+            f"  {label:<32} {row['images_per_s']:9.3f} images/s  {row['rays_per_s']:>13,.0f} "
             f"lanes/s  lanes {closest:>9,.0f} + {shadow:>9,.0f} shadow  max rel err "
-            f"{row['max_rel_error']:.2e}, flipped {row['flipped']:.2%}")
+            f"{row['max_rel_error']:.2e}, flipped {row['flipped']:.2%}"
+        )
     render = triton_renderer(device)
     if render is not None:
-        timing = time_fn(render, scene, o, d, MAX_DEPTH, repeats=sizes["repeats"],
-                         warmup=sizes["warmup"], device=device)
+        timing = time_fn(
+            render,
+            scene,
+            o,
+            d,
+            MAX_DEPTH,
+            repeats=sizes["repeats"],
+            warmup=sizes["warmup"],
+            device=device,
+        )
         image = render(scene, o, d, MAX_DEPTH)
-        row = table.add(scene=name, organisation="uber (Triton kernel)", kind="uber",
-                        triangles=scene.num_faces, pixels=n, seconds=timing.median,
-                        images_per_s=1 / timing.median, **errors(image, sample, reference))
-        log(f"  {'uber (Triton kernel)':<32} {row['images_per_s']:9.3f} images/s  max rel err "
-            f"{row['max_rel_error']:.2e}, flipped {row['flipped']:.2%}")
+        row = table.add(
+            scene=name,
+            organisation="uber (Triton kernel)",
+            kind="uber",
+            triangles=scene.num_faces,
+            pixels=n,
+            seconds=timing.median,
+            images_per_s=1 / timing.median,
+            **errors(image, sample, reference),
+        )
+        log(
+            f"  {'uber (Triton kernel)':<32} {row['images_per_s']:9.3f} images/s  max rel err "
+            f"{row['max_rel_error']:.2e}, flipped {row['flipped']:.2%}"
+        )
     return results
 
 
 def stage_columns(stats: dict) -> dict:
     seconds = stats.get("seconds", {})
-    return {f"{stage}_s": seconds[stage] for stage in ("generate", "trace", "shade", "spawn")
-            if stage in seconds}
+    return {
+        f"{stage}_s": seconds[stage]
+        for stage in ("generate", "trace", "shade", "spawn")
+        if stage in seconds
+    }
 
 
 def pool_columns(stats: dict) -> dict:
     if not stats:
         return {}
-    return {"steps": stats["steps"], "idle_fraction": stats["idle_fraction"],
-            "mean_active_lanes": sum(stats["active_lanes"]) / max(1, stats["steps"])}
+    return {
+        "steps": stats["steps"],
+        "idle_fraction": stats["idle_fraction"],
+        "mean_active_lanes": sum(stats["active_lanes"]) / max(1, stats["steps"]),
+    }
 
 
 def run_layouts(name, sizes, device, table, log):
@@ -232,27 +299,49 @@ def run_layouts(name, sizes, device, table, log):
     rays = primary_rays(camera, device=device)
     pick = torch.linspace(0, len(rays) - 1, sizes["layout_rays"], device=device).long()
     o, d = rays.origins[pick], rays.directions[pick]
-    t_min, t_max = torch.zeros(len(o), device=device), torch.full((len(o),), math.inf,
-                                                                  device=device)
+    t_min, t_max = (
+        torch.zeros(len(o), device=device),
+        torch.full((len(o),), math.inf, device=device),
+    )
     expected = trace_brute_force(scene, o, d, t_min, t_max)
-    for label, build in (("indexed", lab.layout_indexed), ("float4", lab.layout_float4),
-                         ("woop", lab.layout_woop)):
+    for label, build in (
+        ("indexed", lab.layout_indexed),
+        ("float4", lab.layout_float4),
+        ("woop", lab.layout_woop),
+    ):
         try:
             layout = build(mesh)
-            timing = time_fn(lab.intersect_layout, layout, o, d, t_min, t_max,
-                             repeats=sizes["repeats"], warmup=1, device=device)
+            timing = time_fn(
+                lab.intersect_layout,
+                layout,
+                o,
+                d,
+                t_min,
+                t_max,
+                repeats=sizes["repeats"],
+                warmup=1,
+                device=device,
+            )
         except NotImplementedError as exc:
             log(f"  layout {label:<8} skipped: {exc}")
             continue
         hits = lab.intersect_layout(layout, o, d, t_min, t_max)
         agree = float((hits.triangle == expected.triangle).double().mean())
         tests = len(o) * mesh.num_faces
-        row = table.add(scene=name, organisation=f"layout {label}", kind="layout",
-                        triangles=mesh.num_faces, bytes_per_triangle=layout["bytes_per_triangle"],
-                        seconds=timing.median, tests_per_s=tests / timing.median,
-                        same_hit=agree)
-        log(f"  layout {label:<8} {row['bytes_per_triangle']:6.1f} bytes/triangle  "
-            f"{row['tests_per_s']:>14,.0f} tests/s  same hit as brute force {agree:.2%}")
+        row = table.add(
+            scene=name,
+            organisation=f"layout {label}",
+            kind="layout",
+            triangles=mesh.num_faces,
+            bytes_per_triangle=layout["bytes_per_triangle"],
+            seconds=timing.median,
+            tests_per_s=tests / timing.median,
+            same_hit=agree,
+        )
+        log(
+            f"  layout {label:<8} {row['bytes_per_triangle']:6.1f} bytes/triangle  "
+            f"{row['tests_per_s']:>14,.0f} tests/s  same hit as brute force {agree:.2%}"
+        )
 
 
 def lanes_plot(results: dict, path: Path, title: str) -> None:
@@ -263,8 +352,12 @@ def lanes_plot(results: dict, path: Path, title: str) -> None:
     ax = fig.add_subplot()
     for label, stats in results.items():
         if "active_lanes" in stats:
-            ax.step(range(1, stats["steps"] + 1), stats["active_lanes"], where="mid",
-                    label=f"{label} (idle {stats['idle_fraction']:.0%})")
+            ax.step(
+                range(1, stats["steps"] + 1),
+                stats["active_lanes"],
+                where="mid",
+                label=f"{label} (idle {stats['idle_fraction']:.0%})",
+            )
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("step")
     ax.set_ylabel("active lanes")
@@ -277,17 +370,31 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
     parser.add_argument("--size", type=int, default=None, help="image size S (S x S pixels)")
-    parser.add_argument("--reference-pixels", type=int, default=None,
-                        help="pixels compared with the float64 reference renderer")
+    parser.add_argument(
+        "--reference-pixels",
+        type=int,
+        default=None,
+        help="pixels compared with the float64 reference renderer",
+    )
     parser.add_argument("--scenes", default="cornell_mirror,bunny_mirror")
-    parser.add_argument("--no-compile", action="store_true",
-                        help="skip the torch.compile'd uber kernel (slow to compile on a CPU)")
+    parser.add_argument(
+        "--no-compile",
+        action="store_true",
+        help="skip the torch.compile'd uber kernel (slow to compile on a CPU)",
+    )
     parser.add_argument("--out", default=None, help="output folder")
-    parser.add_argument("--threads", type=int, default=None,
-                        help="CPU threads for torch (1 gives steadier ratios on a shared CPU)")
-    parser.add_argument("--quick", action="store_true",
-                        help="seconds on a CPU: the Cornell box only, 16 x 16 pixels, 64 "
-                             "compared, no torch.compile, one timed run")
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="CPU threads for torch (1 gives steadier ratios on a shared CPU)",
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="seconds on a CPU: the Cornell box only, 16 x 16 pixels, 64 "
+        "compared, no torch.compile, one timed run",
+    )
     add_impl_option(parser)
     args = parser.parse_args(argv)
     global lab
@@ -306,18 +413,26 @@ def main(argv=None):
     out = Path(args.out) if args.out else REPO / "bench" / "results" / device_name(device) / "lab3"
     out.mkdir(parents=True, exist_ok=True)
     table = ResultTable("lab3 organising the tracer", device=device)
-    table.metadata.update(sizes=sizes, max_depth=MAX_DEPTH, cpu_threads=torch.get_num_threads(),
-                          tracer=(trace_bvh or trace_brute_force).__name__,
-                          lab_file=str(lab.__file__))
+    table.metadata.update(
+        sizes=sizes,
+        max_depth=MAX_DEPTH,
+        cpu_threads=torch.get_num_threads(),
+        tracer=(trace_bvh or trace_brute_force).__name__,
+        lab_file=str(lab.__file__),
+    )
     start = time.perf_counter()
     names = args.scenes.split(",")
     for name in names:
-        results = run_scene(name, sizes, device, table, not args.no_compile,
-                            lambda text: print(text, flush=True))
+        results = run_scene(
+            name, sizes, device, table, not args.no_compile, lambda text: print(text, flush=True)
+        )
         run_layouts(name, sizes, device, table, lambda text: print(text, flush=True))
         if any("active_lanes" in stats for stats in results.values()):
-            lanes_plot(results, out / f"lanes_{name}.png",
-                       f"{name}: active lanes per step of the persistent pool")
+            lanes_plot(
+                results,
+                out / f"lanes_{name}.png",
+                f"{name}: active lanes per step of the persistent pool",
+            )
     # The rows of rtcourse bench --lab 3 (course.tools.trade.lab3: the organisations on the
     # Cornell box, error against render_reference), measured on this lab and plotted as a
     # student's are: trade.csv and pareto_trade.png.
@@ -334,18 +449,30 @@ def main(argv=None):
         f"max_rel_error where the shading decisions agree, flipped: pixels where a "
         f"shadow/edge decision differs from the float64 reference):\n\n"
         f"{renders.to_markdown()}\n\nGeometry layouts (a brute-force pass over "
-        f"{sizes['layout_rays']} rays):\n\n{layouts.to_markdown()}\n")
+        f"{sizes['layout_rays']} rays):\n\n{layouts.to_markdown()}\n"
+    )
     for name in names:
         rows = [r for r in table.rows if r["scene"] == name and r["kind"] != "layout"]
         if not rows:  # the handout before any organisation is written: nothing to plot
             continue
-        pareto_plot([dict(r, error=r["max_rel_error"] + r["flipped"]) for r in rows],
-                    x="images_per_s", y="error", label="organisation", group="kind",
-                    path=out / f"pareto_{name}.png",
-                    title=f"{name}: error (max rel. + flipped fraction) vs images/s")
-        pareto_plot(rows, x="images_per_s", y="lanes", label="organisation", group="kind",
-                    path=out / f"pareto_{name}_lanes.png",
-                    title=f"{name}: lanes traced (closest + shadow) vs images/s")
+        pareto_plot(
+            [dict(r, error=r["max_rel_error"] + r["flipped"]) for r in rows],
+            x="images_per_s",
+            y="error",
+            label="organisation",
+            group="kind",
+            path=out / f"pareto_{name}.png",
+            title=f"{name}: error (max rel. + flipped fraction) vs images/s",
+        )
+        pareto_plot(
+            rows,
+            x="images_per_s",
+            y="lanes",
+            label="organisation",
+            group="kind",
+            path=out / f"pareto_{name}_lanes.png",
+            title=f"{name}: lanes traced (closest + shadow) vs images/s",
+        )
     print(f"wrote {out} in {time.perf_counter() - start:.0f} s")
     return table
 

@@ -83,11 +83,22 @@ from course.tools.trade import bench_rows
 # or --impl, picks another): main() loads them.
 lab = closest_hit = None
 
-SIZES = {"cpu": {"sizes": (64, 128, 256), "repeats": 7, "rt_max": 128,
-                 "scenes": ("suzanne", "bunny"), "frames": ((128, 128), (192, 108))},
-         "cuda": {"sizes": (256, 512, 1024, 2048), "repeats": 10, "rt_max": 1024,
-                  "scenes": ("suzanne", "bunny", "bunny_x4", "bunny_x16"),
-                  "frames": ((512, 512), (1920, 1080), (3840, 2160))}}
+SIZES = {
+    "cpu": {
+        "sizes": (64, 128, 256),
+        "repeats": 7,
+        "rt_max": 128,
+        "scenes": ("suzanne", "bunny"),
+        "frames": ((128, 128), (192, 108)),
+    },
+    "cuda": {
+        "sizes": (256, 512, 1024, 2048),
+        "repeats": 10,
+        "rt_max": 1024,
+        "scenes": ("suzanne", "bunny", "bunny_x4", "bunny_x16"),
+        "frames": ((512, 512), (1920, 1080), (3840, 2160)),
+    },
+}
 SUN = (0.4, 0.8, 0.45)
 BUDGETS = (2**18, 2**20, 2**24, 2**28)
 TILES = (32, 64, 128)
@@ -98,8 +109,14 @@ ZFIGHT_DISTANCES = (3.0, 10.0, 30.0, 100.0, 300.0)
 # The two ways to find what each pixel sees
 # --------------------------------------------------------------------------------------
 
-def raster_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32,
-               memory_budget_bytes: int = 2**28, tile: int | None = None) -> torch.Tensor:
+
+def raster_ids(
+    mesh: Mesh,
+    camera: Camera,
+    depth_bits: int = 32,
+    memory_budget_bytes: int = 2**28,
+    tile: int | None = None,
+) -> torch.Tensor:
     """(H, W) source-face ids of the rasterizer's visibility buffer (-1: empty)."""
     mvp = camera.view_projection(torch.float64).to(mesh.device)
     clip = lab.to_clip_space(mesh.vertices, mvp)
@@ -122,10 +139,12 @@ def fused_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.Tensor:
 
     mvp = camera.view_projection(torch.float64).to(mesh.device)
     clip = lab.to_clip_space(mesh.vertices, mvp)
-    screen, source = screen_triangles_fast(clip, mesh.faces, camera.width, camera.height,
-                                           lab.clip_triangles, lab.to_screen)
-    k = lab.triangle_ids(rasterize_triton(screen, camera.width, camera.height,
-                                          depth_bits=depth_bits))
+    screen, source = screen_triangles_fast(
+        clip, mesh.faces, camera.width, camera.height, lab.clip_triangles, lab.to_screen
+    )
+    k = lab.triangle_ids(
+        rasterize_triton(screen, camera.width, camera.height, depth_bits=depth_bits)
+    )
     ids = torch.where(k >= 0, source[k.clamp(min=0)], -1) if len(source) else k
     return ids.reshape(camera.height, camera.width)
 
@@ -150,8 +169,14 @@ def fused_vertex_ids(mesh: Mesh, camera: Camera, depth_bits: int = 32) -> torch.
     the other way (slot order)."""
     from course.kernels.triton_raster import visibility_fused
 
-    return visibility_fused(mesh.vertices, mesh.faces, camera_matrix(camera),
-                            camera.width, camera.height, depth_bits=depth_bits)
+    return visibility_fused(
+        mesh.vertices,
+        mesh.faces,
+        camera_matrix(camera),
+        camera.width,
+        camera.height,
+        depth_bits=depth_bits,
+    )
 
 
 @functools.lru_cache(maxsize=8)
@@ -178,8 +203,11 @@ def kernel_times(fn, repeats: int = 20) -> dict[str, float]:
         for _ in range(repeats):
             fn()
         torch.cuda.synchronize()
-    return {e.key: e.self_device_time_total / 1e6 / repeats for e in prof.key_averages()
-            if getattr(e, "self_device_time_total", 0) > 0}
+    return {
+        e.key: e.self_device_time_total / 1e6 / repeats
+        for e in prof.key_averages()
+        if getattr(e, "self_device_time_total", 0) > 0
+    }
 
 
 def tiled_keys(screen, width: int, height: int, tile: int, **kwargs) -> torch.Tensor:
@@ -193,21 +221,28 @@ def tiled_keys(screen, width: int, height: int, tile: int, **kwargs) -> torch.Te
             shifted = screen.clone()
             shifted[..., 0] -= x0
             shifted[..., 1] -= y0
-            out[y0:y0 + th, x0:x0 + tw] = lab.rasterize(shifted, tw, th, **kwargs).reshape(th, tw)
+            out[y0 : y0 + th, x0 : x0 + tw] = lab.rasterize(shifted, tw, th, **kwargs).reshape(
+                th, tw
+            )
     return out.reshape(-1)
 
 
 def traced_ids(mesh: Mesh, camera: Camera) -> torch.Tensor:
     """(H, W) triangle ids of one primary ray per pixel, Lab 1's brute force in float32."""
     rays = primary_rays(camera, device=mesh.device, dtype=mesh.dtype)
-    hits = closest_hit(Rays.create(rays.origins, rays.directions, rays.t_min, rays.t_max), mesh,
-                       "moller_trumbore", memory_budget_bytes=2**30)
+    hits = closest_hit(
+        Rays.create(rays.origins, rays.directions, rays.t_min, rays.t_max),
+        mesh,
+        "moller_trumbore",
+        memory_budget_bytes=2**30,
+    )
     return hits.triangle.reshape(camera.height, camera.width)
 
 
 # --------------------------------------------------------------------------------------
 # Rows
 # --------------------------------------------------------------------------------------
+
 
 def bench_resolutions(table: ResultTable, mesh: Mesh, camera: Camera, cfg: dict) -> None:
     for size in cfg["sizes"]:
@@ -217,16 +252,31 @@ def bench_resolutions(table: ResultTable, mesh: Mesh, camera: Camera, cfg: dict)
         for depth_bits in (32, 24):
             ids = raster_ids(mesh, cam, depth_bits)
             t = time_fn(raster_ids, mesh, cam, depth_bits, repeats=cfg["repeats"], warmup=1)
-            _add(table, method="raster", setting=f"{depth_bits}-bit", size=size, seconds=t.median,
-                 triangles_per_s=tris / t.median, pixels_per_s=pixels / t.median,
-                 coverage=(ids >= 0).double().mean(),
-                 disagreement=None if traced is None else (ids != traced).double().mean())
+            _add(
+                table,
+                method="raster",
+                setting=f"{depth_bits}-bit",
+                size=size,
+                seconds=t.median,
+                triangles_per_s=tris / t.median,
+                pixels_per_s=pixels / t.median,
+                coverage=(ids >= 0).double().mean(),
+                disagreement=None if traced is None else (ids != traced).double().mean(),
+            )
         if traced is not None:
             # Slow and steady: one timed run, the id pass above was its warm-up.
             t = time_fn(traced_ids, mesh, cam, repeats=1, warmup=0)
-            _add(table, method="raytrace", setting="MT fp32 brute force", size=size,
-                 seconds=t.median, triangles_per_s=tris / t.median, pixels_per_s=pixels / t.median,
-                 coverage=(traced >= 0).double().mean(), disagreement=0.0)
+            _add(
+                table,
+                method="raytrace",
+                setting="MT fp32 brute force",
+                size=size,
+                seconds=t.median,
+                triangles_per_s=tris / t.median,
+                pixels_per_s=pixels / t.median,
+                coverage=(traced >= 0).double().mean(),
+                disagreement=0.0,
+            )
 
 
 def bench_knobs(table: ResultTable, mesh: Mesh, camera: Camera, cfg: dict) -> None:
@@ -237,18 +287,31 @@ def bench_knobs(table: ResultTable, mesh: Mesh, camera: Camera, cfg: dict) -> No
     for budget in BUDGETS:
         t = time_fn(raster_ids, mesh, cam, 32, budget, repeats=cfg["repeats"], warmup=1)
         ids = raster_ids(mesh, cam, 32, budget)
-        _add(table, method="chunk", setting=f"{budget >> 20} MiB" if budget >= 2**20
-             else f"{budget >> 10} KiB", size=size, seconds=t.median,
-             triangles_per_s=tris / t.median, pixels_per_s=pixels / t.median,
-             changed=(ids != whole).double().mean())
+        _add(
+            table,
+            method="chunk",
+            setting=f"{budget >> 20} MiB" if budget >= 2**20 else f"{budget >> 10} KiB",
+            size=size,
+            seconds=t.median,
+            triangles_per_s=tris / t.median,
+            pixels_per_s=pixels / t.median,
+            changed=(ids != whole).double().mean(),
+        )
     for tile in TILES:
         if tile >= size:
             continue
         t = time_fn(raster_ids, mesh, cam, 32, 2**28, tile, repeats=cfg["repeats"], warmup=1)
         ids = raster_ids(mesh, cam, 32, 2**28, tile)
-        _add(table, method="tile", setting=f"{tile}x{tile}", size=size, seconds=t.median,
-             triangles_per_s=tris / t.median, pixels_per_s=pixels / t.median,
-             changed=(ids != whole).double().mean())
+        _add(
+            table,
+            method="tile",
+            setting=f"{tile}x{tile}",
+            size=size,
+            seconds=t.median,
+            triangles_per_s=tris / t.median,
+            pixels_per_s=pixels / t.median,
+            changed=(ids != whole).double().mean(),
+        )
 
 
 def zfight_scene(distance: float, gap: float, device) -> tuple[Mesh, Camera]:
@@ -256,8 +319,9 @@ def zfight_scene(distance: float, gap: float, device) -> tuple[Mesh, Camera]:
     one (faces 2, 3) hides the back one (faces 0, 1) wherever both are drawn. The back quad
     comes first: equal keys go to the lower id, so every depth tie shows as z-fighting."""
     half = 0.4 * distance  # both fill a similar part of the view at every distance
-    quad = torch.tensor([[-half, -half], [half, -half], [half, half], [-half, half]],
-                        dtype=torch.float64)
+    quad = torch.tensor(
+        [[-half, -half], [half, -half], [half, half], [-half, half]], dtype=torch.float64
+    )
     # Tilted by 30 degrees about y: depth varies across the quads, as on real surfaces.
     c, s = 0.8660254037844386, 0.5
 
@@ -267,8 +331,15 @@ def zfight_scene(distance: float, gap: float, device) -> tuple[Mesh, Camera]:
 
     vertices = torch.cat([place(-gap), place(0.0)])
     faces = torch.tensor([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
-    camera = Camera(eye=(0.0, 0.0, 0.0), target=(0.0, 0.0, -1.0), fov_y=60.0, width=128,
-                    height=128, near=0.01, far=10 * distance + 10)
+    camera = Camera(
+        eye=(0.0, 0.0, 0.0),
+        target=(0.0, 0.0, -1.0),
+        fov_y=60.0,
+        width=128,
+        height=128,
+        near=0.01,
+        far=10 * distance + 10,
+    )
     return Mesh(vertices.float().to(device), faces.to(device)), camera
 
 
@@ -280,9 +351,15 @@ def bench_zfighting(table: ResultTable, device) -> None:
             ids = raster_ids(mesh, camera, depth_bits)
             front = ids >= 0
             back = (ids < 2) & front
-            _add(table, method="zfight", setting=f"{depth_bits}-bit", size=camera.width,
-                 distance=distance, gap=gap,
-                 zfight_rate=back.double().sum() / front.double().sum().clamp(min=1))
+            _add(
+                table,
+                method="zfight",
+                setting=f"{depth_bits}-bit",
+                size=camera.width,
+                distance=distance,
+                gap=gap,
+                zfight_rate=back.double().sum() / front.double().sum().clamp(min=1),
+            )
 
 
 def bench_frames(table: ResultTable, device, cfg: dict) -> None:
@@ -301,88 +378,170 @@ def bench_frames(table: ResultTable, device, cfg: dict) -> None:
         trace = functools.partial(trace_bvh, mesh)
         for width, height in cfg["frames"]:
             cam = dataclasses.replace(scene.camera, width=width, height=height)
-            common = {"scene": name, "triangles": mesh.num_faces, "frame": f"{width}x{height}",
-                      "size": width, "pixels": width * height}
+            common = {
+                "scene": name,
+                "triangles": mesh.num_faces,
+                "frame": f"{width}x{height}",
+                "size": width,
+                "pixels": width * height,
+            }
             traced = lab.traced_visibility(trace, cam, device=device)
             # traced_visibility's own ``device`` goes positionally; time_fn's by keyword.
-            t_rt = time_fn(lab.traced_visibility, trace, cam, device, repeats=cfg["repeats"],
-                           warmup=1, device=device)
+            t_rt = time_fn(
+                lab.traced_visibility,
+                trace,
+                cam,
+                device,
+                repeats=cfg["repeats"],
+                warmup=1,
+                device=device,
+            )
             torch_ids = raster_ids(mesh, cam)
             if device.type == "cuda":
                 # The whole pipeline in the fused kernels (vertex stage included), from the
                 # camera to the ids like traced_visibility; timed next to it, same process.
                 fused = fused_vertex_ids(mesh, cam)
-                t_v = time_fn(fused_vertex_ids, mesh, cam, repeats=cfg["repeats"], warmup=2,
-                              device=device)
+                t_v = time_fn(
+                    fused_vertex_ids, mesh, cam, repeats=cfg["repeats"], warmup=2, device=device
+                )
                 covered = (fused >= 0) | (traced >= 0)
-                _add(table, method="frame", setting="raster ids (fused, vertex kernel)",
-                     seconds=t_v.median, ms_per_frame=1e3 * t_v.median,
-                     pixels_per_s=width * height / t_v.median,
-                     disagreement=((fused != traced) & covered).double().sum()
-                     / covered.double().sum(),
-                     differs_from_torch=(fused != torch_ids).double().mean().item(),
-                     raster_speedup=t_rt.median / t_v.median, **common)
+                _add(
+                    table,
+                    method="frame",
+                    setting="raster ids (fused, vertex kernel)",
+                    seconds=t_v.median,
+                    ms_per_frame=1e3 * t_v.median,
+                    pixels_per_s=width * height / t_v.median,
+                    disagreement=((fused != traced) & covered).double().sum()
+                    / covered.double().sum(),
+                    differs_from_torch=(fused != torch_ids).double().mean().item(),
+                    raster_speedup=t_rt.median / t_v.median,
+                    **common,
+                )
                 graphed = graphed_ids(mesh, cam)
-                t_g = time_fn(graphed_ids, mesh, cam, repeats=cfg["repeats"], warmup=2,
-                              device=device)
-                _add(table, method="frame", setting="raster ids (fused, vertex kernel, "
-                     "CUDA graph)", seconds=t_g.median, ms_per_frame=1e3 * t_g.median,
-                     pixels_per_s=width * height / t_g.median,
-                     differs_from_torch=(graphed != torch_ids).double().mean().item(),
-                     raster_speedup=t_rt.median / t_g.median, **common)
+                t_g = time_fn(
+                    graphed_ids, mesh, cam, repeats=cfg["repeats"], warmup=2, device=device
+                )
+                _add(
+                    table,
+                    method="frame",
+                    setting="raster ids (fused, vertex kernel, CUDA graph)",
+                    seconds=t_g.median,
+                    ms_per_frame=1e3 * t_g.median,
+                    pixels_per_s=width * height / t_g.median,
+                    differs_from_torch=(graphed != torch_ids).double().mean().item(),
+                    raster_speedup=t_rt.median / t_g.median,
+                    **common,
+                )
                 # Where the time goes: each kernel's GPU time (the rest is host time).
                 gpu = kernel_times(functools.partial(fused_vertex_ids, mesh, cam))
                 if gpu:
                     total = sum(gpu.values())
-                    _add(table, method="frame", setting="fused, vertex kernel: kernels' GPU "
-                         "time", seconds=total, ms_per_frame=1e3 * total,
-                         pixels_per_s=width * height / total,
-                         raster_speedup=t_rt.median / total,
-                         **{f"{k.strip('_').removesuffix('_kernel')}_us": 1e6 * v
-                            for k, v in gpu.items() if k.startswith("_")}, **common)
+                    _add(
+                        table,
+                        method="frame",
+                        setting="fused, vertex kernel: kernels' GPU time",
+                        seconds=total,
+                        ms_per_frame=1e3 * total,
+                        pixels_per_s=width * height / total,
+                        raster_speedup=t_rt.median / total,
+                        **{
+                            f"{k.strip('_').removesuffix('_kernel')}_us": 1e6 * v
+                            for k, v in gpu.items()
+                            if k.startswith("_")
+                        },
+                        **common,
+                    )
             if cfg.get("quick"):
-                _add(table, method="frame", setting="BVH-traced visibility",
-                     seconds=t_rt.median, ms_per_frame=1e3 * t_rt.median,
-                     pixels_per_s=width * height / t_rt.median, build_s=build_s, **common)
+                _add(
+                    table,
+                    method="frame",
+                    setting="BVH-traced visibility",
+                    seconds=t_rt.median,
+                    ms_per_frame=1e3 * t_rt.median,
+                    pixels_per_s=width * height / t_rt.median,
+                    build_s=build_s,
+                    **common,
+                )
                 continue
             face, _ = lab.rasterize_mesh(mesh, cam)
             t = time_fn(lab.rasterize_mesh, mesh, cam, repeats=cfg["repeats"], warmup=1)
             covered = (face >= 0) | (traced >= 0)
             differ = ((face != traced) & covered).double().sum() / covered.double().sum()
-            _add(table, method="frame", setting="raster visibility", seconds=t.median,
-                 ms_per_frame=1e3 * t.median, pixels_per_s=width * height / t.median,
-                 disagreement=differ, **common)
-            t_ids = time_fn(raster_ids, mesh, cam, repeats=cfg["repeats"], warmup=1,
-                            device=device)
-            _add(table, method="frame", setting="raster ids (torch)", seconds=t_ids.median,
-                 ms_per_frame=1e3 * t_ids.median, pixels_per_s=width * height / t_ids.median,
-                 **common)
+            _add(
+                table,
+                method="frame",
+                setting="raster visibility",
+                seconds=t.median,
+                ms_per_frame=1e3 * t.median,
+                pixels_per_s=width * height / t.median,
+                disagreement=differ,
+                **common,
+            )
+            t_ids = time_fn(raster_ids, mesh, cam, repeats=cfg["repeats"], warmup=1, device=device)
+            _add(
+                table,
+                method="frame",
+                setting="raster ids (torch)",
+                seconds=t_ids.median,
+                ms_per_frame=1e3 * t_ids.median,
+                pixels_per_s=width * height / t_ids.median,
+                **common,
+            )
             if device.type == "cuda":
                 fused = fused_ids(mesh, cam)
-                t_f = time_fn(fused_ids, mesh, cam, repeats=cfg["repeats"], warmup=1,
-                              device=device)
+                t_f = time_fn(fused_ids, mesh, cam, repeats=cfg["repeats"], warmup=1, device=device)
                 same = ((fused != torch_ids).double().mean()).item()
-                _add(table, method="frame", setting="raster ids (fused Triton)",
-                     seconds=t_f.median, ms_per_frame=1e3 * t_f.median,
-                     pixels_per_s=width * height / t_f.median, differs_from_torch=same,
-                     raster_speedup=t_rt.median / t_f.median, **common)
+                _add(
+                    table,
+                    method="frame",
+                    setting="raster ids (fused Triton)",
+                    seconds=t_f.median,
+                    ms_per_frame=1e3 * t_f.median,
+                    pixels_per_s=width * height / t_f.median,
+                    differs_from_torch=same,
+                    raster_speedup=t_rt.median / t_f.median,
+                    **common,
+                )
                 # Where the time goes: the torch setup (MVP, near-plane clipping, viewport)
                 # against the fused kernels alone on its output.
                 from course.kernels.triton_raster import rasterize_triton
 
                 mvp = cam.view_projection(torch.float64).to(device)
-                clipped, _, _ = lab.clip_triangles(lab.to_clip_space(mesh.vertices, mvp)
-                                                   [mesh.faces])
+                clipped, _, _ = lab.clip_triangles(
+                    lab.to_clip_space(mesh.vertices, mvp)[mesh.faces]
+                )
                 screen = lab.to_screen(clipped, width, height)
-                t_k = time_fn(rasterize_triton, screen, width, height, repeats=cfg["repeats"],
-                              warmup=1, device=device)
-                _add(table, method="frame", setting="fused raster kernels alone",
-                     seconds=t_k.median, ms_per_frame=1e3 * t_k.median,
-                     pixels_per_s=width * height / t_k.median,
-                     raster_speedup=t_rt.median / t_k.median, **common)
-            _add(table, method="frame", setting="BVH-traced visibility", seconds=t_rt.median,
-                 ms_per_frame=1e3 * t_rt.median, pixels_per_s=width * height / t_rt.median,
-                 build_s=build_s, raster_speedup=t_rt.median / t.median, **common)
+                t_k = time_fn(
+                    rasterize_triton,
+                    screen,
+                    width,
+                    height,
+                    repeats=cfg["repeats"],
+                    warmup=1,
+                    device=device,
+                )
+                _add(
+                    table,
+                    method="frame",
+                    setting="fused raster kernels alone",
+                    seconds=t_k.median,
+                    ms_per_frame=1e3 * t_k.median,
+                    pixels_per_s=width * height / t_k.median,
+                    raster_speedup=t_rt.median / t_k.median,
+                    **common,
+                )
+            _add(
+                table,
+                method="frame",
+                setting="BVH-traced visibility",
+                seconds=t_rt.median,
+                ms_per_frame=1e3 * t_rt.median,
+                pixels_per_s=width * height / t_rt.median,
+                build_s=build_s,
+                raster_speedup=t_rt.median / t.median,
+                **common,
+            )
 
             def hybrid(mesh=mesh, cam=cam, trace=trace):
                 face, bary = lab.rasterize_mesh(mesh, cam)
@@ -391,14 +550,27 @@ def bench_frames(table: ResultTable, device, cfg: dict) -> None:
                 return lab.hybrid_shadows(trace, mesh, lit, bary, sun)
 
             t_h = time_fn(hybrid, repeats=cfg["repeats"], warmup=1, device=device)
-            t_t = time_fn(lab.traced_shadows, trace, mesh, cam, sun, repeats=cfg["repeats"],
-                          warmup=1)
-            _add(table, method="frame", setting="hybrid: raster + traced shadows",
-                 seconds=t_h.median, ms_per_frame=1e3 * t_h.median,
-                 pixels_per_s=width * height / t_h.median, **common)
-            _add(table, method="frame", setting="traced: primary + shadow rays",
-                 seconds=t_t.median, ms_per_frame=1e3 * t_t.median,
-                 pixels_per_s=width * height / t_t.median, **common)
+            t_t = time_fn(
+                lab.traced_shadows, trace, mesh, cam, sun, repeats=cfg["repeats"], warmup=1
+            )
+            _add(
+                table,
+                method="frame",
+                setting="hybrid: raster + traced shadows",
+                seconds=t_h.median,
+                ms_per_frame=1e3 * t_h.median,
+                pixels_per_s=width * height / t_h.median,
+                **common,
+            )
+            _add(
+                table,
+                method="frame",
+                setting="traced: primary + shadow rays",
+                seconds=t_t.median,
+                ms_per_frame=1e3 * t_t.median,
+                pixels_per_s=width * height / t_t.median,
+                **common,
+            )
 
 
 def _add(table: ResultTable, **row) -> None:
@@ -411,21 +583,36 @@ def _add(table: ResultTable, **row) -> None:
 # Output
 # --------------------------------------------------------------------------------------
 
+
 def write_outputs(table: ResultTable, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     table.to_json(out / "lab6_raster.json")
     meta = table.metadata
-    legend = ("raster: the lab's visibility buffer (to_clip_space .. rasterize, ids through "
-              "source); raytrace: Lab 1's brute-force closest_hit, one primary ray per pixel; "
-              "disagreement: fraction of pixels whose triangle differs between the two; "
-              "chunk: rasterize's memory budget; tile: screen tiles rasterized in turn; "
-              "changed: pixels differing from the untiled, default-budget raster (must be 0); "
-              "zfight_rate: fraction of the front quad's pixels where the back quad (1 cm "
-              "behind, lower ids: it wins exact ties) shows.")
-    device = (f"Device: {meta['device']}, {meta.get('threads')} torch threads; torch "
-              f"{meta['torch']}; {meta['date']}.")
-    header = [f"# {table.name}", "", device, "", f"Command: `{meta['command']}`", "",
-              f"Scene: {meta['scene']} ({meta['triangles']} triangles).", "", legend, ""]
+    legend = (
+        "raster: the lab's visibility buffer (to_clip_space .. rasterize, ids through "
+        "source); raytrace: Lab 1's brute-force closest_hit, one primary ray per pixel; "
+        "disagreement: fraction of pixels whose triangle differs between the two; "
+        "chunk: rasterize's memory budget; tile: screen tiles rasterized in turn; "
+        "changed: pixels differing from the untiled, default-budget raster (must be 0); "
+        "zfight_rate: fraction of the front quad's pixels where the back quad (1 cm "
+        "behind, lower ids: it wins exact ties) shows."
+    )
+    device = (
+        f"Device: {meta['device']}, {meta.get('threads')} torch threads; torch "
+        f"{meta['torch']}; {meta['date']}."
+    )
+    header = [
+        f"# {table.name}",
+        "",
+        device,
+        "",
+        f"Command: `{meta['command']}`",
+        "",
+        f"Scene: {meta['scene']} ({meta['triangles']} triangles).",
+        "",
+        legend,
+        "",
+    ]
     (out / "lab6_raster.md").write_text("\n".join(header) + table.to_markdown() + "\n")
     from matplotlib.figure import Figure
 
@@ -435,8 +622,12 @@ def write_outputs(table: ResultTable, out: Path) -> None:
         ax = fig.add_subplot()
         for key in dict.fromkeys((r["setting"], r["frame"]) for r in frames):
             sel = [r for r in frames if (r["setting"], r["frame"]) == key]
-            ax.plot([r["triangles"] for r in sel], [r["ms_per_frame"] for r in sel],
-                    marker="o", label=f"{key[0]}, {key[1]}")
+            ax.plot(
+                [r["triangles"] for r in sel],
+                [r["ms_per_frame"] for r in sel],
+                marker="o",
+                label=f"{key[0]}, {key[1]}",
+            )
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("triangles (suzanne, bunny, bunny_x4, bunny_x16)")
@@ -451,16 +642,23 @@ def write_outputs(table: ResultTable, out: Path) -> None:
         ax = fig.add_subplot()
         for key in dict.fromkeys((r["method"], r["setting"]) for r in series):
             sel = [r for r in series if (r["method"], r["setting"]) == key]
-            ax.plot([r["size"] for r in sel], [r["pixels_per_s"] for r in sel], marker="o",
-                    label=" ".join(key))
-        worst = max((r["disagreement"] for r in series if r.get("disagreement") is not None),
-                    default=None)
+            ax.plot(
+                [r["size"] for r in sel],
+                [r["pixels_per_s"] for r in sel],
+                marker="o",
+                label=" ".join(key),
+            )
+        worst = max(
+            (r["disagreement"] for r in series if r.get("disagreement") is not None), default=None
+        )
         ax.set_xscale("log", base=2)
         ax.set_yscale("log")
         ax.set_xlabel("image size (pixels per side)")
         ax.set_ylabel("pixels / s (primary visibility)")
-        ax.set_title("raster vs ray-traced primary visibility"
-                     + ("" if worst is None else f" (ids differ on <= {worst:.2%} of pixels)"))
+        ax.set_title(
+            "raster vs ray-traced primary visibility"
+            + ("" if worst is None else f" (ids differ on <= {worst:.2%} of pixels)")
+        )
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
         fig.savefig(out / "throughput.png", dpi=150)
@@ -470,8 +668,12 @@ def write_outputs(table: ResultTable, out: Path) -> None:
         ax = fig.add_subplot()
         for setting in dict.fromkeys(r["setting"] for r in zrows):
             sel = [r for r in zrows if r["setting"] == setting]
-            ax.plot([r["distance"] for r in sel], [r["zfight_rate"] for r in sel], marker="o",
-                    label=setting)
+            ax.plot(
+                [r["distance"] for r in sel],
+                [r["zfight_rate"] for r in sel],
+                marker="o",
+                label=setting,
+            )
         ax.set_xscale("log")
         ax.set_xlabel("distance of two quads 1 cm apart (near plane 0.01)")
         ax.set_ylabel("fraction of pixels where the back quad wins")
@@ -482,23 +684,32 @@ def write_outputs(table: ResultTable, out: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
     parser.add_argument("--sizes", type=int, nargs="+", help="square image sizes in pixels")
-    parser.add_argument("--scene", default="suzanne", help="the scene of the resolution and "
-                        "knob sweeps")
+    parser.add_argument(
+        "--scene", default="suzanne", help="the scene of the resolution and knob sweeps"
+    )
     parser.add_argument("--scenes", nargs="+", help="scenes of the frame series")
     parser.add_argument("--frames", nargs="+", help="frame sizes WxH of the frame series")
-    parser.add_argument("--only", nargs="+",
-                        choices=("trade", "sizes", "knobs", "zfight", "frames"),
-                        help="run only these parts")
-    parser.add_argument("--quick", action="store_true", help="frame series: only the "
-                        "BVH-traced visibility and the end-to-end fused raster")
+    parser.add_argument(
+        "--only",
+        nargs="+",
+        choices=("trade", "sizes", "knobs", "zfight", "frames"),
+        help="run only these parts",
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="frame series: only the BVH-traced visibility and the end-to-end fused raster",
+    )
     parser.add_argument("--repeats", type=int, help="timed runs per setting (median reported)")
     parser.add_argument("--threads", type=int, help="CPU threads of torch (default: torch's)")
-    parser.add_argument("--out", type=Path, help="output folder "
-                        "(default: bench/results/<device_name>/lab6)")
+    parser.add_argument(
+        "--out", type=Path, help="output folder (default: bench/results/<device_name>/lab6)"
+    )
     add_impl_option(parser)
     args = parser.parse_args(argv)
     global lab, closest_hit
@@ -523,22 +734,34 @@ def main(argv: list[str] | None = None) -> None:
     scene = load_scene(args.scene, device=device)
     table = ResultTable("Lab 6: compute rasterizer vs ray-traced primary visibility", device)
     table.metadata.update(
-        command=shlex.join(["python", "bench/lab6_raster.py",
-                            *(sys.argv[1:] if argv is None else argv)]),
-        scene=args.scene, triangles=scene.mesh.num_faces, sizes=list(cfg["sizes"]),
-        scenes=list(cfg["scenes"]), frames=[f"{w}x{h}" for w, h in cfg["frames"]],
-        repeats=cfg["repeats"], threads=torch.get_num_threads(), quick=args.quick,
-        lab_file=str(lab.__file__))
-    print(f"{table.metadata['device']}: {args.scene} ({scene.mesh.num_faces} triangles), "
-          f"sizes {cfg['sizes']}", flush=True)
+        command=shlex.join(
+            ["python", "bench/lab6_raster.py", *(sys.argv[1:] if argv is None else argv)]
+        ),
+        scene=args.scene,
+        triangles=scene.mesh.num_faces,
+        sizes=list(cfg["sizes"]),
+        scenes=list(cfg["scenes"]),
+        frames=[f"{w}x{h}" for w, h in cfg["frames"]],
+        repeats=cfg["repeats"],
+        threads=torch.get_num_threads(),
+        quick=args.quick,
+        lab_file=str(lab.__file__),
+    )
+    print(
+        f"{table.metadata['device']}: {args.scene} ({scene.mesh.num_faces} triangles), "
+        f"sizes {cfg['sizes']}",
+        flush=True,
+    )
     started = time.perf_counter()
     # "trade": the rows of rtcourse bench --lab 6 (course.tools.trade.lab6), measured on this
     # lab and plotted as a student's are (trade.csv, pareto_trade.png).
-    parts = {"trade": lambda: bench_rows(6, lab, device, device.type == "cpu", out),
-             "sizes": lambda: bench_resolutions(table, scene.mesh, scene.camera, cfg),
-             "knobs": lambda: bench_knobs(table, scene.mesh, scene.camera, cfg),
-             "zfight": lambda: bench_zfighting(table, device),
-             "frames": lambda: bench_frames(table, device, cfg)}
+    parts = {
+        "trade": lambda: bench_rows(6, lab, device, device.type == "cpu", out),
+        "sizes": lambda: bench_resolutions(table, scene.mesh, scene.camera, cfg),
+        "knobs": lambda: bench_knobs(table, scene.mesh, scene.camera, cfg),
+        "zfight": lambda: bench_zfighting(table, device),
+        "frames": lambda: bench_frames(table, device, cfg),
+    }
     for part in args.only or parts:
         try:
             parts[part]()

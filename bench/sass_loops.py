@@ -43,8 +43,7 @@ def loops(sass: str) -> list[dict]:
             if branch and int(branch.group(1), 16) < at:
                 start = int(branch.group(1), 16)
                 count = sum(1 for a, _ in rows if start <= a <= at)
-                found.append({"function": name, "start": start, "end": at,
-                              "instructions": count})
+                found.append({"function": name, "start": start, "end": at, "instructions": count})
     return sorted(found, key=lambda f: (f["function"], f["end"] - f["start"]))
 
 
@@ -71,42 +70,69 @@ def compile_walk(arch: int, refill: bool) -> str:
 
     kernel = tt._refill_kernel if refill else tt._trace_kernel
     # The kernel's own arguments, typed by name (every other one is a float32 pointer).
-    types = {"tlo_value": "fp32", "thi_value": "fp32", "root_ref": "i32", "n_rays": "i32",
-             "stride": "i32", "pairs": "*i32", "tris": "*i32", "stack_ptr": "*i32",
-             "counter": "*i32", "id_ptr": "*i64"}
-    signature = {p.name: types.get(p.name, "*fp32") for p in kernel.params
-                 if not p.is_constexpr}
-    constants = {"BLOCK": tt.DEFAULT_BLOCK, "ANY_HIT": False, "EXIT": EXIT_SCALE, "VEC": True,
-                 "SANITIZE": False, "REGS": tt.LOCAL_STACK, "TRIS": tt.DEFAULT_TRIS_PER_STEP,
-                 "SPECULATE": tt.DEFAULT_SPECULATE, "TLO_ARRAY": False, "THI_ARRAY": False}
+    types = {
+        "tlo_value": "fp32",
+        "thi_value": "fp32",
+        "root_ref": "i32",
+        "n_rays": "i32",
+        "stride": "i32",
+        "pairs": "*i32",
+        "tris": "*i32",
+        "stack_ptr": "*i32",
+        "counter": "*i32",
+        "id_ptr": "*i64",
+    }
+    signature = {p.name: types.get(p.name, "*fp32") for p in kernel.params if not p.is_constexpr}
+    constants = {
+        "BLOCK": tt.DEFAULT_BLOCK,
+        "ANY_HIT": False,
+        "EXIT": EXIT_SCALE,
+        "VEC": True,
+        "SANITIZE": False,
+        "REGS": tt.LOCAL_STACK,
+        "TRIS": tt.DEFAULT_TRIS_PER_STEP,
+        "SPECULATE": tt.DEFAULT_SPECULATE,
+        "TLO_ARRAY": False,
+        "THI_ARRAY": False,
+    }
     if refill:
         constants["REFILL"] = 8
     else:
         constants.update(UNIFORM=tt.DEFAULT_UNIFORM, WHILE=tt.DEFAULT_LOOP == "while")
     signature.update({c: "constexpr" for c in constants})
-    compiled = triton.compile(ASTSource(fn=kernel, signature=signature, constexprs=constants),
-                              target=GPUTarget("cuda", arch, 32),
-                              options={"num_warps": tt.DEFAULT_NUM_WARPS})
+    compiled = triton.compile(
+        ASTSource(fn=kernel, signature=signature, constexprs=constants),
+        target=GPUTarget("cuda", arch, 32),
+        options={"num_warps": tt.DEFAULT_NUM_WARPS},
+    )
     with tempfile.TemporaryDirectory() as tmp:
         cubin = Path(tmp) / "walk.cubin"
         cubin.write_bytes(compiled.asm["cubin"])
-        return subprocess.run([_tool("cuobjdump"), "-sass", str(cubin)], check=True,
-                              capture_output=True, text=True).stdout
+        return subprocess.run(
+            [_tool("cuobjdump"), "-sass", str(cubin)], check=True, capture_output=True, text=True
+        ).stdout
 
 
 def report(title: str, sass: str) -> str:
     lines = [title]
     for loop in loops(sass):
-        lines.append(f"  {loop['function'][:60]}: loop {loop['start']:#06x}..{loop['end']:#06x}"
-                     f" {loop['instructions']} instructions")
+        lines.append(
+            f"  {loop['function'][:60]}: loop {loop['start']:#06x}..{loop['end']:#06x}"
+            f" {loop['instructions']} instructions"
+        )
     return "\n".join(lines)
 
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--arch", type=int, default=90, help="compute capability x 10")
-    parser.add_argument("--sass", type=Path, nargs="*", default=[],
-                        help="disassemblies to read instead of compiling")
+    parser.add_argument(
+        "--sass",
+        type=Path,
+        nargs="*",
+        default=[],
+        help="disassemblies to read instead of compiling",
+    )
     parser.add_argument("--out", type=Path)
     parser.add_argument("--json", action="store_true", help="print the loops as JSON")
     args = parser.parse_args(argv)
@@ -122,9 +148,13 @@ def main(argv=None) -> None:
             sass = compile_walk(args.arch, refill)
             name = "refill" if refill else "walk"
             dumps[f"triton_{name}.sass"] = sass
-            texts.append(report(f"Triton {triton.__version__}, sm_{args.arch}, "
-                                f"{'refill kernel (refill=8)' if refill else 'the defaults'}:",
-                                sass))
+            texts.append(
+                report(
+                    f"Triton {triton.__version__}, sm_{args.arch}, "
+                    f"{'refill kernel (refill=8)' if refill else 'the defaults'}:",
+                    sass,
+                )
+            )
     text = "\n".join(texts)
     if args.json:
         found = {name: loops(sass) for name, sass in dumps.items()}
@@ -135,7 +165,8 @@ def main(argv=None) -> None:
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "sass_loops.txt").write_text(
-            f"{' '.join(['bench/sass_loops.py', *(argv or sys.argv[1:])])}\n\n{text}\n")
+            f"{' '.join(['bench/sass_loops.py', *(argv or sys.argv[1:])])}\n\n{text}\n"
+        )
         for name, sass in dumps.items():
             (args.out / name).write_text(sass)
 

@@ -29,8 +29,7 @@ from course.grading.testing import (
 )
 
 LAB_MODULE = "lab0_interop"
-TASKS = {1: "Packed framebuffers", 2: "Zero-copy sharing", 3: "The PBO analogue",
-         4: "Frame loop"}
+TASKS = {1: "Packed framebuffers", 2: "Zero-copy sharing", 3: "The PBO analogue", 4: "Frame loop"}
 
 BACKGROUND = (16, 16, 24, 255)  # the documented clear colour of render_rotating_triangle
 POISON = int(poisoned((1,), torch.int32)[0])
@@ -54,13 +53,16 @@ def check_reported_error(report, name: str, case: str, fn_name: str):
     """Check an error a probe caught: ``report`` is (kind, first line) or None."""
     assert report is not None, (
         f"{fn_name} accepted {case} without complaint: it must raise ValueError naming "
-        f"{name!r} (a view of such a buffer would not be what a display expects)")
+        f"{name!r} (a view of such a buffer would not be what a display expects)"
+    )
     kind, message = report
     assert kind in ("ValueError", "TypeError"), (
-        f"{fn_name} with {case} raised {kind}: expected ValueError naming {name!r}")
+        f"{fn_name} with {case} raised {kind}: expected ValueError naming {name!r}"
+    )
     assert name in message, (
         f"{fn_name} with {case} raised {kind}({message!r}): the message should name "
-        f"the argument {name!r} and say what was expected")
+        f"the argument {name!r} and say what was expected"
+    )
 
 
 def check_srgb_codes(got: torch.Tensor, x: torch.Tensor, name: str, near: float = 5e-4):
@@ -80,7 +82,8 @@ def check_srgb_codes(got: torch.Tensor, x: torch.Tensor, name: str, near: float 
             f"{name}: {int(bad.sum())} of {bad.numel()} codes are wrong; first at {i}: input "
             f"{x[i].item()!r} ({x.dtype}) has 255*srgb = {value[i].item() - 0.5:.6f}, so the code "
             f"is floor(255*srgb + 0.5) = {int(expected[i])}, got {int(got[i])}. Clamp to [0, 1] "
-            f"(NaN -> 0), encode in float32 or wider, then round half up.")
+            f"(NaN -> 0), encode in float32 or wider, then round half up."
+        )
 
 
 def reference_triangle(frame_index: int, height: int, width: int, period: int):
@@ -109,8 +112,10 @@ def check_triangle_frame(frame: torch.Tensor, frame_index: int, name: str, perio
     unwritten = frame == POISON
     if unwritten.any():
         y, x = (int(v) for v in unwritten.nonzero()[0])
-        raise AssertionError(f"{name}: {int(unwritten.sum())} of {frame.numel()} pixels were "
-                             f"never written (first at y={y}, x={x}); clear the background too")
+        raise AssertionError(
+            f"{name}: {int(unwritten.sum())} of {frame.numel()} pixels were "
+            f"never written (first at y={y}, x={x}); clear the background too"
+        )
     bary, distance = reference_triangle(frame_index, height, width, period)
     judged = distance >= 1e-4  # pixel centres on an edge may go either way
     inside = (bary >= 0).all(dim=-1)
@@ -125,30 +130,46 @@ def check_triangle_frame(frame: torch.Tensor, frame_index: int, name: str, perio
             f"the wrong coverage; first at y={y}, x={x}: its centre ({x + 0.5}, {y + 0.5}) "
             f"lies {want} the triangle (barycentrics {bary[y, x].tolist()}), but the pixel is "
             f"{'covered' if covered[y, x] else 'background'}. Sample pixel centres (+0.5) and "
-            f"check the vertex formula (y grows downwards, angle grows counter-clockwise).")
+            f"check the vertex formula (y grows downwards, angle grows counter-clockwise)."
+        )
     background = torch.tensor(BACKGROUND).expand(height, width, 4)
     outside = ~inside & judged
-    assert_equal(rgba[outside], background[outside], name=f"{name} background pixels (RGBA)",
-                 where="background pixel")
+    assert_equal(
+        rgba[outside],
+        background[outside],
+        name=f"{name} background pixels (RGBA)",
+        where="background pixel",
+    )
     # Colours are exact, except where 255*b + 0.5 lies within float32 rounding of an integer
     # (1e-3 of a code is about the 1e-4 pixel the coverage contract leaves free).
     value = bary * 255 + 0.5
     expected = torch.cat([torch.floor(value), torch.full_like(bary[..., :1], 255)], dim=-1)
-    decided = torch.cat([(value - torch.round(value)).abs() >= 1e-3,
-                         torch.ones_like(inside[..., None])], dim=-1)
-    assert_close(rgba, expected, mask=(inside & judged)[..., None] & decided,
-                 name=f"{name} (frame {frame_index}, period {period}) triangle colours (RGBA: "
-                 "floor(255*b + 0.5) exactly, rounding half up, alpha 255)",
-                 where="covered pixel (y, x, channel)")
+    decided = torch.cat(
+        [(value - torch.round(value)).abs() >= 1e-3, torch.ones_like(inside[..., None])], dim=-1
+    )
+    assert_close(
+        rgba,
+        expected,
+        mask=(inside & judged)[..., None] & decided,
+        name=f"{name} (frame {frame_index}, period {period}) triangle colours (RGBA: "
+        "floor(255*b + 0.5) exactly, rounding half up, alpha 255)",
+        where="covered pixel (y, x, channel)",
+    )
 
 
 # ---------------------------------------------------------------- task 1: packing
 
 
-KNOWN_WORDS = [((0x12, 0x34, 0x56, 0x78), 0x78563412), ((255, 0, 0, 255), 0xFF0000FF),
-               ((0, 255, 0, 255), 0xFF00FF00), ((0, 0, 255, 255), 0xFFFF0000),
-               ((0, 0, 0, 128), 0x80000000), ((255, 255, 255, 255), 0xFFFFFFFF),
-               ((1, 0, 0, 0), 0x00000001), ((0, 0, 0, 127), 0x7F000000)]
+KNOWN_WORDS = [
+    ((0x12, 0x34, 0x56, 0x78), 0x78563412),
+    ((255, 0, 0, 255), 0xFF0000FF),
+    ((0, 255, 0, 255), 0xFF00FF00),
+    ((0, 0, 255, 255), 0xFFFF0000),
+    ((0, 0, 0, 128), 0x80000000),
+    ((255, 255, 255, 255), 0xFFFFFFFF),
+    ((1, 0, 0, 0), 0x00000001),
+    ((0, 0, 0, 127), 0x7F000000),
+]
 
 
 def _hex(word: int) -> str:
@@ -159,8 +180,13 @@ def _hex(word: int) -> str:
 @pytest.mark.points(0.5)
 def test_pack_rgba8_known_words(impl, device):
     rgba = torch.tensor([[c for c, _ in KNOWN_WORDS]], dtype=torch.uint8, device=device)
-    packed = check_tensor(impl.pack_rgba8(rgba), "pack_rgba8(rgba)",
-                          shape=(1, len(KNOWN_WORDS)), dtype=torch.int32, device=device)
+    packed = check_tensor(
+        impl.pack_rgba8(rgba),
+        "pack_rgba8(rgba)",
+        shape=(1, len(KNOWN_WORDS)),
+        dtype=torch.int32,
+        device=device,
+    )
     for j, (channels, word) in enumerate(KNOWN_WORDS):
         signed = word - 2**32 if word >= 2**31 else word
         got = int(packed[0, j])
@@ -168,9 +194,15 @@ def test_pack_rgba8_known_words(impl, device):
             f"pack_rgba8: RGBA ({', '.join(f'0x{c:02X}' for c in channels)}) should pack to "
             f"{_hex(word)} "
             f"(int32 {signed}), got {_hex(got)} (int32 {got}). R goes in bits 0-7, G 8-15, "
-            f"B 16-23, A 24-31; a word with A >= 128 is a negative int32 (two's complement).")
-    back = check_tensor(impl.unpack_rgba8(packed), "unpack_rgba8(packed)",
-                        shape=(1, len(KNOWN_WORDS), 4), dtype=torch.uint8, device=device)
+            f"B 16-23, A 24-31; a word with A >= 128 is a negative int32 (two's complement)."
+        )
+    back = check_tensor(
+        impl.unpack_rgba8(packed),
+        "unpack_rgba8(packed)",
+        shape=(1, len(KNOWN_WORDS), 4),
+        dtype=torch.uint8,
+        device=device,
+    )
     assert_equal(back, rgba, name="unpack_rgba8 of the known words", where="(row, pixel, channel)")
 
 
@@ -180,23 +212,43 @@ def test_pack_rgba8_unpack_rgba8_roundtrip(impl, device):
     gen = generator(0)
     rgba = torch.randint(0, 256, (13, 17, 4), generator=gen, dtype=torch.uint8)
     rgba[::2, :, 3] = torch.randint(128, 256, (7, 17), generator=gen, dtype=torch.uint8)
-    packed = check_tensor(impl.pack_rgba8(rgba.to(device)), "pack_rgba8(rgba)",
-                          shape=(13, 17), dtype=torch.int32, device=device)
+    packed = check_tensor(
+        impl.pack_rgba8(rgba.to(device)),
+        "pack_rgba8(rgba)",
+        shape=(13, 17),
+        dtype=torch.int32,
+        device=device,
+    )
     assert_equal(packed, ref_pack(rgba), name="pack_rgba8 of random bytes", where="pixel")
-    back = check_tensor(impl.unpack_rgba8(packed), "unpack_rgba8(pack_rgba8(rgba))",
-                        shape=(13, 17, 4), dtype=torch.uint8, device=device)
+    back = check_tensor(
+        impl.unpack_rgba8(packed),
+        "unpack_rgba8(pack_rgba8(rgba))",
+        shape=(13, 17, 4),
+        dtype=torch.uint8,
+        device=device,
+    )
     assert_equal(back, rgba, name="unpack_rgba8(pack_rgba8(rgba))", where="(y, x, channel)")
 
     # Every bit pattern must survive, the sign bit included.
-    words = torch.randint(-2**31, 2**31, (11, 9), generator=gen, dtype=torch.int64)
-    words[0, :4] = torch.tensor([-2**31, -1, 2**31 - 1, 0])
+    words = torch.randint(-(2**31), 2**31, (11, 9), generator=gen, dtype=torch.int64)
+    words[0, :4] = torch.tensor([-(2**31), -1, 2**31 - 1, 0])
     words = words.to(torch.int32)
-    unpacked = check_tensor(impl.unpack_rgba8(words.to(device)), "unpack_rgba8(words)",
-                            shape=(11, 9, 4), dtype=torch.uint8, device=device)
-    assert_equal(unpacked, ref_unpack(words), name="unpack_rgba8 of random words (incl. negative)",
-                 where="(y, x, channel)")
-    assert_equal(impl.pack_rgba8(unpacked), words, name="pack_rgba8(unpack_rgba8(words))",
-                 where="pixel")
+    unpacked = check_tensor(
+        impl.unpack_rgba8(words.to(device)),
+        "unpack_rgba8(words)",
+        shape=(11, 9, 4),
+        dtype=torch.uint8,
+        device=device,
+    )
+    assert_equal(
+        unpacked,
+        ref_unpack(words),
+        name="unpack_rgba8 of random words (incl. negative)",
+        where="(y, x, channel)",
+    )
+    assert_equal(
+        impl.pack_rgba8(unpacked), words, name="pack_rgba8(unpack_rgba8(words))", where="pixel"
+    )
 
 
 def srgb_boundary_inputs(dtype) -> tuple[torch.Tensor, torch.Tensor]:
@@ -220,12 +272,19 @@ def srgb_boundary_inputs(dtype) -> tuple[torch.Tensor, torch.Tensor]:
 def test_linear_to_srgb8_every_level_boundary(impl, device, dtype):
     x, codes = srgb_boundary_inputs(dtype)
     # the test's own premise: the float64 reference puts each input on the intended side
-    assert_equal(torch.floor(srgb_encode(x.double()) * 255 + 0.5), codes,
-                 name="reference codes of the boundary inputs")
+    assert_equal(
+        torch.floor(srgb_encode(x.double()) * 255 + 0.5),
+        codes,
+        name="reference codes of the boundary inputs",
+    )
     img = torch.cat([x, x[:2]]).view(16, 16, 3)  # 766 values padded to 768
     got = impl.linear_to_srgb8(img.to(device))
-    check_srgb_codes(got, img.to(device), "linear_to_srgb8 at the 255 code boundaries and "
-                     "256 level centres", near=1e-6)
+    check_srgb_codes(
+        got,
+        img.to(device),
+        "linear_to_srgb8 at the 255 code boundaries and 256 level centres",
+        near=1e-6,
+    )
 
 
 @pytest.mark.task(1)
@@ -243,16 +302,34 @@ def test_linear_to_srgb8_every_half_precision_value(impl, device, dtype):
 @pytest.mark.points(0.5)
 @pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float32, torch.float64])
 def test_linear_to_srgb8_extremes(impl, device, dtype):
-    cases = [(math.nan, 0), (math.inf, 255), (-math.inf, 0), (-1.0, 0), (-0.0, 0), (2.0, 255),
-             (1e4, 255), (1.0, 255), (0.0, 0), (-1e-30, 0), (1e-30, 0), (0.5, 188)]
+    cases = [
+        (math.nan, 0),
+        (math.inf, 255),
+        (-math.inf, 0),
+        (-1.0, 0),
+        (-0.0, 0),
+        (2.0, 255),
+        (1e4, 255),
+        (1.0, 255),
+        (0.0, 0),
+        (-1e-30, 0),
+        (1e-30, 0),
+        (0.5, 188),
+    ]
     x = torch.tensor([[v for v, _ in cases]], dtype=torch.float64).to(dtype).view(1, 4, 3)
-    got = check_tensor(impl.linear_to_srgb8(x.to(device)), "linear_to_srgb8(img)",
-                       shape=(1, 4, 3), dtype=torch.uint8, device=device)
+    got = check_tensor(
+        impl.linear_to_srgb8(x.to(device)),
+        "linear_to_srgb8(img)",
+        shape=(1, 4, 3),
+        dtype=torch.uint8,
+        device=device,
+    )
     for j, (v, code) in enumerate(cases):
         g = int(got.view(-1)[j])
         assert g == code, (
             f"linear_to_srgb8: input {v!r} ({dtype}) should give code {code}, got {g}. NaN and "
-            f"values <= 0 give 0, values >= 1 and +inf give 255; 0.5 is 255*0.7354 + 0.5 -> 188.")
+            f"values <= 0 give 0, values >= 1 and +inf give 255; 0.5 is 255*0.7354 + 0.5 -> 188."
+        )
 
 
 def nonzero(shape, dtype=torch.float32):
@@ -282,8 +359,12 @@ def probe_framebuffer_to_numpy(lab, height, width):
     arr = lab.framebuffer_to_numpy(fb)
     if not isinstance(arr, np.ndarray):
         return {"type": type(arr).__name__}
-    report = {"type": "ndarray", "dtype": str(arr.dtype), "shape": arr.shape,
-              "addresses": (arr.__array_interface__["data"][0], fb.data_ptr())}
+    report = {
+        "type": "ndarray",
+        "dtype": str(arr.dtype),
+        "shape": arr.shape,
+        "addresses": (arr.__array_interface__["data"][0], fb.data_ptr()),
+    }
     if arr.shape == (height, width) and arr.flags.writeable:
         arr[1, 2] = 12345
         fb[0, 1] = -77
@@ -297,9 +378,13 @@ def probe_numpy_to_framebuffer(lab, height, width):
     fb = lab.numpy_to_framebuffer(arr)
     if not isinstance(fb, torch.Tensor):
         return {"type": type(fb).__name__}
-    report = {"type": "Tensor", "dtype": str(fb.dtype), "shape": tuple(fb.shape),
-              "device": fb.device.type,
-              "addresses": (arr.__array_interface__["data"][0], fb.data_ptr())}
+    report = {
+        "type": "Tensor",
+        "dtype": str(fb.dtype),
+        "shape": tuple(fb.shape),
+        "device": fb.device.type,
+        "addresses": (arr.__array_interface__["data"][0], fb.data_ptr()),
+    }
     if tuple(fb.shape) == (height, width):
         fb[1, 2] = 12345
         arr[0, 1] = -77
@@ -313,9 +398,14 @@ def probe_share_dlpack(lab, height, width, device):
     shared = lab.share_dlpack(fb)
     if not isinstance(shared, torch.Tensor):
         return {"type": type(shared).__name__}
-    report = {"type": "Tensor", "ids": (id(shared), id(fb)), "dtype": str(shared.dtype),
-              "shape": tuple(shared.shape), "device": shared.device.type,
-              "addresses": (shared.data_ptr(), fb.data_ptr())}
+    report = {
+        "type": "Tensor",
+        "ids": (id(shared), id(fb)),
+        "dtype": str(shared.dtype),
+        "shape": tuple(shared.shape),
+        "device": shared.device.type,
+        "addresses": (shared.data_ptr(), fb.data_ptr()),
+    }
     if tuple(shared.shape) == (height, width):
         shared[1, 2] = 12345
         report["fb_sees_write"] = int(fb[1, 2])  # the test wants 12345
@@ -330,12 +420,20 @@ def probe_cuda_array_interface(lab, height, width):
     if not isinstance(info, dict):
         return {"type": type(info).__name__}
     data = info.get("data")
-    report = {"type": "dict", "shape": info.get("shape"),
-              "typestr": info.get("typestr"), "strides": info.get("strides"),
-              "version": info.get("version"),
-              "pointers": (data[0] if isinstance(data, tuple) and len(data) == 2
-                           and isinstance(data[0], int) else None, fb.data_ptr()),
-              "read_only": data[1] if isinstance(data, tuple) and len(data) == 2 else None}
+    report = {
+        "type": "dict",
+        "shape": info.get("shape"),
+        "typestr": info.get("typestr"),
+        "strides": info.get("strides"),
+        "version": info.get("version"),
+        "pointers": (
+            data[0]
+            if isinstance(data, tuple) and len(data) == 2 and isinstance(data[0], int)
+            else None,
+            fb.data_ptr(),
+        ),
+        "read_only": data[1] if isinstance(data, tuple) and len(data) == 2 else None,
+    }
     report["stream"] = info.get("stream")
     side = torch.cuda.Stream()
     with torch.cuda.stream(side):
@@ -343,8 +441,7 @@ def probe_cuda_array_interface(lab, height, width):
     report["side_stream"] = on_side.get("stream") if isinstance(on_side, dict) else None
     report["side_stream_handle"] = side.cuda_stream
     if report["pointers"][0] == report["pointers"][1]:  # a consumer builds a view from it
-        view = torch.as_tensor(types.SimpleNamespace(__cuda_array_interface__=info),
-                               device="cuda")
+        view = torch.as_tensor(types.SimpleNamespace(__cuda_array_interface__=info), device="cuda")
         view[1, 2] = 12345
         torch.cuda.synchronize()
         report["fb_sees_consumer_write"] = int(fb[1, 2])  # the test wants 12345
@@ -363,38 +460,45 @@ def probe_bad_framebuffers(lab, fn_name, device):
     fn = getattr(lab, fn_name)
     if fn_name == "numpy_to_framebuffer":
         base = np.arange(1, 25, dtype=np.int32).reshape(6, 4)  # not zeros: see nonzero
-        cases = {"a transposed (non-contiguous) array": base.T,
-                 "an int64 array": base.astype(np.int64),
-                 "a 3-D array": base.reshape(6, 4, 1)}
+        cases = {
+            "a transposed (non-contiguous) array": base.T,
+            "an int64 array": base.astype(np.int64),
+            "a 3-D array": base.reshape(6, 4, 1),
+        }
     else:
         base = torch.arange(1, 25, dtype=torch.int32, device=device).view(6, 4)
-        cases = {"a transposed (non-contiguous) framebuffer": base.t(),
-                 "an int64 framebuffer": base.long(),
-                 "a 3-D framebuffer": base.view(6, 4, 1)}
+        cases = {
+            "a transposed (non-contiguous) framebuffer": base.t(),
+            "an int64 framebuffer": base.long(),
+            "a 3-D framebuffer": base.view(6, 4, 1),
+        }
     return {case: _caught(fn, value) for case, value in cases.items()}
 
 
 # What each probe writes through one side of a view, read back through the other.
-WRITTEN = {"tensor_sees_numpy_write": {"framebuffer_to_numpy": 12345,
-                                       "numpy_to_framebuffer": -77},
-           "numpy_sees_tensor_write": {"framebuffer_to_numpy": -77,
-                                       "numpy_to_framebuffer": 12345},
-           "fb_sees_write": {"share_dlpack": 12345}}
+WRITTEN = {
+    "tensor_sees_numpy_write": {"framebuffer_to_numpy": 12345, "numpy_to_framebuffer": -77},
+    "numpy_sees_tensor_write": {"framebuffer_to_numpy": -77, "numpy_to_framebuffer": 12345},
+    "fb_sees_write": {"share_dlpack": 12345},
+}
 
 
 def _check_view_report(report, fn_name, expect_dtype, shape):
     assert report["type"] in ("ndarray", "Tensor"), f"{fn_name} returned a {report['type']}"
     assert report["dtype"] == expect_dtype and tuple(report["shape"]) == shape, (
         f"{fn_name}: expected dtype {expect_dtype} and shape {shape}, got {report['dtype']} "
-        f"and {tuple(report['shape'])}")
+        f"and {tuple(report['shape'])}"
+    )
     mine, theirs = report["addresses"]
     assert type(mine) is int and mine == theirs, (
         f"{fn_name} returned a copy: its data lives at another address. A view shares the "
-        f"memory (tensor.numpy() / torch.from_numpy); no bytes should move.")
+        f"memory (tensor.numpy() / torch.from_numpy); no bytes should move."
+    )
     for key, value in report.items():
         if key.endswith("_write"):
             assert value == WRITTEN[key][fn_name], (
-                f"{fn_name}: {key.replace('_', ' ')} failed: the two do not share memory")
+                f"{fn_name}: {key.replace('_', ' ')} failed: the two do not share memory"
+            )
 
 
 @pytest.mark.task(2)
@@ -404,8 +508,9 @@ def test_framebuffer_to_numpy_is_a_view(impl, device):
         report = impl.probe(probe_framebuffer_to_numpy, 5, 7)
         _check_view_report(report, "framebuffer_to_numpy", "int32", (5, 7))
     else:  # numpy cannot address GPU memory: no silent download
-        expect_error("fb", impl.framebuffer_to_numpy,
-                     torch.zeros(5, 7, dtype=torch.int32, device=device))
+        expect_error(
+            "fb", impl.framebuffer_to_numpy, torch.zeros(5, 7, dtype=torch.int32, device=device)
+        )
 
 
 @pytest.mark.task(2)
@@ -423,9 +528,11 @@ def test_share_dlpack_same_memory(impl, device):
     assert report["type"] == "Tensor", f"share_dlpack returned a {report['type']}, not a tensor"
     assert report["ids"][0] != report["ids"][1], (
         "share_dlpack returned fb itself: import the DLPack export with torch.from_dlpack to "
-        "get the consumer's tensor")
-    assert report["device"] == device, (f"share_dlpack: the shared tensor is on "
-                                        f"{report['device']}, fb on {device}")
+        "get the consumer's tensor"
+    )
+    assert report["device"] == device, (
+        f"share_dlpack: the shared tensor is on {report['device']}, fb on {device}"
+    )
     _check_view_report(report, "share_dlpack", "torch.int32", (5, 7))
 
 
@@ -444,26 +551,32 @@ def test_cuda_array_interface(impl, device):
         assert got == want, f"cuda_array_interface: {key!r} should be {want!r}, got {got!r}"
     assert report["pointers"][0] == report["pointers"][1], (
         "cuda_array_interface: 'data' must be (fb.data_ptr(), False): the device pointer and "
-        "a read-only flag")
+        "a read-only flag"
+    )
     assert report["read_only"] is False, "cuda_array_interface: the framebuffer is writable"
     assert report["stream"] == 1, (
         f"cuda_array_interface on the default stream: 'stream' should be 1 (the legacy default "
-        f"stream; 0 is not allowed in version 3), got {report['stream']!r}")
+        f"stream; 0 is not allowed in version 3), got {report['stream']!r}"
+    )
     assert report["side_stream"] == report["side_stream_handle"], (
         f"cuda_array_interface under torch.cuda.stream(s): 'stream' should be the current "
         f"stream's handle s.cuda_stream = {report['side_stream_handle']}, got "
-        f"{report['side_stream']!r}: a consumer synchronises with the producer's stream")
+        f"{report['side_stream']!r}: a consumer synchronises with the producer's stream"
+    )
     assert report.get("fb_sees_consumer_write") == 12345, (
-        "cuda_array_interface: a consumer's write through the described memory did not "
-        "reach fb")
+        "cuda_array_interface: a consumer's write through the described memory did not reach fb"
+    )
 
 
 @pytest.mark.task(2)
 @pytest.mark.points(0.5)
-@pytest.mark.parametrize("fn_name", ["framebuffer_to_numpy", "numpy_to_framebuffer",
-                                     "share_dlpack", "cuda_array_interface"])
+@pytest.mark.parametrize(
+    "fn_name",
+    ["framebuffer_to_numpy", "numpy_to_framebuffer", "share_dlpack", "cuda_array_interface"],
+)
 def test_framebuffer_to_numpy_numpy_to_framebuffer_share_dlpack_cuda_array_interface_bad_input(
-        impl, device, fn_name):
+    impl, device, fn_name
+):
     name = "arr" if fn_name == "numpy_to_framebuffer" else "fb"
     for case, report in impl.probe(probe_bad_framebuffers, fn_name, device).items():
         check_reported_error(report, name, case, fn_name)
@@ -475,8 +588,11 @@ def test_framebuffer_to_numpy_numpy_to_framebuffer_share_dlpack_cuda_array_inter
 def make_frame(frame_index: int, shape, device) -> torch.Tensor:
     """A frame whose every word depends on its index (negative words included)."""
     gen = generator(1000 + frame_index)
-    return torch.randint(-2**31, 2**31, tuple(shape), generator=gen,
-                         dtype=torch.int64).to(torch.int32).to(device)
+    return (
+        torch.randint(-(2**31), 2**31, tuple(shape), generator=gen, dtype=torch.int64)
+        .to(torch.int32)
+        .to(device)
+    )
 
 
 def render_test_frame(frame_index, out):
@@ -484,8 +600,13 @@ def render_test_frame(frame_index, out):
 
 
 def display_checksum(frame_index, frame):
-    return (frame_index, int(frame.to(torch.int64).sum()), tuple(frame.shape),
-            frame.device.type, str(frame.dtype))
+    return (
+        frame_index,
+        int(frame.to(torch.int64).sum()),
+        tuple(frame.shape),
+        frame.device.type,
+        str(frame.dtype),
+    )
 
 
 def display_address(frame_index, frame):
@@ -500,18 +621,32 @@ def test_FrameDownloader_fifo_order_and_content(impl, device, num_buffers):
     downloader = impl.FrameDownloader(shape, device, num_buffers=num_buffers)
     submitted = received = 0
     # fill the ring, then alternate receive/submit, drain half way, refill, drain at the end
-    plan = (["s"] * num_buffers + ["r", "s"] * 5 + ["r"] * num_buffers + ["s"] * num_buffers
-            + ["r"] * num_buffers)
+    plan = (
+        ["s"] * num_buffers
+        + ["r", "s"] * 5
+        + ["r"] * num_buffers
+        + ["s"] * num_buffers
+        + ["r"] * num_buffers
+    )
     for op in plan:
         if op == "s":
             downloader.submit(make_frame(submitted, shape, device))
             submitted += 1
             continue
-        got = check_tensor(downloader.receive(), f"receive() #{received}", shape=shape,
-                           dtype=torch.int32, device="cpu")
-        assert_equal(got, make_frame(received, shape, "cpu"), where="pixel",
-                     name=f"receive() #{received} with {num_buffers} buffers (must return "
-                          f"frame {received}: the oldest submitted, first in first out)")
+        got = check_tensor(
+            downloader.receive(),
+            f"receive() #{received}",
+            shape=shape,
+            dtype=torch.int32,
+            device="cpu",
+        )
+        assert_equal(
+            got,
+            make_frame(received, shape, "cpu"),
+            where="pixel",
+            name=f"receive() #{received} with {num_buffers} buffers (must return "
+            f"frame {received}: the oldest submitted, first in first out)",
+        )
         received += 1
 
 
@@ -538,21 +673,31 @@ def probe_downloader_buffers(lab, device, num_buffers, n_frames):
 def test_FrameDownloader_reuses_pinned_staging_buffers(impl, device, num_buffers):
     report = impl.probe(probe_downloader_buffers, device, num_buffers, 10)
     assert all(d == "cpu" for d in report["device"]), (
-        f"receive() must return a host (CPU) staging buffer, got devices {report['device']}")
-    wrong = [j for j, host in enumerate(report["frames"])
-             if not (isinstance(host, torch.Tensor) and host.shape == (8, 16)
-                     and torch.equal(host, make_frame(j, (8, 16), "cpu")))]
+        f"receive() must return a host (CPU) staging buffer, got devices {report['device']}"
+    )
+    wrong = [
+        j
+        for j, host in enumerate(report["frames"])
+        if not (
+            isinstance(host, torch.Tensor)
+            and host.shape == (8, 16)
+            and torch.equal(host, make_frame(j, (8, 16), "cpu"))
+        )
+    ]
     assert len(report["frames"]) == 10 - num_buffers + 1 and not wrong, (
-        f"receive() returned the wrong content for frames {wrong}")
+        f"receive() returned the wrong content for frames {wrong}"
+    )
     distinct = len(set(report["pointers"]))
     assert distinct <= num_buffers, (
         f"receive() returned {distinct} different host buffers over "
         f"{len(report['pointers'])} frames with num_buffers={num_buffers}: the staging "
-        f"buffers must be allocated once in __init__ and reused (like a PBO), not per frame")
+        f"buffers must be allocated once in __init__ and reused (like a PBO), not per frame"
+    )
     if device == "cuda":
         assert all(report["pinned"]), (
             "the staging buffers are not pinned: allocate them with pin_memory=True so the "
-            "device-to-host copy can run asynchronously (non_blocking=True)")
+            "device-to-host copy can run asynchronously (non_blocking=True)"
+        )
 
 
 @pytest.mark.task(3)
@@ -572,14 +717,21 @@ def test_FrameDownloader_refuses_overflow(impl, device):
         raise AssertionError(
             "FrameDownloader(num_buffers=2) accepted a third frame while two were in flight: "
             "it would overwrite a staging buffer whose frame was never received. Raise "
-            "RuntimeError instead.")
-    assert_equal(downloader.receive(), make_frame(0, shape, "cpu"), name="first frame after a "
-                 "refused submit", where="pixel")
+            "RuntimeError instead."
+        )
+    assert_equal(
+        downloader.receive(),
+        make_frame(0, shape, "cpu"),
+        name="first frame after a refused submit",
+        where="pixel",
+    )
     downloader.submit(make_frame(2, shape, device))  # a buffer is free again
-    assert_equal(downloader.receive(), make_frame(1, shape, "cpu"), name="second frame",
-                 where="pixel")
-    assert_equal(downloader.receive(), make_frame(2, shape, "cpu"), name="third frame",
-                 where="pixel")
+    assert_equal(
+        downloader.receive(), make_frame(1, shape, "cpu"), name="second frame", where="pixel"
+    )
+    assert_equal(
+        downloader.receive(), make_frame(2, shape, "cpu"), name="third frame", where="pixel"
+    )
     with pytest.raises(RuntimeError):
         downloader.receive()
 
@@ -594,9 +746,14 @@ def test_FrameDownloader_refuses_overflow(impl, device):
         else:
             raise AssertionError(
                 "FrameDownloader(num_buffers=1) accepted a second frame while one was in "
-                "flight: it would overwrite the only staging buffer. Raise RuntimeError.")
-        assert_equal(single.receive(), make_frame(10 + i, shape, "cpu"), where="pixel",
-                     name=f"FrameDownloader(num_buffers=1): frame {i} received after its submit")
+                "flight: it would overwrite the only staging buffer. Raise RuntimeError."
+            )
+        assert_equal(
+            single.receive(),
+            make_frame(10 + i, shape, "cpu"),
+            where="pixel",
+            name=f"FrameDownloader(num_buffers=1): frame {i} received after its submit",
+        )
 
 
 @pytest.mark.task(3)
@@ -616,20 +773,30 @@ def test_FrameDownloader_bad_input(impl, device):
 def test_measure_copy_bandwidth(impl, device, pinned):
     gbps = impl.measure_copy_bandwidth(1 << 16, pinned, device, repeats=2)
     assert isinstance(gbps, float) and math.isfinite(gbps) and gbps > 0, (
-        f"measure_copy_bandwidth should return a positive float (GB/s), got {gbps!r}")
+        f"measure_copy_bandwidth should return a positive float (GB/s), got {gbps!r}"
+    )
     # 64 KiB in 0.65 s .. 6.5 ns: far wider than any machine or load, yet a bandwidth in the
     # wrong units (bytes/s, seconds/byte, bytes x seconds) lands outside by many decades.
     assert 1e-4 <= gbps <= 1e4, (
         f"measure_copy_bandwidth(65536, pinned={pinned}, {device!r}) = {gbps!r} GB/s: outside "
         f"any plausible range [1e-4, 1e4] GB/s (64 KiB copied in 0.65 s .. 6.5 ns). The "
-        f"bandwidth is nbytes / seconds per copy / 1e9.")
+        f"bandwidth is nbytes / seconds per copy / 1e9."
+    )
     one = impl.measure_copy_bandwidth(1, pinned, device, repeats=1)  # the smallest block
     assert isinstance(one, float) and math.isfinite(one) and one > 0, (
         f"measure_copy_bandwidth(1, pinned={pinned}, {device!r}, repeats=1) should return a "
-        f"positive float (GB/s): nbytes may be any positive int, 1 included; got {one!r}")
+        f"positive float (GB/s): nbytes may be any positive int, 1 included; got {one!r}"
+    )
     expect_error("nbytes", impl.measure_copy_bandwidth, 0, pinned, device)
-    expect_error("repeats", impl.measure_copy_bandwidth, 1, pinned, device, repeats=0,
-                 case="repeats=0 (nothing would be timed)")
+    expect_error(
+        "repeats",
+        impl.measure_copy_bandwidth,
+        1,
+        pinned,
+        device,
+        repeats=0,
+        case="repeats=0 (nothing would be timed)",
+    )
 
 
 @pytest.mark.task(3)
@@ -637,35 +804,52 @@ def test_measure_copy_bandwidth(impl, device, pinned):
 @pytest.mark.parametrize("overlap", [True, False])
 def test_run_frame_loop_displays_every_frame_in_order(impl, device, overlap):
     shape, n = (6, 10), 7
-    expect_error("n_frames", impl.run_frame_loop, render_test_frame, 0, shape, device,
-                 overlap=overlap, case="n_frames=0 (documented: an int >= 1)")
-    result = impl.run_frame_loop(render_test_frame, n, shape, device, overlap=overlap,
-                                 display=display_checksum)
+    expect_error(
+        "n_frames",
+        impl.run_frame_loop,
+        render_test_frame,
+        0,
+        shape,
+        device,
+        overlap=overlap,
+        case="n_frames=0 (documented: an int >= 1)",
+    )
+    result = impl.run_frame_loop(
+        render_test_frame, n, shape, device, overlap=overlap, display=display_checksum
+    )
     assert isinstance(result, dict), f"run_frame_loop should return a dict, got {type(result)}"
-    assert result.get("frames") == n, f"run_frame_loop: 'frames' should be {n}, got " \
-                                      f"{result.get('frames')!r}"
+    assert result.get("frames") == n, (
+        f"run_frame_loop: 'frames' should be {n}, got {result.get('frames')!r}"
+    )
     fps = result.get("frames_per_second")
     assert isinstance(fps, float) and math.isfinite(fps) and fps > 0, (
-        f"run_frame_loop: 'frames_per_second' should be a positive float, got {fps!r}")
-    shown = [tuple(tuple(v) if isinstance(v, list) else v for v in row)
-             for row in result.get("displayed", [])]
+        f"run_frame_loop: 'frames_per_second' should be a positive float, got {fps!r}"
+    )
+    shown = [
+        tuple(tuple(v) if isinstance(v, list) else v for v in row)
+        for row in result.get("displayed", [])
+    ]
     expected = [display_checksum(i, make_frame(i, shape, "cpu")) for i in range(n)]
     assert [row[0] for row in shown] == list(range(n)), (
         f"run_frame_loop(overlap={overlap}) displayed frames {[row[0] for row in shown]}: "
-        f"expected each of 0..{n - 1} once, in order")
+        f"expected each of 0..{n - 1} once, in order"
+    )
     for got, want in zip(shown, expected):
         assert got == want, (
             f"run_frame_loop(overlap={overlap}): frame {want[0]} was displayed with (index, "
             f"checksum, shape, device, dtype) {got}, expected {want}: the host frame shown is "
-            f"not the frame rendered with that index")
+            f"not the frame rendered with that index"
+        )
     # The frames shown are the two staging buffers, reused (like two PBOs), never more.
-    result = impl.run_frame_loop(render_test_frame, 9, shape, device, overlap=overlap,
-                                 display=display_address)
+    result = impl.run_frame_loop(
+        render_test_frame, 9, shape, device, overlap=overlap, display=display_address
+    )
     buffers = len(set(result.get("displayed", [])))
     assert 1 <= buffers <= 2, (
         f"run_frame_loop(overlap={overlap}) showed frames in {buffers} different host buffers "
         f"over 9 frames: it downloads into two staging buffers (a FrameDownloader with "
-        f"num_buffers=2) and displays those, reused every other frame")
+        f"num_buffers=2) and displays those, reused every other frame"
+    )
 
 
 # ---------------------------------------------------------------- task 4: frame loop
@@ -698,10 +882,12 @@ def render(impl, frame_index, out, **kwargs):
 def test_render_rotating_triangle_coverage(impl, device, frame_index):
     out = poisoned((40, 56), torch.int32, device)
     result = render(impl, frame_index, out)
-    check_tensor(result, "render_rotating_triangle(...)", shape=(40, 56), dtype=torch.int32,
-                 device=device)
-    assert_equal(result, out, name="the returned framebuffer vs out (it must return out)",
-                 where="pixel")
+    check_tensor(
+        result, "render_rotating_triangle(...)", shape=(40, 56), dtype=torch.int32, device=device
+    )
+    assert_equal(
+        result, out, name="the returned framebuffer vs out (it must return out)", where="pixel"
+    )
     check_triangle_frame(out, frame_index, "render_rotating_triangle")
 
 
@@ -711,37 +897,55 @@ def test_render_rotating_triangle_period(impl, device):
     def frame(i, **kw):
         return render(impl, i, poisoned((24, 32), torch.int32, device), **kw)
 
-    check_triangle_frame(frame(3, period=10), 3, "render_rotating_triangle(3, period=10)",
-                         period=10)
-    assert_equal(frame(13, period=10), frame(3, period=10), where="pixel",
-                 name="frame 13 vs frame 3 with period=10 (the rotation repeats every period)")
-    assert_equal(frame(120), frame(0), where="pixel",
-                 name="frame 120 vs frame 0 with the default period 120")
+    check_triangle_frame(
+        frame(3, period=10), 3, "render_rotating_triangle(3, period=10)", period=10
+    )
+    assert_equal(
+        frame(13, period=10),
+        frame(3, period=10),
+        where="pixel",
+        name="frame 13 vs frame 3 with period=10 (the rotation repeats every period)",
+    )
+    assert_equal(
+        frame(120), frame(0), where="pixel", name="frame 120 vs frame 0 with the default period 120"
+    )
     assert not torch.equal(frame(1), frame(0)), "frames 0 and 1 are identical: no rotation"
     # period=1 is valid (an int >= 1): every frame is frame 0.
     check_triangle_frame(frame(5, period=1), 5, "render_rotating_triangle(5, period=1)", period=1)
-    assert_equal(frame(5, period=1), frame(0), where="pixel",
-                 name="frame 5 with period=1 vs frame 0 (period 1: the triangle never turns)")
+    assert_equal(
+        frame(5, period=1),
+        frame(0),
+        where="pixel",
+        name="frame 5 with period=1 vs frame 0 (period 1: the triangle never turns)",
+    )
 
 
 def probe_render_in_place(lab, device):
     fb = torch.full((12, 20), -1, dtype=torch.int32, device=device)
     with replaced(lab, {"pack_rgba8": given_pack_rgba8}):
         result = lab.render_rotating_triangle(2, fb)
-    return {"pointers": (result.data_ptr() if isinstance(result, torch.Tensor) else None,
-                         fb.data_ptr()), "frame": fb.cpu()}
+    return {
+        "pointers": (
+            result.data_ptr() if isinstance(result, torch.Tensor) else None,
+            fb.data_ptr(),
+        ),
+        "frame": fb.cpu(),
+    }
 
 
 @pytest.mark.task(4)
 @pytest.mark.points(0.25)
 def test_render_rotating_triangle_writes_in_place(impl, device):
     report = impl.probe(probe_render_in_place, device)
-    assert report["pointers"][0] == report["pointers"][1], \
+    assert report["pointers"][0] == report["pointers"][1], (
         "render_rotating_triangle must return out itself, not a copy"
+    )
     frame = report["frame"]
     unwritten = (frame == -1).nonzero()
-    assert not len(unwritten), (f"render_rotating_triangle left {len(unwritten)} pixels of out "
-                                f"unwritten, the first at (row, col) {unwritten[0].tolist()}")
+    assert not len(unwritten), (
+        f"render_rotating_triangle left {len(unwritten)} pixels of out "
+        f"unwritten, the first at (row, col) {unwritten[0].tolist()}"
+    )
     # Writing in place earns its point only with the right frame in place.
     check_triangle_frame(frame, 2, "render_rotating_triangle(2, out): the frame in out")
 
@@ -768,7 +972,8 @@ def test_FrameLoop_reuses_one_framebuffer(impl, device):
     assert len(set(report["pointers"])) == 1, (
         f"FrameLoop.step() returned {len(set(report['pointers']))} different buffers over 4 "
         f"frames: allocate the framebuffer once in __init__ and render into it every step "
-        f"(a registered PBO is never reallocated)")
+        f"(a registered PBO is never reallocated)"
+    )
     for k, frame in report["frames"].items():
         check_tensor(frame, f"FrameLoop.step() #{k}", shape=(22, 30), dtype=torch.int32)
         check_triangle_frame(frame, k, f"FrameLoop.step() #{k}")
@@ -776,8 +981,13 @@ def test_FrameLoop_reuses_one_framebuffer(impl, device):
     # The default period is 120, as in render_rotating_triangle: step #120 repeats step #0.
     frames = impl.probe(probe_frame_loop, device, 30, 22, 121, keep=(0, 119, 120))["frames"]
     check_triangle_frame(frames[119], 119, "FrameLoop.step() #119 (default period 120)")
-    assert_equal(frames[120], frames[0], where="pixel", name="FrameLoop.step() #120 vs #0 (the "
-                 "default period is 120, as in render_rotating_triangle)")
+    assert_equal(
+        frames[120],
+        frames[0],
+        where="pixel",
+        name="FrameLoop.step() #120 vs #0 (the "
+        "default period is 120, as in render_rotating_triangle)",
+    )
 
     # A framebuffer one pixel wide or one pixel high is valid (width, height >= 1).
     for width, height in ((1, 9), (9, 1)):

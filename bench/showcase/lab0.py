@@ -38,12 +38,16 @@ def render(lab, device, size: int = 256):
     gap = 1
     for k, tile in enumerate(tiles):
         r, c = divmod(k, 2)
-        image[r * half + gap:(r + 1) * half - gap, c * half + gap:(c + 1) * half - gap] = \
-            tile.cpu()[gap:half - gap, gap:half - gap]
+        image[r * half + gap : (r + 1) * half - gap, c * half + gap : (c + 1) * half - gap] = (
+            tile.cpu()[gap : half - gap, gap : half - gap]
+        )
 
     nbytes = size * size * 4
-    info = {"frame_ms": timing.median * 1e3, "frames_per_second": 1 / timing.median,
-            "frame_bytes": nbytes}
+    info = {
+        "frame_ms": timing.median * 1e3,
+        "frames_per_second": 1 / timing.median,
+        "frame_bytes": nbytes,
+    }
     if device.type == "cuda":
         info["d2h_pageable_GBps"] = lab.measure_copy_bandwidth(nbytes, False, device)
         info["d2h_pinned_GBps"] = lab.measure_copy_bandwidth(nbytes, True, device)

@@ -39,8 +39,9 @@ def render(lab, device, size: int = 256):
     """``(image (size, size, 3) float linear RGB, info)`` for the gallery."""
     device = torch.device(device)
     scene = _scene(device)
-    camera = Camera(eye=(0.0, 1.5, 6.6), target=(0.0, -0.05, 0.0), fov_y=46.0,
-                    width=size, height=size)
+    camera = Camera(
+        eye=(0.0, 1.5, 6.6), target=(0.0, -0.05, 0.0), fov_y=46.0, width=size, height=size
+    )
     rays = primary_rays(camera, device, torch.float32)
     # closest_hit's tiles of rays x triangles: a few hundred MiB of temporaries on the CPU
     # (the fastest of the budgets tried there); a GPU takes larger tiles, fewer launches.
@@ -52,8 +53,7 @@ def render(lab, device, size: int = 256):
         result["surface"] = _nearest_surface(lab, scene, rays, budget)
 
     cpu = device.type != "cuda"
-    timing = time_fn(trace_primary, repeats=1 if cpu else 5, warmup=0 if cpu else 1,
-                     device=device)
+    timing = time_fn(trace_primary, repeats=1 if cpu else 5, warmup=0 if cpu else 1, device=device)
     t, normal, albedo, triangle_tests = result["surface"]
     hit = torch.isfinite(t)
 
@@ -73,16 +73,28 @@ def render(lab, device, size: int = 256):
     image = torch.where(hit[:, None], shade, _sky(rays.directions)).reshape(size, size, 3)
 
     inset, cracks = crack_view(lab, "woop_unit", max(24, size // 3), device)
-    info = {"variant": VARIANT, "triangles": scene["suzanne"].num_faces + 2,
-            "rays": len(rays), "rays_per_s": len(rays) / timing.median,
-            "triangle_tests": triangle_tests, "shadow_rays": len(shadow),
-            "inset": f"woop_unit, float32, icosphere at 1e6: {cracks['crack_pixels']} crack "
-                     f"pixels (red) of {cracks['must_hit_pixels']} that must hit"}
+    info = {
+        "variant": VARIANT,
+        "triangles": scene["suzanne"].num_faces + 2,
+        "rays": len(rays),
+        "rays_per_s": len(rays) / timing.median,
+        "triangle_tests": triangle_tests,
+        "shadow_rays": len(shadow),
+        "inset": f"woop_unit, float32, icosphere at 1e6: {cracks['crack_pixels']} crack "
+        f"pixels (red) of {cracks['must_hit_pixels']} that must hit",
+    }
     return _paste_inset(image, inset), info
 
 
-def crack_view(lab, variant: str, size: int, device, offset: float = 1e6, level: int = 2,
-               dtype: torch.dtype = torch.float32):
+def crack_view(
+    lab,
+    variant: str,
+    size: int,
+    device,
+    offset: float = 1e6,
+    level: int = 2,
+    dtype: torch.dtype = torch.float32,
+):
     """A closed icosphere moved by ``offset`` on every axis, traced with ``variant``.
 
     Returns ``(image (size, size, 3) float linear RGB, info)``: Lambert-shaded hits, crack
@@ -96,8 +108,13 @@ def crack_view(lab, variant: str, size: int, device, offset: float = 1e6, level:
     device = torch.device(device)
     sphere = load_scene("icosphere", level=level, device="cpu", dtype=torch.float64).mesh
     mesh = Mesh((sphere.vertices + offset).to(dtype), sphere.faces).to(device)
-    camera = Camera(eye=(offset + 0.5, offset + 0.75, offset + 3.0),
-                    target=(offset, offset, offset), fov_y=40.0, width=size, height=size)
+    camera = Camera(
+        eye=(offset + 0.5, offset + 0.75, offset + 3.0),
+        target=(offset, offset, offset),
+        fov_y=40.0,
+        width=size,
+        height=size,
+    )
     rays = primary_rays(camera, device, dtype)
     hits = lab.closest_hit(rays, mesh, variant)
 
@@ -120,8 +137,11 @@ def crack_view(lab, variant: str, size: int, device, offset: float = 1e6, level:
     grey = (0.08 + 0.7 * cosine)[:, None].expand(-1, 3)
     image = torch.where(hits.hit[:, None], grey, torch.tensor((0.02, 0.02, 0.03), device=device))
     image = torch.where(cracks[:, None], torch.tensor(CRACK_RED, device=device), image)
-    info = {"crack_pixels": int(cracks.sum()), "must_hit_pixels": int(must_hit.sum()),
-            "hit_pixels": int(hits.hit.sum())}
+    info = {
+        "crack_pixels": int(cracks.sum()),
+        "must_hit_pixels": int(must_hit.sum()),
+        "hit_pixels": int(hits.hit.sum()),
+    }
     return image.reshape(size, size, 3), info
 
 
@@ -132,18 +152,25 @@ def _scene(device) -> dict:
     half_turn = torch.tensor([-1.0, 1.0, -1.0], device=device)  # 180 degrees about y
     suzanne = Mesh(suzanne.vertices * half_turn, suzanne.faces)
     s = 6.0
-    floor = Mesh(torch.tensor([[-s, FLOOR_Y, -s], [-s, FLOOR_Y, s], [s, FLOOR_Y, s],
-                               [s, FLOOR_Y, -s]], device=device),
-                 torch.tensor([[0, 1, 2], [0, 2, 3]], device=device))
-    return {"suzanne": suzanne, "bounds": (suzanne.vertices.amin(0), suzanne.vertices.amax(0)),
-            "floor": floor}
+    floor = Mesh(
+        torch.tensor(
+            [[-s, FLOOR_Y, -s], [-s, FLOOR_Y, s], [s, FLOOR_Y, s], [s, FLOOR_Y, -s]], device=device
+        ),
+        torch.tensor([[0, 1, 2], [0, 2, 3]], device=device),
+    )
+    return {
+        "suzanne": suzanne,
+        "bounds": (suzanne.vertices.amin(0), suzanne.vertices.amax(0)),
+        "floor": floor,
+    }
 
 
 def _trace_culled(lab, mesh: Mesh, bounds, rays: Rays, budget: int) -> tuple[Hits, int]:
     """``closest_hit`` on the rays that enter ``mesh``'s bounding box; the rest miss.
     Returns the hits of all rays and the number of ray-triangle tests made."""
-    _, _, inside = lab.ray_box(rays.origins, lab.safe_reciprocal(rays.directions), *bounds,
-                               rays.t_min, rays.t_max)
+    _, _, inside = lab.ray_box(
+        rays.origins, lab.safe_reciprocal(rays.directions), *bounds, rays.t_min, rays.t_max
+    )
     index = inside.nonzero()[:, 0]
     found = lab.closest_hit(rays[index], mesh, VARIANT, budget)
     hits = Hits.miss(len(rays), dtype=rays.dtype, device=rays.origins.device)
@@ -174,8 +201,9 @@ def _nearest_surface(lab, scene: dict, rays: Rays, budget: int):
     centre, radius = torch.tensor(SPHERE[0], device=device), SPHERE[1]
     t_sphere = lab.ray_sphere(o, d, centre, radius, rays.t_min, rays.t_max)
     box_min, box_max = (torch.tensor(c, device=device) for c in BOX)
-    t_near, _, box_hit = lab.ray_box(o, lab.safe_reciprocal(d), box_min, box_max,
-                                     rays.t_min, rays.t_max)
+    t_near, _, box_hit = lab.ray_box(
+        o, lab.safe_reciprocal(d), box_min, box_max, rays.t_min, rays.t_max
+    )
     t_box = torch.where(box_hit, t_near, torch.full_like(t_near, math.inf))
 
     t, which = torch.stack([suzanne.t, t_sphere, t_box, floor.t]).min(dim=0)
@@ -185,8 +213,9 @@ def _nearest_surface(lab, scene: dict, rays: Rays, budget: int):
     axis = rel.abs().argmax(dim=-1, keepdim=True)
     box_normal = torch.zeros_like(p).scatter(-1, axis, rel.gather(-1, axis).sign())
     up = torch.tensor([0.0, 1.0, 0.0], device=device).expand_as(p)
-    normals = torch.stack([_face_normals(scene["suzanne"], suzanne, rays),
-                           (p - centre) / radius, box_normal, up])
+    normals = torch.stack(
+        [_face_normals(scene["suzanne"], suzanne, rays), (p - centre) / radius, box_normal, up]
+    )
     normal = normals.gather(0, which[None, :, None].expand(1, -1, 3))[0]
     checker = 0.35 + 0.35 * ((p[:, 0].floor() + p[:, 2].floor()) % 2 == 0).to(p.dtype)
     albedo = torch.tensor(ALBEDO, device=device)[which.clamp(max=2)]
@@ -207,5 +236,5 @@ def _paste_inset(image: torch.Tensor, inset: torch.Tensor, border: int = 2) -> t
     h, w = inset.shape[:2]
     out = image.clone()
     out[: h + 2 * border, : w + 2 * border] = 1.0
-    out[border: border + h, border: border + w] = inset
+    out[border : border + h, border : border + w] = inset
     return out

@@ -48,8 +48,7 @@ def heat(count: torch.Tensor, size: int, top: int) -> torch.Tensor:
     from matplotlib import colormaps
 
     level = (count.double().clamp(min=1).log() / math.log(top)).clamp(0, 1)
-    srgb = torch.as_tensor(colormaps["inferno"](level.cpu().numpy())[..., :3],
-                           dtype=torch.float32)
+    srgb = torch.as_tensor(colormaps["inferno"](level.cpu().numpy())[..., :3], dtype=torch.float32)
     srgb = torch.where((count.cpu() == 0)[:, None], 0.0, srgb)
     return srgb_decode(srgb).reshape(size, size, 3)
 
@@ -62,8 +61,10 @@ def render(lab, device, size: int = 256):
     rays = primary_rays(dataclasses.replace(scene.camera, width=size, height=size), device=device)
     info = {"triangles": mesh.num_faces, "rays": len(rays)}
     columns = []
-    for kind, build, traverse in (("grid", lab.build_grid, lab.grid_closest_hit),
-                                  ("bvh", lab.build_sah_bvh, lab.bvh_closest_hit)):
+    for kind, build, traverse in (
+        ("grid", lab.build_grid, lab.grid_closest_hit),
+        ("bvh", lab.build_sah_bvh, lab.bvh_closest_hit),
+    ):
         start = time.perf_counter()
         structure = build(mesh)
         built = time.perf_counter()
@@ -76,6 +77,14 @@ def render(lab, device, size: int = 256):
         for key in TOP:
             info[f"{kind}_mean_{key}"] = counters[key].double().mean().item()
         gap = torch.ones(2, size, 3)
-        columns.append(torch.cat((heat(counters["steps"], size, TOP["steps"]), gap,
-                                  heat(counters["tests"], size, TOP["tests"])), dim=0))
+        columns.append(
+            torch.cat(
+                (
+                    heat(counters["steps"], size, TOP["steps"]),
+                    gap,
+                    heat(counters["tests"], size, TOP["tests"]),
+                ),
+                dim=0,
+            )
+        )
     return torch.cat((columns[0], torch.ones(2 * size + 2, 2, 3), columns[1]), dim=1), info

@@ -34,11 +34,18 @@ def render(lab, device, size: int = 256):
     for name in names:
         scene = whitted_scene(name, device=device)
         rays = primary_rays(whitted_camera(name, size, size), device=device)
-        trace(scene, rays.origins[:1], rays.directions[:1], torch.zeros(1, device=device),
-              torch.full((1,), float("inf"), device=device), False)  # builds the BVH
+        trace(
+            scene,
+            rays.origins[:1],
+            rays.directions[:1],
+            torch.zeros(1, device=device),
+            torch.full((1,), float("inf"), device=device),
+            False,
+        )  # builds the BVH
         start = time.perf_counter()
-        image, stats = lab.render_wavefront(scene, rays.origins, rays.directions, trace, 2,
-                                            sort_by_material=True)
+        image, stats = lab.render_wavefront(
+            scene, rays.origins, rays.directions, trace, 2, sort_by_material=True
+        )
         if device.type == "cuda":
             torch.cuda.synchronize(device)
         info[f"{name}_seconds"] = time.perf_counter() - start

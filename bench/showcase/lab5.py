@@ -37,12 +37,14 @@ def hall_walls() -> tuple:
     """The occluders: roof, the left wall with its window openings, the other walls."""
     (x0, y0, z0), (x1, y1, z1) = HALL
     t = 0.5
-    boxes = [Box((x0 - t - 1, y1, z0 - t - 1), (x1 + t + 1, y1 + t, z1 + t + 1)),  # roof
-             Box((x0 - t, y0, z0 - t), (x0, SILL, z1 + t)),  # left wall below the windows
-             Box((x0 - t, LINTEL, z0 - t), (x0, y1, z1 + t)),  # ... above them
-             Box((x1, y0, z0 - t), (x1 + t, y1, z1 + t)),  # right wall
-             Box((x0 - t, y0, z0 - t), (x1 + t, y1, z0)),  # back wall
-             Box((x0 - t, y0, z1), (x1 + t, y1, z1 + t))]  # front wall, behind the camera
+    boxes = [
+        Box((x0 - t - 1, y1, z0 - t - 1), (x1 + t + 1, y1 + t, z1 + t + 1)),  # roof
+        Box((x0 - t, y0, z0 - t), (x0, SILL, z1 + t)),  # left wall below the windows
+        Box((x0 - t, LINTEL, z0 - t), (x0, y1, z1 + t)),  # ... above them
+        Box((x1, y0, z0 - t), (x1 + t, y1, z1 + t)),  # right wall
+        Box((x0 - t, y0, z0 - t), (x1 + t, y1, z0)),  # back wall
+        Box((x0 - t, y0, z1), (x1 + t, y1, z1 + t)),
+    ]  # front wall, behind the camera
     edges = [z0 - t, *[z for w in WINDOWS for z in w], z1 + t]
     for a, b in zip(edges[::2], edges[1::2]):  # the pillars between the openings
         boxes.append(Box((x0 - t, SILL, a), (x0, LINTEL, b)))
@@ -50,12 +52,16 @@ def hall_walls() -> tuple:
 
 
 def hall_scene() -> Scene:
-    media = (HeightFog(scattering=(0.06, 0.061, 0.065), extinction=0.068, g=0.72, base=0.0,
-                       falloff=0.08),)
-    lights = (DirectionalLight(direction=SUN, irradiance=SUN_IRRADIANCE),
-              PointLight(position=(4.5, 2.2, -25.0), intensity=(9.0, 4.5, 1.5), range=14.0))
-    return Scene(media=media, lights=lights, ambient=(0.004, 0.005, 0.007),
-                 occluders=hall_walls())
+    media = (
+        HeightFog(
+            scattering=(0.06, 0.061, 0.065), extinction=0.068, g=0.72, base=0.0, falloff=0.08
+        ),
+    )
+    lights = (
+        DirectionalLight(direction=SUN, irradiance=SUN_IRRADIANCE),
+        PointLight(position=(4.5, 2.2, -25.0), intensity=(9.0, 4.5, 1.5), range=14.0),
+    )
+    return Scene(media=media, lights=lights, ambient=(0.004, 0.005, 0.007), occluders=hall_walls())
 
 
 def opaque_layer(camera: Camera, scene: Scene, device):
@@ -76,36 +82,43 @@ def opaque_layer(camera: Camera, scene: Scene, device):
     # Lambert on the floor (normal +y) and on the walls (the face the ray hit).
     eps = 1e-6 * (1 + t.clamp(max=1e3))
     inside = (p > torch.tensor(HALL[0], dtype=torch.float64) - 1e-3) & (
-        p < torch.tensor(HALL[1], dtype=torch.float64) + 1e-3)
+        p < torch.tensor(HALL[1], dtype=torch.float64) + 1e-3
+    )
     normal = torch.zeros_like(p)
     normal[:, 1] = 1.0
     for axis in (0, 2):
         lo_face = (p[:, axis] - HALL[0][axis]).abs() < 1e-3
         hi_face = (p[:, axis] - HALL[1][axis]).abs() < 1e-3
-        normal[:, axis] = torch.where(lo_face & ~floor, 1.0, torch.where(
-            hi_face & ~floor, -1.0, normal[:, axis]))
+        normal[:, axis] = torch.where(
+            lo_face & ~floor, 1.0, torch.where(hi_face & ~floor, -1.0, normal[:, axis])
+        )
         normal[:, 1] = torch.where((lo_face | hi_face) & ~floor, 0.0, normal[:, 1])
     cos = (normal @ sun).clamp(min=0)
-    lit = torch.isinf(ray_boxes(p + (eps[:, None] + 1e-3) * sun, sun.expand_as(p),
-                                scene.occluders))
+    lit = torch.isinf(ray_boxes(p + (eps[:, None] + 1e-3) * sun, sun.expand_as(p), scene.occluders))
     lamp = scene.lights[1]
     to_lamp = torch.tensor(lamp.position, dtype=torch.float64) - p
     dist = to_lamp.norm(dim=-1).clamp(min=0.3)
     lamp_e = (to_lamp / dist[:, None] * normal).sum(-1).clamp(min=0) / dist.square()
     checker = ((p[:, 0].floor() + p[:, 2].floor()) % 2) * 0.04
     albedo = torch.where(floor, 0.22 + checker, 0.35)[:, None] * torch.tensor(
-        [1.0, 0.93, 0.84], dtype=torch.float64)
-    irradiance = (torch.tensor(SUN_IRRADIANCE, dtype=torch.float64) * (cos * lit)[:, None]
-                  + lamp_e[:, None] * torch.tensor(lamp.intensity, dtype=torch.float64)
-                  + 0.05)
+        [1.0, 0.93, 0.84], dtype=torch.float64
+    )
+    irradiance = (
+        torch.tensor(SUN_IRRADIANCE, dtype=torch.float64) * (cos * lit)[:, None]
+        + lamp_e[:, None] * torch.tensor(lamp.intensity, dtype=torch.float64)
+        + 0.05
+    )
     colour = albedo / math.pi * irradiance
     through = ~inside.all(-1) | ~hit  # seen through a window: the sky
-    colour = torch.where(through[:, None], torch.tensor([1.4, 1.6, 2.0], dtype=torch.float64),
-                         colour)
+    colour = torch.where(
+        through[:, None], torch.tensor([1.4, 1.6, 2.0], dtype=torch.float64), colour
+    )
     depth = torch.where(hit & ~through, t * (d @ fwd), math.inf)
     h, w = camera.height, camera.width
-    return (depth.reshape(h, w).to(device, torch.float32),
-            colour.reshape(h, w, 3).to(device, torch.float32))
+    return (
+        depth.reshape(h, w).to(device, torch.float32),
+        colour.reshape(h, w, 3).to(device, torch.float32),
+    )
 
 
 def render(lab, device, size: int = 256):
@@ -113,15 +126,29 @@ def render(lab, device, size: int = 256):
     device = torch.device(device)
     start = time.perf_counter()
     scene = hall_scene()
-    camera = Camera(eye=(6.0, 1.6, 1.5), target=(-3.0, 4.2, -13.0), fov_y=62.0, width=size,
-                    height=size)
+    camera = Camera(
+        eye=(6.0, 1.6, 1.5), target=(-3.0, 4.2, -13.0), fov_y=62.0, width=size, height=size
+    )
     depth, opaque = opaque_layer(camera, scene, device)
-    image, report = lab.render_froxels(scene, camera, depth, opaque, tile=4, slices=64,
-                                       near=0.1, far=45.0, shadow_resolution=1024,
-                                       volume_resolution=48)
+    image, report = lab.render_froxels(
+        scene,
+        camera,
+        depth,
+        opaque,
+        tile=4,
+        slices=64,
+        near=0.1,
+        far=45.0,
+        shadow_resolution=1024,
+        volume_resolution=48,
+    )
     seconds = time.perf_counter() - start
     grid = report["grid"]
-    return image, {"seconds_total": seconds, "froxels": f"{grid.nx}x{grid.ny}x{grid.slices}",
-                   "froxels_lit": report["froxels_lit"],
-                   "light_evaluations": report["light_evaluations"],
-                   "lights": len(scene.lights), "occluders": len(scene.occluders)}
+    return image, {
+        "seconds_total": seconds,
+        "froxels": f"{grid.nx}x{grid.ny}x{grid.slices}",
+        "froxels_lit": report["froxels_lit"],
+        "light_evaluations": report["light_evaluations"],
+        "lights": len(scene.lights),
+        "occluders": len(scene.occluders),
+    }

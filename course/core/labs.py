@@ -64,10 +64,15 @@ def implementation_folder(root, impl: str | None = None, *, must_exist: bool = T
         if (folder / "labs").is_dir() and not any(folder.glob("lab*_*")):
             folder = folder / "labs"  # a copy of the whole handout
     if must_exist and not folder.is_dir():
-        hint = (" (the student handout has no reference solutions: use labs)"
-                if impl == "solutions" else "")
-        raise FileNotFoundError(f"impl {impl!r}: no folder {folder}{hint}; expected labs, "
-                                f"solutions or a folder holding lab files")
+        hint = (
+            " (the student handout has no reference solutions: use labs)"
+            if impl == "solutions"
+            else ""
+        )
+        raise FileNotFoundError(
+            f"impl {impl!r}: no folder {folder}{hint}; expected labs, "
+            f"solutions or a folder holding lab files"
+        )
     return folder
 
 
@@ -81,12 +86,14 @@ def lab_path(folder, name: str) -> Path:
     folder = Path(folder)
     found = lab_source(folder, name)
     if found is None:  # a prefix: the first labN_topic file or package of the folder
-        stems = sorted({p.stem for p in folder.glob(f"{name}_*")
-                        if p.suffix == ".py" or p.is_dir()})
+        stems = sorted(
+            {p.stem for p in folder.glob(f"{name}_*") if p.suffix == ".py" or p.is_dir()}
+        )
         found = next(filter(None, (lab_source(folder, stem) for stem in stems)), None)
     if found is None:
-        raise FileNotFoundError(f"no lab module {name!r} in {folder} (expected {name}.py or "
-                                f"a package folder {name}/)")
+        raise FileNotFoundError(
+            f"no lab module {name!r} in {folder} (expected {name}.py or a package folder {name}/)"
+        )
     return found
 
 

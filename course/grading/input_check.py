@@ -28,14 +28,18 @@ def is_output_name(name) -> bool:
 
 
 def input_mutation_message(where: str, names) -> str:
-    return (f"{where} modified its input argument(s) {', '.join(map(repr, names))}. Kernels "
-            f"must leave their inputs untouched (only an `out` argument may be written): a "
-            f"caller that reuses the input would silently get wrong results.")
+    return (
+        f"{where} modified its input argument(s) {', '.join(map(repr, names))}. Kernels "
+        f"must leave their inputs untouched (only an `out` argument may be written): a "
+        f"caller that reuses the input would silently get wrong results."
+    )
 
 
 def too_large_message(where: str, nbytes: int, limit: int) -> str:
-    return (f"{where} returned {nbytes / 2**20:.0f} MB of data, more than the "
-            f"{limit / 2**20:.0f} MB a result may hold; the test fails")
+    return (
+        f"{where} returned {nbytes / 2**20:.0f} MB of data, more than the "
+        f"{limit / 2**20:.0f} MB a result may hold; the test fails"
+    )
 
 
 # ---------------------------------------------------------------- input-mutation check
@@ -80,16 +84,21 @@ def _same_bits(a, b) -> bool:
     import torch
 
     if isinstance(a, np.ndarray):
-        return (a.shape == b.shape and a.dtype == b.dtype
-                and np.ascontiguousarray(a).tobytes() == np.ascontiguousarray(b).tobytes())
+        return (
+            a.shape == b.shape
+            and a.dtype == b.dtype
+            and np.ascontiguousarray(a).tobytes() == np.ascontiguousarray(b).tobytes()
+        )
     a = a.detach()
     if a.shape != b.shape or a.dtype != b.dtype:
         return False
     if a.dtype.is_floating_point or a.dtype.is_complex:
         # Bits, not values (NaN == NaN, -0.0 != +0.0); contiguous first: a strided view
         # (x[..., 0]) cannot be reinterpreted as bytes.
-        return torch.equal(a.contiguous().reshape(-1).view(torch.uint8),
-                           b.contiguous().reshape(-1).view(torch.uint8))
+        return torch.equal(
+            a.contiguous().reshape(-1).view(torch.uint8),
+            b.contiguous().reshape(-1).view(torch.uint8),
+        )
     return torch.equal(a, b)
 
 
@@ -98,9 +107,9 @@ class Changed:
     """An argument (or a tensor inside one) whose bits a call changed."""
 
     position: int | None  # index of a positional argument, else None
-    keyword: str | None   # name of a keyword argument, else None
-    path: str             # "" for the argument itself, ".origins" / "[2]" inside it
-    value: object         # the array after the call
+    keyword: str | None  # name of a keyword argument, else None
+    path: str  # "" for the argument itself, ".origins" / "[2]" inside it
+    value: object  # the array after the call
 
 
 @contextlib.contextmanager
@@ -137,8 +146,11 @@ def call_checked(fn, args, kwargs):
     except BaseException as exc:  # a submission may raise anything, SystemExit too
         error = exc
     with _unobserved():
-        changed = [Changed(pos, key, path, a) for pos, key, path, a, old in before
-                   if not _same_bits(a, old)]
+        changed = [
+            Changed(pos, key, path, a)
+            for pos, key, path, a, old in before
+            if not _same_bits(a, old)
+        ]
     return result, changed, error
 
 
@@ -237,8 +249,11 @@ class LocalLab:
 
 def _positional_names(fn):
     try:
-        return [p.name for p in inspect.signature(fn).parameters.values()
-                if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+        return [
+            p.name
+            for p in inspect.signature(fn).parameters.values()
+            if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)
+        ]
     except (TypeError, ValueError):
         return []
 

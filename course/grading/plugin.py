@@ -42,8 +42,10 @@ from course.grading.sandbox import LocalLab, SandboxedLab, Worker
 MARKERS = (
     "points(n): the test is graded and worth n points",
     "task(k): the lab task (1, 2, ...) the test grades",
-    ("visibility(v): when Gradescope shows the test to students: visible (default), hidden, "
-     "after_due_date or after_published"),
+    (
+        "visibility(v): when Gradescope shows the test to students: visible (default), hidden, "
+        "after_due_date or after_published"
+    ),
     "gpu: needs a CUDA device",
     "slow: long-running; skipped unless --runslow",
 )
@@ -51,27 +53,47 @@ MARKERS = (
 
 def pytest_addoption(parser):
     group = parser.getgroup("rtcourse", "GPU ray tracing course grader")
-    group.addoption("--impl", default=os.environ.get("RTCOURSE_IMPL"),
-                    help="implementation to grade: solutions (the default where it exists), "
-                         "labs (the default in the student handout), or a folder holding a "
-                         "student's lab files")
-    group.addoption("--trusted", action="store_true",
-                    default=os.environ.get("RTCOURSE_TRUSTED") == "1",
-                    help="run the implementation in-process (only for code you trust)")
-    group.addoption("--time-limit", type=float,
-                    default=float(os.environ.get("RTCOURSE_TIME_LIMIT", "120")),
-                    help="seconds of student code per test (sandboxed runs)")
-    group.addoption("--memory-limit", type=float,
-                    default=float(os.environ.get("RTCOURSE_MEMORY_GB", "4")),
-                    help="GiB of extra memory the student code may use (sandboxed runs)")
+    group.addoption(
+        "--impl",
+        default=os.environ.get("RTCOURSE_IMPL"),
+        help="implementation to grade: solutions (the default where it exists), "
+        "labs (the default in the student handout), or a folder holding a "
+        "student's lab files",
+    )
+    group.addoption(
+        "--trusted",
+        action="store_true",
+        default=os.environ.get("RTCOURSE_TRUSTED") == "1",
+        help="run the implementation in-process (only for code you trust)",
+    )
+    group.addoption(
+        "--time-limit",
+        type=float,
+        default=float(os.environ.get("RTCOURSE_TIME_LIMIT", "120")),
+        help="seconds of student code per test (sandboxed runs)",
+    )
+    group.addoption(
+        "--memory-limit",
+        type=float,
+        default=float(os.environ.get("RTCOURSE_MEMORY_GB", "4")),
+        help="GiB of extra memory the student code may use (sandboxed runs)",
+    )
     group.addoption("--runslow", action="store_true", help="also run tests marked slow")
-    group.addoption("--task", action="append", default=[], metavar="[N.]K",
-                    help="run only the tests that award task K's points (of lab N: "
-                         "--task 4.2); repeatable")
-    group.addoption("--feedback", choices=("short", "full"), default=None,
-                    help="failing graded tests: short (the message and your line; the "
-                         "default) or full (pytest's traceback with the test's source and "
-                         "tensors; also with -v)")
+    group.addoption(
+        "--task",
+        action="append",
+        default=[],
+        metavar="[N.]K",
+        help="run only the tests that award task K's points (of lab N: --task 4.2); repeatable",
+    )
+    group.addoption(
+        "--feedback",
+        choices=("short", "full"),
+        default=None,
+        help="failing graded tests: short (the message and your line; the "
+        "default) or full (pytest's traceback with the test's source and "
+        "tensors; also with -v)",
+    )
 
 
 def pytest_configure(config):
@@ -79,8 +101,10 @@ def pytest_configure(config):
         config.addinivalue_line("markers", marker)
     impl = config.getoption("--impl", None)
     if impl and impl not in ("solutions", "labs") and not Path(impl).expanduser().is_dir():
-        raise pytest.UsageError(f"--impl {impl}: no such folder (give the folder that holds "
-                                f"your lab files, or labs / solutions)")
+        raise pytest.UsageError(
+            f"--impl {impl}: no such folder (give the folder that holds "
+            f"your lab files, or labs / solutions)"
+        )
     for spec in config.getoption("--task", None) or ():
         parse_task(spec)
 
@@ -89,8 +113,9 @@ def parse_task(spec: str) -> tuple[int | None, int]:
     """``"2"`` -> (None, 2); ``"4.2"`` -> (4, 2)."""
     match = re.fullmatch(r"\s*(?:(\d+)\.)?(\d+)\s*", str(spec))
     if not match:
-        raise pytest.UsageError(f"--task {spec}: expected a task number K or LAB.K "
-                                f"(e.g. --task 2 or --task 4.2)")
+        raise pytest.UsageError(
+            f"--task {spec}: expected a task number K or LAB.K (e.g. --task 2 or --task 4.2)"
+        )
     return (int(match.group(1)) if match.group(1) else None), int(match.group(2))
 
 
@@ -121,7 +146,8 @@ def pytest_collection_modifyitems(config, items):
                 f"--task {' '.join(config.getoption('--task'))}: no graded test of "
                 f"{' or '.join(f'task {k}' + (f' of lab {n}' if n is not None else '') for n, k in specs)}"
                 f" among the {len(items)} tests collected (check the lab and task numbers "
-                f"in labs/README.md)")
+                f"in labs/README.md)"
+            )
         config.hook.pytest_deselected(items=[i for i in items if i not in keep])
         items[:] = keep
     has_cuda = torch.cuda.is_available()
@@ -129,10 +155,13 @@ def pytest_collection_modifyitems(config, items):
         visibility = item.get_closest_marker("visibility")
         if visibility is None and item.path.parent.name == "hidden":
             item.add_marker(pytest.mark.visibility(HIDDEN_DEFAULT))
-        elif visibility is not None and (len(visibility.args) != 1
-                                         or visibility.args[0] not in VISIBILITIES):
-            raise pytest.UsageError(f"{item.nodeid}: visibility{visibility.args} must be one "
-                                    f"of {', '.join(VISIBILITIES)}")
+        elif visibility is not None and (
+            len(visibility.args) != 1 or visibility.args[0] not in VISIBILITIES
+        ):
+            raise pytest.UsageError(
+                f"{item.nodeid}: visibility{visibility.args} must be one "
+                f"of {', '.join(VISIBILITIES)}"
+            )
         if "slow" in item.keywords and not config.getoption("--runslow"):
             item.add_marker(pytest.mark.skip(reason="slow test: run with --runslow"))
         if "gpu" in item.keywords and not has_cuda:
@@ -189,16 +218,21 @@ def handed_in(folder: Path) -> list[str]:
     folder = Path(folder)
     if not folder.is_dir():
         return []
-    return sorted(p.name + "/" * p.is_dir() for p in folder.iterdir()
-                  if not p.name.startswith((".", "__pycache__")))
+    return sorted(
+        p.name + "/" * p.is_dir()
+        for p in folder.iterdir()
+        if not p.name.startswith((".", "__pycache__"))
+    )
 
 
 def missing_file(folder: Path, name: str) -> str:
     """The one line for a lab file (or package folder) that is not in the submission: the
     submission as the student knows it, and the files it does hold (near misses of the
     name first)."""
-    text = (f"no {name}.py in {shown_folder(folder)}: the submission must contain the file "
-            f"{name}.py (or the folder {name}/ of a lab kept as a package)")
+    text = (
+        f"no {name}.py in {shown_folder(folder)}: the submission must contain the file "
+        f"{name}.py (or the folder {name}/ of a lab kept as a package)"
+    )
     files = handed_in(folder)
     close = [f for f in files if lab_file_rank(f.rsplit("/", 1)[-1], name) == 1]
     if close:
@@ -215,15 +249,15 @@ def graded_as(folder: Path, name: str) -> str | None:
     manifest = read_manifest(folder)
     if manifest is not None:
         files = manifest["files"]
-        mine = [(k, v) for k, v in files.items() if k == f"{name}.py" or k.startswith(
-            f"{name}/")]
+        mine = [(k, v) for k, v in files.items() if k == f"{name}.py" or k.startswith(f"{name}/")]
         taken = [v for _, v in mine if v is not None]
         if not taken:
             return None
         if any("/" in k for k, _ in mine):
             left = len(mine) - len(taken)
             return ", ".join(map(repr, taken)) + (
-                f" (the skeleton's other {left} file{'s' * (left != 1)})" if left else "")
+                f" (the skeleton's other {left} file{'s' * (left != 1)})" if left else ""
+            )
         return repr(taken[0])
     path = lab_source(folder, name)
     if path is None:
@@ -239,8 +273,10 @@ def syntax_problem(path: Path, name: str) -> str | None:
         try:
             compile(file.read_bytes(), str(file), "exec", dont_inherit=True)
         except SyntaxError as exc:
-            return (f"{shown} failed to import: {type(exc).__name__}: {exc.msg} "
-                    f"({shown}, line {exc.lineno})")
+            return (
+                f"{shown} failed to import: {type(exc).__name__}: {exc.msg} "
+                f"({shown}, line {exc.lineno})"
+            )
         except (ValueError, RecursionError, MemoryError) as exc:
             return f"{shown} failed to import: {type(exc).__name__}: {exc}"
     return None
@@ -279,10 +315,13 @@ class _Labs:
             else:
                 limit = self.config.getoption("--time-limit")
                 if self.worker is None:
-                    self.worker = Worker(str(self.folder), memory_bytes=int(
-                        self.config.getoption("--memory-limit") * 2**30))
-                self.loaded[name] = SandboxedLab(name, self.worker, limit,
-                                                 root=self.config.rootpath)
+                    self.worker = Worker(
+                        str(self.folder),
+                        memory_bytes=int(self.config.getoption("--memory-limit") * 2**30),
+                    )
+                self.loaded[name] = SandboxedLab(
+                    name, self.worker, limit, root=self.config.rootpath
+                )
         return self.loaded[name]
 
     def close(self):
@@ -304,8 +343,11 @@ def pytest_collection_finish(session):
     labs = _labs(session.config)
     if labs.trusted:
         return
-    names = {getattr(item.module, "LAB_MODULE", None) for item in session.items
-             if hasattr(item, "module") and "impl" in getattr(item, "fixturenames", ())}
+    names = {
+        getattr(item.module, "LAB_MODULE", None)
+        for item in session.items
+        if hasattr(item, "module") and "impl" in getattr(item, "fixturenames", ())
+    }
     present = sorted(n for n in names if n and lab_source(labs.folder, n) is not None)
     for name in present:
         try:
@@ -363,8 +405,7 @@ def pytest_runtest_makereport(item, call):
         text = worker.take_output()
         if text.strip():
             report.sections.append((f"submission output {call.when}", text))
-    if report.failed and call.excinfo is not None \
-            and item.get_closest_marker("points") is not None:
+    if report.failed and call.excinfo is not None and item.get_closest_marker("points") is not None:
         _give_feedback(item, call, report)
 
 
@@ -414,9 +455,16 @@ def _give_feedback(item, call, report):
     if module in labs.problems and str(exc) == labs.problems[module]:
         feedback = Feedback(labs.problems[module], problem=labs.problems[module])
     else:
-        feedback = short_feedback(exc=exc, frames=_frames(call.excinfo), test_file=item.path,
-                                  folder=labs.folder, task=task, task_of=tasks.get,
-                                  lab_module=module, header=_header(item, task))
+        feedback = short_feedback(
+            exc=exc,
+            frames=_frames(call.excinfo),
+            test_file=item.path,
+            folder=labs.folder,
+            task=task,
+            task_of=tasks.get,
+            lab_module=module,
+            header=_header(item, task),
+        )
     if IMPORT_FAILED in str(exc) and module and module not in labs.problems:
         labs.problems[module] = feedback.text  # the rest of the lab's tests fail at once
     problem = labs.problems.get(module)

@@ -96,8 +96,10 @@ def memory_room(cgroup: str = "/sys/fs/cgroup", meminfo: str = "/proc/meminfo") 
     usage (cgroup v2, else v1), and at most the kernel's ``MemAvailable``; None when neither
     is known. A grading container (Gradescope's: 768 MB) is far below the default limit."""
     free = []
-    for limit, usage in (("memory.max", "memory.current"),
-                         ("memory/memory.limit_in_bytes", "memory/memory.usage_in_bytes")):
+    for limit, usage in (
+        ("memory.max", "memory.current"),
+        ("memory/memory.limit_in_bytes", "memory/memory.usage_in_bytes"),
+    ):
         try:
             text = Path(cgroup, limit).read_text().strip()
             if text != "max" and int(text) < 2**60:  # v1 says "no limit" with a huge number

@@ -22,9 +22,15 @@ class Redactor:
             return
         root = Path(root)
         visible = set()
-        for path in [*root.glob("tests/test_*.py"),
-                     *(f for p in [*root.glob("labs/lab*"), *root.glob("solutions/lab*")]
-                       for f in module_files(p) if f.suffix == ".py")]:
+        for path in [
+            *root.glob("tests/test_*.py"),
+            *(
+                f
+                for p in [*root.glob("labs/lab*"), *root.glob("solutions/lab*")]
+                for f in module_files(p)
+                if f.suffix == ".py"
+            ),
+        ]:
             visible |= _source_lines(path)
         for path in root.glob("tests/hidden/*.py"):
             self.lines |= _source_lines(path) - visible
@@ -92,8 +98,10 @@ def reference_signatures(path) -> dict[str, list[str]] | None:
             table[node.name] = []
             for item in node.body:
                 if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                    static = any(isinstance(d, ast.Name) and d.id == "staticmethod"
-                                 for d in item.decorator_list)
+                    static = any(
+                        isinstance(d, ast.Name) and d.id == "staticmethod"
+                        for d in item.decorator_list
+                    )
                     key = node.name if item.name == "__init__" else f"{node.name}.{item.name}"
                     table[key] = names(item, not static)
     return table

@@ -79,23 +79,36 @@ def encode(obj, refs=None):
         return obj
     if isinstance(obj, torch.Tensor):
         with torch._C.DisableTorchFunctionSubclass():
-            return {TAG: "tensor", "dtype": str(obj.dtype).removeprefix("torch."),
-                    "shape": tuple(obj.shape), "device": str(obj.device),
-                    "data": _tensor_bytes(obj)}
+            return {
+                TAG: "tensor",
+                "dtype": str(obj.dtype).removeprefix("torch."),
+                "shape": tuple(obj.shape),
+                "device": str(obj.device),
+                "data": _tensor_bytes(obj),
+            }
     if isinstance(obj, np.ndarray) and obj.dtype.kind in "biufc":
-        return {TAG: "ndarray", "dtype": obj.dtype.str, "shape": obj.shape,
-                "data": np.ascontiguousarray(obj).tobytes()}
+        return {
+            TAG: "ndarray",
+            "dtype": obj.dtype.str,
+            "shape": obj.shape,
+            "data": np.ascontiguousarray(obj).tobytes(),
+        }
     if isinstance(obj, np.generic) and obj.dtype.kind in "biufc":
         return obj.item()
     if isinstance(obj, torch.dtype):
         return {TAG: "dtype", "name": str(obj).removeprefix("torch.")}
     if isinstance(obj, torch.device):
         return {TAG: "device", "name": str(obj)}
-    if (dataclasses.is_dataclass(obj) and not isinstance(obj, type)
-            and type(obj).__module__.startswith("course.")):
-        return {TAG: "dataclass", "cls": f"{type(obj).__module__}:{type(obj).__qualname__}",
-                "fields": {f.name: encode(getattr(obj, f.name), refs)
-                           for f in dataclasses.fields(obj)}}
+    if (
+        dataclasses.is_dataclass(obj)
+        and not isinstance(obj, type)
+        and type(obj).__module__.startswith("course.")
+    ):
+        return {
+            TAG: "dataclass",
+            "cls": f"{type(obj).__module__}:{type(obj).__qualname__}",
+            "fields": {f.name: encode(getattr(obj, f.name), refs) for f in dataclasses.fields(obj)},
+        }
     if type(obj) in (list, tuple) or isinstance(obj, tuple):  # named tuples travel as tuples
         items = [encode(x, refs) for x in obj]
         return items if type(obj) is list else tuple(items)
@@ -123,9 +136,23 @@ def _encode_function(fn) -> dict:
 
 _ALLOWED_DTYPES = {
     name: getattr(torch, name)
-    for name in ("float16", "bfloat16", "float32", "float64", "uint8", "int8", "int16",
-                 "int32", "int64", "bool", "complex64", "complex128", "uint16", "uint32",
-                 "uint64")
+    for name in (
+        "float16",
+        "bfloat16",
+        "float32",
+        "float64",
+        "uint8",
+        "int8",
+        "int16",
+        "int32",
+        "int64",
+        "bool",
+        "complex64",
+        "complex128",
+        "uint16",
+        "uint32",
+        "uint64",
+    )
     if hasattr(torch, name)
 }
 
@@ -148,8 +175,11 @@ class _Budget:
 
 def _shape(d) -> tuple:
     shape = d["shape"]
-    if type(shape) not in (tuple, list) or len(shape) > 64 or any(
-            type(s) is not int or s < 0 for s in shape):
+    if (
+        type(shape) not in (tuple, list)
+        or len(shape) > 64
+        or any(type(s) is not int or s < 0 for s in shape)
+    ):
         raise TypeError(f"malformed shape {shape!r}")
     return tuple(shape)
 
@@ -166,8 +196,9 @@ def _decode_tensor(d, device_map, budget=None) -> torch.Tensor:
     for s in shape:
         numel *= s
     if numel * torch.empty((), dtype=dtype).element_size() != len(data):
-        raise TypeError(f"tensor of shape {shape} and dtype {d['dtype']} with {len(data)} "
-                        f"bytes of data")
+        raise TypeError(
+            f"tensor of shape {shape} and dtype {d['dtype']} with {len(data)} bytes of data"
+        )
     if budget is not None:
         budget.take(len(data))
     if len(data) == 0:
@@ -239,8 +270,9 @@ def _decode(obj, make_ref, allow_functions, budget):
         if dtype.kind not in "biufc":
             raise TypeError(f"array of unsupported dtype {dtype}")
         shape, data = _shape(obj), obj["data"]
-        if not isinstance(data, (bytes, bytearray)) or int(np.prod(shape)) * dtype.itemsize \
-                != len(data):
+        if not isinstance(data, (bytes, bytearray)) or int(np.prod(shape)) * dtype.itemsize != len(
+            data
+        ):
             raise TypeError(f"array of shape {shape} and dtype {dtype} with malformed data")
         if budget is not None:
             budget.take(len(data))

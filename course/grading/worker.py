@@ -89,18 +89,29 @@ def _error(exc: BaseException, folder: str) -> dict:
         except Exception:
             message = f"<{type(exc).__name__} whose message cannot be printed>"
     root = os.path.realpath(folder) + os.sep
-    frames = [f for f in traceback.extract_tb(exc.__traceback__)
-              if os.path.realpath(f.filename).startswith(root)]
+    frames = [
+        f
+        for f in traceback.extract_tb(exc.__traceback__)
+        if os.path.realpath(f.filename).startswith(root)
+    ]
     text = "".join(traceback.format_list(frames[-6:]))[-3000:]
     if text:
         text = "Traceback (the submission's frames, most recent call last):\n" + text
-    return {"kinds": kinds, "type": type(exc).__name__, "message": message[:3000],
-            "traceback": text}
+    return {
+        "kinds": kinds,
+        "type": type(exc).__name__,
+        "message": message[:3000],
+        "traceback": text,
+    }
 
 
 def _assertion(message: str) -> dict:
-    return {"kinds": ["AssertionError", "Exception", "BaseException"],
-            "type": "AssertionError", "message": message, "traceback": ""}
+    return {
+        "kinds": ["AssertionError", "Exception", "BaseException"],
+        "type": "AssertionError",
+        "message": message,
+        "traceback": "",
+    }
 
 
 def _reply_bytes(reply: dict, wire, limit: int, where: str, folder: str) -> bytes:
@@ -108,25 +119,50 @@ def _reply_bytes(reply: dict, wire, limit: int, where: str, folder: str) -> byte
     try:
         data = wire.dumps(reply)
     except BaseException as exc:
-        data = wire.dumps({"error": _error(exc, folder), "output": reply.get("output", ""),
-                           "nonce": reply.get("nonce")})
+        data = wire.dumps(
+            {
+                "error": _error(exc, folder),
+                "output": reply.get("output", ""),
+                "nonce": reply.get("nonce"),
+            }
+        )
     if len(data) > limit:
         size = len(data)
         del data
-        data = wire.dumps({"error": _assertion(too_large_message(where, size, limit)),
-                           "output": reply.get("output", ""), "nonce": reply.get("nonce")})
+        data = wire.dumps(
+            {
+                "error": _assertion(too_large_message(where, size, limit)),
+                "output": reply.get("output", ""),
+                "nonce": reply.get("nonce"),
+            }
+        )
     return data
 
 
 # ---------------------------------------------------------------- the probe fingerprint
 
+
 def _watched_modules(wide):
     for name, module in list(sys.modules.items()):
         if module is None or name.startswith("submission_"):
             continue
-        if name in ("course", "__main__") or name.startswith(("course.", "rtcourse_file_")) \
-                or wide and name in ("numpy", "torch", "numpy.testing", "torch.testing", "builtins",
-                                      "inspect", "types", "math", "dataclasses"):
+        if (
+            name in ("course", "__main__")
+            or name.startswith(("course.", "rtcourse_file_"))
+            or wide
+            and name
+            in (
+                "numpy",
+                "torch",
+                "numpy.testing",
+                "torch.testing",
+                "builtins",
+                "inspect",
+                "types",
+                "math",
+                "dataclasses",
+            )
+        ):
             yield name, module
 
 
@@ -144,11 +180,17 @@ def fingerprint(wide=True):
         for key, value in list(vars(module).items()):
             if value is None:
                 continue  # a lazily filled cache (``_MODULE = None``)
-            entries[key] = (value, getattr(value, "__code__", None),
-                            getattr(value, "__defaults__", None),
-                            getattr(value, "__kwdefaults__", None))
-            if (isinstance(value, type) and getattr(value, "__module__", None) == name
-                    and name.startswith(("course", "rtcourse_file_", "__main__"))):
+            entries[key] = (
+                value,
+                getattr(value, "__code__", None),
+                getattr(value, "__defaults__", None),
+                getattr(value, "__kwdefaults__", None),
+            )
+            if (
+                isinstance(value, type)
+                and getattr(value, "__module__", None) == name
+                and name.startswith(("course", "rtcourse_file_", "__main__"))
+            ):
                 seen[f"{name}.{key}"] = (value, dict(vars(value)))
         seen[name] = (module, entries)
     if wide:
@@ -173,9 +215,12 @@ def fingerprint_changes(before) -> list[str]:
         now = vars(obj)
         for key, (value, code, defaults, kwdefaults) in entries.items():
             current = now.get(key, changed)
-            if current is not value or getattr(current, "__code__", None) is not code \
-                    or getattr(current, "__defaults__", None) is not defaults \
-                    or getattr(current, "__kwdefaults__", None) is not kwdefaults:
+            if (
+                current is not value
+                or getattr(current, "__code__", None) is not code
+                or getattr(current, "__defaults__", None) is not defaults
+                or getattr(current, "__kwdefaults__", None) is not kwdefaults
+            ):
                 changed.append(f"{name}.{key}")
     return changed
 
@@ -229,8 +274,11 @@ class _Labs:
 
 
 def _import_error(err):
-    return {"error": dict(err, message="the lab module failed to import: " + err["type"]
-                          + ": " + err["message"])}
+    return {
+        "error": dict(
+            err, message="the lab module failed to import: " + err["type"] + ": " + err["message"]
+        )
+    }
 
 
 def _serve(request, labs, refs, wire):
@@ -258,9 +306,15 @@ def _serve(request, labs, refs, wire):
     # top-level tensor); the grader decides by the reference's names what may change.
     import torch
 
-    written = [(c.position, c.keyword, c.path,
-                wire.encode(c.value) if c.path == "" and isinstance(c.value, torch.Tensor)
-                else None) for c in changed]
+    written = [
+        (
+            c.position,
+            c.keyword,
+            c.path,
+            wire.encode(c.value) if c.path == "" and isinstance(c.value, torch.Tensor) else None,
+        )
+        for c in changed
+    ]
     if error is not None:
         return {"error": _error(error, labs.folder), "written": written}
     try:
@@ -293,14 +347,21 @@ def _child(ctl_fd, memory_bytes, uid, gid, keeper):
 
 def _tampered(changed) -> str:
     shown = ", ".join(changed[:5]) + (" ..." if len(changed) > 5 else "")
-    return (f"the submission changed the grader's own code ({shown}): what the grader's "
-            f"side of the sandbox reports cannot be trusted, so the test fails")
+    return (
+        f"the submission changed the grader's own code ({shown}): what the grader's "
+        f"side of the sandbox reports cannot be trusted, so the test fails"
+    )
 
 
 def _server(conn, folder, reply_bytes, capture, wire):
     # Bound before any submission runs: replacing these names in the module changes nothing.
-    serve, changes_of, take, pack, loads = (_serve, fingerprint_changes, _take_output,
-                                            _reply_bytes, wire.pickle.loads)
+    serve, changes_of, take, pack, loads = (
+        _serve,
+        fingerprint_changes,
+        _take_output,
+        _reply_bytes,
+        wire.pickle.loads,
+    )
     labs = _Labs(folder, wire)
     refs: dict[int, object] = {}
     before = fingerprint(wide=False)
@@ -318,8 +379,7 @@ def _server(conn, folder, reply_bytes, capture, wire):
         if tampered is not None:  # from then on, every call fails
             reply = {"error": _assertion(tampered)}
         reply["output"] = take(capture)
-        conn.send_bytes(pack(reply, wire, reply_bytes, request.get("where", "the call"),
-                             folder))
+        conn.send_bytes(pack(reply, wire, reply_bytes, request.get("where", "the call"), folder))
 
 
 def _load_probe(request, folder, wire):
@@ -419,8 +479,9 @@ def main(argv):
             request = ctl.recv_bytes()
         except (EOFError, OSError):
             break
-        ctl.send_bytes(_run_probe(request, ctl_fd, folder, memory_bytes, reply_bytes, uid,
-                                  gid, wire))
+        ctl.send_bytes(
+            _run_probe(request, ctl_fd, folder, memory_bytes, reply_bytes, uid, gid, wire)
+        )
     clean()
     _exit_like(status)
 
@@ -467,8 +528,9 @@ def _run_probe(request_bytes, ctl_fd, folder, memory_bytes, reply_bytes, uid, gi
         os.kill(pid, signal.SIGKILL)
     _, status = os.waitpid(pid, 0)
     if size > reply_bytes:
-        return wire.dumps({"error": _assertion(too_large_message(where, size, reply_bytes)),
-                           "nonce": nonce})
+        return wire.dumps(
+            {"error": _assertion(too_large_message(where, size, reply_bytes)), "nonce": nonce}
+        )
     if size == 0 or len(data) < size:
         return wire.dumps({"crashed": os.waitstatus_to_exitcode(status)})
     return data

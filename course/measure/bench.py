@@ -11,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import json
-import math
 import os
 import platform
 import re
@@ -26,6 +25,15 @@ from pathlib import Path
 import torch
 
 from course.core.device import default_device
+from course.measure.plots import (  # re-exported: the benches import them from here
+    pareto_front as pareto_front,
+)
+from course.measure.plots import (
+    pareto_plot as pareto_plot,
+)
+from course.measure.plots import (
+    trade_plot as trade_plot,
+)
 
 
 @dataclass(frozen=True)
@@ -41,23 +49,34 @@ class Timing:
     method: str  # "cuda-events", "cuda-graph" or "perf_counter"
 
     def __str__(self) -> str:
-        return (f"{self.median * 1e3:.3f} ms (median of {self.repeats}, "
-                f"min {self.min * 1e3:.3f} ms, {self.method} on {self.device})")
+        return (
+            f"{self.median * 1e3:.3f} ms (median of {self.repeats}, "
+            f"min {self.min * 1e3:.3f} ms, {self.method} on {self.device})"
+        )
 
 
 def _tensor_device(args: Sequence) -> torch.device | None:
     """The device of the first tensor among ``args`` or their dataclass fields (Rays, Mesh)."""
     for arg in args:
-        values = ([getattr(arg, f.name) for f in dataclasses.fields(arg)]
-                  if dataclasses.is_dataclass(arg) else [arg])
+        values = (
+            [getattr(arg, f.name) for f in dataclasses.fields(arg)]
+            if dataclasses.is_dataclass(arg)
+            else [arg]
+        )
         for value in values:
             if isinstance(value, torch.Tensor):
                 return value.device
     return None
 
 
-def time_fn(fn: Callable, *args, repeats: int = 20, warmup: int = 3,
-            device: str | torch.device | None = None, **kwargs) -> Timing:
+def time_fn(
+    fn: Callable,
+    *args,
+    repeats: int = 20,
+    warmup: int = 3,
+    device: str | torch.device | None = None,
+    **kwargs,
+) -> Timing:
     """Time ``fn(*args, **kwargs)``; returns its per-call ``Timing`` in seconds.
 
     device: where ``fn`` runs; by default the device of the first tensor argument (looking
@@ -77,9 +96,15 @@ def time_fn(fn: Callable, *args, repeats: int = 20, warmup: int = 3,
         seconds, method = _time_cuda(fn, args, kwargs, repeats, device), "cuda-events"
     else:
         seconds, method = _time_cpu(fn, args, kwargs, repeats), "perf_counter"
-    return Timing(median=statistics.median(seconds), min=min(seconds), max=max(seconds),
-                  mean=statistics.fmean(seconds), repeats=repeats, device=str(device),
-                  method=method)
+    return Timing(
+        median=statistics.median(seconds),
+        min=min(seconds),
+        max=max(seconds),
+        mean=statistics.fmean(seconds),
+        repeats=repeats,
+        device=str(device),
+        method=method,
+    )
 
 
 def _time_cuda(fn, args, kwargs, repeats: int, device: torch.device) -> list[float]:
@@ -95,8 +120,9 @@ def _time_cuda(fn, args, kwargs, repeats: int, device: torch.device) -> list[flo
     return [start.elapsed_time(end) / 1e3 for start, end in zip(starts, ends)]
 
 
-def time_replayed(fn: Callable, *args, calls: int = 10, repeats: int = 20, warmup: int = 3,
-                  **kwargs) -> Timing:
+def time_replayed(
+    fn: Callable, *args, calls: int = 10, repeats: int = 20, warmup: int = 3, **kwargs
+) -> Timing:
     """The device time of ``fn(*args, **kwargs)`` alone: on CUDA, ``calls`` calls captured
     in one CUDA graph, replayed ``repeats`` times between events (seconds per call, method
     ``"cuda-graph"``); on the CPU, :func:`time_fn`.
@@ -134,9 +160,15 @@ def time_replayed(fn: Callable, *args, calls: int = 10, repeats: int = 20, warmu
             end.record()
             end.synchronize()
             seconds.append(start.elapsed_time(end) / 1e3 / calls)
-    return Timing(median=statistics.median(seconds), min=min(seconds), max=max(seconds),
-                  mean=statistics.fmean(seconds), repeats=repeats, device=str(device),
-                  method="cuda-graph")
+    return Timing(
+        median=statistics.median(seconds),
+        min=min(seconds),
+        max=max(seconds),
+        mean=statistics.fmean(seconds),
+        repeats=repeats,
+        device=str(device),
+        method="cuda-graph",
+    )
 
 
 def _time_cpu(fn, args, kwargs, repeats: int) -> list[float]:
@@ -182,9 +214,14 @@ class ResultTable:
     >>> table.to_json("bench/results/cpu-8cores/lab1.json")
     """
 
-    def __init__(self, name: str = "", device: str | torch.device | None = None,
-                 metadata: dict | None = None, rows: list[dict] | None = None,
-                 total: int | None = None):
+    def __init__(
+        self,
+        name: str = "",
+        device: str | torch.device | None = None,
+        metadata: dict | None = None,
+        rows: list[dict] | None = None,
+        total: int | None = None,
+    ):
         self.name = name
         self.metadata = metadata if metadata is not None else self._collect_metadata(device)
         self.rows: list[dict] = list(rows or [])
@@ -194,10 +231,14 @@ class ResultTable:
     @staticmethod
     def _collect_metadata(device) -> dict:
         device = default_device(device)
-        return {"device": _device_description(device), "device_name": device_name(device),
-                "torch": torch.__version__, "python": platform.python_version(),
-                "command": shlex.join(sys.argv),
-                "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+        return {
+            "device": _device_description(device),
+            "device_name": device_name(device),
+            "torch": torch.__version__,
+            "python": platform.python_version(),
+            "command": shlex.join(sys.argv),
+            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        }
 
     def add(self, **row) -> dict:
         """Append one row, e.g. ``add(variant="woop", seconds=t.median, max_error=e)``."""
@@ -227,8 +268,10 @@ class ResultTable:
         """Write ``{"name", "metadata", "rows"}`` to ``path`` (folders are created)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"name": self.name, "metadata": self.metadata,
-                                    "rows": self.rows}, indent=2) + "\n")
+        path.write_text(
+            json.dumps({"name": self.name, "metadata": self.metadata, "rows": self.rows}, indent=2)
+            + "\n"
+        )
         return path
 
     @classmethod
@@ -252,97 +295,17 @@ def _cell(value) -> str:
     return str(value)
 
 
-def pareto_front(rows: Sequence[dict], x: str, y: str, maximize_x: bool = False) -> list[int]:
-    """Indices of the rows no other row beats on both ``x`` and ``y`` (lower ``y`` is better).
-
-    Rows lacking a finite ``x`` or ``y`` are ignored. Returned in order of improving x.
-    """
-    usable = [i for i, row in enumerate(rows) if _finite(row.get(x)) and _finite(row.get(y))]
-    sign = -1.0 if maximize_x else 1.0
-    # Sweep from the best x to the worst: a row is on the front iff its y beats all before it.
-    order = sorted(usable, key=lambda i: (sign * rows[i][x], rows[i][y]))
-    front, best_y = [], math.inf
-    for i in order:
-        if rows[i][y] < best_y:
-            front.append(i)
-            best_y = rows[i][y]
-    return front
-
-
-def _finite(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def _is_throughput(key: str) -> bool:
-    return any(part in key for part in ("per_s", "/s", "throughput"))
-
-
-def pareto_plot(rows: Sequence[dict], x: str = "seconds", y: str = "error",
-                label: str | None = None, path: str | Path | None = None,
-                maximize_x: bool | None = None, group: str | None = None,
-                log: bool = True, title: str | None = None):
-    """Scatter ``y`` (an error, lower is better) against ``x`` (cost or throughput) and mark
-    the Pareto front: the settings worth choosing. Returns the matplotlib Figure.
-
-    label: key whose value annotates each point (e.g. ``"setting"``);
-    group: key whose values get one colour each (e.g. ``"variant"``);
-    maximize_x: whether higher ``x`` is better; by default True for keys that look like a
-    throughput (``"rays_per_s"``, ``"throughput"``) and False for times;
-    log: log axes (symmetric-log where a column holds zeros, e.g. an exact setting's error);
-    path: where to save the figure (PNG, SVG or PDF by suffix).
-    """
-    from matplotlib.figure import Figure  # object-oriented: no pyplot state, no GUI backend
-
-    maximize_x = _is_throughput(x) if maximize_x is None else maximize_x
-    points = [i for i, row in enumerate(rows) if _finite(row.get(x)) and _finite(row.get(y))]
-    if not points:
-        raise ValueError(f"rows: no row has finite values for both x={x!r} and y={y!r}")
-    fig = Figure(figsize=(6.4, 4.8), layout="constrained")
-    ax = fig.add_subplot()
-    groups = dict.fromkeys(rows[i].get(group) for i in points) if group else {None: None}
-    for value in groups:
-        members = [i for i in points if group is None or rows[i].get(group) == value]
-        ax.scatter([rows[i][x] for i in members], [rows[i][y] for i in members],
-                   label=None if group is None else f"{group}={value}", alpha=0.8)
-    front = pareto_front(rows, x, y, maximize_x)
-    ax.plot([rows[i][x] for i in front], [rows[i][y] for i in front], "k--", marker="o",
-            markerfacecolor="none", markersize=11, label="Pareto front")
-    if label:
-        for i in points:
-            ax.annotate(str(rows[i].get(label, "")), (rows[i][x], rows[i][y]),
-                        textcoords="offset points", xytext=(4, 4), fontsize=8)
-    if log:
-        _log_scale(ax.set_xscale, [rows[i][x] for i in points])
-        _log_scale(ax.set_yscale, [rows[i][y] for i in points])
-    ax.set_xlabel(f"{x} ({'higher' if maximize_x else 'lower'} is better)")
-    ax.set_ylabel(f"{y} (lower is better)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
-    if title:
-        ax.set_title(title)
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=150)
-    return fig
-
-
-def _log_scale(set_scale, values: list[float]) -> None:
-    """Log scale, or symmetric log when some values are <= 0 (a log axis would drop them)."""
-    positive = [abs(v) for v in values if v != 0]
-    if all(v > 0 for v in values):
-        set_scale("log")
-    elif positive:
-        set_scale("symlog", linthresh=min(positive))
-
-
 def add_impl_option(parser) -> None:
     """The ``--impl`` option of a bench script: which implementation of the labs it measures
     (:func:`load_lab`'s ``impl``; the default, ``RTCOURSE_IMPL`` or else solutions/ where it
     exists and labs/ in the student handout, is what the grader runs too)."""
-    parser.add_argument("--impl", default=os.environ.get("RTCOURSE_IMPL") or None,
-                        help="the labs measured: labs (yours), solutions (the references, "
-                             "in the course repository) or a folder of lab files (default: "
-                             "solutions where present, else labs)")
+    parser.add_argument(
+        "--impl",
+        default=os.environ.get("RTCOURSE_IMPL") or None,
+        help="the labs measured: labs (yours), solutions (the references, "
+        "in the course repository) or a folder of lab files (default: "
+        "solutions where present, else labs)",
+    )
 
 
 def load_lab(name: str, impl: str | None = None, root=None):
@@ -383,8 +346,11 @@ def _calibration_work(origins, directions, corners) -> torch.Tensor:
     from course.core.raymath import cross, dot
 
     o, d = origins[:, None], directions[:, None]
-    v0, e1, e2 = corners[None, :, 0], corners[None, :, 1] - corners[None, :, 0], \
-        corners[None, :, 2] - corners[None, :, 0]
+    v0, e1, e2 = (
+        corners[None, :, 0],
+        corners[None, :, 1] - corners[None, :, 0],
+        corners[None, :, 2] - corners[None, :, 0],
+    )
     p = cross(d, e2)
     det = dot(e1, p)
     inv = 1.0 / det
@@ -447,70 +413,7 @@ def read_rows_csv(path: str | Path) -> list[dict]:
     import csv
 
     with Path(path).open(newline="") as f:
-        return [{k: v for k, v in ((k, _parse_cell(v)) for k, v in row.items()) if v is not None}
-                for row in csv.DictReader(f)]
-
-
-def trade_plot(reference: Sequence[dict], yours: Sequence[dict], extra: Sequence[dict] = (),
-               x: str = "seconds", y: str = "error", label: str = "setting",
-               path: str | Path | None = None, title: str | None = None,
-               yours_name: str = "yours", reference_name: str = "reference", ax=None):
-    """Your points over the reference's: the reference's rows in grey with their Pareto front
-    (dashed), ``extra`` rows (fused kernels) as grey triangles, and yours as red stars,
-    each labelled with its ``label`` and joined to the reference's point of the same
-    setting by a thin line (where the two differ, the line shows by how much and which
-    way). Log axes (symmetric-log where a column holds zeros: exact settings). Draws into
-    ``ax`` (a matplotlib Axes) when given, else into a new Figure; returns the Figure,
-    saved to ``path`` when given."""
-    from matplotlib.figure import Figure
-
-    def usable(rows):
-        return [r for r in rows if _finite(r.get(x)) and _finite(r.get(y))]
-
-    reference, yours, extra = usable(reference), usable(yours), usable(extra)
-    everything = reference + yours + extra
-    if not everything:
-        raise ValueError(f"rows: no row has finite values for both x={x!r} and y={y!r}")
-    if ax is None:
-        fig = Figure(figsize=(7.2, 5.0), layout="constrained")
-        ax = fig.add_subplot()
-    fig = ax.figure
-    if reference:
-        ax.scatter([r[x] for r in reference], [r[y] for r in reference], color="0.55", s=30,
-                   label=reference_name, zorder=2)
-        front = [reference[i] for i in pareto_front(reference, x, y)]
-        ax.plot([r[x] for r in front], [r[y] for r in front], "--", color="0.3", lw=1,
-                label=f"{reference_name}: Pareto front", zorder=1)
-    if extra:
-        ax.scatter([r[x] for r in extra], [r[y] for r in extra], marker="^", color="0.35",
-                   s=40, label="fused kernels", zorder=2)
-    if yours:
-        by_setting = {r.get(label): r for r in reference}
-        for r in yours:
-            twin = by_setting.get(r.get(label))
-            if twin is not None:
-                ax.plot([twin[x], r[x]], [twin[y], r[y]], "-", color="tab:red", lw=0.6,
-                        alpha=0.5, zorder=1)
-        ax.scatter([r[x] for r in yours], [r[y] for r in yours], marker="*", s=110,
-                   color="tab:red", label=yours_name, zorder=3)
-    # Labels on your points where they are few, else on the reference's front only: twenty
-    # labels on top of each other are read by nobody.
-    named = yours if 0 < len(yours) <= 12 else \
-        [reference[i] for i in pareto_front(reference, x, y)] if reference else yours
-    for r in named:
-        ax.annotate(str(r.get(label, "")), (r[x], r[y]), textcoords="offset points",
-                    xytext=(4, 3), fontsize=7)
-    _log_scale(ax.set_xscale, [r[x] for r in everything])
-    _log_scale(ax.set_yscale, [r[y] for r in everything])
-    if min(r[y] for r in everything) >= 0:  # errors: a symlog axis need not show negatives
-        ax.set_ylim(bottom=0 if ax.get_yscale() == "symlog" else None)
-    ax.set_xlabel(f"{x} (lower is better)")
-    ax.set_ylabel(f"{y} (lower is better)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    if title:
-        ax.set_title(title, fontsize=10)
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=120)
-    return fig
+        return [
+            {k: v for k, v in ((k, _parse_cell(v)) for k, v in row.items()) if v is not None}
+            for row in csv.DictReader(f)
+        ]

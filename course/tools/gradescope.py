@@ -140,8 +140,11 @@ exit 0
 
 def _script(template: str, labs) -> str:
     lab_args = " ".join(f"--lab {int(n)}" for n in sorted(set(labs or ())))
-    return (template.replace("@PACKAGE@", PACKAGE).replace("@USER@", STUDENT_USER)
-            .replace("@LABS@", lab_args))
+    return (
+        template.replace("@PACKAGE@", PACKAGE)
+        .replace("@USER@", STUDENT_USER)
+        .replace("@LABS@", lab_args)
+    )
 
 
 def package_files(root) -> list[Path]:
@@ -185,8 +188,10 @@ def _ranked(candidates, filename: str, submission: Path) -> list[Path]:
     """The files of ``candidates`` named ``filename`` or a near miss of it ("grid (1).py"),
     best first: the exact name, then the shallowest."""
     stem = filename[:-3]
-    ranked = [(lab_file_rank(p.name, stem), len(p.relative_to(submission).parts), str(p), p)
-              for p in candidates]
+    ranked = [
+        (lab_file_rank(p.name, stem), len(p.relative_to(submission).parts), str(p), p)
+        for p in candidates
+    ]
     return [p for rank, *_, p in sorted(r for r in ranked if r[0] is not None)]
 
 
@@ -227,9 +232,14 @@ def collect_submission(submission, dest, modules, skeletons=None) -> dict[str, P
     submission, dest = Path(submission), Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     found: dict[str, Path | None] = {}
-    handed_in = sorted(p for p in submission.rglob("*") if (p.is_file() or p.is_symlink())
-                       and not any(part.startswith(".") or part == "__MACOSX"
-                                   for part in p.relative_to(submission).parts))
+    handed_in = sorted(
+        p
+        for p in submission.rglob("*")
+        if (p.is_file() or p.is_symlink())
+        and not any(
+            part.startswith(".") or part == "__MACOSX" for part in p.relative_to(submission).parts
+        )
+    )
     candidates = [p for p in handed_in if p.suffix == ".py"]
     for module in modules:
         package = lab_source(skeletons, module) if skeletons is not None else None
@@ -238,10 +248,18 @@ def collect_submission(submission, dest, modules, skeletons=None) -> dict[str, P
             path = _copy_first(_ranked(candidates, target.name, submission), target)
             found[target.name] = path.relative_to(submission) if path else None
             continue
-        folders = sorted({p.parent for p in candidates
-                          if lab_file_rank(p.parent.name + ".py", module) is not None},
-                         key=lambda f: (lab_file_rank(f.name + ".py", module),
-                                        len(f.relative_to(submission).parts), str(f)))
+        folders = sorted(
+            {
+                p.parent
+                for p in candidates
+                if lab_file_rank(p.parent.name + ".py", module) is not None
+            },
+            key=lambda f: (
+                lab_file_rank(f.name + ".py", module),
+                len(f.relative_to(submission).parts),
+                str(f),
+            ),
+        )
         files = module_files(package)
         mine: dict[str, Path | None] = {}
         for file in files:
@@ -251,8 +269,14 @@ def collect_submission(submission, dest, modules, skeletons=None) -> dict[str, P
             else:
                 pool = [p for p in candidates if name != "__init__.py"]
             paths = _ranked(pool, Path(name).name, submission)
-            chosen = next((p for p in paths if not p.is_symlink() and p.is_file()
-                           and p.stat().st_size <= _MAX_LAB_FILE), None)
+            chosen = next(
+                (
+                    p
+                    for p in paths
+                    if not p.is_symlink() and p.is_file() and p.stat().st_size <= _MAX_LAB_FILE
+                ),
+                None,
+            )
             mine[f"{module}/{name}"] = chosen
         if any(mine.values()):
             for file in files:
@@ -262,10 +286,11 @@ def collect_submission(submission, dest, modules, skeletons=None) -> dict[str, P
                 if _copy_first([chosen] if chosen else [], target) is None:
                     target.parent.mkdir(parents=True, exist_ok=True)
                     shutil.copyfile(file, target)  # the skeleton's: its tasks score 0
-        found.update({name: p.relative_to(submission) if p else None
-                      for name, p in mine.items()})
-    manifest = {"files": {name: p.as_posix() if p else None for name, p in found.items()},
-                "handed_in": [p.relative_to(submission).as_posix() for p in handed_in]}
+        found.update({name: p.relative_to(submission) if p else None for name, p in mine.items()})
+    manifest = {
+        "files": {name: p.as_posix() if p else None for name, p in found.items()},
+        "handed_in": [p.relative_to(submission).as_posix() for p in handed_in],
+    }
     (dest / SUBMISSION_MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
     return found
 
@@ -279,9 +304,16 @@ def _collect_main(submission: str, dest: str, labs=None) -> int:
     handed_in = {name.split("/")[0] for name, path in found.items() if path}
     for name, path in found.items():
         partial = "/" in name and name.split("/")[0] in handed_in  # a package's file
-        print(f"{name:<24} " + (f"found: {path}" if path else
-                                "not in the submission: the skeleton's is graded"
-                                if partial else "not in the submission: its lab scores 0"))
+        print(
+            f"{name:<24} "
+            + (
+                f"found: {path}"
+                if path
+                else "not in the submission: the skeleton's is graded"
+                if partial
+                else "not in the submission: its lab scores 0"
+            )
+        )
     return 0
 
 

@@ -30,17 +30,38 @@ from course.tools.skeletons import write as write_skeletons
 
 # Paths (relative to the repository root) that never ship to students.
 # tests/contracts names hidden tests and the mutants each one catches: the graders' own notes.
-WITHHELD = ("solutions", "tests/meta", "tests/hidden", "tests/contracts", ".git", ".venv", ".ci",
-            "out", "build", "dist")
-_IGNORED_NAMES = ("__pycache__", ".pytest_cache", ".ruff_cache", ".ipynb_checkpoints",
-                  "*.egg-info", "results.json")
+WITHHELD = (
+    "solutions",
+    "tests/meta",
+    "tests/hidden",
+    "tests/contracts",
+    ".git",
+    ".venv",
+    ".ci",
+    "out",
+    "build",
+    "dist",
+)
+_IGNORED_NAMES = (
+    "__pycache__",
+    ".pytest_cache",
+    ".ruff_cache",
+    ".ipynb_checkpoints",
+    "*.egg-info",
+    "results.json",
+)
 LABS_README = Path("labs") / "README.md"
 
 
 def _tracked_files(root: Path) -> list[Path] | None:
     try:
-        out = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard"],
-                             cwd=root, capture_output=True, text=True, check=True).stdout
+        out = subprocess.run(
+            ["git", "ls-files", "--cached", "--others", "--exclude-standard"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
     except (OSError, subprocess.CalledProcessError):
         return None
     return [Path(line) for line in out.splitlines() if line]
@@ -62,8 +83,12 @@ def course_files(root, withheld=WITHHELD) -> list[Path]:
     files = _tracked_files(root)
     if files is None:  # not a git checkout: walk the tree instead
         ignore = shutil.ignore_patterns(*_IGNORED_NAMES)
-        files = [path.relative_to(root) for path in root.rglob("*") if path.is_file()
-                 and not any(ignore("", [part]) for part in path.relative_to(root).parts)]
+        files = [
+            path.relative_to(root)
+            for path in root.rglob("*")
+            if path.is_file()
+            and not any(ignore("", [part]) for part in path.relative_to(root).parts)
+        ]
     return sorted(rel for rel in files if not _under(rel, withheld) and (root / rel).is_file())
 
 
@@ -88,8 +113,7 @@ def release(root, out, *, notes=False, reference_rows=False, log=print) -> list[
     if (root / "solutions").is_dir():
         # The handout's skeletons are generated from the references by the generator that
         # writes the committed labs/ (rtcourse skeletons), never copied by hand.
-        written += [Path("labs") / rel for rel in write_skeletons(root / "solutions",
-                                                                   out / "labs")]
+        written += [Path("labs") / rel for rel in write_skeletons(root / "solutions", out / "labs")]
     if (out / "labs").is_dir():
         (out / LABS_README).write_text(labs_readme(out, hidden_root=root))
         written.append(LABS_README)
@@ -133,16 +157,24 @@ def lecture_notes(root, out, names=None, log=print) -> list[Path]:
     try:
         for step, path in enumerate(paths, 1):
             if bar is None:
-                say(f"[{step}/{len(paths)}] lecture notes: executing {path.name} on the "
-                    f"references ...")
+                say(
+                    f"[{step}/{len(paths)}] lecture notes: executing {path.name} on the "
+                    f"references ..."
+                )
             notebook = nbformat.read(path, as_version=4)
             start = time.perf_counter()
             stopped = execute(notebook, path.parent)
             if stopped or error_cells(notebook):
-                raise RuntimeError(f"{path.name}: " + (f"stopped early ({stopped})" if stopped
-                                   else f"{error_cells(notebook)} cell(s) raised")
-                                   + " on the reference solutions; fix it before a release "
-                                   "(rtcourse slides shows the error)")
+                raise RuntimeError(
+                    f"{path.name}: "
+                    + (
+                        f"stopped early ({stopped})"
+                        if stopped
+                        else f"{error_cells(notebook)} cell(s) raised"
+                    )
+                    + " on the reference solutions; fix it before a release "
+                    "(rtcourse slides shows the error)"
+                )
             seconds = time.perf_counter() - start
             entries.update(save_reference_outputs(notebook, path.stem, out / FIGURES))
             shipped = out / "slides" / path.name
@@ -157,13 +189,20 @@ def lecture_notes(root, out, names=None, log=print) -> list[Path]:
         if bar is not None:
             bar.close()
     write_figures(out / FIGURES, entries)
-    write_index(out / NOTES, rows, executed=True,
-                note="Outputs and figures are those of the reference solutions, from running "
-                     "every notebook when this handout was made (RTCOURSE_SMALL=1). Run a "
-                     "notebook in slides/ to see your own.")
-    return sorted(p.relative_to(out) for folder in (out / NOTES, out / FIGURES)
-                  for p in folder.rglob("*") if p.is_file()) + [
-        Path("slides") / p.name for p in paths]
+    write_index(
+        out / NOTES,
+        rows,
+        executed=True,
+        note="Outputs and figures are those of the reference solutions, from running "
+        "every notebook when this handout was made (RTCOURSE_SMALL=1). Run a "
+        "notebook in slides/ to see your own.",
+    )
+    return sorted(
+        p.relative_to(out)
+        for folder in (out / NOTES, out / FIGURES)
+        for p in folder.rglob("*")
+        if p.is_file()
+    ) + [Path("slides") / p.name for p in paths]
 
 
 # ------------------------------------------------------------------ labs/README.md
@@ -184,32 +223,46 @@ def _lab_title(lab_file: Path, number: int) -> str:
     return doc.strip().splitlines()[0].rstrip(".") if doc.strip() else f"Lab {number}"
 
 
-def _lab_section(root: Path, lab: LabInfo, hidden: LabInfo | None,
-                 reference: Path | None = None) -> list[str]:
+def _lab_section(
+    root: Path, lab: LabInfo, hidden: LabInfo | None, reference: Path | None = None
+) -> list[str]:
     lab_file = lab_source(root / "labs", lab.module) or root / "labs" / f"{lab.module}.py"
     test_file = lab.files[0].relative_to(root).as_posix()
     if lab_file.is_dir():
         handed = ", ".join(f"`{name}`" for name in package_files(lab, lab_file))
-        your_file = (f"Your files: the package `labs/{lab.module}/` (hand in the files you "
-                     f"edit: {handed}; one left out is graded as the skeleton's)")
+        your_file = (
+            f"Your files: the package `labs/{lab.module}/` (hand in the files you "
+            f"edit: {handed}; one left out is graded as the skeleton's)"
+        )
     else:
-        your_file = (f"Your file: `labs/{lab.module}.py`" if lab_file.is_file() else
-                     f"Your file `labs/{lab.module}.py` is not in this handout yet")
-    lines = [f"## {_lab_title(lab_file, lab.number)}", "",
-             f"{your_file} · its grader: `{test_file}` · {_pts(lab.points())} points", "",
-             *task_table(lab, lab_file, test_file, reference)]
+        your_file = (
+            f"Your file: `labs/{lab.module}.py`"
+            if lab_file.is_file()
+            else f"Your file `labs/{lab.module}.py` is not in this handout yet"
+        )
+    lines = [
+        f"## {_lab_title(lab_file, lab.number)}",
+        "",
+        f"{your_file} · its grader: `{test_file}` · {_pts(lab.points())} points",
+        "",
+        *task_table(lab, lab_file, test_file, reference),
+    ]
     extra = [t for t in lab.tests if t.needs]
     notes = []
     if extra:
-        notes.append(f"Tests worth {_pts(sum(t.points for t in extra))} more points run only "
-                     f"with a CUDA GPU or with `--runslow`; `rtcourse grade` counts them "
-                     f"only where they run.")
+        notes.append(
+            f"Tests worth {_pts(sum(t.points for t in extra))} more points run only "
+            f"with a CUDA GPU or with `--runslow`; `rtcourse grade` counts them "
+            f"only where they run."
+        )
     if hidden is not None and hidden.points() > 0:
         more = hidden.points()
-        notes.append(f"The course's autograder also runs hidden tests of this lab, worth "
-                     f"{_pts(more)} more point{'s' * (more != 1)}, that are not in this handout. "
-                     f"They check the same contracts (each function's docstring) on other "
-                     f"inputs: meet the docstring, not just the visible tests.")
+        notes.append(
+            f"The course's autograder also runs hidden tests of this lab, worth "
+            f"{_pts(more)} more point{'s' * (more != 1)}, that are not in this handout. "
+            f"They check the same contracts (each function's docstring) on other "
+            f"inputs: meet the docstring, not just the visible tests."
+        )
     return lines + ([""] + notes if notes else []) + [""]
 
 
@@ -227,26 +280,32 @@ def labs_readme(root, hidden_root=None) -> str:
     labs = lab_catalog(sorted((root / "tests").glob("test_lab*_*.py")))
     hidden = {}
     if hidden_root is not None:
-        hidden = lab_catalog([f for f in lab_test_files(Path(hidden_root))
-                              if f.parent.name == "hidden"])
+        hidden = lab_catalog(
+            [f for f in lab_test_files(Path(hidden_root)) if f.parent.name == "hidden"]
+        )
     example = next(iter(labs.values()), None)
-    first = example.files[0].relative_to(root).as_posix() if example else \
-        "tests/test_lab0_interop.py"
+    first = (
+        example.files[0].relative_to(root).as_posix() if example else "tests/test_lab0_interop.py"
+    )
     number = example.number if example else 0
     example_file = lab_source(root / "labs", example.module) if example else None
     functions = skeleton_functions(example_file) if example_file else []
     fn = functions[0] if functions else "pack_rgba8"
-    test_cmds = _commented([
-        (f"python -m pytest {first}", f"all tests of lab {number}"),
-        (f"python -m pytest {first} --task 1", "exactly the tests of task 1's points"),
-        (f"python -m pytest {first} -k {fn}", "only the tests of one function"),
-        (f"python -m pytest {first} -x -k {fn}", "stop at the first failure"),
-    ])
-    grade_cmds = _commented([
-        (f"rtcourse grade --lab {number}", f"per-task score table of lab {number}"),
-        ("rtcourse grade", "every lab (the same as `make grade`)"),
-        (f"rtcourse grade --lab {number} --json results.json", "also write results.json"),
-    ])
+    test_cmds = _commented(
+        [
+            (f"python -m pytest {first}", f"all tests of lab {number}"),
+            (f"python -m pytest {first} --task 1", "exactly the tests of task 1's points"),
+            (f"python -m pytest {first} -k {fn}", "only the tests of one function"),
+            (f"python -m pytest {first} -x -k {fn}", "stop at the first failure"),
+        ]
+    )
+    grade_cmds = _commented(
+        [
+            (f"rtcourse grade --lab {number}", f"per-task score table of lab {number}"),
+            ("rtcourse grade", "every lab (the same as `make grade`)"),
+            (f"rtcourse grade --lab {number} --json results.json", "also write results.json"),
+        ]
+    )
     head = f"""# The labs
 
 Generated by `rtcourse release` from the graders in `tests/`: what each lab asks for and
@@ -289,6 +348,5 @@ function earns part of its points.
     sections = []
     solutions = Path(hidden_root if hidden_root is not None else root) / "solutions"
     for number_, lab in labs.items():
-        sections += _lab_section(root, lab, hidden.get(number_),
-                                 lab_source(solutions, lab.module))
+        sections += _lab_section(root, lab, hidden.get(number_), lab_source(solutions, lab.module))
     return head + "\n".join(sections)

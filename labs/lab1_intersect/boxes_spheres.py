@@ -56,9 +56,14 @@ def ray_box(origins, inv_directions, box_min, box_max, t_min=0.0, t_max=math.inf
     """
     # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
     _, s = check_inputs(
-        {"origins": (origins, (3,)), "inv_directions": (inv_directions, (3,)),
-         "box_min": (box_min, (3,)), "box_max": (box_max, (3,))},
-        {"t_min": t_min, "t_max": t_max})
+        {
+            "origins": (origins, (3,)),
+            "inv_directions": (inv_directions, (3,)),
+            "box_min": (box_min, (3,)),
+            "box_max": (box_max, (3,)),
+        },
+        {"t_min": t_min, "t_max": t_max},
+    )
     raise NotImplementedError("not implemented yet: ray_box (task 5)")
 
 
@@ -87,5 +92,6 @@ def ray_sphere(origins, directions, center, radius, t_min=0.0, t_max=math.inf):
     # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
     _, s = check_inputs(
         {"origins": (origins, (3,)), "directions": (directions, (3,)), "center": (center, (3,))},
-        {"radius": radius, "t_min": t_min, "t_max": t_max})
+        {"radius": radius, "t_min": t_min, "t_max": t_max},
+    )
     raise NotImplementedError("not implemented yet: ray_sphere (task 5)")

@@ -59,6 +59,11 @@ def woop_unit(origins, directions, transform, t_min=0.0, t_max=math.inf):
     """
     # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
     _, s = check_inputs(
-        {"origins": (origins, (3,)), "directions": (directions, (3,)),
-         "transform": (transform, (3, 4))}, {"t_min": t_min, "t_max": t_max})
+        {
+            "origins": (origins, (3,)),
+            "directions": (directions, (3,)),
+            "transform": (transform, (3, 4)),
+        },
+        {"t_min": t_min, "t_max": t_max},
+    )
     raise NotImplementedError("not implemented yet: woop_unit (task 3)")

@@ -1,5 +1,4 @@
-"""Task 2: the BVH builds: ``morton_codes``, ``build_lbvh``, ``build_sah_bvh`` (binned SAH).
-"""
+"""Task 2: the BVH builds: ``morton_codes``, ``build_lbvh``, ``build_sah_bvh`` (binned SAH)."""
 
 from __future__ import annotations
 
@@ -20,8 +19,9 @@ from course.given.lab2 import (
 )
 
 
-def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
-                 bits: int = 10) -> torch.Tensor:
+def morton_codes(
+    points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, bits: int = 10
+) -> torch.Tensor:
     """Morton (Z-order) codes of points in the box ``[lo, hi]``.
 
     points: (N, 3) float; lo, hi: (3,) float; bits: bits per axis, 1..21 (10 gives the

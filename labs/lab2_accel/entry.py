@@ -25,8 +25,7 @@ from .kdtree import build_kdtree, kd_closest_hit
 from .two_level import build_two_level_grid, two_level_closest_hit
 
 
-def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect,
-                            memory_budget_bytes: int = 2**27):
+def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect, memory_budget_bytes: int = 2**27):
     """The baseline: every ray against every triangle, in tiles.
 
     Same results as the structures: ``(Hits, counters)`` with ``"steps" = 0`` and

@@ -24,9 +24,17 @@ from course.given.lab2 import (
 from course.given.lab2_robust import reach
 
 
-def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
-                         check_every: int = 8, compile=False, compact: bool = True,
-                         walk: dict | None = None, fuse_steps: int = 1):
+def bvh_closest_hit_fast(
+    rays: Rays,
+    mesh: Mesh,
+    bvh: dict,
+    any_hit: bool = False,
+    check_every: int = 8,
+    compile=False,
+    compact: bool = True,
+    walk: dict | None = None,
+    fuse_steps: int = 1,
+):
     """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop,
     and no stack: a step any compiler can fuse with the next.
 
@@ -100,8 +108,14 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     check_structure(bvh, "bvh", "bvh", mesh)
     _positive_int(check_every, "check_every", 1, 1024)
     _positive_int(fuse_steps, "fuse_steps", 1, 64)
-    if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
-                       "max-autotune-no-cudagraphs"):
+    if compile not in (
+        False,
+        True,
+        "default",
+        "reduce-overhead",
+        "max-autotune",
+        "max-autotune-no-cudagraphs",
+    ):
         raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
     if walk is not None:
         check_walk(walk, mesh, rays)

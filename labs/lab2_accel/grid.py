@@ -29,8 +29,9 @@ from course.given.lab2 import (
 from course.given.lab2_robust import reach
 
 
-def grid_resolution(extent, num_triangles: int, density: float = 2.0,
-                    max_cells: int = 2**22) -> tuple[int, int, int]:
+def grid_resolution(
+    extent, num_triangles: int, density: float = 2.0, max_cells: int = 2**22
+) -> tuple[int, int, int]:
     """Cells per axis for a grid over a box of size ``extent``: the classic heuristic.
 
     extent: 3 non-negative numbers (a sequence or a (3,) tensor), the box's size;

@@ -30,9 +30,14 @@ from course.given.lab2 import (
 from course.given.lab2_robust import reach
 
 
-def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
-                 traversal_cost: float = 1.0, intersect_cost: float = 2.0,
-                 empty_bonus: float = 0.5) -> dict:
+def build_kdtree(
+    mesh: Mesh,
+    max_depth: int | None = None,
+    leaf_size: int = 2,
+    traversal_cost: float = 1.0,
+    intersect_cost: float = 2.0,
+    empty_bonus: float = 0.5,
+) -> dict:
     """A kd-tree by the surface area heuristic over triangle bound planes, level by level.
 
     mesh: F triangles; max_depth: default ``round(8 + 1.3 log2 F)`` (pbrt); leaf_size: a

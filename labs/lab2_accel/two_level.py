@@ -31,8 +31,9 @@ from course.given.lab2_robust import reach
 from .grid import build_grid
 
 
-def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float = 2.0,
-                         min_triangles: int = 16) -> dict:
+def build_two_level_grid(
+    mesh: Mesh, top_density: float = 1 / 16, density: float = 2.0, min_triangles: int = 16
+) -> dict:
     """A two-level (hierarchical) grid: a coarse top grid, and a fine grid in each crowded
     top cell, sized for the triangles it holds (Jevans & Wyvill 1989; Kalojanov et al.
     2011 on GPUs). The answer to the teapot in a stadium.

@@ -138,16 +138,23 @@ __all__ = [
     # task 2
     "moller_trumbore",
     # task 3
-    "woop_precompute", "woop_unit",
+    "woop_precompute",
+    "woop_unit",
     # task 4
     "watertight",
     # task 5
-    "safe_reciprocal", "ray_box", "ray_sphere",
+    "safe_reciprocal",
+    "ray_box",
+    "ray_sphere",
     # task 6
     "closest_hit",
     # task 7
-    "op_counts", "register_estimate", "occupancy_for",
+    "op_counts",
+    "register_estimate",
+    "occupancy_for",
     # given (course.given.lab1), part of the lab's interface: the kernels' names (for
     # closest_hit and the accounting), the tile size's unit, the accounting's one lane
-    "VARIANTS", "BYTES_PER_PAIR", "accounting_inputs",
+    "VARIANTS",
+    "BYTES_PER_PAIR",
+    "accounting_inputs",
 ]

@@ -34,10 +34,13 @@ def op_counts(variant: str) -> dict:
     """
     # BEGIN SOLUTION (task 7)
     from course.measure.accounting import count_ops
+
     args = accounting_inputs(variant)  # validates the name first
     counts = count_ops(globals()[variant], *args, lanes=1)
-    result = {key: getattr(counts, key) for key in
-              ("mul", "add", "div", "sqrt", "fma", "compare", "abs", "select", "other")}
+    result = {
+        key: getattr(counts, key)
+        for key in ("mul", "add", "div", "sqrt", "fma", "compare", "abs", "select", "other")
+    }
     pairs = min(counts.mul, counts.add)
     result["cycles_bound"] = 4 * (pairs + abs(counts.add - counts.mul))
     return result
@@ -57,6 +60,7 @@ def register_estimate(variant: str) -> int:
     """
     # BEGIN SOLUTION (task 7)
     from course.measure.accounting import live_values
+
     args = accounting_inputs(variant)  # validates the name first
     live = live_values(globals()[variant], *args, lanes=1)
     return math.ceil(live.peak_last_use)
@@ -74,6 +78,7 @@ def occupancy_for(variant: str, arch: str = "g80", block_size: int = 64):
     """
     # BEGIN SOLUTION (task 7)
     from course.measure.occupancy import PRESETS, occupancy
+
     if arch not in PRESETS:
         raise ValueError(f"arch: expected one of {', '.join(PRESETS)}, got {arch!r}")
     return occupancy(PRESETS[arch], register_estimate(variant), block_size)

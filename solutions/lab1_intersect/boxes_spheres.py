@@ -58,9 +58,14 @@ def ray_box(origins, inv_directions, box_min, box_max, t_min=0.0, t_max=math.inf
     """
     # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
     _, s = check_inputs(
-        {"origins": (origins, (3,)), "inv_directions": (inv_directions, (3,)),
-         "box_min": (box_min, (3,)), "box_max": (box_max, (3,))},
-        {"t_min": t_min, "t_max": t_max})
+        {
+            "origins": (origins, (3,)),
+            "inv_directions": (inv_directions, (3,)),
+            "box_min": (box_min, (3,)),
+            "box_max": (box_max, (3,)),
+        },
+        {"t_min": t_min, "t_max": t_max},
+    )
     # BEGIN SOLUTION (task 5)
     t0 = (box_min - origins) * inv_directions
     t1 = (box_max - origins) * inv_directions
@@ -68,8 +73,11 @@ def ray_box(origins, inv_directions, box_min, box_max, t_min=0.0, t_max=math.inf
     hi = torch.maximum(t0, t1) * (1 + 2 * gamma(3, t0.dtype))
     t_near = torch.fmax(s["t_min"], torch.fmax(torch.fmax(lo[..., 0], lo[..., 1]), lo[..., 2]))
     t_far = torch.fmin(s["t_max"], torch.fmin(torch.fmin(hi[..., 0], hi[..., 1]), hi[..., 2]))
-    valid = (torch.isfinite(origins).all(-1) & (inv_directions.abs() > 0).all(-1)
-             & (box_min <= box_max).all(-1))
+    valid = (
+        torch.isfinite(origins).all(-1)
+        & (inv_directions.abs() > 0).all(-1)
+        & (box_min <= box_max).all(-1)
+    )
     return t_near, t_far, (t_near <= t_far) & (t_near < math.inf) & valid
     # END SOLUTION
 
@@ -99,7 +107,8 @@ def ray_sphere(origins, directions, center, radius, t_min=0.0, t_max=math.inf):
     # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
     _, s = check_inputs(
         {"origins": (origins, (3,)), "directions": (directions, (3,)), "center": (center, (3,))},
-        {"radius": radius, "t_min": t_min, "t_max": t_max})
+        {"radius": radius, "t_min": t_min, "t_max": t_max},
+    )
     # BEGIN SOLUTION (task 5)
     r, t_min, t_max = s["radius"], s["t_min"], s["t_max"]
     f = origins - center

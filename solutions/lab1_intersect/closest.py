@@ -16,8 +16,9 @@ from .watertight import watertight  # noqa: F401
 from .woop import woop_precompute, woop_unit  # noqa: F401
 
 
-def closest_hit(rays: Rays, mesh: Mesh, variant: str = "moller_trumbore",
-                memory_budget_bytes: int = 2**28) -> Hits:
+def closest_hit(
+    rays: Rays, mesh: Mesh, variant: str = "moller_trumbore", memory_budget_bytes: int = 2**28
+) -> Hits:
     """The nearest hit of every ray among all triangles of ``mesh``, by brute force.
 
     rays: N rays; mesh: F triangles, same dtype and device; variant: the name of a

@@ -64,7 +64,6 @@ def intersect_simple(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf)
     reach = (v0 - p).abs().amax(-1) + size
     resolved = noise * reach * reach <= nn
     inv_area = 1 / nn
-    hit = ((denom != 0) & resolved & (a0 >= 0) & (a1 >= 0) & (a2 >= 0) & (t >= t_min)
-           & (t <= t_max))
+    hit = (denom != 0) & resolved & (a0 >= 0) & (a1 >= 0) & (a2 >= 0) & (t >= t_min) & (t <= t_max)
     return masked_result(hit, t, a1 * inv_area, a2 * inv_area)
     # END SOLUTION

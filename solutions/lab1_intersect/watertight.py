@@ -61,8 +61,11 @@ def watertight(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
     def shear(vertex):
         rel = vertex - origins
         along = torch.take_along_dim(rel, kz, dim=-1)[..., 0]
-        return (torch.take_along_dim(rel, kx, dim=-1)[..., 0] - sx * along,
-                torch.take_along_dim(rel, ky, dim=-1)[..., 0] - sy * along, along)
+        return (
+            torch.take_along_dim(rel, kx, dim=-1)[..., 0] - sx * along,
+            torch.take_along_dim(rel, ky, dim=-1)[..., 0] - sy * along,
+            along,
+        )
 
     ax, ay, az = shear(v0)
     bx, by, bz = shear(v1)
@@ -73,6 +76,7 @@ def watertight(origins, directions, v0, v1, v2, t_min=0.0, t_max=math.inf):
     U, V, W = U.expand(shape).clone(), V.expand(shape).clone(), W.expand(shape).clone()
     exact = (U == 0) | (V == 0) | (W == 0)
     if dtype != torch.float64 and bool(exact.any()):
+
         def at(x):
             return x.expand(shape)[exact].double()
 

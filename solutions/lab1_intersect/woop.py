@@ -71,8 +71,13 @@ def woop_unit(origins, directions, transform, t_min=0.0, t_max=math.inf):
     """
     # Provided: validates the arguments; s: {name: tensor}, the scalars in the kernel's dtype.
     _, s = check_inputs(
-        {"origins": (origins, (3,)), "directions": (directions, (3,)),
-         "transform": (transform, (3, 4))}, {"t_min": t_min, "t_max": t_max})
+        {
+            "origins": (origins, (3,)),
+            "directions": (directions, (3,)),
+            "transform": (transform, (3, 4)),
+        },
+        {"t_min": t_min, "t_max": t_max},
+    )
     # BEGIN SOLUTION (task 3)
     oz, dz = affine_row(transform[..., 2, :], origins, directions)
     t = -oz / dz

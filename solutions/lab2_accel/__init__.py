@@ -107,19 +107,35 @@ from .two_level import build_two_level_grid, two_level_closest_hit
 
 __all__ = [
     # task 1
-    "grid_resolution", "build_grid", "grid_closest_hit",
+    "grid_resolution",
+    "build_grid",
+    "grid_closest_hit",
     # task 2
-    "morton_codes", "build_lbvh", "build_sah_bvh",
+    "morton_codes",
+    "build_lbvh",
+    "build_sah_bvh",
     # task 3
-    "bvh_closest_hit", "bvh_skip_indices", "bvh_closest_hit_stackless",
+    "bvh_closest_hit",
+    "bvh_skip_indices",
+    "bvh_closest_hit_stackless",
     # task 4
-    "build_kdtree", "kd_pack", "kd_unpack", "kd_closest_hit",
+    "build_kdtree",
+    "kd_pack",
+    "kd_unpack",
+    "kd_closest_hit",
     # task 5
-    "brute_force_closest_hit", "build", "closest_hit",
+    "brute_force_closest_hit",
+    "build",
+    "closest_hit",
     # task 6
-    "build_two_level_grid", "two_level_closest_hit",
+    "build_two_level_grid",
+    "two_level_closest_hit",
     # task 7
     "bvh_closest_hit_fast",
     # given (course.given.lab2), part of the lab's interface
-    "COUNTERS", "STRUCTURES", "choose_structure", "pack_bvh", "surface_area",
+    "COUNTERS",
+    "STRUCTURES",
+    "choose_structure",
+    "pack_bvh",
+    "surface_area",
 ]

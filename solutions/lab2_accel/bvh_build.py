@@ -1,5 +1,4 @@
-"""Task 2: the BVH builds: ``morton_codes``, ``build_lbvh``, ``build_sah_bvh`` (binned SAH).
-"""
+"""Task 2: the BVH builds: ``morton_codes``, ``build_lbvh``, ``build_sah_bvh`` (binned SAH)."""
 
 from __future__ import annotations
 
@@ -20,8 +19,9 @@ from course.given.lab2 import (
 )
 
 
-def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
-                 bits: int = 10) -> torch.Tensor:
+def morton_codes(
+    points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, bits: int = 10
+) -> torch.Tensor:
     """Morton (Z-order) codes of points in the box ``[lo, hi]``.
 
     points: (N, 3) float; lo, hi: (3,) float; bits: bits per axis, 1..21 (10 gives the
@@ -61,8 +61,13 @@ def morton_codes(points: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
 # x -> the bits of x (up to 21) two zeros apart: bit i moves to bit 3i. Five shift-and-mask
 # rounds (each moves the upper half of every group), not one op per bit: 15 kernels on a
 # GPU instead of 60 per axis.
-_SPREAD = ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
-           (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249))
+_SPREAD = (
+    (32, 0x1F00000000FFFF),
+    (16, 0x1F0000FF0000FF),
+    (8, 0x100F00F00F00F00F),
+    (4, 0x10C30C30C30C30C3),
+    (2, 0x1249249249249249),
+)
 
 
 def _spread_bits(x: torch.Tensor) -> torch.Tensor:
@@ -70,6 +75,8 @@ def _spread_bits(x: torch.Tensor) -> torch.Tensor:
     for shift, mask in _SPREAD:
         x = (x | (x << shift)) & mask
     return x
+
+
 # END SOLUTION
 
 
@@ -151,7 +158,7 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
         # Depth-first (pre-order) = by first triangle, then larger nodes first (a node
         # precedes the nodes inside it that start where it starts); invalid entries last.
         key = torch.where(valid, start * (f + 1) + (f - size), (f + 1) ** 2)
-        pick = torch.sort(key).indices[:2 * len(s) + 1]  # inner nodes + their leaves
+        pick = torch.sort(key).indices[: 2 * len(s) + 1]  # inner nodes + their leaves
         start, size, split = start[pick], size[pick], split[pick]
     leaf = split < 0
     m = len(start)
@@ -164,11 +171,16 @@ def build_lbvh(mesh: Mesh, leaf_size: int = 4, bits: int = 10) -> dict:
     left_size = 2 * (before[gap + 1] - before[start]) - 1
     lo, hi = _range_boxes(tri_lo[order], tri_hi[order], start, size)
     minus = torch.full_like(start, -1)
-    return {"kind": "bvh", "lo": lo, "hi": hi,
-            "left": torch.where(leaf, minus, node + 1),
-            "right": torch.where(leaf, minus, node + 1 + left_size),
-            "first": torch.where(leaf, start, 0), "count": torch.where(leaf, size, 0),
-            "triangles": order}
+    return {
+        "kind": "bvh",
+        "lo": lo,
+        "hi": hi,
+        "left": torch.where(leaf, minus, node + 1),
+        "right": torch.where(leaf, minus, node + 1 + left_size),
+        "first": torch.where(leaf, start, 0),
+        "count": torch.where(leaf, size, 0),
+        "triangles": order,
+    }
     # END SOLUTION
 
 
@@ -205,7 +217,7 @@ def _lbvh_gap_ranges(differ: torch.Tensor, same: torch.Tensor):
     gap = torch.arange(n, device=device)
     start, end = gap.clone(), gap + 1  # in gaps: lower-priority neighbours at start - 1, end
     for k in reversed(range(len(table))):
-        width, level = 2 ** k, table[k]
+        width, level = 2**k, table[k]
         top = len(level) - 1
         step = start - width  # the block [start - 2^k, start) holds no lower priority?
         ok = (step >= 0) & (level[step.clamp(0, top)] >= prio)
@@ -260,14 +272,16 @@ def _range_boxes(lo: torch.Tensor, hi: torch.Tensor, start: torch.Tensor, size: 
     done = 0
     for k, count in enumerate(counts):
         if count:
-            s, e = first[done:done + count], last[done:done + count] - 2**k
-            out[done:done + count] = torch.minimum(level[s], level[e])
+            s, e = first[done : done + count], last[done : done + count] - 2**k
+            out[done : done + count] = torch.minimum(level[s], level[e])
             done += count
         if done == m:
             break
-        level = torch.minimum(level[:-2**k], level[2**k:])
+        level = torch.minimum(level[: -(2**k)], level[2**k :])
     out = torch.empty_like(out).index_copy_(0, group, out)
     return out[:, :3].contiguous(), (-out[:, 3:]).contiguous()
+
+
 # END SOLUTION
 
 
@@ -350,8 +364,10 @@ def build_sah_bvh(mesh: Mesh, leaf_size: int = 4, bins: int = 16) -> dict:
         right_hi = bin_hi.flip(2).cummax(dim=2).values.flip(2)
         right_n = bin_count.flip(2).cumsum(dim=2).flip(2)
         n_l, n_r = left_n[..., :-1], right_n[..., 1:]
-        cost = (surface_area(left_lo[..., :-1, :], left_hi[..., :-1, :]) * n_l
-                + surface_area(right_lo[..., 1:, :], right_hi[..., 1:, :]) * n_r)
+        cost = (
+            surface_area(left_lo[..., :-1, :], left_hi[..., :-1, :]) * n_l
+            + surface_area(right_lo[..., 1:, :], right_hi[..., 1:, :]) * n_r
+        )
         cost = torch.where((n_l > 0) & (n_r > 0), cost, math.inf).reshape(k, -1)
         best_cost, best = cost.min(dim=1)
         axis, after = best // (bins - 1), best % (bins - 1)

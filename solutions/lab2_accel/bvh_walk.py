@@ -65,8 +65,9 @@ def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
     counters = new_counters(n, device)
     corners = mesh.triangles()
     inv = 1 / rays.directions
-    t_root, _, hit = slab_test(rays.origins, inv, bvh["lo"][0], bvh["hi"][0], rays.t_min,
-                               rays.t_max)
+    t_root, _, hit = slab_test(
+        rays.origins, inv, bvh["lo"][0], bvh["hi"][0], rays.t_min, rays.t_max
+    )
     ray = hit.nonzero()[:, 0]
     depth = 32
     stack = torch.zeros((len(ray), depth), dtype=torch.int64, device=device)
@@ -87,8 +88,17 @@ def bvh_closest_hit(rays: Rays, mesh: Mesh, bvh: dict, intersect):
         live = t_node <= reach(closest["t"][ray])
         add_count(counters["steps"], ray[live])
         leaf = live & (left[node] < 0)
-        test_ranges(intersect, rays, corners, ray[leaf], bvh["first"][node[leaf]],
-                    bvh["count"][node[leaf]], bvh["triangles"], closest, counters)
+        test_ranges(
+            intersect,
+            rays,
+            corners,
+            ray[leaf],
+            bvh["first"][node[leaf]],
+            bvh["count"][node[leaf]],
+            bvh["triangles"],
+            closest,
+            counters,
+        )
         inner = (live & (left[node] >= 0)).nonzero()[:, 0]
         r = ray[inner]
         t_hi = torch.minimum(rays.t_max[r], reach(closest["t"][r]))
@@ -180,12 +190,22 @@ def bvh_closest_hit_stackless(rays: Rays, mesh: Mesh, bvh: dict, intersect):
         if len(ray) == 0:
             break
         t_hi = torch.minimum(rays.t_max[ray], reach(closest["t"][ray]))
-        _, _, hit = slab_test(rays.origins[ray], inv[ray], bvh["lo"][node], bvh["hi"][node],
-                              rays.t_min[ray], t_hi)
+        _, _, hit = slab_test(
+            rays.origins[ray], inv[ray], bvh["lo"][node], bvh["hi"][node], rays.t_min[ray], t_hi
+        )
         add_count(counters["steps"], ray)
         leaf = hit & leaf_of[node]
-        test_ranges(intersect, rays, corners, ray[leaf], bvh["first"][node[leaf]],
-                    bvh["count"][node[leaf]], bvh["triangles"], closest, counters)
+        test_ranges(
+            intersect,
+            rays,
+            corners,
+            ray[leaf],
+            bvh["first"][node[leaf]],
+            bvh["count"][node[leaf]],
+            bvh["triangles"],
+            closest,
+            counters,
+        )
         node = torch.where(hit & ~leaf_of[node], node + 1, skip[node])
         keep = node < m
         ray, node = ray[keep], node[keep]

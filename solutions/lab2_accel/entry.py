@@ -25,8 +25,7 @@ from .kdtree import build_kdtree, kd_closest_hit
 from .two_level import build_two_level_grid, two_level_closest_hit
 
 
-def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect,
-                            memory_budget_bytes: int = 2**27):
+def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect, memory_budget_bytes: int = 2**27):
     """The baseline: every ray against every triangle, in tiles.
 
     Same results as the structures: ``(Hits, counters)`` with ``"steps" = 0`` and
@@ -58,8 +57,15 @@ def brute_force_closest_hit(rays: Rays, mesh: Mesh, intersect,
         r = torch.arange(r0, min(n, r0 + ray_chunk), device=device)
         for f0 in range(0, f, tri_chunk):
             tri = torch.arange(f0, min(f, f0 + tri_chunk), device=device)
-            intersect_pairs(intersect, rays, corners, r.repeat_interleave(len(tri)),
-                       tri.repeat(len(r)), closest, counters)
+            intersect_pairs(
+                intersect,
+                rays,
+                corners,
+                r.repeat_interleave(len(tri)),
+                tri.repeat(len(r)),
+                closest,
+                counters,
+            )
     return as_hits(closest), counters
     # END SOLUTION
 
@@ -113,15 +119,17 @@ def closest_hit(rays: Rays, mesh: Mesh, structure, intersect, **options):
         structure = build(mesh, kind, **knobs)
     kind = structure.get("kind") if isinstance(structure, dict) else None
     if kind not in STRUCTURES:
-        raise ValueError(f"structure: expected None or a dict with kind in "
-                         f"{', '.join(STRUCTURES)}, got "
-                         f"{kind if kind is not None else type(structure).__name__!r}")
-    allowed = {"grid": {"mailbox"}, "grid2": {"mailbox"}, "bvh": {"stackless"},
-               "kd": set()}[kind]
+        raise ValueError(
+            f"structure: expected None or a dict with kind in "
+            f"{', '.join(STRUCTURES)}, got "
+            f"{kind if kind is not None else type(structure).__name__!r}"
+        )
+    allowed = {"grid": {"mailbox"}, "grid2": {"mailbox"}, "bvh": {"stackless"}, "kd": set()}[kind]
     extra = set(options) - allowed
     if extra:
-        raise ValueError(f"structure: a {kind} takes the options {sorted(allowed)}, "
-                         f"got {sorted(extra)}")
+        raise ValueError(
+            f"structure: a {kind} takes the options {sorted(allowed)}, got {sorted(extra)}"
+        )
     if kind == "grid":
         return grid_closest_hit(rays, mesh, structure, intersect, **options)
     if kind == "grid2":

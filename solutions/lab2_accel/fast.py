@@ -24,9 +24,17 @@ from course.given.lab2 import (
 from course.given.lab2_robust import reach
 
 
-def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = False,
-                         check_every: int = 8, compile=False, compact: bool = True,
-                         walk: dict | None = None, fuse_steps: int = 1):
+def bvh_closest_hit_fast(
+    rays: Rays,
+    mesh: Mesh,
+    bvh: dict,
+    any_hit: bool = False,
+    check_every: int = 8,
+    compile=False,
+    compact: bool = True,
+    walk: dict | None = None,
+    fuse_steps: int = 1,
+):
     """Closest (or any) hits through a BVH with fixed shapes: no host sync inside the loop,
     and no stack: a step any compiler can fuse with the next.
 
@@ -100,8 +108,14 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     check_structure(bvh, "bvh", "bvh", mesh)
     _positive_int(check_every, "check_every", 1, 1024)
     _positive_int(fuse_steps, "fuse_steps", 1, 64)
-    if compile not in (False, True, "default", "reduce-overhead", "max-autotune",
-                       "max-autotune-no-cudagraphs"):
+    if compile not in (
+        False,
+        True,
+        "default",
+        "reduce-overhead",
+        "max-autotune",
+        "max-autotune-no-cudagraphs",
+    ):
         raise ValueError(f"compile: expected False, True or a torch.compile mode, got {compile!r}")
     if walk is not None:
         check_walk(walk, mesh, rays)
@@ -124,8 +138,9 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
     # this number of rays (~40 small ops of host time in one launch).
     inputs = (rays.origins, rays.directions, rays.t_min, rays.t_max)
     roots = (walk["base"], walk["lo"], walk["hi"])
-    floats, ints, hit_root = (_start_graph(inputs, roots).run(inputs) if cache
-                              else _start(*inputs, *roots))
+    floats, ints, hit_root = (
+        _start_graph(inputs, roots).run(inputs) if cache else _start(*inputs, *roots)
+    )
     # The outputs as two (3, n) tensors, floats (t, u, v) and int32 (triangle, steps,
     # tests): a compaction writes its rays' results back in two ops, and the walk's
     # tensors come from one float and one int tensor in two gathers (_gather, _pack).
@@ -136,8 +151,9 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
         return _hits(out_f, out_i)
     m = walk["nodes"]
     tables = (walk["boxes"], walk["links"], walk["slots"], walk["tri"])
-    steps = (_fast_steps if compile is False else _compiled_fast_steps(
-        "in place" if graphs else compile))
+    steps = (
+        _fast_steps if compile is False else _compiled_fast_steps("in place" if graphs else compile)
+    )
     # k steps as calls of `fuse` steps each (eager: one call of k); extra steps of finished
     # rays change nothing, so the counters never depend on the knobs.
     fuse = check_every if compile is False else min(fuse_steps, check_every)
@@ -167,14 +183,18 @@ def bvh_closest_hit_fast(rays: Rays, mesh: Mesh, bvh: dict, any_hit: bool = Fals
             break
         # A compaction is ~15 small ops of host time (with graphs, copies into the buffers
         # of another cached graph): compact only when it saves the device far more.
-        if (compact and active <= len(ray) // (8 if graphs else 2)
-                and len(ray) >= _compact_from(graphs)):
+        if (
+            compact
+            and active <= len(ray) // (8 if graphs else 2)
+            and len(ray) >= _compact_from(graphs)
+        ):
             floats, ints = _pack(fixed, state)
             _write_back(out_f, out_i, ray, floats, ints)
             keep = (state[0] < m).nonzero()[:, 0]  # padding never runs: keep < len(ray)
             ray = ray[keep]
-            fixed, state = _gather(floats, ints, keep,
-                                   _graph_size(len(keep)) if cache else len(keep), m)
+            fixed, state = _gather(
+                floats, ints, keep, _graph_size(len(keep)) if cache else len(keep), m
+            )
             if alone:
                 fixed, state = _own(fixed, state)
             graph = None
@@ -199,8 +219,10 @@ def _compact_from(graphs: bool) -> int:
 
 def _hits(out_f, out_i):
     """``(Hits, counters)`` from the packed outputs."""
-    return (Hits(t=out_f[0], triangle=out_i[0].long(), u=out_f[1], v=out_f[2]),
-            {"steps": out_i[1].long(), "tests": out_i[2].long()})
+    return (
+        Hits(t=out_f[0], triangle=out_i[0].long(), u=out_f[1], v=out_f[2]),
+        {"steps": out_i[1].long(), "tests": out_i[2].long()},
+    )
 
 
 def _start(origins, directions, t_min, t_max, base, lo, hi):
@@ -248,8 +270,13 @@ class _StartGraph:
 def _start_graph(inputs, tables):
     """The cached :class:`_StartGraph` for these rays' shapes and these tables (the step
     graphs' cache, :func:`_cached`)."""
-    key = ("start", len(inputs[0]), inputs[0].dtype, inputs[0].device,
-           tuple(t.data_ptr() for t in tables))
+    key = (
+        "start",
+        len(inputs[0]),
+        inputs[0].dtype,
+        inputs[0].device,
+        tuple(t.data_ptr() for t in tables),
+    )
     return _cached(key, tables, lambda: _StartGraph(inputs, tables))
 
 
@@ -259,8 +286,17 @@ _GRAPH_DEVICES = ("cuda",)  # where "reduce-overhead" replays CUDA graphs
 # then t, u, v; ints = base (the octant's row), node, slot, end, triangle, steps, tests.
 _COLUMNS = 11
 _TRIANGLE_ROW = 4  # of ints: the outputs triangle, steps, tests are its last three rows
-_STATE_ROWS = ((1, None), (2, None), (3, None), (None, 11), (4, None), (None, 12), (None, 13),
-               (5, None), (6, None))  # node slot end t tri u v steps tests: (int row, float row)
+_STATE_ROWS = (
+    (1, None),
+    (2, None),
+    (3, None),
+    (None, 11),
+    (4, None),
+    (None, 12),
+    (None, 13),
+    (5, None),
+    (6, None),
+)  # node slot end t tri u v steps tests: (int row, float row)
 
 
 def _gather(floats, ints, index, size: int, m: int):
@@ -284,16 +320,18 @@ def _own(fixed, state):
 def _pack(fixed, state):
     """The inverse of :func:`_gather`: ``(floats, ints)`` of the current rays (3 ops)."""
     node, slot, end, t, tri, u, v, steps, tests = state
-    return (torch.cat((fixed[0], torch.stack((t, u, v)))),
-            torch.stack((fixed[1], node, slot, end, tri, steps, tests)))
+    return (
+        torch.cat((fixed[0], torch.stack((t, u, v)))),
+        torch.stack((fixed[1], node, slot, end, tri, steps, tests)),
+    )
 
 
 def _write_back(out_f, out_i, ray, floats, ints):
     """Results of the rays ``ray`` (the first ``len(ray)`` columns of the packed tensors)
     into the outputs: two scatters (floats' rows t, u, v; ints' rows triangle, steps,
     tests)."""
-    out_f[:, ray] = floats[_COLUMNS:, :len(ray)]
-    out_i[:, ray] = ints[_TRIANGLE_ROW:, :len(ray)]
+    out_f[:, ray] = floats[_COLUMNS:, : len(ray)]
+    out_i[:, ray] = ints[_TRIANGLE_ROW:, : len(ray)]
 
 
 def _fast_steps(fixed, state, tables, m: int, k: int, any_hit: bool):
@@ -376,10 +414,19 @@ _MAX_GRAPHS = 32
 
 def _step_graph(steps, fixed, state, tables, m: int, fuse: int, any_hit: bool, calls: int):
     """The cached :class:`_StepGraph` for these tables and this size (:func:`_cached`)."""
-    key = (len(fixed[1]), fixed[0].dtype, fixed[0].device, m, fuse, any_hit, calls,
-           tuple(t.data_ptr() for t in tables))
-    return _cached(key, tables,
-                   lambda: _StepGraph(steps, fixed, state, (tables, m, fuse, any_hit), calls))
+    key = (
+        len(fixed[1]),
+        fixed[0].dtype,
+        fixed[0].device,
+        m,
+        fuse,
+        any_hit,
+        calls,
+        tuple(t.data_ptr() for t in tables),
+    )
+    return _cached(
+        key, tables, lambda: _StepGraph(steps, fixed, state, (tables, m, fuse, any_hit), calls)
+    )
 
 
 def _cached(key, tables, make):
@@ -397,9 +444,35 @@ def _cached(key, tables, make):
     return graph
 
 
-def _fast_step(ox, oy, oz, dx, dy, dz, ix, iy, iz, t_min, t_max, base,
-               node, slot, end, best_t, best_tri, best_u, best_v, steps, tests,
-               boxes, links, slots, tri_of, m: int, any_hit: bool):
+def _fast_step(
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    ix,
+    iy,
+    iz,
+    t_min,
+    t_max,
+    base,
+    node,
+    slot,
+    end,
+    best_t,
+    best_tri,
+    best_u,
+    best_v,
+    steps,
+    tests,
+    boxes,
+    links,
+    slots,
+    tri_of,
+    m: int,
+    any_hit: bool,
+):
     """One step of :func:`bvh_closest_hit_fast` for every ray: (n,) columns in, the new
     state out, no host sync, no scatter, no data-dependent Python control flow.
     Rays: origin, direction, inverse direction columns, ``t_min, t_max`` and ``base`` (the
@@ -423,9 +496,15 @@ def _fast_step(ox, oy, oz, dx, dy, dz, ix, iy, iz, t_min, t_max, base,
     # The leaf slot (slot 0 for rays that are not in a leaf: cached, the result unused).
     s = torch.where(leafing, slot, 0)
     tri = slots[s]
-    t, u, v, hit = moller_trumbore_rows((ox, oy, oz), (dx, dy, dz), tri[:, 0:3].unbind(1),
-                                        tri[:, 3:6].unbind(1), tri[:, 6:9].unbind(1), t_min,
-                                        t_max)
+    t, u, v, hit = moller_trumbore_rows(
+        (ox, oy, oz),
+        (dx, dy, dz),
+        tri[:, 0:3].unbind(1),
+        tri[:, 3:6].unbind(1),
+        tri[:, 6:9].unbind(1),
+        t_min,
+        t_max,
+    )
     index = tri_of[s]
     better = leafing & hit & ((t < best_t) | ((t == best_t) & (index < best_tri)))
     best_t = torch.where(better, t, best_t)
@@ -468,7 +547,10 @@ def _compiled_fast_steps(mode):
         # that none falls back to eager after dynamo's default limit of 8.
         torch._dynamo.config.recompile_limit = max(torch._dynamo.config.recompile_limit, 64)
         fn = _fast_steps_in_place if mode == "in place" else _fast_steps
-        _COMPILED[mode] = torch.compile(fn, mode="default" if mode == "in place" else mode,
-                                        dynamic=True)
+        _COMPILED[mode] = torch.compile(
+            fn, mode="default" if mode == "in place" else mode, dynamic=True
+        )
     return _COMPILED[mode]
+
+
 # END SOLUTION

@@ -29,8 +29,9 @@ from course.given.lab2 import (
 from course.given.lab2_robust import reach
 
 
-def grid_resolution(extent, num_triangles: int, density: float = 2.0,
-                    max_cells: int = 2**22) -> tuple[int, int, int]:
+def grid_resolution(
+    extent, num_triangles: int, density: float = 2.0, max_cells: int = 2**22
+) -> tuple[int, int, int]:
     """Cells per axis for a grid over a box of size ``extent``: the classic heuristic.
 
     extent: 3 non-negative numbers (a sequence or a (3,) tensor), the box's size;
@@ -136,9 +137,17 @@ def build_grid(mesh: Mesh, resolution=None, density: float = 2.0) -> dict:
     order = torch.sort(cell_id, stable=True).indices  # stable: triangles stay ascending
     num_cells = math.prod(resolution)
     cell_count = torch.bincount(cell_id, minlength=num_cells)
-    return {"kind": "grid", "lo": lo, "hi": hi, "resolution": res,
-            "cell_start": torch.cumsum(cell_count, 0) - cell_count, "cell_count": cell_count,
-            "triangles": tri[order], "tri_cell_lo": c_lo, "tri_cell_hi": c_hi}
+    return {
+        "kind": "grid",
+        "lo": lo,
+        "hi": hi,
+        "resolution": res,
+        "cell_start": torch.cumsum(cell_count, 0) - cell_count,
+        "cell_count": cell_count,
+        "triangles": tri[order],
+        "tri_cell_lo": c_lo,
+        "tri_cell_hi": c_hi,
+    }
     # END SOLUTION
 
 
@@ -222,8 +231,10 @@ def grid_closest_hit(rays: Rays, mesh: Mesh, grid: dict, intersect, mailbox: boo
         for owner, k in pair_chunks(grid["cell_start"][cell_id], grid["cell_count"][cell_id]):
             tri = grid["triangles"][k]
             if mailbox:
-                seen = ((prev[owner] >= grid["tri_cell_lo"][tri])
-                        & (prev[owner] <= grid["tri_cell_hi"][tri])).all(dim=1)
+                seen = (
+                    (prev[owner] >= grid["tri_cell_lo"][tri])
+                    & (prev[owner] <= grid["tri_cell_hi"][tri])
+                ).all(dim=1)
                 add_count(counters["skipped"], ray[owner[seen]])
                 owner, tri = owner[~seen], tri[~seen]
             intersect_pairs(intersect, rays, corners, ray[owner], tri, closest, counters)

@@ -30,9 +30,14 @@ from course.given.lab2 import (
 from course.given.lab2_robust import reach
 
 
-def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
-                 traversal_cost: float = 1.0, intersect_cost: float = 2.0,
-                 empty_bonus: float = 0.5) -> dict:
+def build_kdtree(
+    mesh: Mesh,
+    max_depth: int | None = None,
+    leaf_size: int = 2,
+    traversal_cost: float = 1.0,
+    intersect_cost: float = 2.0,
+    empty_bonus: float = 0.5,
+) -> dict:
     """A kd-tree by the surface area heuristic over triangle bound planes, level by level.
 
     mesh: F triangles; max_depth: default ``round(8 + 1.3 log2 F)`` (pbrt); leaf_size: a
@@ -95,10 +100,12 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
     # a node's box is a clamp of plane numbers (exact), and one integer sort per axis and
     # level orders the events.
     planes = [torch.sort(torch.cat((tri_lo[:, a], tri_hi[:, a]))).values for a in range(3)]
-    start_plane = torch.stack([torch.searchsorted(planes[a], tri_lo[:, a].contiguous())
-                               for a in range(3)], dim=1)
-    end_plane = torch.stack([torch.searchsorted(planes[a], tri_hi[:, a].contiguous())
-                             for a in range(3)], dim=1)
+    start_plane = torch.stack(
+        [torch.searchsorted(planes[a], tri_lo[:, a].contiguous()) for a in range(3)], dim=1
+    )
+    end_plane = torch.stack(
+        [torch.searchsorted(planes[a], tri_hi[:, a].contiguous()) for a in range(3)], dim=1
+    )
     # Per level: the nodes' boxes (as plane numbers); per created node: split, axis, left.
     box_lo, box_hi = start_plane.amin(0, keepdim=True), end_plane.amax(0, keepdim=True)
     root = [torch.stack([planes[a][box[0, a]] for a in range(3)]) for box in (box_lo, box_hi)]
@@ -122,8 +129,18 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
         if depth < max_depth and p > 0:
             for a in range(3):
                 cost, plane, owner, slot = _kd_sweep(
-                    a, seg, n, box_lo, box_hi, start_plane[pair_tri, a], end_plane[pair_tri, a],
-                    planes, traversal_cost, intersect_cost, empty_bonus)
+                    a,
+                    seg,
+                    n,
+                    box_lo,
+                    box_hi,
+                    start_plane[pair_tri, a],
+                    end_plane[pair_tri, a],
+                    planes,
+                    traversal_cost,
+                    intersect_cost,
+                    empty_bonus,
+                )
                 slot_start.append(slot[:p])
                 slot_end.append(slot[p:])
                 axis_best = torch.full((k,), math.inf, dtype=dtype, device=device)
@@ -146,8 +163,7 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
         child = torch.full((k,), -1, dtype=torch.int64, device=device)
         next_base = base + k
         child[splitting] = next_base + 2 * torch.arange(len(splitting), device=device)
-        value = torch.stack([planes[a][best_plane] for a in range(3)]).gather(
-            0, best_axis[None])[0]
+        value = torch.stack([planes[a][best_plane] for a in range(3)]).gather(0, best_axis[None])[0]
         split[-1] = torch.where(do_split, value, split[-1])
         axis[-1] = torch.where(do_split, best_axis, axis[-1])
         left[-1] = child
@@ -179,16 +195,24 @@ def build_kdtree(mesh: Mesh, max_depth: int | None = None, leaf_size: int = 2,
     order = torch.sort(leaf_node, stable=True).indices
     num_nodes = sum(len(x) for x in axis)
     count = torch.bincount(leaf_node, minlength=num_nodes)
-    return {"kind": "kd", "lo": root[0], "hi": root[1], "split": torch.cat(split),
-            "axis": torch.cat(axis), "left": torch.cat(left),
-            "first": torch.cumsum(count, 0) - count, "count": count,
-            "triangles": leaf_tri[order]}
+    return {
+        "kind": "kd",
+        "lo": root[0],
+        "hi": root[1],
+        "split": torch.cat(split),
+        "axis": torch.cat(axis),
+        "left": torch.cat(left),
+        "first": torch.cumsum(count, 0) - count,
+        "count": count,
+        "triangles": leaf_tri[order],
+    }
     # END SOLUTION
 
 
 # BEGIN SOLUTION
-def _kd_sweep(a, seg, n, box_lo, box_hi, starts, ends, planes, traversal_cost, intersect_cost,
-              empty_bonus):
+def _kd_sweep(
+    a, seg, n, box_lo, box_hi, starts, ends, planes, traversal_cost, intersect_cost, empty_bonus
+):
     """The SAH sweep of one level on axis ``a``: the cost of splitting at every event.
 
     seg: (P,) the node (of this level) of each (node, triangle) pair; n: (k,) pairs per
@@ -200,8 +224,12 @@ def _kd_sweep(a, seg, n, box_lo, box_hi, starts, ends, planes, traversal_cost, i
     """
     p, device = len(seg), seg.device
     lo_a, hi_a = box_lo[:, a], box_hi[:, a]
-    plane = torch.cat((torch.minimum(torch.maximum(starts, lo_a[seg]), hi_a[seg]),
-                       torch.minimum(torch.maximum(ends, lo_a[seg]), hi_a[seg])))
+    plane = torch.cat(
+        (
+            torch.minimum(torch.maximum(starts, lo_a[seg]), hi_a[seg]),
+            torch.minimum(torch.maximum(ends, lo_a[seg]), hi_a[seg]),
+        )
+    )
     is_end = (torch.arange(2 * p, device=device) >= p).long()
     owner = torch.cat((seg, seg))
     # One key orders by (node, plane, start before end).
@@ -224,10 +252,17 @@ def _kd_sweep(a, seg, n, box_lo, box_hi, starts, ends, planes, traversal_cost, i
     area_below = 2 * (cap + (value - nlo[owner, a]) * rim)
     area_above = 2 * (cap + (nhi[owner, a] - value) * rim)
     empty = (n_below == 0) | (n_above == 0)
-    cost = traversal_cost + intersect_cost * (1 - empty_bonus * empty) * (
-        area_below * n_below + area_above * n_above) / surface_area(nlo, nhi)[owner]
+    cost = (
+        traversal_cost
+        + intersect_cost
+        * (1 - empty_bonus * empty)
+        * (area_below * n_below + area_above * n_above)
+        / surface_area(nlo, nhi)[owner]
+    )
     inside = (plane > lo_a[owner]) & (plane < hi_a[owner])
     return torch.where(inside, cost, math.inf), plane, owner, slot
+
+
 # END SOLUTION
 
 
@@ -263,8 +298,10 @@ def kd_pack(tree: dict) -> torch.Tensor:
     index = torch.arange(m, device=tree["axis"].device)
     offset = torch.where(leaf, tree["first"], tree["left"] - index)
     if m and (int(offset.min()) < 0 or int(offset.max()) >= 2**OFFSET_BITS):
-        raise ValueError(f"tree: a leftOffset of {int(offset.max())} does not fit in "
-                         f"{OFFSET_BITS} bits (or is negative)")
+        raise ValueError(
+            f"tree: a leftOffset of {int(offset.max())} does not fit in "
+            f"{OFFSET_BITS} bits (or is negative)"
+        )
     if m and int(tree["count"].max()) >= 2**31:
         raise ValueError("tree: a leaf count does not fit in 31 bits")
     split_bits = tree["split"].to(torch.float32).contiguous().view(torch.int32).long()
@@ -295,10 +332,13 @@ def kd_unpack(packed: torch.Tensor) -> dict:
     axis = (word1 >> OFFSET_BITS) & 3
     index = torch.arange(len(packed), device=packed.device)
     zero = torch.zeros_like(offset)
-    return {"split": torch.where(leaf, 0.0, word0.contiguous().view(torch.float32)),
-            "axis": torch.where(leaf, -1, axis), "left": torch.where(leaf, -1, index + offset),
-            "first": torch.where(leaf, offset, zero),
-            "count": torch.where(leaf, word0.long(), zero)}
+    return {
+        "split": torch.where(leaf, 0.0, word0.contiguous().view(torch.float32)),
+        "axis": torch.where(leaf, -1, axis),
+        "left": torch.where(leaf, -1, index + offset),
+        "first": torch.where(leaf, offset, zero),
+        "count": torch.where(leaf, word0.long(), zero),
+    }
     # END SOLUTION
 
 
@@ -342,8 +382,9 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
     counters = new_counters(n, device)
     corners = mesh.triangles()
     inv = 1 / rays.directions
-    t_enter, t_exit, hit = slab_test(rays.origins, inv, tree["lo"], tree["hi"], rays.t_min,
-                                     rays.t_max)
+    t_enter, t_exit, hit = slab_test(
+        rays.origins, inv, tree["lo"], tree["hi"], rays.t_min, rays.t_max
+    )
     ray = hit.nonzero()[:, 0]
     node = torch.zeros(len(ray), dtype=torch.int64, device=device)
     t_near, t_far = t_enter[ray], t_exit[ray]
@@ -357,16 +398,26 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
         if len(ray) == 0:
             break
         if int(sp.max()) + 1 > depth:
-            stack, stack_near, stack_far = (torch.cat((x, torch.zeros_like(x)), dim=1)
-                                            for x in (stack, stack_near, stack_far))
+            stack, stack_near, stack_far = (
+                torch.cat((x, torch.zeros_like(x)), dim=1) for x in (stack, stack_near, stack_far)
+            )
             depth *= 2
         add_count(counters["steps"], ray)
         axis = axis_of[node]
         leaf = axis < 0
         done = torch.zeros_like(leaf)
         # Leaves: test, then exit early or pop.
-        test_ranges(intersect, rays, corners, ray[leaf], tree["first"][node[leaf]],
-                    tree["count"][node[leaf]], tree["triangles"], closest, counters)
+        test_ranges(
+            intersect,
+            rays,
+            corners,
+            ray[leaf],
+            tree["first"][node[leaf]],
+            tree["count"][node[leaf]],
+            tree["triangles"],
+            closest,
+            counters,
+        )
         exit_early = leaf & (reach(closest["t"][ray]) < t_far)
         pop = leaf & ~exit_early & (sp > 0)
         done |= leaf & ~pop

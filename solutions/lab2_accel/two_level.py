@@ -31,8 +31,9 @@ from course.given.lab2_robust import reach
 from .grid import build_grid
 
 
-def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float = 2.0,
-                         min_triangles: int = 16) -> dict:
+def build_two_level_grid(
+    mesh: Mesh, top_density: float = 1 / 16, density: float = 2.0, min_triangles: int = 16
+) -> dict:
     """A two-level (hierarchical) grid: a coarse top grid, and a fine grid in each crowded
     top cell, sized for the triangles it holds (Jevans & Wyvill 1989; Kalojanov et al.
     2011 on GPUs). The answer to the teapot in a stadium.
@@ -98,8 +99,9 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
     tri_lo, tri_hi = triangle_bounds(mesh)
     big = (tri_hi - tri_lo).amax(dim=1) >= width.amin()
     # Each top cell's small triangles, counted per cell.
-    entry_cell = torch.repeat_interleave(torch.arange(len(top["cell_count"]), device=device),
-                                         top["cell_count"])
+    entry_cell = torch.repeat_interleave(
+        torch.arange(len(top["cell_count"]), device=device), top["cell_count"]
+    )
     entry_tri = top["triangles"]
     small = ~big[entry_tri]
     n_small = torch.bincount(entry_cell[small], minlength=len(top["cell_count"]))
@@ -110,8 +112,15 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
     # Direct lists: everything in plain cells, the big triangles in dense ones.
     direct = ~dense[entry_cell] | ~small
     cell_count = torch.bincount(entry_cell[direct], minlength=len(top["cell_count"]))
-    out = dict(top, cell_start=torch.cumsum(cell_count, 0) - cell_count, cell_count=cell_count,
-               triangles=entry_tri[direct], kind="grid2", big=big, sub_of=sub_of)
+    out = dict(
+        top,
+        cell_start=torch.cumsum(cell_count, 0) - cell_count,
+        cell_count=cell_count,
+        triangles=entry_tri[direct],
+        kind="grid2",
+        big=big,
+        sub_of=sub_of,
+    )
     # Sub-grid boxes: the bounds of the cell's small triangles, clipped to the cell.
     into_sub = dense[entry_cell] & small
     s, tri = sub_of[entry_cell[into_sub]], entry_tri[into_sub]  # (pairs,), ascending tri per s
@@ -124,8 +133,9 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
     box_lo = torch.maximum(inf.scatter_reduce(0, index, tri_lo[tri], "amin"), cell_lo)
     box_hi = torch.minimum((-inf).scatter_reduce(0, index, tri_hi[tri], "amax"), cell_hi)
     eps = torch.finfo(lo.dtype).eps
-    pad = (1e-4 * (box_hi - box_lo).amax(dim=1)
-           + 16 * eps * torch.maximum(box_lo.abs(), box_hi.abs()).amax(dim=1))
+    pad = 1e-4 * (box_hi - box_lo).amax(dim=1) + 16 * eps * torch.maximum(
+        box_lo.abs(), box_hi.abs()
+    ).amax(dim=1)
     pad = torch.where(pad > 0, pad, 1e-4 * width.amin())[:, None]
     sub_lo, sub_hi = box_lo - pad, box_hi + pad
     n_sub = torch.bincount(s, minlength=num_sub)
@@ -137,10 +147,12 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
     sub_w = (sub_hi - sub_lo) / sub_res
     top_cell = sub_res - 1
     p = pad[s]
-    c_lo = torch.minimum(torch.floor((tri_lo[tri] - p - sub_lo[s]) / sub_w[s]).long().clamp(min=0),
-                         top_cell[s])
-    c_hi = torch.minimum(torch.floor((tri_hi[tri] + p - sub_lo[s]) / sub_w[s]).long().clamp(min=0),
-                         top_cell[s])
+    c_lo = torch.minimum(
+        torch.floor((tri_lo[tri] - p - sub_lo[s]) / sub_w[s]).long().clamp(min=0), top_cell[s]
+    )
+    c_hi = torch.minimum(
+        torch.floor((tri_hi[tri] + p - sub_lo[s]) / sub_w[s]).long().clamp(min=0), top_cell[s]
+    )
     span = c_hi - c_lo + 1
     pair, local = expand_ranges(torch.zeros_like(s), span.prod(dim=1))
     sx, sy = span[pair, 0], span[pair, 1]
@@ -151,10 +163,17 @@ def build_two_level_grid(mesh: Mesh, top_density: float = 1 / 16, density: float
     cell_id = base[sp] + x + sub_res[sp, 0] * (y + sub_res[sp, 1] * z)
     order = torch.sort(cell_id, stable=True).indices
     sub_count = torch.bincount(cell_id, minlength=total)
-    out.update(sub_lo=sub_lo, sub_hi=sub_hi, sub_resolution=sub_res, sub_cell_base=base,
-               sub_cell_start=torch.cumsum(sub_count, 0) - sub_count, sub_cell_count=sub_count,
-               sub_triangles=tri[pair[order]], sub_tri_cell_lo=c_lo[pair[order]],
-               sub_tri_cell_hi=c_hi[pair[order]])
+    out.update(
+        sub_lo=sub_lo,
+        sub_hi=sub_hi,
+        sub_resolution=sub_res,
+        sub_cell_base=base,
+        sub_cell_start=torch.cumsum(sub_count, 0) - sub_count,
+        sub_cell_count=sub_count,
+        sub_triangles=tri[pair[order]],
+        sub_tri_cell_lo=c_lo[pair[order]],
+        sub_tri_cell_hi=c_hi[pair[order]],
+    )
     return out
     # END SOLUTION
 
@@ -224,8 +243,10 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
         for owner, k in pair_chunks(grid2["cell_start"][cell_id], grid2["cell_count"][cell_id]):
             tri = grid2["triangles"][k]
             if mailbox:
-                seen = ((prev[owner] >= grid2["tri_cell_lo"][tri])
-                        & (prev[owner] <= grid2["tri_cell_hi"][tri])).all(dim=1)
+                seen = (
+                    (prev[owner] >= grid2["tri_cell_lo"][tri])
+                    & (prev[owner] <= grid2["tri_cell_hi"][tri])
+                ).all(dim=1)
                 seen &= prev_plain[owner] | big[tri]
                 add_count(counters["skipped"], ray[owner[seen]])
                 owner, tri = owner[~seen], tri[~seen]
@@ -234,9 +255,20 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
         sub = grid2["sub_of"][cell_id]
         crowded = (sub >= 0).nonzero()[:, 0]
         if len(crowded):
-            _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray[crowded],
-                            sub[crowded], t_in[crowded], reach(t_out[crowded]),
-                            torch.where(prev_plain[crowded, None], prev[crowded], -1), mailbox)
+            _walk_sub_grids(
+                rays,
+                grid2,
+                intersect,
+                corners,
+                closest,
+                counters,
+                ray[crowded],
+                sub[crowded],
+                t_in[crowded],
+                reach(t_out[crowded]),
+                torch.where(prev_plain[crowded, None], prev[crowded], -1),
+                mailbox,
+            )
         done = (reach(closest["t"][ray]) < t_out) | (t_out >= t_end)
         axis = t_next.argmin(dim=1, keepdim=True)
         prev, prev_plain = cell, sub < 0
@@ -251,8 +283,9 @@ def two_level_closest_hit(rays: Rays, mesh: Mesh, grid2: dict, intersect, mailbo
 
 
 # BEGIN SOLUTION
-def _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray, sub, t_lo, t_hi,
-                    prev_top, mailbox):
+def _walk_sub_grids(
+    rays, grid2, intersect, corners, closest, counters, ray, sub, t_lo, t_hi, prev_top, mailbox
+):
     """The nested DDA of :func:`two_level_closest_hit`: rays ``ray`` (k,) walk sub-grids
     ``sub`` (k,) over ``[t_lo, t_hi]`` (their top cell's interval); ``prev_top`` (k, 3):
     the previous top cell if it was plain, else -1."""
@@ -278,14 +311,19 @@ def _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray, sub
         t_next = torch.where(step == 0, math.inf, (boundary - o) * inv)
         t_out = torch.minimum(t_next.amin(dim=1), s_out)
         cell_id = base + cell[:, 0] + res[:, 0] * (cell[:, 1] + res[:, 1] * cell[:, 2])
-        for owner, k in pair_chunks(grid2["sub_cell_start"][cell_id],
-                                    grid2["sub_cell_count"][cell_id]):
+        for owner, k in pair_chunks(
+            grid2["sub_cell_start"][cell_id], grid2["sub_cell_count"][cell_id]
+        ):
             tri = grid2["sub_triangles"][k]
             if mailbox:
-                here = ((prev[owner] >= grid2["sub_tri_cell_lo"][k])
-                        & (prev[owner] <= grid2["sub_tri_cell_hi"][k])).all(dim=1)
-                before = ((prev_top[owner] >= grid2["tri_cell_lo"][tri])
-                          & (prev_top[owner] <= grid2["tri_cell_hi"][tri])).all(dim=1)
+                here = (
+                    (prev[owner] >= grid2["sub_tri_cell_lo"][k])
+                    & (prev[owner] <= grid2["sub_tri_cell_hi"][k])
+                ).all(dim=1)
+                before = (
+                    (prev_top[owner] >= grid2["tri_cell_lo"][tri])
+                    & (prev_top[owner] <= grid2["tri_cell_hi"][tri])
+                ).all(dim=1)
                 seen = here | before
                 add_count(counters["skipped"], ray[owner[seen]])
                 owner, tri = owner[~seen], tri[~seen]
@@ -300,4 +338,6 @@ def _walk_sub_grids(rays, grid2, intersect, corners, closest, counters, ray, sub
         ray, o, inv, s_out, prev_top = ray[keep], o[keep], inv[keep], s_out[keep], prev_top[keep]
         lo, res, base, width = lo[keep], res[keep], base[keep], width[keep]
         cell, prev, step = cell[keep], prev[keep], step[keep]
+
+
 # END SOLUTION

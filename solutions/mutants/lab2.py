@@ -97,10 +97,10 @@ MUTANTS = [
         name="sah_cost_without_counts",
         module=M,
         function="build_sah_bvh",
-        find="cost = (surface_area(left_lo[..., :-1, :], left_hi[..., :-1, :]) * n_l\n"
-        "                + surface_area(right_lo[..., 1:, :], right_hi[..., 1:, :]) * n_r)",
-        replace="cost = (surface_area(left_lo[..., :-1, :], left_hi[..., :-1, :])\n"
-        "                + surface_area(right_lo[..., 1:, :], right_hi[..., 1:, :]))",
+        find="surface_area(left_lo[..., :-1, :], left_hi[..., :-1, :]) * n_l\n"
+        "            + surface_area(right_lo[..., 1:, :], right_hi[..., 1:, :]) * n_r\n",
+        replace="surface_area(left_lo[..., :-1, :], left_hi[..., :-1, :])\n"
+        "            + surface_area(right_lo[..., 1:, :], right_hi[..., 1:, :])\n",
         tests="sah_bvh",
         why="minimises the children's areas without weighting them by their triangle "
         "counts: splits off slivers, a much deeper and costlier tree",

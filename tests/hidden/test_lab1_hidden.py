@@ -46,32 +46,58 @@ def check_kernel_hidden(impl, variant, device):
     for dtype in (torch.float32, F64):
         o, d, tri, lo, hi = (x.to(device, dtype) for x in (o64, d64, tris, t_min, t_max))
         v0, v1, v2 = tri[None, :, 0], tri[None, :, 1], tri[None, :, 2]
-        got = checked(intersect(impl, variant, o[:, None], d[:, None], v0, v1, v2, lo, hi),
-                      variant, (121, 37), dtype, device)
+        got = checked(
+            intersect(impl, variant, o[:, None], d[:, None], v0, v1, v2, lo, hi),
+            variant,
+            (121, 37),
+            dtype,
+            device,
+        )
         eps = torch.finfo(dtype).eps
         ref = ref_triangle(o[:, None], d[:, None], v0, v1, v2, lo, hi, margin_eps=eps)
         assert ref[3].sum() > 20, "test set-up: too few hits"
-        compare_hits(variant, f"hidden soup, 121 rays x 37 triangles with per-ray intervals, "
-                     f"{dtype}", got, ref, eps)
+        compare_hits(
+            variant,
+            f"hidden soup, 121 rays x 37 triangles with per-ray intervals, {dtype}",
+            got,
+            ref,
+            eps,
+        )
 
     # Triangles with two corners opposite each other through the world origin (a quad centred
     # on the origin, split along a diagonal, has them): ordinary triangles all the same.
     g = generator(5157)
     a = torch.rand(3, 4, 3, generator=g, dtype=F64) * 2 - 1
     b = torch.rand(3, 4, 3, generator=g, dtype=F64) * 2 - 1
-    tris = torch.cat([torch.stack([a[0], -a[0], b[0]], 1), torch.stack([a[1], b[1], -a[1]], 1),
-                      torch.stack([b[2], a[2], -a[2]], 1)])
+    tris = torch.cat(
+        [
+            torch.stack([a[0], -a[0], b[0]], 1),
+            torch.stack([a[1], b[1], -a[1]], 1),
+            torch.stack([b[2], a[2], -a[2]], 1),
+        ]
+    )
     o64, d64, _ = rays_at(tris, 60, seed=5158)
     for dtype in (torch.float32, F64):
         o, d, tri = (x.to(device, dtype) for x in (o64, d64, tris))
         v0, v1, v2 = tri[None, :, 0], tri[None, :, 1], tri[None, :, 2]
-        got = checked(intersect(impl, variant, o[:, None], d[:, None], v0, v1, v2),
-                      variant, (60, 12), dtype, device)
+        got = checked(
+            intersect(impl, variant, o[:, None], d[:, None], v0, v1, v2),
+            variant,
+            (60, 12),
+            dtype,
+            device,
+        )
         eps = torch.finfo(dtype).eps
         ref = ref_triangle(o[:, None], d[:, None], v0, v1, v2, margin_eps=eps)
         assert ref[3].sum() > 20, "test set-up: too few hits"
-        compare_hits(variant, f"12 triangles with v1 = -v0, v2 = -v0 or v2 = -v1 (two corners "
-                     f"symmetric about the origin), 60 rays, {dtype}", got, ref, eps)
+        compare_hits(
+            variant,
+            f"12 triangles with v1 = -v0, v2 = -v0 or v2 = -v1 (two corners "
+            f"symmetric about the origin), 60 rays, {dtype}",
+            got,
+            ref,
+            eps,
+        )
 
 
 @pytest.mark.task(1)
@@ -105,21 +131,32 @@ def test_ray_box_ray_sphere_hidden_cases(impl, device):
     o, d, lo, hi = visible.box_case(n, seed=5154)
     t_min = torch.where(torch.arange(n) % 4 == 1, 0.2, 0.0)
     t_max = torch.where(torch.arange(n) % 6 == 2, 0.7, INF)
-    near, far, hit = impl.ray_box(o.to(device), impl.safe_reciprocal(d.to(device)),
-                                  lo.to(device), hi.to(device), t_min.to(device),
-                                  t_max.to(device))
+    near, far, hit = impl.ray_box(
+        o.to(device),
+        impl.safe_reciprocal(d.to(device)),
+        lo.to(device),
+        hi.to(device),
+        t_min.to(device),
+        t_max.to(device),
+    )
     hit = check_tensor(hit, "ray_box hit", shape=(n,), dtype=torch.bool, device=device).cpu()
     r_near, r_far, r_hit = ref_box(o, d, lo, hi, t_min, t_max)
-    clear = (r_far - r_near).abs() > 1e-5 * (r_near.abs() + r_far.abs()).nan_to_num(0, 1, 1) \
-        + 1e-6
+    clear = (r_far - r_near).abs() > 1e-5 * (r_near.abs() + r_far.abs()).nan_to_num(0, 1, 1) + 1e-6
     wrong = (hit != r_hit) & (clear | r_hit)
     assert not wrong.any(), (
         f"ray_box (hidden boxes and rays): {int(wrong.sum())} rays decided against the float64 "
-        f"slabs, first ray {int(wrong.nonzero()[0, 0])}")
+        f"slabs, first ray {int(wrong.nonzero()[0, 0])}"
+    )
     both = hit & r_hit & clear
     for name, got, want in (("t_near", near, r_near), ("t_far", far, r_far)):
-        assert_close(got.cpu().double()[both], want[both], rtol=1e-5, atol=1e-6,
-                     name=f"ray_box {name} (hidden cases)", where="ray")
+        assert_close(
+            got.cpu().double()[both],
+            want[both],
+            rtol=1e-5,
+            atol=1e-6,
+            name=f"ray_box {name} (hidden cases)",
+            where="ray",
+        )
     g = generator(5155)
     centre = torch.rand(n, 3, generator=g, dtype=F64) * 4 - 2
     radius = torch.rand(n, generator=g, dtype=F64) * 0.8 + 0.05
@@ -127,19 +164,39 @@ def test_ray_box_ray_sphere_hidden_cases(impl, device):
     aim = centre + torch.randn(n, 3, generator=g, dtype=F64) * radius[:, None]
     direction = aim - origin
     for dtype in (torch.float32, F64):
-        t = impl.ray_sphere(origin.to(device, dtype), direction.to(device, dtype),
-                            centre.to(device, dtype), radius.to(device, dtype))
-        t = check_tensor(t[0] if isinstance(t, tuple) else t, "ray_sphere t", shape=(n,),
-                         dtype=dtype, device=device).cpu().double()
-        want, disc = ref_sphere(origin.to(dtype), direction.to(dtype), centre.to(dtype),
-                                radius.to(dtype))
+        t = impl.ray_sphere(
+            origin.to(device, dtype),
+            direction.to(device, dtype),
+            centre.to(device, dtype),
+            radius.to(device, dtype),
+        )
+        t = (
+            check_tensor(
+                t[0] if isinstance(t, tuple) else t,
+                "ray_sphere t",
+                shape=(n,),
+                dtype=dtype,
+                device=device,
+            )
+            .cpu()
+            .double()
+        )
+        want, disc = ref_sphere(
+            origin.to(dtype), direction.to(dtype), centre.to(dtype), radius.to(dtype)
+        )
         clear = disc.abs() > 1e-3 * (direction.norm(dim=1) * radius) ** 2
         assert bool(((t < INF) == (want < INF))[clear].all()), (
             f"ray_sphere ({dtype}, hidden spheres): a clear-cut ray decided against the "
-            f"float64 quadratic")
+            f"float64 quadratic"
+        )
         hit = clear & (want < INF)
-        assert_close(t[hit], want[hit], rtol=1e-4 if dtype == torch.float32 else 1e-10,
-                     name=f"ray_sphere ({dtype}, hidden spheres): t", where="ray")
+        assert_close(
+            t[hit],
+            want[hit],
+            rtol=1e-4 if dtype == torch.float32 else 1e-10,
+            name=f"ray_sphere ({dtype}, hidden spheres): t",
+            where="ray",
+        )
 
 
 @pytest.mark.task(6)
@@ -150,13 +207,17 @@ def test_closest_hit_hidden_soup(impl, device):
     # on the given Möller–Trumbore, so a mistake in task 2 costs task 2 only
     hits = visible.closest(impl, rays, mesh, memory_budget_bytes=2**14)
     visible.check_hits(hits, len(rays), torch.float32, device, "default")
-    compare_closest(hits, ref, "hidden soup of 77 + 2 triangles, the default variant, a 16 KB "
-                    "memory budget")
+    compare_closest(
+        hits, ref, "hidden soup of 77 + 2 triangles, the default variant, a 16 KB memory budget"
+    )
     for variant in [v for v in visible.implemented_variants(impl) if v in TRIANGLE_KERNELS]:
         hits = impl.closest_hit(rays, mesh, variant, 2**14)
         visible.check_hits(hits, len(rays), torch.float32, device, variant)
-        compare_closest(hits, ref, f"hidden soup of 77 + 2 triangles, variant={variant!r}, "
-                        f"a 16 KB memory budget")
+        compare_closest(
+            hits,
+            ref,
+            f"hidden soup of 77 + 2 triangles, variant={variant!r}, a 16 KB memory budget",
+        )
 
 
 # ---------------------------------------------------------------- promises, one at a time
@@ -170,8 +231,9 @@ def grazing_case(slope: float):
     """Rays ``slope`` off the plane z = 0 of the triangle (0,0,0), (1,0,0), (0,1,0), each
     crossing it at t = 0.3 (unit speed along (1, 0.2, -slope)): four well inside, two well
     outside. Returns float64 ``o, d, v0, v1, v2`` and the expected hits."""
-    starts = torch.tensor([[0.1, 0.3], [0.2, 0.1], [0.05, 0.05], [0.3, 0.25], [0.9, 0.6],
-                           [-0.5, 0.2]], dtype=F64)
+    starts = torch.tensor(
+        [[0.1, 0.3], [0.2, 0.1], [0.05, 0.05], [0.3, 0.25], [0.9, 0.6], [-0.5, 0.2]], dtype=F64
+    )
     o = torch.cat((starts, torch.full((6, 1), 0.3 * slope, dtype=F64)), 1)
     d = torch.tensor([1.0, 0.2, -slope], dtype=F64).expand(6, 3)
     cross = starts + 0.3 * torch.tensor([1.0, 0.2], dtype=F64)
@@ -186,20 +248,26 @@ def check_any_direction_length(impl, device, variant):
         for dtype in (torch.float32, F64):
             for k in LENGTHS:
                 args = [x.to(device, dtype) for x in (o, d * k, v0, v1, v2)]
-                t, _, _ = checked(intersect(impl, variant, *args), variant, (6,), dtype,
-                                  device)
+                t, _, _ = checked(intersect(impl, variant, *args), variant, (6,), dtype, device)
                 t = t.cpu().double()
                 hit = t < INF
-                case = (f"{variant} ({dtype}): rays {slope:g} off the triangle's plane with "
-                        f"directions of length {k:g}")
+                case = (
+                    f"{variant} ({dtype}): rays {slope:g} off the triangle's plane with "
+                    f"directions of length {k:g}"
+                )
                 assert bool((hit == inside).all()), (
                     f"{case}: hits {hit.tolist()}, expected {inside.tolist()} (the same as "
                     f"with unit directions). A tolerance that compares a quantity scaled by "
                     f"|d| with one that is not (e.g. |det| against eps |e1| |e2| without "
-                    f"|d|) decides differently for short and long directions.")
-                assert_close(t[inside] * k, torch.full((int(inside.sum()),), 0.3, dtype=F64),
-                             rtol=2e-3 if dtype == torch.float32 else 1e-9,
-                             name=f"{case}: t * |d| (t is in units of |d|)", where="ray")
+                    f"|d|) decides differently for short and long directions."
+                )
+                assert_close(
+                    t[inside] * k,
+                    torch.full((int(inside.sum()),), 0.3, dtype=F64),
+                    rtol=2e-3 if dtype == torch.float32 else 1e-9,
+                    name=f"{case}: t * |d| (t is in units of |d|)",
+                    where="ray",
+                )
 
 
 @pytest.mark.task(1)
@@ -245,26 +313,42 @@ def test_woop_precompute_rounded_once_from_float64(impl, device):
     v1 = v0 + torch.randn(64, 3, generator=g, dtype=F64)
     v2 = v0 + torch.randn(64, 3, generator=g, dtype=F64)
     got = impl.woop_precompute(*(x.float().to(device) for x in (v0, v1, v2)))
-    got = check_tensor(got, "woop_precompute(...)", shape=(64, 3, 4), dtype=torch.float32,
-                       device=device).cpu().double()
+    got = (
+        check_tensor(
+            got, "woop_precompute(...)", shape=(64, 3, 4), dtype=torch.float32, device=device
+        )
+        .cpu()
+        .double()
+    )
     # The float32 corners are the input: the float64 map of *those* corners, rounded once,
     # is within one float32 ulp (2**-23 relative) of each entry; entries that cancel to
     # about zero get an allowance from the size of their row.
     want = woop_float64(*(x.float().double() for x in (v0, v1, v2)))
     scale = want.abs().amax(-1, keepdim=True).expand_as(want)
-    assert_close(got, want, rtol=2.0**-23, atol=0, mask=want.abs() > 1e-6 * scale,
-                 name="woop_precompute in float32: each entry against the float64 map rounded "
-                      "once (about one ulp; compute it in float64 and cast at the end)",
-                 where="(triangle, row, column)")
+    assert_close(
+        got,
+        want,
+        rtol=2.0**-23,
+        atol=0,
+        mask=want.abs() > 1e-6 * scale,
+        name="woop_precompute in float32: each entry against the float64 map rounded "
+        "once (about one ulp; compute it in float64 and cast at the end)",
+        where="(triangle, row, column)",
+    )
     # The third row is the unit normal: z' is the signed distance from the plane, and
     # v0 + n goes to (0, 0, 1).
     n = torch.linalg.cross(v1 - v0, v2 - v0, dim=-1)
     n = n / n.norm(dim=-1, keepdim=True)
     lifted = torch.cat((v0 + n, torch.ones(64, 1, dtype=F64)), 1)[..., None]
     image = (got @ lifted)[..., 0]
-    assert_close(image, torch.tensor([0.0, 0, 1]).double().expand(64, 3), atol=1e-5,
-                 name="woop_precompute: the transform applied to v0 + n (unit normal) should "
-                      "be (0, 0, 1): the third row is n itself, not e1 x e2", where="triangle")
+    assert_close(
+        image,
+        torch.tensor([0.0, 0, 1]).double().expand(64, 3),
+        atol=1e-5,
+        name="woop_precompute: the transform applied to v0 + n (unit normal) should "
+        "be (0, 0, 1): the third row is n itself, not e1 x e2",
+        where="triangle",
+    )
 
 
 @pytest.mark.task(5)
@@ -279,4 +363,5 @@ def test_ray_sphere_negative_radius_misses(impl, device):
         assert bool((t.cpu() == INF).all()), (
             f"ray_sphere with a negative radius ({radius}) returned t = {t.cpu().tolist()}: "
             f"the docstring says a negative radius gives inf. r * r hides the sign, so test "
-            f"r >= 0 yourself.")
+            f"r >= 0 yourself."
+        )

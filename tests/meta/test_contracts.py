@@ -30,16 +30,22 @@ LABS = {0: "lab0_interop", 1: "lab1_intersect", 3: "lab3_wavefront"}
 
 
 def contracts(lab: int) -> dict:
-    return import_file(ROOT / "tests" / "contracts" / f"lab{lab}.py",
-                       f"rtcourse_contracts_lab{lab}").CONTRACTS
+    return import_file(
+        ROOT / "tests" / "contracts" / f"lab{lab}.py", f"rtcourse_contracts_lab{lab}"
+    ).CONTRACTS
 
 
 def grader_tests(lab: int) -> set[str]:
     names = set()
-    for path in [*ROOT.glob(f"tests/test_lab{lab}_*.py"),
-                 *ROOT.glob(f"tests/hidden/test_lab{lab}_*.py")]:
-        names |= {n.name for n in ast.parse(path.read_text()).body
-                  if isinstance(n, ast.FunctionDef) and n.name.startswith("test_")}
+    for path in [
+        *ROOT.glob(f"tests/test_lab{lab}_*.py"),
+        *ROOT.glob(f"tests/hidden/test_lab{lab}_*.py"),
+    ]:
+        names |= {
+            n.name
+            for n in ast.parse(path.read_text()).body
+            if isinstance(n, ast.FunctionDef) and n.name.startswith("test_")
+        }
     return names
 
 
@@ -57,10 +63,12 @@ def test_every_student_function_has_a_contract(lab):
     listed = contracts(lab)
     assert wanted - set(listed) == set(), (
         f"Lab {lab}: no contract list for {sorted(wanted - set(listed))} in "
-        f"tests/contracts/lab{lab}.py")
+        f"tests/contracts/lab{lab}.py"
+    )
     assert set(listed) - wanted == set(), (
         f"Lab {lab}: contract lists for functions the skeleton does not ask for: "
-        f"{sorted(set(listed) - wanted)}")
+        f"{sorted(set(listed) - wanted)}"
+    )
     empty = [f for f, promises in listed.items() if not promises]
     assert not empty, f"Lab {lab}: empty contract lists: {empty}"
 
@@ -69,26 +77,40 @@ def test_every_student_function_has_a_contract(lab):
 def test_named_tests_and_mutants_exist(lab):
     tests = grader_tests(lab)
     shipped = {m.name for m in load_mutants(ROOT) if m.lab == lab}
-    missing = [f"{fn}: {promise!r} names the test {test!r}, which no grader of Lab {lab} "
-               f"defines" for fn, promise, test, _ in entries(lab) if test not in tests]
-    missing += [f"{fn}: {promise!r} names the mutant {mutant!r}, not shipped for Lab {lab}"
-                for fn, promise, _, mutant in entries(lab) if mutant and mutant not in shipped]
+    missing = [
+        f"{fn}: {promise!r} names the test {test!r}, which no grader of Lab {lab} defines"
+        for fn, promise, test, _ in entries(lab)
+        if test not in tests
+    ]
+    missing += [
+        f"{fn}: {promise!r} names the mutant {mutant!r}, not shipped for Lab {lab}"
+        for fn, promise, _, mutant in entries(lab)
+        if mutant and mutant not in shipped
+    ]
     named = {mutant for *_, mutant in entries(lab) if mutant}
-    missing += [f"mutant {m!r} breaks no promise of tests/contracts/lab{lab}.py"
-                for m in sorted(shipped - named)]
+    missing += [
+        f"mutant {m!r} breaks no promise of tests/contracts/lab{lab}.py"
+        for m in sorted(shipped - named)
+    ]
     assert not missing, "\n".join(missing)
 
 
 @pytest.mark.parametrize("lab", sorted(LABS))
 def test_each_promise_test_fails_on_its_mutant(lab):
     by_name = {m.name: m for m in load_mutants(ROOT) if m.lab == lab}
-    pairs = sorted({(mutant, test) for *_, test, mutant in entries(lab)
-                    if mutant in by_name})
-    runs = [dataclasses.replace(by_name[mutant], name=f"{mutant}@{test}", tests=test)
-            for mutant, test in pairs]
+    pairs = sorted({(mutant, test) for *_, test, mutant in entries(lab) if mutant in by_name})
+    runs = [
+        dataclasses.replace(by_name[mutant], name=f"{mutant}@{test}", tests=test)
+        for mutant, test in pairs
+    ]
     outcomes = catch_mutants(runs, ROOT)
-    survived = [f"{name}: the test passes on the mutant"
-                + (f" ({outcome['error']})" if outcome.get("error") else "")
-                for name, outcome in outcomes.items() if not outcome.get("killed")]
-    assert not survived, (f"Lab {lab}: a promise's test does not catch the mistake that "
-                          f"breaks it:\n" + "\n".join(survived))
+    survived = [
+        f"{name}: the test passes on the mutant"
+        + (f" ({outcome['error']})" if outcome.get("error") else "")
+        for name, outcome in outcomes.items()
+        if not outcome.get("killed")
+    ]
+    assert not survived, (
+        f"Lab {lab}: a promise's test does not catch the mistake that "
+        f"breaks it:\n" + "\n".join(survived)
+    )

@@ -51,11 +51,13 @@ USER = _worker_user()
 NO_USER = "needs root and a user nobody that can run this Python (the autograder's worker)"
 
 # (submission, lab, tasks, the flag that turns its trick off)
-RUNS = {"forger0": ("reply_forger", 0, (), ("_forge.py", "FORGE")),
-        "forger1": ("reply_forger", 1, ("7",), ("_forge.py", "FORGE")),
-        **({"reader0": ("hidden_reader", 0, (), ("lab0_interop.py", "READ"))} if USER else {}),
-        "reference0": ("reference", 0, (), None),
-        "reference1": ("reference", 1, ("7",), None)}
+RUNS = {
+    "forger0": ("reply_forger", 0, (), ("_forge.py", "FORGE")),
+    "forger1": ("reply_forger", 1, ("7",), ("_forge.py", "FORGE")),
+    **({"reader0": ("hidden_reader", 0, (), ("lab0_interop.py", "READ"))} if USER else {}),
+    "reference0": ("reference", 0, (), None),
+    "reference1": ("reference", 1, ("7",), None),
+}
 
 
 def _copy_course(base: Path) -> Path:
@@ -63,8 +65,11 @@ def _copy_course(base: Path) -> Path:
     for name in COPIED:
         source = ROOT / name
         if source.is_dir():
-            shutil.copytree(source, course / name, ignore=shutil.ignore_patterns(
-                "meta", "__pycache__", "mutants"))
+            shutil.copytree(
+                source,
+                course / name,
+                ignore=shutil.ignore_patterns("meta", "__pycache__", "mutants"),
+            )
         else:
             course.mkdir(exist_ok=True)
             shutil.copy(source, course / name)
@@ -74,8 +79,9 @@ def _copy_course(base: Path) -> Path:
 def _submission(base: Path, tag: str, name: str, flag, on: bool) -> Path:
     folder = base / "subs" / tag
     if name == "reference":
-        shutil.copytree(ROOT / "solutions", folder, ignore=shutil.ignore_patterns(
-            "__pycache__", "mutants"))
+        shutil.copytree(
+            ROOT / "solutions", folder, ignore=shutil.ignore_patterns("__pycache__", "mutants")
+        )
     else:
         shutil.copytree(HERE / "hostile" / name, folder)
     if flag and not on:
@@ -89,16 +95,31 @@ def _grade(base: Path, course: Path, impl: Path, lab: int, tasks, tag: str) -> d
     results.mkdir(parents=True)
     results.chmod(0o700)  # as run_autograder leaves it
     out = results / "results.json"
-    env = dict(os.environ, RTCOURSE_RESULTS_DIR=str(results), RTCOURSE_TEST_RESULTS=str(out),
-               PYTHONPATH=str(course))
+    env = dict(
+        os.environ,
+        RTCOURSE_RESULTS_DIR=str(results),
+        RTCOURSE_TEST_RESULTS=str(out),
+        PYTHONPATH=str(course),
+    )
     if USER:  # the forgers too run as the autograder's worker user, where there is one
         env["RTCOURSE_WORKER_USER"] = USER
-    args = [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(impl),
-            "--lab", str(lab), "--json", str(out)]
+    args = [
+        sys.executable,
+        "-m",
+        "course.tools.cli",
+        "grade",
+        "--impl",
+        str(impl),
+        "--lab",
+        str(lab),
+        "--json",
+        str(out),
+    ]
     for task in tasks:
         args += ["--task", task]
-    proc = subprocess.run(args, cwd=course, env=env, capture_output=True, text=True,
-                          timeout=900, check=False)
+    proc = subprocess.run(
+        args, cwd=course, env=env, capture_output=True, text=True, timeout=900, check=False
+    )
     assert out.exists(), f"{tag}: no results.json\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return json.loads(out.read_text())
 
@@ -137,7 +158,8 @@ def test_a_trick_earns_what_the_submission_earns_without_it(graded, key):
         pytest.skip(NO_USER)
     with_trick, without = graded[f"{key}-on"], graded[f"{key}-off"]
     assert _scores(with_trick) == _scores(without), (
-        f"{key}: {with_trick['score']} with the trick, {without['score']} without")
+        f"{key}: {with_trick['score']} with the trick, {without['score']} without"
+    )
 
 
 def test_forged_replies_are_refused(graded):
@@ -154,8 +176,12 @@ def test_hidden_tests_and_results_are_unreadable(graded):
     assert "READ-OK" not in text, text[:3000]
     assert "ENV-SEEN" not in text, "the worker's environment names the results"
     assert "DENIED" in text, "the reader found nothing to try: the test no longer tests"
-    hidden = [line.strip() for path in (graded["course"] / "tests" / "hidden").glob("*.py")
-              for line in path.read_text().splitlines() if len(line.strip()) >= 24]
+    hidden = [
+        line.strip()
+        for path in (graded["course"] / "tests" / "hidden").glob("*.py")
+        for line in path.read_text().splitlines()
+        if len(line.strip()) >= 24
+    ]
     for line in hidden:
         assert line[::-1] not in text and line[: len(line) // 2] not in text.splitlines(), line
     assert data["score"] > 0, "the honest packing should keep its points"
@@ -192,20 +218,48 @@ def test_an_unreadable_interpreter_stops_grading_before_a_score(tmp_path):
     tmp_path.chmod(0o755)
     python = _private_python(tmp_path)
     env = dict(os.environ, RTCOURSE_WORKER_USER=_nobody())
-    check = subprocess.run([str(python), "-m", "course.grading.sandbox", "check-worker"],
-                           env=env, capture_output=True, text=True, timeout=300, check=False)
+    check = subprocess.run(
+        [str(python), "-m", "course.grading.sandbox", "check-worker"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert check.returncode == 2, check.stdout + check.stderr
     line = check.stderr.strip()
     assert len(line.splitlines()) == 1 and str(python) in line, line
     assert "/usr or /opt" in line and "RTCOURSE_WORKER_USER=" in line, line
     out = tmp_path / "results.json"
-    grade = subprocess.run([str(python), "-m", "course.tools.cli", "grade", "--impl",
-                            str(ROOT / "solutions"), "--lab", "0", "--json", str(out)],
-                           cwd=ROOT, env=dict(env, RTCOURSE_IMPL=""), capture_output=True,
-                           text=True, timeout=300, check=False)
+    grade = subprocess.run(
+        [
+            str(python),
+            "-m",
+            "course.tools.cli",
+            "grade",
+            "--impl",
+            str(ROOT / "solutions"),
+            "--lab",
+            "0",
+            "--json",
+            str(out),
+        ],
+        cwd=ROOT,
+        env=dict(env, RTCOURSE_IMPL=""),
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert grade.returncode != 0 and not out.exists(), grade.stdout + grade.stderr
     assert str(python) in grade.stderr, grade.stderr
     if USER:  # this interpreter itself is readable: the check passes
-        ok = subprocess.run([sys.executable, "-m", "course.grading.sandbox", "check-worker"],
-                            env=env, capture_output=True, text=True, timeout=300, check=False)
+        ok = subprocess.run(
+            [sys.executable, "-m", "course.grading.sandbox", "check-worker"],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
         assert ok.returncode == 0, ok.stderr

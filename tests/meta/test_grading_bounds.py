@@ -28,15 +28,31 @@ HERE = Path(__file__).parent
 ROOT = HERE.parent.parent
 TIME_LIMIT, BUDGET, SLOW = 4.0, 8.0, 1.0
 MARK = "rtcourse-hostile-child-987654"  # in the command line of child_spawner's children
-TOY = ("honest", "hang_everything", "near_limit_sleeper", "reply_bomb", "probe_forger",
-       "out_renamer", "hidden_leak", "child_spawner", "input_zeroer")
+TOY = (
+    "honest",
+    "hang_everything",
+    "near_limit_sleeper",
+    "reply_bomb",
+    "probe_forger",
+    "out_renamer",
+    "hidden_leak",
+    "child_spawner",
+    "input_zeroer",
+)
 LAB0 = ("input_zeroer", "out_renamer", "probe_forger")  # a hanging Lab 0: the slow test
 # Only the runs about time get the small limits; the others keep the default ones, so a
 # busy machine cannot make an honest call look like a hang.
-TIMED = {"RTCOURSE_TIME_LIMIT": str(TIME_LIMIT), "RTCOURSE_LAB_TIME_BUDGET": str(BUDGET),
-         "RTCOURSE_SLOW_TEST": str(SLOW)}
-ENV = {"reply_bomb": {"RTCOURSE_MEMORY_GB": "2"}, "hang_everything": TIMED,
-       "near_limit_sleeper": TIMED, "child_spawner": {"RTCOURSE_TIME_LIMIT": "40"}}
+TIMED = {
+    "RTCOURSE_TIME_LIMIT": str(TIME_LIMIT),
+    "RTCOURSE_LAB_TIME_BUDGET": str(BUDGET),
+    "RTCOURSE_SLOW_TEST": str(SLOW),
+}
+ENV = {
+    "reply_bomb": {"RTCOURSE_MEMORY_GB": "2"},
+    "hang_everything": TIMED,
+    "near_limit_sleeper": TIMED,
+    "child_spawner": {"RTCOURSE_TIME_LIMIT": "40"},
+}
 
 
 def _unprivileged_user():
@@ -92,29 +108,53 @@ def _grade(name, base: Path, hostile: Path, course: Path, lab: int, env: dict) -
     tmp = run / "tmp"
     tmp.mkdir(parents=True)
     out, rss = run / "results.json", run / "maxrss"
-    full_env = dict(os.environ, RTCOURSE_MEMORY_GB="0.5", RTCOURSE_REPLY_MB="32",
-                    TMPDIR=str(tmp))
-    for key in ("RTCOURSE_TIME_LIMIT", "RTCOURSE_LAB_TIME_BUDGET", "RTCOURSE_SLOW_TEST",
-                "RTCOURSE_LAB_TIME_CAP"):
+    full_env = dict(os.environ, RTCOURSE_MEMORY_GB="0.5", RTCOURSE_REPLY_MB="32", TMPDIR=str(tmp))
+    for key in (
+        "RTCOURSE_TIME_LIMIT",
+        "RTCOURSE_LAB_TIME_BUDGET",
+        "RTCOURSE_SLOW_TEST",
+        "RTCOURSE_LAB_TIME_CAP",
+    ):
         full_env.pop(key, None)
     full_env.update(env)
     start = time.monotonic()
     proc = subprocess.run(
-        [sys.executable, "-c", _WRAPPER, str(rss), "grade", "--impl", str(hostile / name),
-         "--lab", str(lab), "--json", str(out)], cwd=course, env=full_env,
-        capture_output=True, text=True, timeout=400, check=False)
-    return {"proc": proc, "seconds": time.monotonic() - start,
-            "data": json.loads(out.read_text()) if out.exists() else None,
-            "maxrss_kb": int(rss.read_text()) if rss.exists() else None,
-            "leftover_files": sorted(p.name for p in tmp.iterdir()
-                                     if not p.name.startswith("pytest-of-"))}
+        [
+            sys.executable,
+            "-c",
+            _WRAPPER,
+            str(rss),
+            "grade",
+            "--impl",
+            str(hostile / name),
+            "--lab",
+            str(lab),
+            "--json",
+            str(out),
+        ],
+        cwd=course,
+        env=full_env,
+        capture_output=True,
+        text=True,
+        timeout=400,
+        check=False,
+    )
+    return {
+        "proc": proc,
+        "seconds": time.monotonic() - start,
+        "data": json.loads(out.read_text()) if out.exists() else None,
+        "maxrss_kb": int(rss.read_text()) if rss.exists() else None,
+        "leftover_files": sorted(
+            p.name for p in tmp.iterdir() if not p.name.startswith("pytest-of-")
+        ),
+    }
 
 
 # The runs each test reads; only those of the selected tests are graded.
 _ALL = [(n, 8) for n in TOY] + [(n, 0) for n in LAB0]
 NEEDS = {
     "test_every_toy_run_is_valid_and_leaves_nothing": None,  # its parameter's toy run
-    "test_lab0_attacks_earn_nothing": None,                  # its parameter's Lab 0 run
+    "test_lab0_attacks_earn_nothing": None,  # its parameter's Lab 0 run
     "test_no_process_of_a_run_outlives_it": _ALL,
     "test_hanging_lab_ends_in_its_budget": [("hang_everything", 8)],
     "test_near_limit_sleeper_cannot_multiply_the_limit": [("near_limit_sleeper", 8)],
@@ -150,8 +190,10 @@ def runs(request):
         shutil.copytree(HERE / "hostile", hostile)
         course = base / "toycourse"
         shutil.copytree(HERE / "toycourse", course)
-        jobs = [(name, course if lab == 8 else ROOT, lab, ENV.get(name, {}))
-                for name, lab in _needed(request.session.items)]
+        jobs = [
+            (name, course if lab == 8 else ROOT, lab, ENV.get(name, {}))
+            for name, lab in _needed(request.session.items)
+        ]
         with ThreadPoolExecutor(max_workers=2) as pool:
             graded = list(pool.map(lambda job: _grade(job[0], base, hostile, *job[1:]), jobs))
         result = {(name, lab): run for (name, _, lab, _), run in zip(jobs, graded)}
@@ -165,8 +207,7 @@ def runs(request):
 
 def _hidden_lines(course: Path) -> set[str]:
     def lines(path):
-        return {s for s in (line.strip() for line in path.read_text().splitlines())
-                if len(s) >= 16}
+        return {s for s in (line.strip() for line in path.read_text().splitlines()) if len(s) >= 16}
 
     visible = set()
     for path in [*course.glob("tests/test_*.py"), *course.glob("solutions/*.py")]:
@@ -224,14 +265,20 @@ def test_no_process_of_a_run_outlives_it(runs):
 
 def _timed_out(messages) -> set[str]:
     """The calls that ran into the time limit (a later call of one repeats its message)."""
-    return {line.split(" did not finish")[0] for m in messages for line in m.splitlines()
-            if "did not finish within the time limit" in line}
+    return {
+        line.split(" did not finish")[0]
+        for m in messages
+        for line in m.splitlines()
+        if "did not finish within the time limit" in line
+    }
 
 
 def test_hanging_lab_ends_in_its_budget(runs):
     messages = _outputs(runs[("hang_everything", 8)]["data"])
-    assert all("did not finish within the time limit" in m
-               or "time budget of the lab used up" in m for m in messages), messages
+    assert all(
+        "did not finish within the time limit" in m or "time budget of the lab used up" in m
+        for m in messages
+    ), messages
     # 8 s of budget past the first second of each 4 s test: two timeouts, then the budget
     # ends the third call and every later one fails before it runs.
     assert len(_timed_out(messages)) <= 3, _timed_out(messages)
@@ -262,13 +309,14 @@ def test_near_limit_sleeper_cannot_multiply_the_limit(runs):
 def test_reply_bombs_fail_their_tests_not_the_grader(runs):
     run = runs[("reply_bomb", 8)]
     data = run["data"]
-    assert run["maxrss_kb"] is not None and run["maxrss_kb"] < 2 * 2**20, \
+    assert run["maxrss_kb"] is not None and run["maxrss_kb"] < 2 * 2**20, (
         f"the grader peaked at {run['maxrss_kb'] / 2**20:.2f} GB"
+    )
     outputs = dict(zip((t["name"] for t in data["tests"]), _outputs(data)))
     text = " ".join(outputs.values())
-    assert "more than the 32 MB" in text        # a result over the cap, in the worker
-    assert "more than 32 MB" in text            # the memo bomb, counted while decoding
-    assert "nested too deeply" in text          # the deep list
+    assert "more than the 32 MB" in text  # a result over the cap, in the worker
+    assert "more than 32 MB" in text  # the memo bomb, counted while decoding
+    assert "nested too deeply" in text  # the deep list
     assert "more than" in outputs[next(k for k in outputs if "test_scale[3.0]" in k)]
 
 
@@ -295,8 +343,11 @@ def test_hidden_source_never_shown(runs):
     assert hidden, "the toy course's hidden test has no line of its own"
     probe_body = {line for line in hidden if "secret_shape" in line or "lab.as_view" in line}
     shown = [(t["name"], t["output"]) for t in data["tests"] if "hidden" not in t["name"]]
-    shown += [("results.json output", data["output"]), ("stdout", run["proc"].stdout),
-              ("stderr", run["proc"].stderr)]
+    shown += [
+        ("results.json output", data["output"]),
+        ("stdout", run["proc"].stdout),
+        ("stderr", run["proc"].stderr),
+    ]
     for where, text in shown:
         leaked = [line for line in hidden if line in text]
         assert not leaked, f"{where} shows hidden test lines {leaked}"
@@ -332,14 +383,20 @@ def test_outputs_are_the_references_and_hidden_lines_are_removed(tmp_path):
         "def f(x, y_out, *, out=None):\n    pass\n\n"
         "class K:\n    def __init__(self, shape):\n        pass\n\n"
         "    def put(self, frame, out):\n        pass\n\n"
-        "    @staticmethod\n    def make(a):\n        pass\n")
+        "    @staticmethod\n    def make(a):\n        pass\n"
+    )
     table = reference_signatures(tmp_path / "solutions" / "lab8_guard.py")
-    assert table == {"f": ["x", "y_out"], "K": ["shape"], "K.put": ["frame", "out"],
-                     "K.make": ["a"]}
+    assert table == {
+        "f": ["x", "y_out"],
+        "K": ["shape"],
+        "K.put": ["frame", "out"],
+        "K.make": ["a"],
+    }
     (tmp_path / "tests" / "hidden").mkdir(parents=True)
     (tmp_path / "tests" / "test_lab8_guard.py").write_text("shared_line_of_both_tests = 1\n")
     (tmp_path / "tests" / "hidden" / "test_lab8_guard_hidden.py").write_text(
-        "shared_line_of_both_tests = 1\nsecret_seed_of_the_hidden_test = 1234\n")
+        "shared_line_of_both_tests = 1\nsecret_seed_of_the_hidden_test = 1234\n"
+    )
     redact = Redactor(tmp_path)
     text = redact("ok\n    secret_seed_of_the_hidden_test = 1234\nshared_line_of_both_tests = 1\n")
     assert "1234" not in text and "shared_line_of_both_tests" in text and "ok" in text
@@ -354,9 +411,25 @@ def test_hanging_lab_grades_within_three_minutes_at_the_default_limits(tmp_path)
     env["TMPDIR"] = str(tmp_path)
     start = time.monotonic()
     proc = subprocess.run(
-        [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(tmp_path / "sub"),
-         "--lab", "0", "--json", str(tmp_path / "results.json")], cwd=ROOT, env=env,
-        capture_output=True, text=True, timeout=600, check=False)
+        [
+            sys.executable,
+            "-m",
+            "course.tools.cli",
+            "grade",
+            "--impl",
+            str(tmp_path / "sub"),
+            "--lab",
+            "0",
+            "--json",
+            str(tmp_path / "results.json"),
+        ],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     seconds = time.monotonic() - start
     data = json.loads((tmp_path / "results.json").read_text())
     assert data["score"] == 0 and data["tests"], proc.stdout[-2000:]
@@ -372,9 +445,13 @@ def test_a_killed_grader_leaves_nothing(tmp_path):
     shutil.copytree(HERE / "hostile" / "child_spawner", sub)
     (tmp_path / "tmp").mkdir()
     env = dict(os.environ, TMPDIR=str(tmp_path / "tmp"), RTCOURSE_TIME_LIMIT="60")
-    proc = subprocess.Popen([sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(sub),
-                             "--lab", "8"], cwd=course, env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(sub), "--lab", "8"],
+        cwd=course,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + 240
         while not _processes_with(MARK) and time.monotonic() < deadline:
@@ -423,15 +500,19 @@ def test_worker_limit_fits_the_container(tmp_path, monkeypatch):
     worker = sandbox.Worker(str(tmp_path), memory_bytes=4 * 2**30)
     assert worker.tree_limit == sandbox.MIN_TREE_BYTES, "never below the least limit"
     monkeypatch.setattr(sandbox, "memory_room", lambda: 3 * 2**30)
-    assert sandbox.Worker(str(tmp_path), memory_bytes=4 * 2**30).tree_limit == \
-        3 * 2**30 - sandbox.GRADER_RESERVE
+    assert (
+        sandbox.Worker(str(tmp_path), memory_bytes=4 * 2**30).tree_limit
+        == 3 * 2**30 - sandbox.GRADER_RESERVE
+    )
     monkeypatch.setattr(sandbox, "memory_room", lambda: None)
-    assert sandbox.Worker(str(tmp_path), memory_bytes=2**30).tree_limit == \
-        2**30 + sandbox.BASELINE_BYTES
+    assert (
+        sandbox.Worker(str(tmp_path), memory_bytes=2**30).tree_limit
+        == 2**30 + sandbox.BASELINE_BYTES
+    )
     (tmp_path / "lab8_oom.py").write_text(
-        "def score():\n    return int(open('/proc/self/oom_score_adj').read())\n")
-    lab = sandbox.SandboxedLab("lab8_oom", sandbox.Worker(str(tmp_path), memory_bytes=2**30),
-                               60.0)
+        "def score():\n    return int(open('/proc/self/oom_score_adj').read())\n"
+    )
+    lab = sandbox.SandboxedLab("lab8_oom", sandbox.Worker(str(tmp_path), memory_bytes=2**30), 60.0)
     try:
         assert lab.score() == 1000, "the submission's process: the out-of-memory killer's first"
     finally:

@@ -32,12 +32,33 @@ def _grade(name: str, base: Path) -> dict:
     course = base / name / "course"
     shutil.copytree(HERE / "toycourse", course)
     out = base / name / "out" / "results.json"
-    env = dict(os.environ, RTCOURSE_TIME_LIMIT="8", RTCOURSE_MEMORY_GB="1",
-               RTCOURSE_TEST_RESULTS=str(out), RTCOURSE_TEST_CWD=str(course))
+    env = dict(
+        os.environ,
+        RTCOURSE_TIME_LIMIT="8",
+        RTCOURSE_MEMORY_GB="1",
+        RTCOURSE_TEST_RESULTS=str(out),
+        RTCOURSE_TEST_CWD=str(course),
+    )
     proc = subprocess.run(
-        [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(HERE / "hostile" / name),
-         "--lab", "9", "--json", str(out)], cwd=course, env=env, capture_output=True, text=True,
-        timeout=300, check=False)
+        [
+            sys.executable,
+            "-m",
+            "course.tools.cli",
+            "grade",
+            "--impl",
+            str(HERE / "hostile" / name),
+            "--lab",
+            "9",
+            "--json",
+            str(out),
+        ],
+        cwd=course,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     return {"proc": proc, "json": out, "cwd_json": course / "results.json"}
 
 
@@ -67,8 +88,15 @@ def test_grader_survives_and_scores_honestly(graded, name):
     for key in ("score", "max_score", "execution_time", "tests"):
         assert key in data, f"{name}: results.json lacks {key!r}"
     for test in data["tests"]:
-        assert set(test) >= {"name", "number", "score", "max_score", "status", "output",
-                             "visibility"}, f"{name}: malformed test entry {test}"
+        assert set(test) >= {
+            "name",
+            "number",
+            "score",
+            "max_score",
+            "status",
+            "output",
+            "visibility",
+        }, f"{name}: malformed test entry {test}"
     scores = _task_scores(data)
     assert data["max_score"] == pytest.approx(3.0), f"{name}: max_score {data['max_score']}"
     if name == "honest":
@@ -78,8 +106,9 @@ def test_grader_survives_and_scores_honestly(graded, name):
     if name in AT_IMPORT:
         assert data["score"] == 0, f"{name}: {data['output']}"
     else:
-        assert scores["9.1"][0] == pytest.approx(1.0), \
+        assert scores["9.1"][0] == pytest.approx(1.0), (
             f"{name}: the honest task lost its point\n{data['output']}"
+        )
 
 
 def test_fake_results_are_overwritten(graded):
@@ -89,8 +118,10 @@ def test_fake_results_are_overwritten(graded):
 
 
 def test_failures_explain_themselves(graded):
-    outputs = {name: " ".join(t["output"] for t in json.loads(run["json"].read_text())["tests"])
-               for name, run in graded.items()}
+    outputs = {
+        name: " ".join(t["output"] for t in json.loads(run["json"].read_text())["tests"])
+        for name, run in graded.items()
+    }
     assert "time limit" in outputs["hang_in_task"]
     assert "exit code 0" in outputs["os_exit_in_task"]
     assert "sys.exit(0)" in outputs["sys_exit_in_task"]
@@ -107,24 +138,45 @@ def test_student_output_is_captured_not_mixed(tmp_path):
     (sub / "lab9_toy.py").write_text(
         "import torch\nprint('IMPORT-NOISE')\n"
         "def double(x):\n    print('DOUBLE-NOISE')\n    return 2 * x\n"
-        "def norms(x):\n    print('NORMS-NOISE')\n    return x.sum(-1)\n")
+        "def norms(x):\n    print('NORMS-NOISE')\n    return x.sum(-1)\n"
+    )
     out = tmp_path / "results.json"
-    proc = subprocess.run([sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(sub),
-                           "--lab", "9", "--json", str(out)], cwd=course, capture_output=True,
-                          text=True, timeout=300, check=False)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "course.tools.cli",
+            "grade",
+            "--impl",
+            str(sub),
+            "--lab",
+            "9",
+            "--json",
+            str(out),
+        ],
+        cwd=course,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     for noise in ("IMPORT-NOISE", "DOUBLE-NOISE"):
         assert noise not in proc.stdout + proc.stderr, "student output leaked into the grader's"
     tests = {t["number"]: t for t in json.loads(out.read_text())["tests"]}
     assert "NORMS-NOISE" in tests["9.2"]["output"], "the failing test should show what it printed"
 
 
-@pytest.mark.parametrize("tensor", [
-    torch.tensor(0.5).expand(1).contiguous(),          # stride 0 on a size-1 dim
-    torch.arange(6.0).reshape(2, 3).T,                 # non-contiguous
-    torch.tensor(3, dtype=torch.int64),                # 0-d
-    torch.ones(2, 2, dtype=torch.bfloat16),            # no numpy dtype
-    torch.empty(0, 3),                                 # empty
-], ids=["stride0", "transposed", "scalar", "bf16", "empty"])
+@pytest.mark.parametrize(
+    "tensor",
+    [
+        torch.tensor(0.5).expand(1).contiguous(),  # stride 0 on a size-1 dim
+        torch.arange(6.0).reshape(2, 3).T,  # non-contiguous
+        torch.tensor(3, dtype=torch.int64),  # 0-d
+        torch.ones(2, 2, dtype=torch.bfloat16),  # no numpy dtype
+        torch.empty(0, 3),  # empty
+    ],
+    ids=["stride0", "transposed", "scalar", "bf16", "empty"],
+)
 def test_tensors_cross_the_wire_unchanged(tensor):
     back = wire.decode(wire.loads_plain(wire.dumps(wire.encode(tensor))))
     assert type(back) is torch.Tensor and back.dtype == tensor.dtype

@@ -20,7 +20,6 @@ from pathlib import Path
 import pytest
 
 from course.core.files import lab_source
-
 from course.tools.release import release
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -36,8 +35,15 @@ def handout(tmp_path_factory):
 
 def _run(handout: Path, *args: str, timeout: int = 300) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k != "RTCOURSE_IMPL"}  # the default
-    return subprocess.run([sys.executable, *args], cwd=handout, env=env, capture_output=True,
-                          text=True, timeout=timeout, check=False)
+    return subprocess.run(
+        [sys.executable, *args],
+        cwd=handout,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
 
 
 def test_the_handout_has_the_benches_and_no_solutions(handout):
@@ -48,8 +54,9 @@ def test_the_handout_has_the_benches_and_no_solutions(handout):
 @pytest.mark.parametrize("script", SCRIPTS)
 def test_every_bench_answers_help_in_the_handout(handout, script):
     proc = _run(handout, f"bench/{script}", "--help", timeout=120)
-    assert proc.returncode == 0 and "usage:" in proc.stdout, proc.stdout[-2000:] + \
-        proc.stderr[-3000:]
+    assert proc.returncode == 0 and "usage:" in proc.stdout, (
+        proc.stdout[-2000:] + proc.stderr[-3000:]
+    )
 
 
 def test_lab3_bench_measures_the_students_code(handout, tmp_path):
@@ -61,8 +68,7 @@ def test_lab3_bench_measures_the_students_code(handout, tmp_path):
     else:
         shutil.copy(reference, student)
     out = tmp_path / "results"
-    proc = _run(handout, "bench/lab3_wavefront.py", "--device", "cpu", "--quick",
-                "--out", str(out))
+    proc = _run(handout, "bench/lab3_wavefront.py", "--device", "cpu", "--quick", "--out", str(out))
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     data = json.loads((out / "lab3_wavefront.json").read_text())
     loaded = Path(data["metadata"]["lab_file"]).resolve()

@@ -87,14 +87,19 @@ class _Scope:
         self.instances: dict[str, set] = {}  # local -> lab classes it is an instance of
         self.strings = strings  # local -> literal strings it may take
         # ``if name == "x": ... return`` ahead of a line: past it, ``name`` is not "x".
-        self.returned = [(n.end_lineno, n.test.left.id, n.test.comparators[0].value)
-                         for n in fn.body if isinstance(n, ast.If)
-                         and isinstance(n.test, ast.Compare) and isinstance(n.test.left, ast.Name)
-                         and isinstance(n.test.ops[0], ast.Eq)
-                         and isinstance(n.test.comparators[0], ast.Constant)
-                         and isinstance(n.body[-1], ast.Return)]
-        for node in sorted((n for n in ast.walk(fn) if isinstance(n, ast.Assign)),
-                           key=lambda n: n.lineno):
+        self.returned = [
+            (n.end_lineno, n.test.left.id, n.test.comparators[0].value)
+            for n in fn.body
+            if isinstance(n, ast.If)
+            and isinstance(n.test, ast.Compare)
+            and isinstance(n.test.left, ast.Name)
+            and isinstance(n.test.ops[0], ast.Eq)
+            and isinstance(n.test.comparators[0], ast.Constant)
+            and isinstance(n.body[-1], ast.Return)
+        ]
+        for node in sorted(
+            (n for n in ast.walk(fn) if isinstance(n, ast.Assign)), key=lambda n: n.lineno
+        ):
             if len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
                 name, value = node.targets[0].id, node.value
                 if isinstance(value, ast.Call) and _impl_name(value.func):
@@ -112,8 +117,12 @@ class _Scope:
             return set(earlier[-1]) if earlier else set()
         if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
             return {f"{cls}.{node.attr}" for cls in self.instances.get(node.value.id, ())}
-        if isinstance(node, ast.Call) and _dotted(node.func) == "getattr" \
-                and len(node.args) == 2 and _dotted(node.args[0]) == "impl":
+        if (
+            isinstance(node, ast.Call)
+            and _dotted(node.func) == "getattr"
+            and len(node.args) == 2
+            and _dotted(node.args[0]) == "impl"
+        ):
             key = node.args[1]
             if isinstance(key, ast.Constant) and isinstance(key.value, str):
                 return {key.value}
@@ -160,8 +169,7 @@ def _string_values(functions: list, constants: dict) -> dict:
                     if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
                         values.setdefault((callee, param), set()).add(arg.value)
                     elif isinstance(arg, ast.Name) and (fn.name, arg.id) in values:
-                        values.setdefault((callee, param), set()).update(
-                            values[(fn.name, arg.id)])
+                        values.setdefault((callee, param), set()).update(values[(fn.name, arg.id)])
     return values
 
 
@@ -173,11 +181,14 @@ def _unpacked_strings(target: ast.Tuple, iterable) -> dict:
     except ValueError:
         return {}
     if not isinstance(items, (tuple, list)) or not all(
-            isinstance(item, (tuple, list)) and len(item) == len(target.elts) for item in items):
+        isinstance(item, (tuple, list)) and len(item) == len(target.elts) for item in items
+    ):
         return {}
-    return {elt.id: {item[i] for item in items} for i, elt in enumerate(target.elts)
-            if isinstance(elt, ast.Name) and items and all(isinstance(item[i], str)
-                                                           for item in items)}
+    return {
+        elt.id: {item[i] for item in items}
+        for i, elt in enumerate(target.elts)
+        if isinstance(elt, ast.Name) and items and all(isinstance(item[i], str) for item in items)
+    }
 
 
 def _impl_name(node) -> str | None:
@@ -187,59 +198,93 @@ def _impl_name(node) -> str | None:
 
 def _course_imports(tree: ast.Module) -> set[str]:
     """The names a grader imports from the course package at its top level."""
-    return {alias.asname or alias.name for node in tree.body
-            if isinstance(node, ast.ImportFrom) and node.level == 0
-            and (node.module or "").split(".")[0] == "course" for alias in node.names}
+    return {
+        alias.asname or alias.name
+        for node in tree.body
+        if isinstance(node, ast.ImportFrom)
+        and node.level == 0
+        and (node.module or "").split(".")[0] == "course"
+        for alias in node.names
+    }
 
 
 def _checks_in(path: Path) -> tuple[list[Check], list[str]]:
     """The graded argument checks of one grader, and the calls it could not resolve."""
     tree = ast.parse(path.read_text())
-    module = next((ast.literal_eval(n.value) for n in tree.body if isinstance(n, ast.Assign)
-                   and any(getattr(t, "id", "") == "LAB_MODULE" for t in n.targets)), None)
-    constants = {n.targets[0].id: v for n in tree.body if isinstance(n, ast.Assign)
-                 and isinstance(n.targets[0], ast.Name)
-                 and (v := _literal_strings(n.value)) is not None}
+    module = next(
+        (
+            ast.literal_eval(n.value)
+            for n in tree.body
+            if isinstance(n, ast.Assign)
+            and any(getattr(t, "id", "") == "LAB_MODULE" for t in n.targets)
+        ),
+        None,
+    )
+    constants = {
+        n.targets[0].id: v
+        for n in tree.body
+        if isinstance(n, ast.Assign)
+        and isinstance(n.targets[0], ast.Name)
+        and (v := _literal_strings(n.value)) is not None
+    }
     functions = [n for n in tree.body if isinstance(n, ast.FunctionDef)]
     given = _course_imports(tree)
     # Wrappers: functions that pass one of their parameters to expect_error as ``fn``.
     wrappers = {}  # name -> (parameter index, parameter name, [(names, kinds)])
     for fn in functions:
         params = [a.arg for a in fn.args.args]
-        calls = [c for c in ast.walk(fn) if isinstance(c, ast.Call)
-                 and _dotted(c.func) == "expect_error" and len(c.args) >= 2
-                 and isinstance(c.args[1], ast.Name) and c.args[1].id in params]
+        calls = [
+            c
+            for c in ast.walk(fn)
+            if isinstance(c, ast.Call)
+            and _dotted(c.func) == "expect_error"
+            and len(c.args) >= 2
+            and isinstance(c.args[1], ast.Name)
+            and c.args[1].id in params
+        ]
         for c in calls:
             entry = wrappers.setdefault(fn.name, (params.index(c.args[1].id), c.args[1].id, []))
             entry[2].append((_literal_strings(c.args[0]), _kinds(c)))
     strings = _string_values(functions, constants)
     checks, unresolved = [], []
     for fn in functions:
-        scope = _Scope(fn, {local: v for (owner, local), v in strings.items()
-                            if owner == fn.name})
+        scope = _Scope(fn, {local: v for (owner, local), v in strings.items() if owner == fn.name})
         for call in (c for c in ast.walk(fn) if isinstance(c, ast.Call)):
             name = _dotted(call.func)
             where = f"{path.relative_to(ROOT)}:{call.lineno}"
             if name == "expect_error" and len(call.args) >= 2:
-                if fn.name in wrappers and isinstance(call.args[1], ast.Name) \
-                        and call.args[1].id == wrappers[fn.name][1]:
+                if (
+                    fn.name in wrappers
+                    and isinstance(call.args[1], ast.Name)
+                    and call.args[1].id == wrappers[fn.name][1]
+                ):
                     continue  # checked where the wrapper is called
                 names = _literal_strings(call.args[0])
                 wanted = [(names, _kinds(call), call.args[1])]
-                if names is None and isinstance(call.args[0], ast.Name) \
-                        and scope.strings.get(call.args[0].id):  # each name it takes
-                    wanted = [((n,), _kinds(call), call.args[1])
-                              for n in sorted(scope.strings[call.args[0].id])]
+                if (
+                    names is None
+                    and isinstance(call.args[0], ast.Name)
+                    and scope.strings.get(call.args[0].id)
+                ):  # each name it takes
+                    wanted = [
+                        ((n,), _kinds(call), call.args[1])
+                        for n in sorted(scope.strings[call.args[0].id])
+                    ]
             elif name in wrappers:
                 index, param, inner = wrappers[name]
-                target = next((kw.value for kw in call.keywords if kw.arg == param),
-                              call.args[index] if len(call.args) > index else None)
+                target = next(
+                    (kw.value for kw in call.keywords if kw.arg == param),
+                    call.args[index] if len(call.args) > index else None,
+                )
                 wanted = [(names, kinds, target) for names, kinds in inner]
             else:
                 continue
             for names, kinds, target in wanted:
-                if isinstance(target, ast.Name) and target.id in given \
-                        and target.id not in scope.values:
+                if (
+                    isinstance(target, ast.Name)
+                    and target.id in given
+                    and target.id not in scope.values
+                ):
                     continue  # given code's check, not one the student writes
                 targets = scope.resolve(target, call.lineno) if target is not None else set()
                 if not names or not targets:
@@ -281,12 +326,15 @@ def documented(check: Check, definitions: dict) -> str | None:
         init = definitions.get(f"{check.function}.__init__")
         docs.insert(0, ast.get_docstring(init) or "" if init else "")
     for paragraph in (p for doc in docs for p in errors_paragraphs(doc)):
-        if any(re.search(rf"\b{re.escape(n)}\b", paragraph) for n in check.names) and \
-                any(re.search(rf"\b{k}\b", paragraph) for k in check.kinds):
+        if any(re.search(rf"\b{re.escape(n)}\b", paragraph) for n in check.names) and any(
+            re.search(rf"\b{k}\b", paragraph) for k in check.kinds
+        ):
             return None
-    return (f"{check.where}: {check.function} must say in an 'Errors' paragraph of its "
-            f"docstring that it raises {' or '.join(check.kinds)} naming "
-            f"{' or '.join(f'``{n}``' for n in check.names)}")
+    return (
+        f"{check.where}: {check.function} must say in an 'Errors' paragraph of its "
+        f"docstring that it raises {' or '.join(check.kinds)} naming "
+        f"{' or '.join(f'``{n}``' for n in check.names)}"
+    )
 
 
 def lab_checks(lab: int) -> tuple[list[Check], list[str]]:
@@ -306,11 +354,15 @@ def test_every_graded_check_is_in_the_docstring(lab):
     missing = []
     for module in sorted({c.module for c in checks}):
         definitions = _definitions(module)
-        missing += [m for c in checks if c.module == module
-                    and (m := documented(c, definitions)) is not None]
-    problems = sorted(set(missing)) + [f"{u} (cannot tell which lab function it checks: "
-                                       f"pass impl.fn, or a local bound to one)"
-                                       for u in unresolved]
+        missing += [
+            m
+            for c in checks
+            if c.module == module and (m := documented(c, definitions)) is not None
+        ]
+    problems = sorted(set(missing)) + [
+        f"{u} (cannot tell which lab function it checks: pass impl.fn, or a local bound to one)"
+        for u in unresolved
+    ]
     if problems and lab in PENDING:
         pytest.xfail(f"{PENDING[lab]}: {len(problems)} to do, first: {problems[0]}")
     assert not problems, "\n".join(problems)
@@ -320,7 +372,7 @@ def test_the_reader_resolves_what_graders_write(tmp_path, monkeypatch):
     grader = tmp_path / "tests" / "test_lab9_toy.py"
     grader.parent.mkdir()
     grader.write_text(
-        'from course.given.lab9 import given_fn\n'
+        "from course.given.lab9 import given_fn\n"
         'LAB_MODULE = "lab9_toy"\nNAMES = ("f", "g")\n\n'
         "def bad(render, device):\n    expect_error('x', render, 1, case='x=1')\n\n"
         "@pytest.mark.parametrize('name', NAMES)\n"
@@ -329,14 +381,20 @@ def test_the_reader_resolves_what_graders_write(tmp_path, monkeypatch):
         "    expect_error('z', box.put, 0, kinds=(RuntimeError,))\n"
         "    bad(impl.h, 'cpu')\n    expect_error('w', impl.Box, 0)\n"
         "    for arg, v in (('p', -1.0), ('q', 2)):\n        expect_error(arg, impl.k, v)\n"
-        "    expect_error('v', given_fn, 0)\n")
+        "    expect_error('v', given_fn, 0)\n"
+    )
     monkeypatch.setitem(globals(), "ROOT", tmp_path)
     checks, unresolved = _checks_in(grader)
     got = sorted((c.function, c.names, c.kinds) for c in checks)
-    assert got == [("Box", ("w",), DEFAULT_KINDS), ("Box.put", ("z",), ("RuntimeError",)),
-                   ("f", ("x", "y"), DEFAULT_KINDS), ("g", ("x", "y"), DEFAULT_KINDS),
-                   ("h", ("x",), DEFAULT_KINDS), ("k", ("p",), DEFAULT_KINDS),
-                   ("k", ("q",), DEFAULT_KINDS)], got
+    assert got == [
+        ("Box", ("w",), DEFAULT_KINDS),
+        ("Box.put", ("z",), ("RuntimeError",)),
+        ("f", ("x", "y"), DEFAULT_KINDS),
+        ("g", ("x", "y"), DEFAULT_KINDS),
+        ("h", ("x",), DEFAULT_KINDS),
+        ("k", ("p",), DEFAULT_KINDS),
+        ("k", ("q",), DEFAULT_KINDS),
+    ], got
     assert not unresolved
     ok = ast.parse('def h(x):\n    """Do.\n\n    Errors: ValueError naming ``x``.\n    """\n')
     bad = ast.parse('def h(x):\n    """Do. Raises ValueError for a bad ``x``."""\n')

@@ -17,8 +17,7 @@ def timed(ctx: dict, fn, *args, **kwargs):
     """``(result, seconds)``: the first call's result (it is also the warm-up) and the median
     of ``ctx["repeats"]`` timed calls (:func:`course.measure.bench.time_fn`)."""
     result = fn(*args, **kwargs)
-    timing = time_fn(fn, *args, repeats=ctx["repeats"], warmup=0, device=ctx["device"],
-                     **kwargs)
+    timing = time_fn(fn, *args, repeats=ctx["repeats"], warmup=0, device=ctx["device"], **kwargs)
     return result, timing.median
 
 
@@ -45,8 +44,14 @@ def exact_hits(rays: Rays, mesh: Mesh, pairs: int = 1 << 20) -> tuple[torch.Tens
         q = torch.linalg.cross(s, e1[None].expand_as(s))
         v = (dd * q).sum(-1) * inv
         t = (e2[None] * q).sum(-1) * inv
-        ok = ((det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1)
-              & (t >= t_min[sl, None]) & (t <= t_max[sl, None]))
+        ok = (
+            (det != 0)
+            & (u >= 0)
+            & (v >= 0)
+            & (u + v <= 1)
+            & (t >= t_min[sl, None])
+            & (t <= t_max[sl, None])
+        )
         t = torch.where(ok, t, math.inf)
         tb, ib = t.min(1)
         best_t[sl], best[sl] = tb, torch.where(torch.isfinite(tb), ib, -1)

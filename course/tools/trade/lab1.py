@@ -20,8 +20,12 @@ MODULE = "lab1_intersect"
 TITLE = "ray/triangle intersection: variant and precision"
 ERROR_NAME = "hits differing from exact"
 ERROR = "fraction of rays whose closest hit differs from float64 brute force (course code)"
-DTYPES = {"fp16": torch.float16, "bf16": torch.bfloat16, "fp32": torch.float32,
-          "fp64": torch.float64}
+DTYPES = {
+    "fp16": torch.float16,
+    "bf16": torch.bfloat16,
+    "fp32": torch.float32,
+    "fp64": torch.float64,
+}
 
 
 def soup_rays(n: int, seed: int = 1) -> Rays:
@@ -39,13 +43,23 @@ def prepare(device, quick: bool) -> dict:
     soup = load_scene("random_soup", n=tris, seed=0, device="cpu", dtype=F64).mesh
     ray_batch = soup_rays(rays)
     t, triangle = exact_hits(ray_batch, soup)
-    return {"device": device, "quick": quick, "repeats": 2 if quick else 5, "soup": soup,
-            "rays": ray_batch, "exact": (t, triangle), "pairs": rays * tris}
+    return {
+        "device": device,
+        "quick": quick,
+        "repeats": 2 if quick else 5,
+        "soup": soup,
+        "rays": ray_batch,
+        "exact": (t, triangle),
+        "pairs": rays * tris,
+    }
 
 
 def knobs(ctx: dict) -> list[dict]:
-    return [{"setting": f"{variant} {name}", "variant": variant, "dtype": name}
-            for variant in VARIANTS for name in DTYPES]
+    return [
+        {"setting": f"{variant} {name}", "variant": variant, "dtype": name}
+        for variant in VARIANTS
+        for name in DTYPES
+    ]
 
 
 def measure(lab, ctx: dict, knob: dict) -> dict:
@@ -53,8 +67,12 @@ def measure(lab, ctx: dict, knob: dict) -> dict:
     rays, mesh = ctx["rays"].to(ctx["device"], dtype), ctx["soup"].to(ctx["device"], dtype)
     budget = {"memory_budget_bytes": ctx["memory"]} if ctx.get("memory") else {}
     hits, seconds = timed(ctx, lab.closest_hit, rays, mesh, variant=knob["variant"], **budget)
-    return {"seconds": seconds, "error": hit_disagreement(hits.t, hits.triangle, *ctx["exact"]),
-            "tests": ctx["pairs"], "hits": hits}
+    return {
+        "seconds": seconds,
+        "error": hit_disagreement(hits.t, hits.triangle, *ctx["exact"]),
+        "tests": ctx["pairs"],
+        "hits": hits,
+    }
 
 
 def fused(ctx: dict) -> list[dict]:
@@ -68,8 +86,16 @@ def fused(ctx: dict) -> list[dict]:
         return []
     rays = ctx["rays"].to(ctx["device"], torch.float32)
     layout = ti.mt_layout(ctx["soup"].to(ctx["device"], torch.float32).triangles())
-    (t, index, _, _), seconds = timed(ctx, ti.mt_closest_hit_triton, rays.origins,
-                                      rays.directions, layout, rays.t_min, rays.t_max)
-    return [{"setting": "fused moller_trumbore fp32", "variant": "triton_mt", "dtype": "fp32",
-             "seconds": seconds, "error": hit_disagreement(t, index, *ctx["exact"]),
-             "tests": ctx["pairs"]}]
+    (t, index, _, _), seconds = timed(
+        ctx, ti.mt_closest_hit_triton, rays.origins, rays.directions, layout, rays.t_min, rays.t_max
+    )
+    return [
+        {
+            "setting": "fused moller_trumbore fp32",
+            "variant": "triton_mt",
+            "dtype": "fp32",
+            "seconds": seconds,
+            "error": hit_disagreement(t, index, *ctx["exact"]),
+            "tests": ctx["pairs"],
+        }
+    ]

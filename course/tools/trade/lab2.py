@@ -53,38 +53,50 @@ def prepare(device, quick: bool) -> dict:
     camera = dataclasses.replace(scene.camera, width=size, height=size)
     rays = primary_rays(camera, device=device)
     exact = exact_hits(primary_rays(camera, device="cpu", dtype=F64), scene.mesh)
-    return {"device": device, "quick": quick, "repeats": 1 if quick else 3, "mesh": scene.mesh,
-            "rays": rays, "exact": exact}
+    return {
+        "device": device,
+        "quick": quick,
+        "repeats": 1 if quick else 3,
+        "mesh": scene.mesh,
+        "rays": rays,
+        "exact": exact,
+    }
 
 
 def knobs(ctx: dict) -> list[dict]:
-    return [{"setting": label, "structure": kind or "none", **params}
-            for label, kind, params in STRUCTURES]
+    return [
+        {"setting": label, "structure": kind or "none", **params}
+        for label, kind, params in STRUCTURES
+    ]
 
 
 def _nbytes(structure) -> int:
-    return sum(x.numel() * x.element_size() for x in structure.values()
-               if isinstance(x, torch.Tensor))
+    return sum(
+        x.numel() * x.element_size() for x in structure.values() if isinstance(x, torch.Tensor)
+    )
 
 
 def measure(lab, ctx: dict, knob: dict) -> dict:
     label, kind, params = next(s for s in STRUCTURES if s[0] == knob["setting"])
     mesh, rays = ctx["mesh"], ctx["rays"]
     if kind is None:
-        (hits, counters), seconds = timed(ctx, lab.brute_force_closest_hit, rays, mesh,
-                                          intersect)
+        (hits, counters), seconds = timed(ctx, lab.brute_force_closest_hit, rays, mesh, intersect)
         build_s, nbytes = 0.0, 0
     else:
         start = time.perf_counter()
         structure = lab.build(mesh, kind, **params)
         build_s = time.perf_counter() - start
-        (hits, counters), seconds = timed(ctx, lab.closest_hit, rays, mesh, structure,
-                                          intersect)
+        (hits, counters), seconds = timed(ctx, lab.closest_hit, rays, mesh, structure, intersect)
         nbytes = _nbytes(structure)
-    return {"seconds": seconds, "error": hit_disagreement(hits.t, hits.triangle, *ctx["exact"]),
-            "build_s": build_s, "steps": counters["steps"].double().mean().item(),
-            "tests": counters["tests"].double().mean().item(), "bytes": nbytes,
-            "rays": len(rays)}
+    return {
+        "seconds": seconds,
+        "error": hit_disagreement(hits.t, hits.triangle, *ctx["exact"]),
+        "build_s": build_s,
+        "steps": counters["steps"].double().mean().item(),
+        "tests": counters["tests"].double().mean().item(),
+        "bytes": nbytes,
+        "rays": len(rays),
+    }
 
 
 def fused(ctx: dict) -> list[dict]:
@@ -92,8 +104,16 @@ def fused(ctx: dict) -> list[dict]:
     from course.kernels.trace import trace_bvh
 
     rays, mesh = ctx["rays"], ctx["mesh"]
-    hits, seconds = timed(ctx, trace_bvh, mesh, rays.origins, rays.directions, rays.t_min,
-                          rays.t_max)
+    hits, seconds = timed(
+        ctx, trace_bvh, mesh, rays.origins, rays.directions, rays.t_min, rays.t_max
+    )
     t, triangle = (hits.t, hits.triangle) if hasattr(hits, "t") else hits[:2]
-    return [{"setting": "fused BVH (trace_bvh)", "structure": "flat bvh", "seconds": seconds,
-             "error": hit_disagreement(t, triangle, *ctx["exact"]), "rays": len(rays)}]
+    return [
+        {
+            "setting": "fused BVH (trace_bvh)",
+            "structure": "flat bvh",
+            "seconds": seconds,
+            "error": hit_disagreement(t, triangle, *ctx["exact"]),
+            "rays": len(rays),
+        }
+    ]

@@ -22,8 +22,10 @@ from course.tools.trade.common import F64, timed
 MODULE = "lab3_wavefront"
 TITLE = "organising the tracer: loop, wavefront, uber, persistent"
 ERROR_NAME = "mean relative image error"
-ERROR = ("mean relative error of the image against render_reference (float64 brute force) "
-         "on sampled pixels")
+ERROR = (
+    "mean relative error of the image against render_reference (float64 brute force) "
+    "on sampled pixels"
+)
 SCENE = "cornell_mirror"
 
 
@@ -32,24 +34,37 @@ def prepare(device, quick: bool) -> dict:
     scene = whitted_scene(SCENE, device=device)
     rays = primary_rays(whitted_camera(SCENE, size, size), device=device)
     g = torch.Generator().manual_seed(0)
-    sample = torch.randperm(len(rays), generator=g)[:min(len(rays), 64 if quick else 256)]
+    sample = torch.randperm(len(rays), generator=g)[: min(len(rays), 64 if quick else 256)]
     sample = sample.to(device)
-    reference = render_reference(scene, rays.origins[sample], rays.directions[sample],
-                                 MAX_DEPTH).detach().to("cpu", F64)
-    return {"device": device, "quick": quick, "repeats": 1 if quick else 3, "scene": scene,
-            "origins": rays.origins, "directions": rays.directions, "sample": sample,
-            "reference": reference}
+    reference = (
+        render_reference(scene, rays.origins[sample], rays.directions[sample], MAX_DEPTH)
+        .detach()
+        .to("cpu", F64)
+    )
+    return {
+        "device": device,
+        "quick": quick,
+        "repeats": 1 if quick else 3,
+        "scene": scene,
+        "origins": rays.origins,
+        "directions": rays.directions,
+        "sample": sample,
+        "reference": reference,
+    }
 
 
 def knobs(ctx: dict) -> list[dict]:
     n = len(ctx["origins"])
-    rows = [{"setting": "whitted (full-size loop)", "renderer": "render_whitted"},
-            {"setting": "wavefront", "renderer": "render_wavefront"},
-            {"setting": "wavefront sorted", "renderer": "render_wavefront",
-             "sort_by_material": True},
-            {"setting": "uber (eager)", "renderer": "render_uber"}]
-    rows += [{"setting": f"persistent pool {pool}", "renderer": "render_persistent",
-              "pool_size": pool} for pool in sorted({max(1, n // 4), n})]
+    rows = [
+        {"setting": "whitted (full-size loop)", "renderer": "render_whitted"},
+        {"setting": "wavefront", "renderer": "render_wavefront"},
+        {"setting": "wavefront sorted", "renderer": "render_wavefront", "sort_by_material": True},
+        {"setting": "uber (eager)", "renderer": "render_uber"},
+    ]
+    rows += [
+        {"setting": f"persistent pool {pool}", "renderer": "render_persistent", "pool_size": pool}
+        for pool in sorted({max(1, n // 4), n})
+    ]
     return rows
 
 
@@ -62,8 +77,16 @@ def image_error(image, ctx: dict) -> float:
 def measure(lab, ctx: dict, knob: dict) -> dict:
     options = {k: v for k, v in knob.items() if k not in ("setting", "renderer")}
     render = getattr(lab, knob["renderer"])
-    out, seconds = timed(ctx, render, ctx["scene"], ctx["origins"], ctx["directions"],
-                         trace_bvh, MAX_DEPTH, **options)
+    out, seconds = timed(
+        ctx,
+        render,
+        ctx["scene"],
+        ctx["origins"],
+        ctx["directions"],
+        trace_bvh,
+        MAX_DEPTH,
+        **options,
+    )
     image, extra = out if isinstance(out, tuple) else (out, {})
     row = {"seconds": seconds, "error": image_error(image, ctx), "pixels": len(ctx["origins"])}
     if knob["renderer"] == "render_persistent" and isinstance(extra, dict):
@@ -79,8 +102,15 @@ def fused(ctx: dict) -> list[dict]:
         return []
     if not triton_available():
         return []
-    image, seconds = timed(ctx, render_whitted_triton, ctx["scene"], ctx["origins"],
-                           ctx["directions"], MAX_DEPTH)
-    return [{"setting": "fused uber (Triton)", "renderer": "render_whitted_triton",
-             "seconds": seconds, "error": image_error(image, ctx),
-             "pixels": len(ctx["origins"])}]
+    image, seconds = timed(
+        ctx, render_whitted_triton, ctx["scene"], ctx["origins"], ctx["directions"], MAX_DEPTH
+    )
+    return [
+        {
+            "setting": "fused uber (Triton)",
+            "renderer": "render_whitted_triton",
+            "seconds": seconds,
+            "error": image_error(image, ctx),
+            "pixels": len(ctx["origins"]),
+        }
+    ]

@@ -26,8 +26,10 @@ from course.tools.trade.common import F64, exact_hits, timed
 MODULE = "lab6_raster"
 TITLE = "compute rasterizer: raster against trace"
 ERROR_NAME = "pixels differing from exact"
-ERROR = ("fraction of covered pixels whose triangle differs from float64 brute-force primary "
-         "rays (course code)")
+ERROR = (
+    "fraction of covered pixels whose triangle differs from float64 brute-force primary "
+    "rays (course code)"
+)
 BUDGET = 2**28
 
 
@@ -36,18 +38,28 @@ def prepare(device, quick: bool) -> dict:
     scene = load_scene("suzanne", device=device)
     camera = dataclasses.replace(scene.camera, width=size, height=size)
     _, exact = exact_hits(primary_rays(camera, device="cpu", dtype=F64), scene.mesh)
-    return {"device": device, "quick": quick, "repeats": 2 if quick else 5, "mesh": scene.mesh,
-            "camera": camera, "exact": exact.reshape(size, size)}
+    return {
+        "device": device,
+        "quick": quick,
+        "repeats": 2 if quick else 5,
+        "mesh": scene.mesh,
+        "camera": camera,
+        "exact": exact.reshape(size, size),
+    }
 
 
 def knobs(ctx: dict) -> list[dict]:
-    return [{"setting": "raster 32-bit depth", "method": "raster", "depth_bits": 32,
-             "bytes": BUDGET},
-            {"setting": "raster 24-bit depth", "method": "raster", "depth_bits": 24,
-             "bytes": BUDGET},
-            {"setting": "raster 32-bit, budget 256 KiB", "method": "raster", "depth_bits": 32,
-             "bytes": 2**18},
-            {"setting": "trace (BVH)", "method": "trace"}]
+    return [
+        {"setting": "raster 32-bit depth", "method": "raster", "depth_bits": 32, "bytes": BUDGET},
+        {"setting": "raster 24-bit depth", "method": "raster", "depth_bits": 24, "bytes": BUDGET},
+        {
+            "setting": "raster 32-bit, budget 256 KiB",
+            "method": "raster",
+            "depth_bits": 32,
+            "bytes": 2**18,
+        },
+        {"setting": "trace (BVH)", "method": "trace"},
+    ]
 
 
 def raster_ids(lab, mesh, camera, depth_bits: int, memory_budget_bytes: int) -> torch.Tensor:
@@ -56,8 +68,13 @@ def raster_ids(lab, mesh, camera, depth_bits: int, memory_budget_bytes: int) -> 
     clip = lab.to_clip_space(mesh.vertices, mvp)
     clipped, source, _ = lab.clip_triangles(clip[mesh.faces])
     screen = lab.to_screen(clipped, camera.width, camera.height)
-    keys = lab.rasterize(screen, camera.width, camera.height, depth_bits=depth_bits,
-                         memory_budget_bytes=memory_budget_bytes)
+    keys = lab.rasterize(
+        screen,
+        camera.width,
+        camera.height,
+        depth_bits=depth_bits,
+        memory_budget_bytes=memory_budget_bytes,
+    )
     k = lab.triangle_ids(keys)
     ids = torch.where(k >= 0, source[k.clamp(min=0)], -1) if len(source) else k
     return ids.reshape(camera.height, camera.width)
@@ -76,10 +93,13 @@ def measure(lab, ctx: dict, knob: dict) -> dict:
         trace = functools.partial(trace_bvh, mesh)  # its BVH: built in the untimed call
         ids, seconds = timed(ctx, lab.traced_visibility, trace, camera, ctx["device"])
     else:
-        ids, seconds = timed(ctx, raster_ids, lab, mesh, camera, knob["depth_bits"],
-                             knob["bytes"])
-    return {"seconds": seconds, "error": pixel_error(ids, ctx),
-            "pixels": camera.width * camera.height, "triangles": mesh.num_faces}
+        ids, seconds = timed(ctx, raster_ids, lab, mesh, camera, knob["depth_bits"], knob["bytes"])
+    return {
+        "seconds": seconds,
+        "error": pixel_error(ids, ctx),
+        "pixels": camera.width * camera.height,
+        "triangles": mesh.num_faces,
+    }
 
 
 def fused(ctx: dict) -> list[dict]:
@@ -95,9 +115,25 @@ def fused(ctx: dict) -> list[dict]:
     mvp = camera.view_projection(torch.float64)
     rows = []
     for bits in (32, 24):
-        ids, seconds = timed(ctx, visibility_fused, mesh.vertices, mesh.faces, mvp,
-                             camera.width, camera.height, depth_bits=bits)
-        rows.append({"setting": f"fused raster {bits}-bit depth", "method": "raster",
-                     "depth_bits": bits, "seconds": seconds, "error": pixel_error(ids, ctx),
-                     "pixels": camera.width * camera.height, "triangles": mesh.num_faces})
+        ids, seconds = timed(
+            ctx,
+            visibility_fused,
+            mesh.vertices,
+            mesh.faces,
+            mvp,
+            camera.width,
+            camera.height,
+            depth_bits=bits,
+        )
+        rows.append(
+            {
+                "setting": f"fused raster {bits}-bit depth",
+                "method": "raster",
+                "depth_bits": bits,
+                "seconds": seconds,
+                "error": pixel_error(ids, ctx),
+                "pixels": camera.width * camera.height,
+                "triangles": mesh.num_faces,
+            }
+        )
     return rows
