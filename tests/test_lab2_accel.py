@@ -1373,7 +1373,8 @@ def test_bvh_stackless_traversal(impl, device):
             i = int(over.nonzero()[0, 0])
             raise AssertionError(
                 f"bvh_closest_hit_stackless({name}, median BVH): {int(over.sum())} rays test "
-                f"triangles of leaves whose box they miss. First: ray {i} ({describe(rays.to('cpu'), i)}) "
+                f"triangles of leaves whose box they miss. First: ray {i} "
+                f"({describe(rays.to('cpu'), i)}) "
                 f"ran {int(stackless['tests'][i])} tests, its segment crosses leaf boxes of "
                 f"{int(most[i])} triangles: test a leaf's triangles only if its box is hit"
             )

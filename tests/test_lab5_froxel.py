@@ -592,7 +592,8 @@ def test_voxelize_samples_froxel_points(impl, device):
                 rtol=1e-7,
                 atol=1e-9,
                 name=f"voxelize[{key!r}] (jitter={jitter}): media at froxel "
-                f"(i + 0.5, j + 0.5) at depth z_k + jitter (z_k+1 - z_k), volumes indexed [k, j, i]",
+                f"(i + 0.5, j + 0.5) at depth z_k + jitter (z_k+1 - z_k), volumes indexed "
+                f"[k, j, i]",
                 where="froxel (flat k*ny*nx + j*nx + i)",
             )
     vb = impl.voxelize(scene, grid, 0.5, F32, device)

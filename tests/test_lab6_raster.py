@@ -1253,7 +1253,8 @@ def test_pack_depth_id(impl, device):
             keys >> 32,
             float_bits(torch.where(d32 > 0, d32, 0.0)),
             name=(
-                "pack_depth_id(depth_bits=32): the float32 bit pattern of the depth in the high bits"
+                "pack_depth_id(depth_bits=32): the float32 bit pattern of the depth in the high "
+                "bits"
             ),
             where="fragment",
         )
@@ -1287,7 +1288,8 @@ def test_pack_depth_id(impl, device):
             keys >> 32,
             want,
             name=(
-                f"pack_depth_id(depth_bits=24, {dtype}): round(clamp(depth, 0, 1) * (2**24 - 1)) in "
+                f"pack_depth_id(depth_bits=24, {dtype}): round(clamp(depth, 0, 1) * (2**24 - 1)) "
+                f"in "
                 f"the high bits"
             ),
             where="fragment",

@@ -94,7 +94,8 @@ def save_png(path: str | Path, img: torch.Tensor) -> Path:
 
 
 def show(img: torch.Tensor, title: str | None = None, ax=None):
-    """Display ``img`` (as for ``save_png``) with matplotlib, e.g. in a notebook; returns the axes."""
+    """Display ``img`` (as for ``save_png``) with matplotlib, e.g. in a notebook; returns
+    the axes."""
     import matplotlib.pyplot as plt
 
     pixels = _as_srgb8_numpy(img)

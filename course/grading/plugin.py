@@ -144,7 +144,7 @@ def pytest_collection_modifyitems(config, items):
         if not keep:
             raise pytest.UsageError(
                 f"--task {' '.join(config.getoption('--task'))}: no graded test of "
-                f"{' or '.join(f'task {k}' + (f' of lab {n}' if n is not None else '') for n, k in specs)}"
+                f"{' or '.join(_task_name(n, k) for n, k in specs)}"
                 f" among the {len(items)} tests collected (check the lab and task numbers "
                 f"in labs/README.md)"
             )
@@ -485,3 +485,8 @@ def pytest_terminal_summary(terminalreporter, config):
         terminalreporter.section("submission problems")
         for text in labs.problems.values():
             terminalreporter.write_line(text)
+
+
+def _task_name(lab, task) -> str:
+    """ "task 2" or "task 2 of lab 4" (a ``--task`` given as ``N.K``)."""
+    return f"task {task}" + (f" of lab {lab}" if lab is not None else "")

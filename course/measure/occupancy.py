@@ -5,7 +5,8 @@ room for *all* of it: its warps (warp slots), its registers (the register file) 
 shared memory. The smallest of those limits, and the hardware's cap on resident blocks,
 decides how many blocks run at once::
 
-    warps/block  = ceil(threads / warp_size)    (slots reserved: rounded up to the warp allocation unit)
+    warps/block  = ceil(threads / warp_size)    (slots reserved: rounded up to the
+                                                 warp allocation unit)
     blocks/SM    = min(by registers, by shared memory, max_warps // warps/block, max_blocks)
     occupancy    = blocks/SM * warps/block / max_warps
 

@@ -79,7 +79,8 @@ RUN_AUTOGRADER = r"""#!/usr/bin/env bash
 # RTCOURSE_SUBMISSION_DIR and RTCOURSE_RESULTS_DIR (and RTCOURSE_PYTHON).
 set -uo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-if [ -d "$HERE/@PACKAGE@" ]; then SOURCE="$HERE/@PACKAGE@"; else SOURCE=/autograder/source/@PACKAGE@; fi
+SOURCE=/autograder/source/@PACKAGE@
+if [ -d "$HERE/@PACKAGE@" ]; then SOURCE="$HERE/@PACKAGE@"; fi
 SUBMISSION="${RTCOURSE_SUBMISSION_DIR:-/autograder/submission}"
 RESULTS="${RTCOURSE_RESULTS_DIR:-/autograder/results}"
 PYTHON="${RTCOURSE_PYTHON:-python3}"
@@ -129,10 +130,13 @@ if [ -n "${RTCOURSE_WORKER_USER:-}" ]; then
     chmod -R a+rX "$WORK"                    # the submission is the worker's to read
 fi
 
-"$PYTHON" -m course.tools.cli grade --impl "$WORK" ${LABS[@]+"${LABS[@]}"} --json "$RESULTS/results.json"
+"$PYTHON" -m course.tools.cli grade --impl "$WORK" ${LABS[@]+"${LABS[@]}"} \
+    --json "$RESULTS/results.json"
 
 if [ ! -s "$RESULTS/results.json" ]; then
-    printf '%s\n' '{"score": 0, "output": "The autograder stopped before it could grade this submission. Please tell the course staff."}' > "$RESULTS/results.json"
+    STOPPED="The autograder stopped before it could grade this submission."
+    printf '{"score": 0, "output": "%s Please tell the course staff."}\n' "$STOPPED" \
+        > "$RESULTS/results.json"
 fi
 exit 0
 """

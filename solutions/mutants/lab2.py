@@ -18,7 +18,8 @@ MUTANTS = [
         name="grid_cells_one_short",
         module=M,
         function="build_grid",
-        find="c_hi = torch.minimum(torch.floor((tri_hi + pad - lo) / cell).long().clamp(min=0), top)",
+        find="c_hi = torch.minimum(torch.floor((tri_hi + pad - lo) / cell).long()"
+        ".clamp(min=0), top)",
         replace="c_hi = torch.minimum(torch.floor((tri_hi + pad - lo) / cell).long().clamp(min=0) "
         "- 1, top).clamp(min=c_lo)",
         tests="grid_resolution_and_build",
