@@ -40,8 +40,8 @@ def _shadow_map_kernel(volf_ptr, voli_ptr, vdata_ptr, boxes_ptr, n_boxes, BLOCK:
     off = tl.load(voli_ptr + v * VOL_I + 1)
     t = tl.program_id(1) * BLOCK + tl.arange(0, BLOCK)
     live = t < res * res
-    a = tl.div_rn((t // res).to(tl.float32) + 0.5, res.to(tl.float32)) * 2.0 - 1.0
-    b = tl.div_rn((t % res).to(tl.float32) + 0.5, res.to(tl.float32)) * 2.0 - 1.0
+    a = tl.div_rn((t // res).to(tl.float32) + 0.5, (res * 1.0)) * 2.0 - 1.0
+    b = tl.div_rn((t % res).to(tl.float32) + 0.5, (res * 1.0)) * 2.0 - 1.0
     extent = tl.load(row + 12)
     sx = tl.load(row + 0) + extent * (a * tl.load(row + 3) + b * tl.load(row + 6))
     sy = tl.load(row + 1) + extent * (a * tl.load(row + 4) + b * tl.load(row + 7))
@@ -93,7 +93,7 @@ def _extinction_kernel(
     box ``lo .. lo + size`` (x the first axis)."""
     t = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = t < res * res * res
-    fres = res.to(tl.float32)
+    fres = res * 1.0
     fx = tl.div_rn((t // (res * res)).to(tl.float32) + 0.5, fres)
     fy = tl.div_rn(((t // res) % res).to(tl.float32) + 0.5, fres)
     fz = tl.div_rn((t % res).to(tl.float32) + 0.5, fres)
@@ -137,8 +137,8 @@ def _transmittance_kernel(
     off = tl.load(irow + 1)
     t = tl.program_id(1) * BLOCK + tl.arange(0, BLOCK)
     live = t < res * res
-    a = tl.div_rn((t // res).to(tl.float32) + 0.5, res.to(tl.float32)) * 2.0 - 1.0
-    b = tl.div_rn((t % res).to(tl.float32) + 0.5, res.to(tl.float32)) * 2.0 - 1.0
+    a = tl.div_rn((t // res).to(tl.float32) + 0.5, (res * 1.0)) * 2.0 - 1.0
+    b = tl.div_rn((t % res).to(tl.float32) + 0.5, (res * 1.0)) * 2.0 - 1.0
     extent = tl.load(row + 12)
     ox = tl.load(row + 0)
     oy = tl.load(row + 1)
@@ -164,7 +164,7 @@ def _transmittance_kernel(
     dz = dz / norm
     near = tl.load(row + 13)
     step = tl.load(row + 15)
-    fres = ext_res.to(tl.float32)
+    fres = ext_res * 1.0
     depth = tl.zeros_like(sx)
     tl.store(vdata_ptr + off + t * k, tl.full(sx.shape, 1.0, tl.float32), mask=live)
     for m in range(k - 1):

@@ -57,9 +57,11 @@ K_MAX = _const(SCHLICK_K_MAX)
 def _texture(tex_ptr, off, sx, sy, sz, cx, cy, cz, live):
     """``sample_texture`` of an (X, Y, Z) scalar texture at ``tex_ptr + off``: trilinear,
     voxel centres at index + 0.5, clamped to the border, NaN coordinates read voxel 0."""
-    fx = sx.to(tl.float32)
-    fy = sy.to(tl.float32)
-    fz = sz.to(tl.float32)
+    # ``* 1.0``, not ``.to``: Triton passes an int argument equal to 1 as a constant (a
+    # Python int, which has no ``.to``); a texture or volume of one voxel per axis is valid.
+    fx = sx * 1.0
+    fy = sy * 1.0
+    fz = sz * 1.0
     # NaN first: min/max treat NaN differently compiled and interpreted.
     ux = tl.where(cx == cx, cx, 0.0) - 0.5  # noqa: PLR0124 (NaN test)
     uy = tl.where(cy == cy, cy, 0.0) - 0.5  # noqa: PLR0124
@@ -196,7 +198,7 @@ def _shadow_lookup(volf_ptr, voli_ptr, vdata_ptr, v, px, py, pz, live):
     extent = tl.load(row + 12)
     res = tl.load(voli_ptr + v * VOL_I + 2)
     off = tl.load(voli_ptr + v * VOL_I + 1)
-    fres = res.to(tl.float32)
+    fres = res * 1.0
     fi = tl.floor((cu / extent + 1.0) / 2.0 * fres)
     fj = tl.floor((cv / extent + 1.0) / 2.0 * fres)
     inside = (fi >= 0.0) & (fi < fres) & (fj >= 0.0) & (fj < fres)  # False for NaN
@@ -224,7 +226,7 @@ def _transmittance_lookup(volf_ptr, voli_ptr, vdata_ptr, v, px, py, pz, live):
     depth = tl.where(persp, tl.sqrt(rx * rx + ry * ry + rz * rz), cw)
     res = tl.load(irow + 2)
     k = tl.load(irow + 3)
-    fres = res.to(tl.float32)
+    fres = res * 1.0
     inside = (tl.abs(a) <= 1.0) & (tl.abs(b) <= 1.0)
     ca = tl.where(inside, (a + 1.0) / 2.0 * fres, 0.0)
     cb = tl.where(inside, (b + 1.0) / 2.0 * fres, 0.0)
@@ -271,7 +273,7 @@ def _segment_transmittance(
     span = tl.where(span > 0.0, span, 0.0)  # also NaN -> 0
     t0 = tl.where(span > 0.0, t0, 0.0)
     run = live & (span > 0.0)
-    fres = ext_res.to(tl.float32)
+    fres = ext_res * 1.0
     depth = tl.zeros_like(px)
     for m in range(steps):
         t = t0 + (m + 0.5) / steps * span
