@@ -30,8 +30,7 @@ def lab_number(name) -> int | None:
 
 def lab_file_number(path) -> int | None:
     """The lab whose source ``path`` is part of: a file ``labN_topic.py``, or any file of a
-    package folder ``labN_topic/`` or of a parts folder ``labN_topic_parts/``; None for
-    anything else (a grader, a course module)."""
+    package folder ``labN_topic/``; None for anything else (a grader, a course module)."""
     path = Path(path)
     if path.suffix != ".py":
         return None
