@@ -13,6 +13,7 @@ skipped on a plain CPU run and counted apart.
 from __future__ import annotations
 
 import ast
+import copy
 import json
 import re
 from dataclasses import dataclass, field
@@ -229,8 +230,25 @@ def _dispatches(helper) -> bool:
     )
 
 
+_CATALOGS: dict[tuple, dict[int, LabInfo]] = {}
+
+
 def lab_catalog(test_files) -> dict[int, LabInfo]:
-    """Lab number -> :class:`LabInfo`, merging every grader file of a lab."""
+    """Lab number -> :class:`LabInfo`, merging every grader file of a lab. Kept per process,
+    keyed by the files' paths, sizes and modification times (parsing every grader takes a
+    second or more, and a warm grading process grades one submission after another); each
+    call gets its own copy."""
+    files = [Path(f) for f in test_files]
+    try:
+        key = tuple((str(f), f.stat().st_mtime_ns, f.stat().st_size) for f in files)
+    except OSError:
+        return _read_catalog(files)
+    if key not in _CATALOGS:
+        _CATALOGS[key] = _read_catalog(files)
+    return copy.deepcopy(_CATALOGS[key])
+
+
+def _read_catalog(test_files) -> dict[int, LabInfo]:
     labs: dict[int, LabInfo] = {}
     for path in test_files:
         info = read_grader(path)

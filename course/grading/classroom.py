@@ -125,22 +125,6 @@ def stage(sub: Submission, work: Path, module: str, skeletons: Path, collect) ->
 # ---------------------------------------------------------------- the warm process
 
 
-def _problems(output: str) -> list[str]:
-    """The submission problems a score table lists first (results.ScoreKeeper.table)."""
-    lines = output.splitlines()
-    start = next(
-        (i for i, line in enumerate(lines) if line.startswith("submission problems")), None
-    )
-    if start is None:
-        return []
-    found = []
-    for line in lines[start + 1 :]:
-        if not line.startswith("  "):
-            break
-        found.append(line.strip())
-    return found
-
-
 def _tasks(data: dict) -> dict[str, list[float]]:
     """``"N.K"`` -> [score, max] summed over the task's tests."""
     table: dict[str, list[float]] = {}
@@ -149,34 +133,6 @@ def _tasks(data: dict) -> dict[str, list[float]]:
         row[0] += test["score"]
         row[1] += test["max_score"]
     return {k: [round(s, 4), round(m, 4)] for k, (s, m) in sorted(table.items())}
-
-
-def share_catalog():
-    """Prepared once per warm process: the graders' catalog (every grader parsed, about a
-    second and a half a lab, on each grading run) depends only on the graders' files, so
-    this process keeps it, keyed by their size and modification time, and hands out
-    copies. Idempotent."""
-    import copy
-
-    from course.grading import catalog
-
-    if getattr(catalog.lab_catalog, "shared_by_classroom", False):
-        return
-    original, memo = catalog.lab_catalog, {}
-
-    def lab_catalog(test_files):
-        files = list(test_files)
-        try:
-            key = tuple((str(f), os.stat(f).st_mtime_ns, os.stat(f).st_size) for f in files)
-        except OSError:
-            return original(files)
-        if key not in memo:
-            memo[key] = original(files)
-        return copy.deepcopy(memo[key])
-
-    lab_catalog.shared_by_classroom = True
-    lab_catalog.__doc__ = original.__doc__
-    catalog.lab_catalog = lab_catalog
 
 
 def grade_job(spec: dict) -> dict:
@@ -189,7 +145,6 @@ def grade_job(spec: dict) -> dict:
     from course.grading.results import write_json_atomically
     from course.grading.runner import GradeError, grade
 
-    share_catalog()
     started = time.monotonic()
     log = io.StringIO()
     data, error = None, ""
@@ -220,7 +175,7 @@ def grade_job(spec: dict) -> dict:
             tests=[],
         )
         return {"status": "error", "record": record}
-    problems = _problems(data["output"])
+    problems = list(data.get("extra_data", {}).get("problems", ()))
     if not any(spec["meta"]["found"].values()):
         status = "missing"
     elif any("failed to import" in p for p in problems):

@@ -305,7 +305,11 @@ class ScoreKeeper:
             "execution_time": round(time.monotonic() - self.started, 2),
             "output": self.table(),
             "tests": tests,
-            "extra_data": {"graded_files": dict(self.graded_files)},
+            "extra_data": {
+                "graded_files": dict(self.graded_files),
+                # each failing every test of its lab: a missing file, an import that failed
+                "problems": [*self.problems.values(), *self.collect_errors],
+            },
         }
 
 
