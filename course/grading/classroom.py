@@ -228,7 +228,7 @@ def _class_folder(submissions: Path, work: Path) -> Path:
     raise ValueError(f"{submissions}: no such folder or zip of submissions")
 
 
-def worker_env(device: str, jobs: int) -> dict:
+def grading_env(device: str, jobs: int) -> dict:
     """The warm processes' environment. ``device="cpu"`` hides CUDA from the graders (and
     so from the sandboxed submissions they start): a class is graded in many short runs of
     small kernels, where starting CUDA in every process and launching tiny kernels costs
@@ -265,7 +265,7 @@ def grade_class(
     ``collect``: the autograder's collection of a submission's lab files
     (``course.tools.gradescope.collect_submission``). ``jobs``: warm grading processes
     (default: the usable cores). ``device``: ``cpu`` (CUDA hidden, the default: see
-    :func:`worker_env`) or ``auto`` (the graders' own choice). ``tasks``/``keyword``/
+    :func:`grading_env`) or ``auto`` (the graders' own choice). ``tasks``/``keyword``/
     ``time_limit``: as ``rtcourse grade``'s ``--task``/``-k``/``--time-limit``. Raises
     ValueError for a folder with no submissions or a lab with no graders; a
     KeyboardInterrupt propagates after the finished rows are written."""
@@ -357,7 +357,7 @@ def grade_class(
     outcomes = []
     if specs:
         say(f"grading {len(specs)} submissions of lab {lab} with {jobs} worker(s), device {device}")
-        env = worker_env(device, jobs)
+        env = grading_env(device, jobs)
         bar = progress(total=len(specs), desc=f"lab {lab}", unit="student", leave=True)
         try:
             outcomes = run_pool(
