@@ -13,7 +13,7 @@ finish in time (estimated from the last). A mutant that hangs past ``--deadline`
 caught, as the real grader's deadline fails it.
 
 At the end: the score table over every outcome in the files, as ``rtcourse mutants
---generated`` prints it (reviewed equivalents from ``solutions/mutants/generated_reviewed.py``).
+--generated`` prints it (reviewed equivalents from ``solutions/mutants/reviewed/labN.py``).
 """
 
 from __future__ import annotations

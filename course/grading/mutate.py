@@ -17,7 +17,7 @@ skeleton leaves raising ``NotImplementedError``), makes one small change at a ti
 -- and grades each mutated module on the tests of that function (visible and hidden). A
 mutant the tests do not notice *survives*: either a test is missing, or the change does
 not alter the contract (an *equivalent* mutant, recorded with its reason in
-``solutions/mutants/generated_reviewed.py``). The mutation score of a lab is
+``solutions/mutants/reviewed/labN.py``). The mutation score of a lab is
 ``killed / (generated - equivalent)``.
 
 Mutants are identified by ``module:function:kind:n`` where ``n`` counts the sites of that
@@ -132,13 +132,14 @@ def _reaches(graph, start, target) -> bool:
 
 
 def load_reviewed(root) -> dict[str, str]:
-    """Mutant id -> why it is equivalent (or outside the contract), as reviewed."""
-    path = Path(root, "solutions", "mutants", "generated_reviewed.py")
-    if not path.is_file():
-        return {}
+    """Mutant id -> why it is equivalent (or outside the contract), as reviewed: the
+    ``EQUIVALENT`` dicts of ``solutions/mutants/reviewed/lab*.py``."""
     from course.core.files import import_file
 
-    return dict(import_file(path, "rtcourse_generated_reviewed").EQUIVALENT)
+    reviewed = {}
+    for path in sorted(Path(root, "solutions", "mutants", "reviewed").glob("lab*.py")):
+        reviewed |= import_file(path, f"rtcourse_reviewed_{path.stem}").EQUIVALENT
+    return reviewed
 
 
 def sample(plans: list[LabPlan], per_lab: int | None, seed: int) -> list[Generated]:
