@@ -11,6 +11,7 @@ reports.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -765,6 +766,21 @@ def test_FrameDownloader_bad_input(impl, device):
     downloader = impl.FrameDownloader((4, 6), device)
     expect_error("frame", downloader.submit, torch.zeros(6, 4, dtype=torch.int32, device=device))
     expect_error("frame", downloader.submit, torch.zeros(4, 6, device=device))
+    # A side of 1 is a positive int, so (1, 1) is valid; the default ring (num_buffers=2,
+    # the signature's default) holds two frames in flight and refuses a third.
+    tiny = impl.FrameDownloader((1, 1), device)
+    tiny.submit(make_frame(0, (1, 1), device))
+    tiny.submit(make_frame(1, (1, 1), device))
+    try:
+        tiny.submit(make_frame(2, (1, 1), device))
+    except RuntimeError:
+        pass
+    else:
+        raise AssertionError(
+            "FrameDownloader((1, 1), device) accepted a third frame while two were in flight: "
+            "its default num_buffers is 2, so the third submit should raise RuntimeError"
+        )
+    assert_equal(tiny.receive(), make_frame(0, (1, 1), "cpu"), name="FrameDownloader((1, 1))")
 
 
 @pytest.mark.task(3)
@@ -814,16 +830,34 @@ def test_run_frame_loop_displays_every_frame_in_order(impl, device, overlap):
         overlap=overlap,
         case="n_frames=0 (documented: an int >= 1)",
     )
+    wall = time.perf_counter()
     result = impl.run_frame_loop(
         render_test_frame, n, shape, device, overlap=overlap, display=display_checksum
     )
+    wall = time.perf_counter() - wall
     assert isinstance(result, dict), f"run_frame_loop should return a dict, got {type(result)}"
+    seconds = result.get("seconds")
+    assert isinstance(seconds, float) and 0 < seconds <= wall, (
+        f"run_frame_loop: 'seconds' should be the loop's wall time, in (0, {wall:.4g}] (the "
+        f"whole call took {wall:.4g} s), got {seconds!r}"
+    )
     assert result.get("frames") == n, (
         f"run_frame_loop: 'frames' should be {n}, got {result.get('frames')!r}"
     )
     fps = result.get("frames_per_second")
     assert isinstance(fps, float) and math.isfinite(fps) and fps > 0, (
         f"run_frame_loop: 'frames_per_second' should be a positive float, got {fps!r}"
+    )
+    assert math.isclose(fps, n / seconds, rel_tol=1e-6), (
+        f"run_frame_loop: 'frames_per_second' should be frames / seconds = {n} / {seconds:.4g} "
+        f"= {n / seconds:.4g}, got {fps!r}"
+    )
+    one = impl.run_frame_loop(
+        render_test_frame, 1, shape, device, overlap=overlap, display=display_checksum
+    )
+    assert [row[0] for row in one.get("displayed", [])] == [0], (
+        f"run_frame_loop(n_frames=1, overlap={overlap}) displayed frames "
+        f"{[row[0] for row in one.get('displayed', [])]}: expected [0] (n_frames >= 1 is valid)"
     )
     shown = [
         tuple(tuple(v) if isinstance(v, list) else v for v in row)

@@ -736,6 +736,12 @@ def test_surface_at(impl, device, dtype):
         name="surface_at: normals of rays that missed (0)",
         where="(miss, axis)",
     )
+    assert_equal(
+        points.cpu()[~hit],
+        torch.zeros(int((~hit).sum()), 3, dtype=dtype),
+        name="surface_at: points of rays that missed (0)",
+        where="(miss, axis)",
+    )
 
 
 def _hits_and_frames(name, dtype, device, size=SIZE):

@@ -125,6 +125,14 @@ def sdf_unit_sphere(p):
     return p.norm(dim=-1) - 1.0
 
 
+SPHERE_5_C = (0.0, 0.0, 5.0)
+
+
+def sdf_sphere_at_5(p):
+    """The unit sphere at distance 5 along +z."""
+    return (p - torch.tensor(SPHERE_5_C, dtype=p.dtype, device=p.device)).norm(dim=-1) - 1.0
+
+
 SPHERE_C, SPHERE_R = (0.0, 0.0, 4.0), 1.0
 BOX_C, BOX_H = (1.5, 0.3, 6.0), (0.6, 0.8, 0.5)
 
@@ -682,6 +690,26 @@ def test_ray_box_interval(impl, device):
 
 @pytest.mark.task(1)
 @pytest.mark.points(0.5)
+def test_ray_box_interval_closed_box(impl, device):
+    # The box is closed: a ray through an edge, or across a flat box, touches it at one t.
+    o = torch.tensor([[-1.0, 1.0, 0.5], [0.25, 0.5, 0.0]], dtype=F64, device=device)
+    d = torch.tensor([[1.0, -1.0, 0.0], [0.0, 0.0, 2.0]], dtype=F64, device=device)
+    boxes = (([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]), ([0.0, 0.0, 0.5], [1.0, 1.0, 0.5]))
+    for k, ((lo, hi), want) in enumerate(zip(boxes, (1.0, 0.25))):
+        near, far, hit = impl.ray_box_interval(o[k : k + 1], d[k : k + 1], lo, hi)
+        what = f"ray o={o[k].tolist()} d={d[k].tolist()} box {lo}..{hi}"
+        assert bool(hit.cpu()[0]), (
+            f"ray_box_interval ({what}): it touches the closed box at t = {want} "
+            f"(t_near = t_far), so hit must be True (hit = t_near <= t_far)"
+        )
+        got = (float(near.cpu()[0]), float(far.cpu()[0]))
+        assert abs(got[0] - want) <= 1e-12 and abs(got[1] - want) <= 1e-12, (
+            f"ray_box_interval ({what}): expected t_near = t_far = {want}, got {got}"
+        )
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
 def test_sample_grid_trilinear(impl, device):
     g = generator(21)
     grid = torch.rand(3, 4, 5, generator=g, dtype=F64)
@@ -1186,6 +1214,45 @@ def test_march_box_early_termination_and_jitter(impl, device):
         "(the same offsets as seed=0)",
         where="ray",
     )
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+def test_march_box_stops_only_below_threshold(impl, device):
+    # "A ray whose T has dropped *below* min_transmittance stops": T equal to it goes on.
+    o = torch.tensor([[-1.0, 0.3, 0.6], [-1.0, 0.7, 0.2]], dtype=F64)
+    d = torch.tensor([[1.0, 0.1, 0.0], [2.0, 0.0, -0.1]], dtype=F64)
+    steps = 8
+    cases = (
+        (
+            "a dense box (density 1e4: T = 0 after one step), min_transmittance=0: T = 0 is "
+            "not below 0",
+            1e4,
+            0.0,
+        ),
+        ("vacuum (density 0), min_transmittance=1: T = 1 is not below 1", 0.0, 1.0),
+    )
+    for what, sigma, floor in cases:
+        got = march(
+            impl,
+            o.to(device),
+            d.to(device),
+            [0.0] * 3,
+            [1.0] * 3,
+            torch.full((1, 1, 1), sigma, dtype=F64, device=device),
+            None,
+            steps,
+            min_transmittance=floor,
+            what=f"march_box ({what})",
+            n=2,
+            dtype=F64,
+            device=device,
+        )
+        samples = got["samples"].cpu().tolist()
+        assert samples == [steps, steps], (
+            f"march_box ({what}): every ray must take all {steps} steps, got samples "
+            f"{samples}; stop only when T < min_transmittance"
+        )
 
 
 @pytest.mark.task(1)
@@ -1864,6 +1931,15 @@ def test_henyey_greenstein(impl, device):
 
 
 SCATTER_LO, SCATTER_HI = (0.0, 0.0, 0.0), (1.0, 2.0, 1.0)
+BOXED_SIGMA = 0.7
+
+
+def boxed_density(p):
+    """sigma = 0.7 inside the scattering box (closed), 0 outside it."""
+    lo = torch.tensor(SCATTER_LO, dtype=p.dtype, device=p.device)
+    hi = torch.tensor(SCATTER_HI, dtype=p.dtype, device=p.device)
+    inside = ((p >= lo) & (p <= hi)).all(-1)
+    return torch.where(inside, BOXED_SIGMA, 0.0).to(p.dtype)
 
 
 def scatter_rays(n, seed):
@@ -2083,6 +2159,83 @@ def scatter_grid_density(p):
 def single_scatter(impl, *args, **kwargs):
     """The lab's ``march_single_scatter`` (tasks 1 and 2 given)."""
     return impl.probe(probe_single_scatter, *args, **kwargs)
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.5)
+def test_shadow_transmittance_only_inside_box(impl, device):
+    # Only the part of the light ray inside the box counts: a callable density that is not
+    # zero outside the box must not be sampled there (points outside the box, light through).
+    sigma = BOXED_SIGMA
+    lo, hi = torch.tensor(SCATTER_LO, dtype=F64), torch.tensor(SCATTER_HI, dtype=F64)
+    light = torch.tensor([0.05, 1.0, -0.03], dtype=F64)
+    g = generator(83)
+    start = torch.rand(16, 3, generator=g, dtype=F64) * 0.6 + 0.2
+    points = torch.stack([start[:, 0], -1.0 - start[:, 1], start[:, 2]], -1)
+    near, far, hit = ref_interval(points, unit(light).expand_as(points), lo, hi)
+    assert bool(hit.all()), "test set-up: the light rays cross the box"
+    want = torch.exp(-sigma * (far - near))
+    got = impl.shadow_transmittance(
+        points.to(device), light.to(device), lo.to(device), hi.to(device), boxed_density, steps=4
+    )
+    got = check_tensor(got, "shadow_transmittance", shape=(16,), dtype=F64, device=device)
+    assert_close(
+        got.cpu(),
+        want,
+        rtol=1e-6,
+        atol=1e-9,
+        name="shadow_transmittance (points below the box, homogeneous box, density 0 "
+        "outside it): exp(-sigma * chord); march from t_near to t_far, not from the point",
+        where="point",
+    )
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.5)
+def test_shadow_transmittance_grid_in_offset_box(impl, device):
+    # A grid density in a box away from the origin: sampled at box coordinates
+    # (p - box_min) / size; compared with a float64 midpoint march using grid_sample.
+    lo = torch.tensor([1.0, -2.0, 0.5], dtype=F64)
+    hi = torch.tensor([3.0, -1.0, 1.5], dtype=F64)
+    g = generator(85)
+    grid = torch.rand(4, 3, 5, generator=g, dtype=F64) * 2.0
+    points = lo + (hi - lo) * torch.rand(24, 3, generator=g, dtype=F64)
+    light = torch.tensor([0.3, 1.0, 0.2], dtype=F64)
+    steps = 4
+    near, far, hit = ref_interval(points, unit(light).expand_as(points), lo, hi)
+    dt = (far - near) / steps
+    depth = torch.zeros(24, dtype=F64)
+    for k in range(steps):
+        p = points + (near + (k + 0.5) * dt)[:, None] * unit(light)
+        depth = depth + given_field(grid, p, (p - lo) / (hi - lo)) * dt
+    want = torch.exp(-torch.where(hit, depth, 0.0))
+    got = impl.shadow_transmittance(
+        points.to(device), light.to(device), lo.to(device), hi.to(device), grid.to(device), steps
+    )
+    got = check_tensor(got, "shadow_transmittance", shape=(24,), dtype=F64, device=device)
+    assert_close(
+        got.cpu(),
+        want,
+        rtol=1e-6,
+        atol=1e-9,
+        name="shadow_transmittance (random grid density in the box (1, -2, 0.5)..(3, -1, 1.5), "
+        "4 midpoint steps): grids are sampled at (p - box_min) / (box_max - box_min)",
+        where="point",
+    )
+    default = impl.shadow_transmittance(
+        points.to(device), light.to(device), lo.to(device), hi.to(device), grid.to(device)
+    )
+    explicit = impl.shadow_transmittance(
+        points.to(device), light.to(device), lo.to(device), hi.to(device), grid.to(device), 16
+    )
+    assert_close(
+        check_tensor(default, "shadow_transmittance", shape=(24,), dtype=F64, device=device).cpu(),
+        explicit.cpu(),
+        rtol=1e-12,
+        atol=0.0,
+        name="shadow_transmittance: the default is steps=16",
+        where="point",
+    )
 
 
 @pytest.mark.task(3)
@@ -3419,3 +3572,47 @@ def test_sphere_trace_relative_epsilon(impl, device):
         "a tenth of the sphere's radius here",
         where="hit",
     )
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(0.5)
+def test_sphere_trace_direction_length(impl, device):
+    # The hit test is |f| <= epsilon t |d|: the same rays with |d| = 1e-4 and 1e2 find the
+    # same world points (t scales as 1 / |d|).
+    n = 32
+    g = generator(173)
+    d = torch.cat(
+        [torch.rand(n, 2, generator=g, dtype=F64) * 0.3 - 0.15, torch.ones(n, 1, dtype=F64)], 1
+    )
+    d = unit(d)
+    o = torch.zeros(n, 3, dtype=F64)
+    centre, radius, eps = SPHERE_5_C, 1.0, 1e-4
+    t_ref, cos, _ = ref_sphere_hit(o, d, centre, radius)
+    judged = torch.isfinite(t_ref) & (cos > 0.3)
+    assert judged.sum() > 8, "test set-up: hits"
+    for scale in (1e-4, 1e2):
+        got = trace(
+            impl,
+            o.to(device),
+            (d * scale).to(device),
+            sdf_sphere_at_5,
+            t_max=1e6,
+            max_steps=200,
+            epsilon=eps,
+            what=f"sphere_trace (|d| = {scale:g})",
+            n=n,
+            device=device,
+        )
+        assert (got["status"].cpu()[judged] == HIT).all(), (
+            f"sphere_trace (|d| = {scale:g}): the clear hits must be found "
+            f"({status_counts(got['status'][judged])})"
+        )
+        assert_close(
+            got["t"].cpu()[judged] * scale,
+            t_ref[judged],
+            rtol=4 * eps / 0.3,
+            name=f"sphere_trace (unit sphere at distance 5, |d| = {scale:g}, epsilon=1e-4): "
+            "t |d| must be within epsilon t |d| / cos of the surface; the tolerance is "
+            "relative to the world distance t |d|, not to t",
+            where="hit",
+        )

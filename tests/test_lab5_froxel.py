@@ -357,6 +357,22 @@ def test_slice_depths_exponential(impl, device):
             assert z[0].item() == pytest.approx(near, rel=1e-7) and z[-1].item() == pytest.approx(
                 far, rel=1e-7
             ), "slice_depths: the first boundary is near and the last far"
+            ends = [torch.tensor(v, dtype=dtype).item() for v in (near, far)]
+            assert [z[0].item(), z[-1].item()] == ends, (
+                f"slice_depths({near}, {far}, {slices}, {dtype}): z_0 = near and "
+                f"z_slices = far exactly (rounded to {dtype}), got "
+                f"{[z[0].item(), z[-1].item()]}, expected {ends}"
+            )
+            if dtype == F32:
+                # Computed in float64 and rounded once: within one float32 rounding.
+                assert_close(
+                    z,
+                    ref_depths(near, far, slices),
+                    rtol=1.2e-7,
+                    name=f"slice_depths({near}, {far}, {slices}, float32): computed in "
+                    f"float64 and rounded once (not computed in float32)",
+                    where="boundary",
+                )
     expect_error("slices", impl.slice_depths, 0.1, 10.0, 0, case="0 slices")
     expect_error("far", impl.slice_depths, 1.0, 1.0, 8, case="far == near")
     expect_error("near", impl.slice_depths, 0.0, 1.0, 8, case="near = 0 (log(0))")
@@ -464,6 +480,12 @@ def test_world_to_froxel_roundtrip(impl, device):
     ).cpu()
     assert torch.isnan(behind).any(), (
         f"world_to_froxel: a point behind the camera has no froxel (NaN), got {behind.tolist()}"
+    )
+    on_plane = impl.world_to_froxel(GRID, eye[None].to(device)).cpu()
+    assert torch.isnan(behind).all() and torch.isnan(on_plane).all(), (
+        f"world_to_froxel: points at or behind the eye's plane (view depth <= 0) get NaN "
+        f"in x, y and z; behind the camera got {behind.tolist()}, the eye itself (depth 0) "
+        f"got {on_plane.tolist()}"
     )
     expect_error(
         "coords",
@@ -1487,7 +1509,16 @@ def test_temporal_blend_exponential(impl, device):
         rtol=1e-12,
         name="temporal_blend(alpha=0.5) of a scalar volume",
     )
+    got = impl.temporal_blend(cur.to(device), his.to(device), valid.to(device), 1.0)
+    assert_close(
+        got,
+        cur,
+        rtol=1e-12,
+        name="temporal_blend(alpha=1) (alpha in (0, 1] includes 1): the current frame",
+        where="froxel [k, j, i, c]",
+    )
     expect_error("alpha", impl.temporal_blend, cur, his, valid, 0.0, case="alpha = 0")
+    expect_error("alpha", impl.temporal_blend, cur, his, valid, 1.5, case="alpha = 1.5 > 1")
     expect_error(
         "valid",
         impl.temporal_blend,
@@ -1563,6 +1594,26 @@ def test_slice_integral_limits(impl, device):
     assert integral.cpu().tolist() == [[0.0] * 3] * 2 and trans.cpu().tolist() == [1.0, 0.0], (
         f"slice_integral(S = 1, sigma = inf, D = 0 / 2): want integral 0 and T = 1 / 0 (no "
         f"slice / an opaque one), got {integral.cpu().tolist()}, {trans.cpu().tolist()}"
+    )
+    expect_error(
+        "source",
+        impl.slice_integral,
+        torch.ones(2, 3, dtype=torch.int64),
+        torch.ones(2, dtype=F64),
+        torch.ones(2, dtype=F64),
+        kinds=(TypeError,),
+        case="an int64 source",
+    )
+    # An endless slice: clear without medium (S D = inf light), opaque with it (S / sigma).
+    integral, trans = impl.slice_integral(
+        one,
+        torch.tensor([0.0, 2.0], dtype=F64, device=device),
+        torch.tensor([INF, INF], dtype=F64, device=device),
+    )
+    got = [integral.cpu().tolist(), trans.cpu().tolist()]
+    assert got == [[[INF] * 3, [0.5] * 3], [1.0, 0.0]], (
+        f"slice_integral(S = 1, sigma = 0 / 2, D = inf): want integral inf (S D, no medium) "
+        f"/ 0.5 (S / sigma, the limit of S D phi(sigma D)) and T = 1 / 0, got {got}"
     )
     for name, sig, length in (("extinction", -0.5, 1.0), ("length", 0.5, -1.0)):
         expect_error(

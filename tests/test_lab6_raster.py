@@ -905,6 +905,32 @@ def box_reference(tris, width, height):
     return torch.where(empty[:, None], 0, boxes), empty
 
 
+@pytest.mark.task(1)
+@pytest.mark.points(1)
+def test_clip_triangles_corner_on_near_plane(impl, device):
+    # d = z + w = 0 is the visible side (d >= 0): a triangle with one corner exactly on the
+    # near plane and the others in front of it has three inside corners and is kept whole.
+    tri = [[0.0, 0.0, -1.0, 1.0], [0.5, 0.0, 0.0, 1.0], [0.0, 0.5, 0.0, 1.0]]
+    for dtype in (torch.float32, F64):
+        clip = torch.tensor([tri], dtype=dtype)
+        clipped, source, weights = impl.clip_triangles(clip.to(device))
+        case = f"clip_triangles ({dtype}) of {tri} (corner 0 on the near plane, z + w = 0)"
+        assert clipped.shape[0] == 1, (
+            f"{case}: expected 1 output triangle (the input, all corners have z + w >= 0), "
+            f"got {clipped.shape[0]}"
+        )
+        assert int(source.cpu()[0]) == 0, f"{case}: source must be [0]"
+        rebuilt = weights.cpu().double() @ clip.double()[0]
+        assert torch.allclose(clipped.cpu().double()[0], rebuilt[0], atol=1e-6), (
+            f"{case}: clipped != weights @ clip"
+        )
+        # The kept triangle covers the input: its corners are the input's (any rotation).
+        got = sorted(map(tuple, clipped.cpu().double()[0].tolist()))
+        assert got == sorted(map(tuple, clip.double()[0].tolist())), (
+            f"{case}: expected the input corners {tri}, got {clipped.cpu().tolist()}"
+        )
+
+
 @pytest.mark.task(2)
 @pytest.mark.points(1)
 def test_bounding_boxes(impl, device):
@@ -925,6 +951,7 @@ def test_bounding_boxes(impl, device):
                     [width + 3.0, height - 0.5],
                     [width - 0.5, height + 3.0],
                 ],  # from the last pixel's centre
+                [[0.2, 0.2], [2.5, 0.2], [0.2, 2.5]],  # max exactly on pixel 2's centre
             ],
             dtype=F64,
         )

@@ -21,7 +21,9 @@ def slice_integral(source, extinction, length):
     (...); extinction, length: broadcasting with it (without C), >= 0 (``inf`` allowed):
     a negative one raises ValueError naming it (it would give a transmittance above 1).
     A slice of zero length, or of no medium, is no optical depth even where the other
-    factor is ``inf``: ``(0, 1)``, as ``sigma_t = inf`` over ``D = 0``.
+    factor is ``inf``: transmittance 1 (``sigma_t = inf`` over ``D = 0`` gives ``(0, 1)``;
+    no medium over ``D = inf`` gives ``(S D, 1)``, infinite where ``S > 0``). An endless
+    slice of medium (``sigma_t > 0``, ``D = inf``) gives ``(S / sigma_t, 0)``, the limit.
     Returns tensors of the broadcast shape (integral with C).
 
     Errors: TypeError naming ``source``, ``extinction`` or ``length`` unless it is a float

@@ -29,7 +29,9 @@ def slice_integral(source, extinction, length):
     (...); extinction, length: broadcasting with it (without C), >= 0 (``inf`` allowed):
     a negative one raises ValueError naming it (it would give a transmittance above 1).
     A slice of zero length, or of no medium, is no optical depth even where the other
-    factor is ``inf``: ``(0, 1)``, as ``sigma_t = inf`` over ``D = 0``.
+    factor is ``inf``: transmittance 1 (``sigma_t = inf`` over ``D = 0`` gives ``(0, 1)``;
+    no medium over ``D = inf`` gives ``(S D, 1)``, infinite where ``S > 0``). An endless
+    slice of medium (``sigma_t > 0``, ``D = inf``) gives ``(S / sigma_t, 0)``, the limit.
     Returns tensors of the broadcast shape (integral with C).
 
     Errors: TypeError naming ``source``, ``extinction`` or ``length`` unless it is a float
@@ -52,9 +54,13 @@ def slice_integral(source, extinction, length):
     tau = torch.where(length == 0, 0, extinction * finite)
     small = tau < 1e-4
     safe = torch.where(small, 1.0, tau)
-    # Below 1e-4 the series 1 - x/2 + x^2/6 is exact to float64 rounding.
+    # Below 1e-4 the series 1 - x/2 + x^2/6 is within x^3/24 (4e-14 relative) of phi.
     phi = torch.where(small, 1 - tau / 2 + tau * tau / 6, -torch.expm1(-safe) / safe)
-    factor = length * phi
+    # tau = inf: D phi(sigma_t D) -> 1 / sigma_t (D = inf would give inf * 0 = NaN).
+    endless = torch.isinf(tau)
+    factor = torch.where(
+        endless, 1 / torch.where(endless, extinction, 1), torch.where(endless, 0, length) * phi
+    )
     if source.ndim == factor.ndim + 1:
         factor = factor[..., None]
     return source * factor, torch.exp(-tau)

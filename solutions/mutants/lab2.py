@@ -292,4 +292,14 @@ MUTANTS = [
         why="builds an LBVH 'just in case' next to the chosen structure (and uses it for "
         "every BVH pick): the scene pays for a structure it did not ask for",
     ),
+    # Fresh mistakes, written from the docstrings
+    Mutant(
+        name="skip_is_last_not_after",
+        module=M,
+        function="bvh_skip_indices",
+        find="return last + 1",
+        replace="return last",
+        tests="stackless or bvh_traversal_extremes",
+        why="skip[i] is the first node AFTER the subtree (last(i) + 1), not its last leaf",
+    ),
 ]

@@ -217,4 +217,123 @@ MUTANTS = [
         tests="sphere_trace",
         why="a negative distance (ray starting inside) steps backwards",
     ),
+    # Fresh mistakes, written from the docstrings (before reading the tests).
+    Mutant(
+        name="fresh_box_open_interval",
+        module=M,
+        function="ray_box_interval",
+        find="(t_near <= t_far)",
+        replace="(t_near < t_far)",
+        tests="ray_box_interval",
+        why="the box is closed: a ray grazing an edge or crossing a flat box (t_near = t_far) "
+        "still hits it",
+    ),
+    Mutant(
+        name="fresh_box_no_clip_at_zero",
+        module=M,
+        function="ray_box_interval",
+        find="lo[:, 2]), zero)",
+        replace="lo[:, 2]), lo[:, 2])",
+        tests="ray_box_interval",
+        why="the interval is clipped to t >= 0: a ray starting inside has t_near = 0, not a "
+        "negative t behind its origin",
+    ),
+    Mutant(
+        name="fresh_box_world_distance",
+        module=M,
+        function="ray_box_interval",
+        find="inv = torch.reciprocal(directions)",
+        replace="inv = torch.reciprocal(directions / directions.norm(dim=-1, keepdim=True))",
+        tests="ray_box_interval",
+        why="t is the ray parameter of o + t d, not a world distance: normalising d gives "
+        "wrong t for directions that are not unit",
+    ),
+    Mutant(
+        name="fresh_grid_node_centred",
+        module=M,
+        function="sample_grid",
+        find="u = torch.nan_to_num(uvw, nan=0.0) * sizes - 0.5",
+        replace="u = torch.nan_to_num(uvw, nan=0.0) * (sizes - 1)",
+        tests="sample_grid",
+        why="align_corners=True: values at the box corners instead of the voxel centres",
+    ),
+    Mutant(
+        name="fresh_grid_nan_not_zero",
+        module=M,
+        function="sample_grid",
+        find="return torch.where(finite, (weight * values).sum(-1), 0)",
+        replace="return (weight * values).sum(-1)",
+        tests="sample_grid",
+        why="NaN coordinates give 0, not the value at the clamped corner",
+    ),
+    Mutant(
+        name="fresh_march_ds_not_world",
+        module=M,
+        function="march_box",
+        find="ds = dt * d.norm(dim=-1)",
+        replace="ds = dt",
+        tests="march_box",
+        why="the segment's world length is |d| dt: with a direction of length 1e-4 or 1e2 "
+        "the optical depth comes out wrong",
+    ),
+    Mutant(
+        name="fresh_march_stop_at_equal",
+        module=M,
+        function="march_box",
+        find="active = hit & (transmittance >= min_transmittance)",
+        replace="active = hit & (transmittance > min_transmittance)",
+        tests="march_box",
+        why="a ray stops once T has dropped *below* min_transmittance: with the default 0 an "
+        "opaque ray keeps counting its samples",
+    ),
+    Mutant(
+        name="fresh_march_jitter_per_step",
+        module=M,
+        function="march_box",
+        find="t = t_near + (i + xi) * dt",
+        replace="t = t_near + (i + (torch.rand(n, generator=generator, dtype=torch.float64)"
+        ".to(**like) if jitter else xi)) * dt",
+        tests="march_box",
+        why="jitter draws one offset per ray, the same for all its steps, not a fresh one per step",
+    ),
+    Mutant(
+        name="fresh_segment_inf_times_zero",
+        module=M,
+        function="segment_integral",
+        find="x = torch.where((length == 0) | (sigma == 0), 0, sigma * length)",
+        replace="x = sigma * length",
+        tests="segment_integral",
+        why="sigma = inf over length 0 (or sigma 0 over an endless step) is 0 * inf = NaN, "
+        "not 'no step' / 'no medium'",
+    ),
+    Mutant(
+        name="fresh_hg_one_denominator",
+        module=M,
+        function="henyey_greenstein",
+        find="g >= 0, (1 - g) ** 2",
+        replace="g > -2, (1 - g) ** 2",
+        tests="henyey_greenstein",
+        why="(1 - g)^2 + 2 g (1 - cos) has terms of both signs for g < 0: at g -> -1, "
+        "cos = -1 it cancels and loses every digit",
+    ),
+    Mutant(
+        name="fresh_shadow_from_point_not_box",
+        module=M,
+        function="shadow_transmittance",
+        find="offset = rel + (t_near + (k + 0.5) * dt)[:, None] * light",
+        replace="offset = rel + ((k + 0.5) * dt)[:, None] * light",
+        tests="shadow_transmittance",
+        why="a point outside the box is shadowed by the part of the light ray inside the "
+        "box, which starts at t_near, not at the point",
+    ),
+    Mutant(
+        name="fresh_trace_tolerance_without_d",
+        module=M,
+        function="sphere_trace",
+        find="radius <= epsilon * t * length",
+        replace="radius <= epsilon * t",
+        tests="sphere_trace",
+        why="t is a ray parameter: the footprint's world size is epsilon t |d|; a direction "
+        "of length 1e-4 or 1e2 gets a tolerance 1e4 times too tight or too loose",
+    ),
 ]

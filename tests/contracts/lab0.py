@@ -104,6 +104,11 @@ CONTRACTS = {
     ],
     "FrameDownloader": [
         (
+            "shape sides of 1 are valid; the default num_buffers is 2",
+            "test_FrameDownloader_bad_input",
+            None,
+        ),
+        (
             "receive gives the oldest submitted frame (first in, first out)",
             "test_FrameDownloader_fifo_order_and_content",
             "downloader_lifo",

@@ -99,7 +99,7 @@ def _grade(base: Path, course: Path, impl: Path, lab: int, tasks, tag: str) -> d
         os.environ,
         RTCOURSE_RESULTS_DIR=str(results),
         RTCOURSE_TEST_RESULTS=str(out),
-        PYTHONPATH=str(course),
+        PYTHONPATH=os.pathsep.join([str(course), *filter(None, [os.environ.get("PYTHONPATH")])]),
     )
     if USER:  # the forgers too run as the autograder's worker user, where there is one
         env["RTCOURSE_WORKER_USER"] = USER

@@ -47,4 +47,62 @@ EQUIVALENT = {
         "without overlap the loop renders into framebuffers[1] instead of framebuffers[0]: both are"
         " allocated alike (shape, dtype, device) and the other is never used"
     ),
+    "lab0_interop:pack_rgba8:cmp_GtE_Gt:0": (
+        "torch's int64 -> int32 conversion keeps the low 32 bits (two's complement) on the CPU"
+        " and on CUDA, and the mutated expression equals the reference modulo 2**32 for every "
+        "word, so no uint8 input tells it apart"
+    ),
+    "lab0_interop:pack_rgba8:cmp_GtE_LtE:0": (
+        "torch's int64 -> int32 conversion keeps the low 32 bits (two's complement) on the CPU"
+        " and on CUDA, and the mutated expression equals the reference modulo 2**32 for every "
+        "word, so no uint8 input tells it apart"
+    ),
+    "lab0_interop:pack_rgba8:const_int:13": (
+        "torch's int64 -> int32 conversion keeps the low 32 bits (two's complement) on the CPU"
+        " and on CUDA, and the mutated expression equals the reference modulo 2**32 for every "
+        "word, so no uint8 input tells it apart (word - 2**33 = word - 2**32 modulo 2**32)"
+    ),
+    "lab0_interop:pack_rgba8:swap_where:0": (
+        "torch's int64 -> int32 conversion keeps the low 32 bits (two's complement) on the CPU"
+        " and on CUDA, and the mutated expression equals the reference modulo 2**32 for every "
+        "word, so no uint8 input tells it apart"
+    ),
+    "lab0_interop:cuda_array_interface:cmp_NotEq_Eq:1": (
+        "CUDA only: the function raises ValueError for a CPU framebuffer before this line, so "
+        "only a CUDA framebuffer reaches the stream value"
+    ),
+    "lab0_interop:cuda_array_interface:const_int:0": (
+        "CUDA only: the function raises ValueError for a CPU framebuffer before building the "
+        "dict (version)"
+    ),
+    "lab0_interop:cuda_array_interface:const_int:1": (
+        "CUDA only: the function raises ValueError for a CPU framebuffer before this line, so "
+        "only a CUDA framebuffer reaches the stream value"
+    ),
+    "lab0_interop:cuda_array_interface:const_int:2": (
+        "CUDA only: the function raises ValueError for a CPU framebuffer before this line, so "
+        "only a CUDA framebuffer reaches the stream value"
+    ),
+    "lab0_interop:measure_copy_bandwidth:bool_And_Or:1": (
+        "non_blocking only changes when the copy may return: on the CPU a copy is synchronous "
+        "whatever the flag, and time_fn synchronises the device, so only the measured time (a "
+        "timing, not pinned by any test) can differ"
+    ),
+    "lab0_interop:linear_to_srgb8:drop_clamp:0": (
+        "the clamp after nan_to_num is redundant: srgb_encode does the same itself: its "
+        "docstring (course.core.image.srgb_encode, which the task docstring names as the srgb "
+        'to use): "Inputs are clamped to [0, 1] first (displays cannot show more) and NaN '
+        'becomes 0"'
+    ),
+    "lab0_interop:linear_to_srgb8:drop_nan_to_num:0": (
+        "clamp(0, 1) alone sends -inf to 0 and +inf to 1; NaN stays NaN and srgb_encode does "
+        "the same itself: its docstring (course.core.image.srgb_encode, which the task "
+        'docstring names as the srgb to use): "Inputs are clamped to [0, 1] first (displays '
+        'cannot show more) and NaN becomes 0"'
+    ),
+    "lab0_interop:render_rotating_triangle:drop_clamp:0": (
+        "pixels outside (a negative weight) are replaced by the background; inside pixels have"
+        " three weights >= 0 summing to 1 up to rounding, so each is at most 1 + a few ulp and"
+        " floor(255 w + 0.5) gives the same code with or without the clamp"
+    ),
 }

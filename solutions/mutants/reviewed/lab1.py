@@ -15,4 +15,27 @@ EQUIVALENT = {
         "area2 == 0 makes n / area2 NaN (0/0) or inf, so the transform is not finite and the "
         "isfinite check zeroes it anyway"
     ),
+    "lab1_intersect:closest_hit:const_int:0": (
+        "default memory_budget_bytes 2**28 -> 3**28 changes the tiling only, and the result "
+        'does not depend on it: docstring: "ties in ``t`` go to the lowest triangle index '
+        'whatever the tiling"'
+    ),
+    "lab1_intersect:closest_hit:const_int:1": (
+        "default memory_budget_bytes 2**28 -> 2**29 changes the tiling only, and the result "
+        'does not depend on it: docstring: "ties in ``t`` go to the lowest triangle index '
+        'whatever the tiling"'
+    ),
+    "lab1_intersect:closest_hit:const_int:2": (
+        "pairs floor 1 -> 2 (only when the budget is below one pair) changes the tiling only, "
+        'and the result does not depend on it: docstring: "ties in ``t`` go to the lowest '
+        'triangle index whatever the tiling"'
+    ),
+    "lab1_intersect:closest_hit:const_int:3": (
+        "ray_chunk floor 1 -> 2 changes the tiling only, and the result does not depend on it:"
+        ' docstring: "ties in ``t`` go to the lowest triangle index whatever the tiling"'
+    ),
+    "lab1_intersect:closest_hit:op_Sub_Add:0": (
+        "same as closest_hit:drop_clamp:0: some column always equals the row minimum, so the "
+        "clamp (whatever its bound) never binds"
+    ),
 }

@@ -30,4 +30,53 @@ EQUIVALENT = {
         "only a hits that is not the Hits of the N rays is treated differently; the provided checks"
         " do not validate hits, so that input is outside the contract (the docstring says so)"
     ),
+    "lab3_wavefront:layout_float4:op_BitOr_BitAnd:0": (
+        "the mutated text is a parameter annotation and the module has `from __future__ import"
+        " annotations`, so it is never evaluated: no input tells it apart"
+    ),
+    "lab3_wavefront:surface_at:const_float:0": (
+        "t of a missed ray (0 -> 0.001) only enters that ray's point, which the next line "
+        "replaces by 0 (torch.where(hit, ..., 0.0)); o + 0.001 d is finite, so nothing else "
+        "changes"
+    ),
+    "lab3_wavefront:surface_at:cmp_Gt_GtE:0": (
+        "only n . d == 0 exactly differs (n flipped or not), and both n and -n then satisfy "
+        'the docstring: "flipped to face the ray (``n . d <= 0``)"'
+    ),
+    "lab3_wavefront:render_whitted:drop_clamp:0": (
+        "the clamp only changes the material -1 of missed rays, which then index the last "
+        "material (a valid index); alive = hit & ..., and hit is False for exactly those rays,"
+        " so alive is unchanged"
+    ),
+    "lab3_wavefront:render_whitted:const_float:1": (
+        "the throughput of dead lanes (0 -> 0.001) is never read again: the image only adds "
+        "throughput where alive (background) or where hit = hits.hit & alive, and a dead lane "
+        "never revives"
+    ),
+    "lab3_wavefront:render_whitted:const_int:1": (
+        "range(max_depth + 2) adds an iteration after depth == max_depth, but alive includes "
+        "(depth < max_depth), so after that bounce no lane is alive and the loop breaks before"
+        " the extra iteration"
+    ),
+    "lab3_wavefront:render_uber:const_int:1": (
+        "range(max_depth + 2) adds one bounce after the last, where every lane is dead (alive "
+        "= hit & ... & more, more False at depth == max_depth): shade_step then adds "
+        "throughput * where(hit, ., where(alive, ., 0)) = 0 to every pixel, so the image is "
+        "unchanged"
+    ),
+    "lab3_wavefront:render_uber:drop_neg:0": (
+        "dead lanes get [0, inf] instead of an empty interval: shadow_step masks hit = alive &"
+        " (triangle >= 0) and shade_step adds 0 where not alive and keeps alive False, so only"
+        " the wasted work on dead lanes changes, never the image"
+    ),
+    "lab3_wavefront:render_uber:cmp_Lt_LtE:0": (
+        "more = depth <= max_depth only differs on the last bounce (depth == max_depth), after"
+        " which the loop ends: the alive/throughput it spawns are never used and the image of "
+        "that bounce is accumulated before (independent of more)"
+    ),
+    "lab3_wavefront:render_wavefront:const_int:2": (
+        "range(max_depth + 2) adds an iteration after depth == max_depth, but mirror includes "
+        "(depth < max_depth), so after that bounce no ray is left and the extra iteration "
+        "breaks at its start (len(pixel) == 0) before tracing or recording any stats"
+    ),
 }

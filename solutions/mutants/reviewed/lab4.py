@@ -27,4 +27,21 @@ EQUIVALENT = {
         "index at -1, a valid negative index, and what it reads is masked (same 300-grid check: "
         "identical outputs)"
     ),
+    "lab4_march:henyey_greenstein:cmp_GtE_Gt:0": (
+        "g = 0 picks the other denominator: (1 + g)^2 - 2 g (1 + cos) and "
+        "(1 - g)^2 + 2 g (1 - cos) are both exactly 1 at g = 0, "
+        "so the value is the same for every cos"
+    ),
+    "lab4_march:segment_integral:const_int:6": (
+        "the 1 of the inner where is the divisor of the finite steps' lanes, whose result "
+        "the outer where(endless, ...) discards: only the lanes with length = inf read 1 / sigma"
+    ),
+    "lab4_march:shadow_transmittance:const_int:1": (
+        "rel of a point whose light ray misses the box moves from 0 to 1: its density is masked by "
+        "where(hit, sigma, 0) and its dt is (t_far - t_near) / steps = 0"
+    ),
+    "lab4_march:shadow_transmittance:const_int:4": (
+        "the masked density of a missed point becomes 1: it is multiplied by dt = 0 (t_near = "
+        "t_far = 0 where hit is False), so it adds 0 to the depth"
+    ),
 }

@@ -38,4 +38,22 @@ EQUIVALENT = {
         "the fallback shape only feeds check_volume for a non-3-D extinction, which is rejected "
         "with (1, 1, 1) or (1, 1, 2) alike"
     ),
+    "lab5_froxel:slice_integral:const_int:2": (
+        "the placeholder length where sigma_t = 0 and D = inf only multiplies sigma_t = 0: tau = "
+        "0 * 0 or 0 * 1 is 0 either way, and the integral uses length, not the placeholder"
+    ),
+    "lab5_froxel:slice_integral:cmp_Lt_LtE:1": (
+        "a tie only: at tau = 1e-4 exactly, the series 1 - x/2 + x^2/6 and -expm1(-x)/x agree "
+        "to ~4e-14 relative (series error x^3/24), far below any test's tolerance; where to "
+        "switch formulas is the reference's own choice, not the contract's"
+    ),
+    "lab5_froxel:slice_integral:const_float:0": (
+        "moving the series threshold from 1e-4 to 1.1e-4: both formulas agree there to ~6e-14 "
+        "relative (series error x^3/24), far below any tolerance a correct solution must meet; "
+        "where to switch is not part of the contract"
+    ),
+    "lab5_froxel:slice_integral:const_float:1": (
+        "safe only replaces tau in the branch torch.where discards (tau < 1e-4); 1.0 or 1.1 "
+        "only keeps that unused branch finite, so values and gradients are unchanged"
+    ),
 }
