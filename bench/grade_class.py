@@ -17,7 +17,8 @@ pass``), a hang in a function and a crash at import (``os._exit``). Recorded per
 * ``same_scores``: whether each one-off grade gave the score the bulk run gave.
 
     python bench/grade_class.py [--n 100] [--lab 2 --lab 5] [--jobs J] [--task K]
-                                [--time-limit S] [--out bench/results/cpu-2cores/grade_class]
+                                [--time-limit S] [--device cpu|auto]
+                                [--out bench/results/cpu-2cores/grade_class]
 """
 
 from __future__ import annotations
@@ -107,10 +108,12 @@ def _run(cmd, env) -> tuple[float, float, subprocess.CompletedProcess]:
     return wall, cpu, proc
 
 
-def bench_lab(lab: int, n: int, jobs: int, tasks, time_limit, scratch: Path) -> dict:
+def bench_lab(lab: int, n: int, jobs: int, tasks, time_limit, scratch: Path, device="cpu") -> dict:
     folder, out = scratch / f"class{lab}", scratch / f"grades{lab}"
     students = make_class(folder, lab, n)
-    env = dict(os.environ, RTCOURSE_PROGRESS="0", CUDA_VISIBLE_DEVICES="")
+    env = dict(os.environ, RTCOURSE_PROGRESS="0")
+    if device == "cpu":  # the one-off grades too: the same machine for both
+        env["CUDA_VISIBLE_DEVICES"] = ""
     selection = [a for t in tasks for a in ("--task", str(t))]
     limit = ["--time-limit", str(time_limit)] if time_limit else []
     cmd = [
@@ -125,6 +128,8 @@ def bench_lab(lab: int, n: int, jobs: int, tasks, time_limit, scratch: Path) -> 
         str(out),
         "--jobs",
         str(jobs),
+        "--device",
+        device,
         *selection,
         *limit,
     ]
@@ -186,6 +191,7 @@ def bench_lab(lab: int, n: int, jobs: int, tasks, time_limit, scratch: Path) -> 
         "lab": lab,
         "n": n,
         "jobs": jobs,
+        "device": device,
         "tasks": list(tasks),
         "time_limit": time_limit,
         "kinds": {k: len(v) for k, v in by_kind.items()},
@@ -222,6 +228,12 @@ def main(argv=None):
         default=None,
         help="seconds per test of student code (the grader's default: 120)",
     )
+    parser.add_argument(
+        "--device",
+        choices=("cpu", "auto"),
+        default="cpu",
+        help="cpu hides CUDA from bulk and one-off grades alike; auto leaves it visible",
+    )
     parser.add_argument("--out", default=str(ROOT / "bench/results/cpu-2cores/grade_class"))
     args = parser.parse_args(argv)
     labs, jobs = args.lab or [2, 5], args.jobs or allowed_cpus()
@@ -233,7 +245,9 @@ def main(argv=None):
     results = []
     with tempfile.TemporaryDirectory(prefix="rtcourse-bench-class-") as scratch:
         for lab in labs:
-            row = bench_lab(lab, args.n, jobs, args.task, args.time_limit, Path(scratch))
+            row = bench_lab(
+                lab, args.n, jobs, args.task, args.time_limit, Path(scratch), args.device
+            )
             results.append(row)
             print(json.dumps({k: v for k, v in row.items() if k != "summary"}, indent=1))
             print(row["summary"])

@@ -421,9 +421,11 @@ def grade_class(
 
 def main(argv=None) -> int:
     """``python -m course.grading.classroom JOBS RESULTS``: a warm grading process."""
+    from course.grading import zygote
     from course.grading.warm import serve
 
     argv = sys.argv[1:] if argv is None else argv
+    zygote.enable()  # every student's worker forked from one pre-imported process
     serve(argv[0], argv[1], grade_job)
     return 0
 

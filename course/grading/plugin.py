@@ -107,6 +107,10 @@ def pytest_configure(config):
         )
     for spec in config.getoption("--task", None) or ():
         parse_task(spec)
+    if os.environ.get("RTCOURSE_ZYGOTE") == "1":
+        from course.grading import zygote
+
+        zygote.enable()
 
 
 def parse_task(spec: str) -> tuple[int | None, int]:

@@ -89,7 +89,7 @@ import tempfile
 import time
 from multiprocessing.connection import Connection
 
-from course.grading import wire
+from course.grading import wire, zygote
 from course.grading.input_check import LocalLab as LocalLab  # the trusted lab, re-exported
 from course.grading.input_check import too_large_message
 from course.grading.proctree import memory_room, tree_bytes
@@ -205,17 +205,17 @@ class Worker:
             PYTORCH_NVML_BASED_CUDA_CHECK="1",
         )
         fds = (ctl_child.fileno(), data_child.fileno())
-        self.proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "course.grading.worker",
-                *map(str, fds),
-                self.folder,
-                str(self.memory_bytes),
-                str(self.reply_bytes),
-                *map(str, user or ()),
-            ],
+        argv = [
+            *map(str, fds),
+            self.folder,
+            str(self.memory_bytes),
+            str(self.reply_bytes),
+            *map(str, user or ()),
+        ]
+        # Forked from a pre-imported zygote where this process enabled one (grading a
+        # class), else a fresh interpreter.
+        self.proc = zygote.spawn(argv, fds, self.workdir, env) or subprocess.Popen(
+            [sys.executable, "-m", "course.grading.worker", *argv],
             pass_fds=fds,
             stdin=subprocess.DEVNULL,
             env=env,

@@ -20,12 +20,18 @@ from pathlib import Path
 import pytest
 
 from course.core.files import defining_file, lab_source, module_files, relative_name
+from course.grading.catalog import lab_catalog
 from course.grading.classroom_layouts import describe, find_submissions
 from course.grading.classroom_report import read_gradebook
 from course.grading.mutants import apply_mutant, load_mutants
+from course.grading.runner import lab_test_files
 
 ROOT = Path(__file__).resolve().parents[2]
-LAB, MODULE, TASK, FULL = 4, "lab4_march", "1", 3.5
+LAB, MODULE, TASK = 4, "lab4_march", "1"
+# task 1's points, visible and hidden tests alike, as the graders declare them
+FULL = sum(
+    t.points for t in lab_catalog(lab_test_files(ROOT, [LAB]))[LAB].tests if str(t.task) == TASK
+)
 MUTANT = "march_back_to_front"  # loses points in task 1
 
 GRADESCOPE_METADATA = """\

@@ -437,14 +437,18 @@ def test_hanging_lab_grades_within_three_minutes_at_the_default_limits(tmp_path)
     assert seconds < 180, f"a hanging Lab 0 took {seconds:.0f} s to grade"
 
 
-def test_a_killed_grader_leaves_nothing(tmp_path):
+@pytest.mark.parametrize("forked", ["0", "1"], ids=["fresh", "forked"])
+def test_a_killed_grader_leaves_nothing(tmp_path, forked):
     """The grader itself killed mid-run (SIGKILL: no clean-up of its own): the worker
-    notices, ends everything the submission started and removes its folder."""
+    notices, ends everything the submission started and removes its folder; with the
+    worker forked from the zygote, the zygote goes too, with its folder."""
     course, sub = tmp_path / "course", tmp_path / "sub"
     shutil.copytree(HERE / "toycourse", course)
     shutil.copytree(HERE / "hostile" / "child_spawner", sub)
     (tmp_path / "tmp").mkdir()
-    env = dict(os.environ, TMPDIR=str(tmp_path / "tmp"), RTCOURSE_TIME_LIMIT="60")
+    env = dict(
+        os.environ, TMPDIR=str(tmp_path / "tmp"), RTCOURSE_TIME_LIMIT="60", RTCOURSE_ZYGOTE=forked
+    )
     proc = subprocess.Popen(
         [sys.executable, "-m", "course.tools.cli", "grade", "--impl", str(sub), "--lab", "8"],
         cwd=course,
@@ -461,10 +465,15 @@ def test_a_killed_grader_leaves_nothing(tmp_path):
         proc.kill()
         proc.wait()
     deadline = time.monotonic() + 30
-    while (_processes_with(str(sub)) or _processes_with(MARK)) and time.monotonic() < deadline:
+
+    def left():  # a worker forked from the zygote does not name the submission's folder
+        folders = list((tmp_path / "tmp").glob("rtcourse-*"))
+        return _processes_with(str(sub)) + _processes_with(MARK) + folders
+
+    while left() and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not _processes_with(str(sub)) and not _processes_with(MARK)
-    assert not list((tmp_path / "tmp").glob("rtcourse-worker-*"))
+    assert not list((tmp_path / "tmp").glob("rtcourse-*")), "the worker's and zygote's folders"
 
 
 # ------------------------------------------------------------ memory of a small container

@@ -6,6 +6,10 @@ task 1 (``double``, 1 point) is honest everywhere; task 2 (``norms``, 2 points)
 attacks the grader. For every attack the grader must finish, write a valid
 results.json, give the attack 0 and the honest task its point (unless the
 attack happens at import, which costs the whole module).
+
+Every other submission (in name order) is graded with its worker forked from the
+pre-imported zygote (``RTCOURSE_ZYGOTE=1``, as ``rtcourse grade-class`` grades), the rest
+with a fresh interpreter (as a one-off ``rtcourse grade``): both ways hold against attacks.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from course.grading import wire
 
 HERE = Path(__file__).parent
 HOSTILE = sorted(p.name for p in (HERE / "hostile").iterdir() if (p / "lab9_toy.py").is_file())
+FORKED = set(HOSTILE[1::2])  # graded with workers forked from the zygote
 AT_IMPORT = {"os_exit_at_import", "sys_exit_at_import", "raise_at_import"}
 
 
@@ -38,6 +43,7 @@ def _grade(name: str, base: Path) -> dict:
         RTCOURSE_MEMORY_GB="1",
         RTCOURSE_TEST_RESULTS=str(out),
         RTCOURSE_TEST_CWD=str(course),
+        RTCOURSE_ZYGOTE="1" if name in FORKED else "0",
     )
     proc = subprocess.run(
         [
@@ -79,7 +85,9 @@ def _task_scores(data: dict) -> dict:
     return scores
 
 
-@pytest.mark.parametrize("name", HOSTILE)
+@pytest.mark.parametrize(
+    "name", HOSTILE, ids=[f"{n}-{'forked' if n in FORKED else 'fresh'}" for n in HOSTILE]
+)
 def test_grader_survives_and_scores_honestly(graded, name):
     run = graded[name]
     proc = run["proc"]
