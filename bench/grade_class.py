@@ -85,10 +85,14 @@ def make_class(folder: Path, lab: int, n: int) -> dict[str, str]:
         else:
             entry = _entry_file(copy_module(solution, dest))
             text = entry.read_text()
+            # after the module's __future__ import, which must come first
+            future = "from __future__ import annotations\n"
+            head, body = text.split(future, 1) if future in text else ("", text)
+            head += future if future in text else ""
             if kind == "hang_import":
-                entry.write_text("while True:\n    pass\n" + text)
+                entry.write_text(head + "while True:\n    pass\n" + body)
             elif kind == "crash_import":
-                entry.write_text("import os\nos._exit(3)\n" + text)
+                entry.write_text(head + "import os\nos._exit(3)\n" + body)
             elif kind == "hang_function":
                 entry.write_text(
                     text + f"\n\ndef {first}(*args, **kwargs):\n    while True:\n        pass\n"

@@ -1010,10 +1010,64 @@ def test_intersect_simple_matches_float64_reference(impl, device):
     check_matches_reference(impl, "intersect_simple", device)
 
 
+def check_simple_resolution_rule(impl, device):
+    """Step 4's rule ``16 eps R^2 |n|_max <= n . n`` at its boundary, on slivers.
+
+    Slivers of width ``w`` (a power of two times eps) in the plane z = 0, hit straight down
+    exactly at a corner: every quantity of the rule is a power of two, so the rule decides
+    exactly (equality included), whatever the evaluation order. Corners and edges have no
+    positive component in some windings (``|e|_max`` takes absolute values), and one ray
+    meets the corner v1, where ``R = |v0 - p|_max + max(|e1|_max, |e2|_max) = 2``."""
+    for dtype in (torch.float32, F64):
+        eps = torch.finfo(dtype).eps
+        cases = []  # (v0, v1, v2, corner hit)
+        for w in (16 * eps, 8 * eps):
+            cases.append(([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, w, 0.0], 0))
+            cases.append(([0.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [-0.5, -w, 0.0], 0))
+            cases.append(([0.0, 0.0, 0.0], [-0.5, -w, 0.0], [-1.0, 0.0, 0.0], 0))
+        for w in (64 * eps, 8 * eps):
+            cases.append(([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, w, 0.0], 1))
+        tv = torch.tensor([c[:3] for c in cases], dtype=F64)
+        p = tv[torch.arange(len(cases)), torch.tensor([c[3] for c in cases])]
+        d = torch.tensor([0.0, 0.0, -1.0], dtype=F64).expand(len(cases), 3)
+        o = p - d
+        # The rule, exactly (powers of two), in float64.
+        e1, e2 = tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0]
+        n = torch.linalg.cross(e1, e2)
+        reach = (tv[:, 0] - p).abs().amax(-1) + torch.maximum(e1.abs().amax(-1), e2.abs().amax(-1))
+        accept = 16 * eps * n.abs().amax(-1) * reach**2 <= (n * n).sum(-1)
+        assert accept.any() and not accept.all(), "test set-up: both outcomes expected"
+        t, u, v = checked(
+            impl.intersect_simple(
+                *(x.to(device, dtype) for x in (o, d, tv[:, 0], tv[:, 1], tv[:, 2]))
+            ),
+            "intersect_simple",
+            (len(cases),),
+            dtype,
+            device,
+        )
+        no_nan("intersect_simple", "slivers at the resolution limit", t, u, v)
+        hit = t.cpu() < INF
+        wrong = hit != accept
+        if wrong.any():
+            i = int(wrong.nonzero()[0, 0])
+            lhs = (16 * eps * n[i].abs().amax() * reach[i] ** 2).item()
+            raise AssertionError(
+                f"intersect_simple ({dtype}): a ray straight down onto the corner "
+                f"{p[i].tolist()} of the sliver {tv[i].tolist()} gives R = {reach[i].item()}, "
+                f"16 eps R^2 |n|_max = {lhs:.6g} and n . n = {(n[i] * n[i]).sum().item():.6g}: "
+                f"step 4 says {'accept (<=, equality included)' if accept[i] else 'reject'}, "
+                f"you report {'a hit' if hit[i] else 'a miss'}. R = |v0 - p|_max + "
+                f"max(|e1|_max, |e2|_max) with |x|_max = x.abs().amax(-1) (absolute values), "
+                f"eps = torch.finfo(dtype).eps, the factor 16 exactly."
+            )
+
+
 @pytest.mark.task(1)
 @pytest.mark.points(1)
 def test_intersect_simple_degenerate_and_interval_cases(impl, device):
     check_degenerate_cases(impl, "intersect_simple", device)
+    check_simple_resolution_rule(impl, device)
 
 
 @pytest.mark.task(1)
@@ -1046,22 +1100,27 @@ def check_relative_parallel_test(impl, device):
         ],
         dtype=F64,
     )
-    tilts = torch.tensor(
-        [2.0**-40, -(2.0**-40), 2.0**-34, -(2.0**-34), 2.0**-8, -(2.0**-8)], dtype=F64
+    # |d|_max = 0.5, so a tilt of eps / 2 is exactly at the threshold (parallel: <=) and
+    # one of eps just above it; every direction with y = -0.25 and a negative tilt has no
+    # positive component.
+    eps = torch.finfo(torch.float32).eps
+    tilts = [2.0**-40, 2.0**-34, 2.0**-8, eps / 2, eps]
+    d = torch.tensor(
+        [[-0.5, y, s * tilt] for y in (0.25, -0.25) for s in (1, -1) for tilt in tilts],
+        dtype=F64,
     )
     target = torch.tensor([0.75, 0.5, 0.0], dtype=F64)  # inside both, crossed at t = 1
-    d = torch.cat(
-        [torch.tensor([-0.5, 0.25], dtype=F64).expand(len(tilts), 2), tilts[:, None]], dim=-1
-    )
     o = target - d
     o, d = o[:, None].expand(-1, 2, -1), d[:, None].expand(-1, 2, -1)
-    tv = corners[None].expand(len(tilts), -1, -1, -1)
+    tv = corners[None].expand(len(d), -1, -1, -1)
     e1, e2 = tv[..., 1, :] - tv[..., 0, :], tv[..., 2, :] - tv[..., 0, :]
     det = (e1 * torch.linalg.cross(d, e2)).sum(-1)
     relative = det.abs() / (d.abs().amax(-1) * e1.abs().amax(-1) * e2.abs().amax(-1))
-    eps = torch.finfo(torch.float32).eps
-    parallel = relative < 1e-2 * eps
-    assert bool((parallel | (relative > 1e3 * eps)).all()), "test set-up: ambiguous tilt"
+    parallel = relative <= eps
+    exact = (relative == eps) | (relative == 2 * eps)  # powers of two: decided exactly
+    assert bool((exact | (relative < 1e-2 * eps) | (relative > 1e3 * eps)).all()), (
+        "test set-up: ambiguous tilt"
+    )
     t, u, v = checked(
         impl.moller_trumbore(
             *(
@@ -1070,7 +1129,7 @@ def check_relative_parallel_test(impl, device):
             )
         ),
         "moller_trumbore",
-        (len(tilts), 2),
+        (len(d), 2),
         torch.float32,
         device,
     )
@@ -1081,11 +1140,12 @@ def check_relative_parallel_test(impl, device):
         i = tuple(wrong.nonzero()[0].tolist())
         raise AssertionError(
             f"moller_trumbore: ray {i} with direction {d[i].tolist()} against the triangle "
-            f"{tv[i].tolist()} has |det| = {relative[i].item():.3g} |d| |e1| |e2| (max-norms), "
-            f"{'far below' if parallel[i] else 'far above'} eps = {eps:.3g}: it must "
+            f"{tv[i].tolist()} has |det| = {relative[i].item():.6g} |d| |e1| |e2| (max-norms), "
+            f"{'at or below' if parallel[i] else 'above'} eps = {eps:.3g}: it must "
             f"{'miss (parallel to within rounding)' if parallel[i] else 'hit at t = 1'}, got "
             f"{'a hit' if hit[i] else 'a miss'}. Reject |det| <= eps * |d| |e1| |e2| with "
-            f"max-norms, |x|_max = x.abs().amax(-1) (the absolute values, whatever the signs)."
+            f"max-norms (equality is parallel), |x|_max = x.abs().amax(-1) (the absolute "
+            f"values, whatever the signs)."
         )
 
 
@@ -1184,16 +1244,28 @@ def test_woop_precompute_maps_to_unit_triangle(impl, device):
             [[0.0, 0.0, 0.0], [INF, 0.0, 0.0], [1.0, 1.0, 1.0]],
             [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, -INF, 1.0]],
             [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, math.nan, 1.0]],
+            [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]],  # a good one
         ],
         device=device,
     )
     transform = check_tensor(
         impl.woop_precompute(bad[:, 0], bad[:, 1], bad[:, 2]),
         "woop_precompute of triangles with inf/NaN corners",
-        shape=(3, 3, 4),
+        shape=(4, 3, 4),
         dtype=torch.float32,
         device=device,
     ).cpu()
+    alone = impl.woop_precompute(bad[3:, 0], bad[3:, 1], bad[3:, 2]).cpu()
+    assert_close(
+        transform[3],
+        alone[0],
+        rtol=1e-6,
+        atol=1e-6,
+        name="woop_precompute: a good triangle batched with inf/NaN ones must get the same "
+        "transform as alone (each triangle's transform depends on its own corners only)",
+        where="(row, column)",
+    )
+    transform = transform[:3]
     nan = torch.isnan(transform)
     if nan.any():
         k = int(nan.nonzero()[0, 0])
@@ -1329,6 +1401,12 @@ def axis_rays_near_edges(n: int, seed: int):
 def test_watertight_decides_exactly_near_edges(impl, device):
     o, d, v0, v1, v2, inside, U = axis_rays_near_edges(3000, seed=61)
     products_equal = (v2[:, 0] * v1[:, 1] == v2[:, 1] * v1[:, 0]) & (U != 0)
+    # Rotate the corners (v0, v1, v2) -> (v1, v2, v0) or (v2, v0, v1) for a third of the rays
+    # each: the edge near the ray becomes the one of W or V, the exact decision is the same.
+    turn = (torch.arange(len(o)) // 3) % 3
+    corners = torch.stack([v0, v1, v2], 1)
+    corners = corners[torch.arange(len(o))[:, None], (torch.arange(3) + turn[:, None]) % 3]
+    v0, v1, v2 = corners.unbind(1)
     t, u, v = checked(
         impl.watertight(*(x.to(device) for x in (o, d, v0, v1, v2))),
         "watertight",
@@ -1345,7 +1423,8 @@ def test_watertight_decides_exactly_near_edges(impl, device):
             f"watertight: {int(wrong.sum())} of {len(o)} axis-parallel rays passing within "
             f"rounding distance of an edge are decided wrongly (exact answer from float64 edge "
             f"functions). First: ray {i} should {'hit' if inside[i] else 'miss'}; its edge "
-            f"function U is exactly {U[i].item():.3g} in float64 but the two float32 products "
+            f"function {'UWV'[int(turn[i])]} is exactly {U[i].item():.3g} in float64 but the two "
+            f"float32 products "
             f"{'round to the same value' if products_equal[i] else 'differ'}. When U, V or W "
             f"comes out exactly 0.0, recompute all three in float64 (the double fallback)."
         )
@@ -1517,6 +1596,22 @@ def test_ray_box_matches_slabs(impl, device):
     assert not hit2.cpu().any(), (
         f"ray_box: NaN origin, NaN direction, infinite origin and an empty box (min > max) must "
         f"all miss; got hits {hit2.cpu().tolist()}"
+    )
+    # An infinite direction component (inv_direction 0) from inside the box misses too,
+    # and with the default t_min = 0 a ray starting inside the box has t_near = 0.
+    o3 = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]], device=device)
+    d3 = torch.tensor([[INF, 0.5, 0.5], [1.0, 0.5, -0.25]], device=device)
+    near3, _, hit3 = impl.ray_box(
+        o3, impl.safe_reciprocal(d3), -torch.ones_like(o3), torch.ones_like(o3)
+    )
+    assert hit3.cpu().tolist() == [False, True], (
+        f"ray_box: from the centre of the box [-1, 1]^3, the direction (inf, 0.5, 0.5) "
+        f"(inv_directions (0, 2, 2)) must miss (every |inv_direction| > 0) and "
+        f"(1, 0.5, -0.25) must hit; got hits {hit3.cpu().tolist()}"
+    )
+    assert near3.cpu()[1].item() == 0.0, (
+        f"ray_box: a ray starting inside the box with the default t_min = 0 has t_near = 0, "
+        f"got {near3.cpu()[1].item()!r}"
     )
     expect_error(
         "box_min",
@@ -2185,5 +2280,15 @@ def test_register_estimate_and_occupancy(impl):
                 f"for {got} registers, got {occ.blocks_per_sm} blocks/SM, occupancy "
                 f"{occ.occupancy:.3f} ({occ.regs_per_thread} registers)"
             )
+        default = impl.occupancy_for(variant)
+        expected = occupancy(PRESETS["g80"], got, 64)
+        assert (default.blocks_per_sm, default.occupancy) == (
+            expected.blocks_per_sm,
+            expected.occupancy,
+        ), (
+            f"occupancy_for({variant!r}) with the defaults (arch 'g80', block_size 64): "
+            f"expected {expected.blocks_per_sm} blocks/SM, occupancy {expected.occupancy:.3f}, "
+            f"got {default.blocks_per_sm} blocks/SM, occupancy {default.occupancy:.3f}"
+        )
     expect_error("variant", impl.register_estimate, "nope", case="an unknown variant name")
     expect_error("variant", impl.occupancy_for, "nope", case="an unknown variant name")

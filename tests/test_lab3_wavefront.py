@@ -797,6 +797,29 @@ def test_shade_direct_matches_reference(impl, device, name):
         check_shadow_count(
             shadow_rays, expected_shadow_rays(scene, p, n), f"shade_direct on {name} ({dtype})"
         )
+        # One point (a lit one) shades as in the batch; no point gives no shadow ray.
+        ambient = scene.ambient * scene.kd[m]
+        i = int(((radiance - ambient).abs().amax(1) > 1e-3).nonzero()[0, 0])
+        one, one_count = impl.shade_direct(
+            scene, p[i : i + 1], n[i : i + 1], d[i : i + 1], m[i : i + 1], trace_brute_force
+        )
+        compare_images(
+            one,
+            expected[i : i + 1],
+            f"shade_direct on {name} ({dtype}) with a single point (its lights count too)",
+            dtype,
+            device,
+        )
+        want = expected_shadow_rays(scene, p[i : i + 1], n[i : i + 1])
+        assert one_count == want, (
+            f"shade_direct on {name} ({dtype}) with a single point: {one_count} shadow rays, "
+            f"expected {want} (one per light with n . l > 0)"
+        )
+        none, none_count = impl.shade_direct(scene, p[:0], n[:0], d[:0], m[:0], trace_brute_force)
+        check_tensor(none, "shade_direct of no points: radiance", shape=(0, 3), dtype=dtype)
+        assert none_count == 0, (
+            f"shade_direct of no points traces no shadow ray: expected 0, got {none_count!r}"
+        )
     if name == "courtyard_both":  # shadow rays through the given tracer: the cube casts none
         keep = m != 2  # the points not on the cube (their primary hit is the same without it)
         radiance, _ = impl.shade_direct(
@@ -879,6 +902,29 @@ def test_shade_direct_light_on_and_above_a_surface(impl, device, lamp):
                 where="(floor pixel, channel)",
                 name="shade_direct: the floor under a lamp standing on it gets ambient "
                 "light only (n . l = 0: the light lies in its plane)",
+            )
+            # A sun exactly in the floor's plane: n . l = 0 exactly, so no shadow ray.
+            sun = dataclasses.replace(
+                scene_on("courtyard_sun", dtype, device),
+                dir_directions=torch.tensor([[1.0, 0.0, 0.0]], dtype=dtype, device=device),
+            )
+            up = torch.tensor([0.0, 1.0, 0.0], dtype=dtype, device=device).expand(len(p), 3)
+            keep = floor.to(device)
+            flat, flat_count = impl.shade_direct(
+                sun, p[keep], up[keep], d[keep], m[keep], trace_brute_force
+            )
+            assert flat_count == 0, (
+                f"shade_direct ({dtype}): {int(keep.sum())} floor points with n = (0, 1, 0) "
+                f"under a directional light l = (1, 0, 0) have n . l = 0 exactly: that light "
+                f"cannot contribute and gets no shadow ray (only n . l > 0 does); got "
+                f"{flat_count!r} shadow rays"
+            )
+            assert_close(
+                flat.cpu().double(),
+                (sun.ambient * sun.kd[m[keep]]).cpu().double(),
+                rtol=1e-6,
+                where="(floor point, channel)",
+                name="shade_direct: floor points under a sun in their plane get ambient light only",
             )
             assert lit[~floor].double().mean() > 0.2, (
                 "shade_direct: a lamp standing on the floor must light the cube and the wall: "
@@ -1152,8 +1198,16 @@ def test_render_wavefront_extremes(impl, device):
             device,
         )
         o, d = bad_rays(dtype, device)
-        image, _ = with_blocks(impl, "render_wavefront", scene, o, d, trace_brute_force)
+        image, stats = with_blocks(impl, "render_wavefront", scene, o, d, trace_brute_force)
         check_background(image, scene, f"render_wavefront ({dtype})")
+        s = wavefront_stats(stats, 2, f"render_wavefront, rays that all miss ({dtype})")
+        want = {"closest_rays": [len(o), 0, 0], "hits": [0, 0, 0], "material_runs": [0, 0, 0]}
+        got = {key: s[key] for key in want}
+        assert got == want, (
+            f"render_wavefront ({dtype}): {len(o)} NaN/inf/zero rays all miss: one bounce "
+            f"traces them, none hits, so the shading queue is empty (0 runs of equal material)"
+            f"; expected {want} (padded to max_depth + 1), got {got}"
+        )
     scene = translated(scene_on("cornell_mirror", F64, device), 1e5)
     o, d = camera_rays("cornell_mirror", F64, device)
     image, _ = with_blocks(impl, "render_wavefront", scene, o + 1e5, d, trace_brute_force)
@@ -1506,6 +1560,17 @@ def check_layout_hits(hits, expected: Hits, what: str, dtype) -> None:
             f"t={expected.t[i].item():.7g}, got {int(tri[i])} at "
             f"t={hits.t[i].item():.7g}"
         )
+    # A tie or a shared edge: the other triangle is hit at the same distance, never farther.
+    both = differ & (ref >= 0) & (tri >= 0)
+    far = (hits.t.cpu() - expected.t.cpu()).abs() > 1e-4 * expected.t.cpu().abs()
+    if (both & far).any():
+        i = int((both & far).nonzero()[0, 0])
+        raise AssertionError(
+            f"{what}: ray {i} reports triangle {int(tri[i])} at t={hits.t[i].item():.7g}, but "
+            f"triangle {int(ref[i])} is hit nearer, at t={expected.t[i].item():.7g}: keep the "
+            f"nearest hit over all tiles (a farther hit never replaces a nearer one, whatever "
+            f"its index)"
+        )
     same = (~differ) & (ref >= 0)
     assert_close(
         hits.t.cpu()[same],
@@ -1514,6 +1579,15 @@ def check_layout_hits(hits, expected: Hits, what: str, dtype) -> None:
         where="hit",
         name=f"{what}: t of the hits",
     )
+    atol = 1e-4 if dtype == F32 else 1e-9
+    for name in ("u", "v"):
+        assert_close(
+            getattr(hits, name).cpu()[same],
+            getattr(expected, name).cpu()[same],
+            atol=atol,
+            where="hit",
+            name=f"{what}: {name} of the hits (the barycentrics of the kept hit)",
+        )
     missed = (tri < 0) & ~differ
     assert_equal(
         hits.t.cpu()[missed],
@@ -1521,6 +1595,13 @@ def check_layout_hits(hits, expected: Hits, what: str, dtype) -> None:
         name=f"{what}: t of misses (inf)",
         where="miss",
     )
+    for name in ("u", "v"):
+        assert_equal(
+            getattr(hits, name).cpu()[tri < 0],
+            torch.zeros(int((tri < 0).sum()), dtype=dtype),
+            name=f"{what}: {name} of misses (0)",
+            where="miss",
+        )
 
 
 @pytest.mark.task(5)
@@ -1655,6 +1736,53 @@ def intersect_in_small_tiles(lab, pairs: int, *args):
             m.MEMORY_BUDGET_BYTES = budget
 
 
+def check_layout_edges_and_ties(impl, device, dtype) -> None:
+    """Rays straight down onto the corners, edges and inside of the unit triangle, which the
+    mesh holds three times (1, 2, 3) above a farther copy (0). Every corner, ray and
+    transform is exact, so u, v and t are exact: u = 0, v = 0 and u + v = 1 on the edges
+    are hits, and the exact tie goes to triangle 1, also with one pair per tile in a float4
+    layout that stores the triangles in the order 3, 2, 1, 0 (the farther triangle 0, of a
+    lower index, comes last and must not replace the nearer hit)."""
+    unit = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    below = [[0.0, 0.0, -1.0], [1.0, 0.0, -1.0], [0.0, 1.0, -1.0]]
+    corners = torch.tensor([below, unit, unit, unit], dtype=dtype)
+    mesh = Mesh(corners.reshape(-1, 3).to(device), torch.arange(12, device=device).reshape(4, 3))
+    uv = torch.tensor(
+        [[0, 0], [1, 0], [0, 1], [0.5, 0], [0, 0.5], [0.5, 0.5], [0.25, 0.25]], dtype=dtype
+    )
+    n = len(uv)
+    o = torch.cat((uv, torch.ones(n, 1, dtype=dtype)), 1).to(device)
+    d = torch.tensor([0.0, 0.0, -1.0], dtype=dtype).expand(n, 3).contiguous().to(device)
+    t_min = torch.zeros(n, dtype=dtype, device=device)
+    t_max = torch.full((n,), INF, dtype=dtype, device=device)
+    order = torch.tensor([3, 2, 1, 0], device=device)
+    cases = {
+        "indexed": (impl.layout_indexed(mesh), None),
+        "float4": (impl.layout_float4(mesh), None),
+        "woop": (impl.layout_woop(mesh), None),
+        "float4 in the order 3, 2, 1, 0, one pair per tile": (impl.layout_float4(mesh, order), 1),
+        "woop, one pair per tile": (impl.layout_woop(mesh), 1),
+    }
+    for what, (layout, pairs) in cases.items():
+        if pairs is None:
+            hits = impl.intersect_layout(layout, o, d, t_min, t_max)
+        else:
+            hits = impl.probe(intersect_in_small_tiles, pairs, layout, o, d, t_min, t_max)
+        got = {k: getattr(hits, k).cpu() for k in ("triangle", "t", "u", "v")}
+        for i in range(n):
+            want = (1, 1.0, uv[i, 0].item(), uv[i, 1].item())
+            have = tuple(x[i].item() for x in got.values())
+            assert have == want, (
+                f"intersect_layout ({what}, {dtype}): the ray straight down onto the point "
+                f"(u, v) = {tuple(uv[i].tolist())} of the unit triangle (on an edge or corner: "
+                f"u, v >= 0 and u + v <= 1 include it) must hit triangle 1 at t = 1 with that "
+                f"u, v exactly (every number here is exact; triangles 2 and 3 are copies of 1, "
+                f"an exact tie that the lowest index wins, in any tile order; triangle 0 is "
+                f"hit farther, at t = 2); got (triangle, "
+                f"t, u, v) = {have}"
+            )
+
+
 @pytest.mark.task(5)
 @pytest.mark.points(1)
 @pytest.mark.parametrize("dtype", [F32, F64], ids=["f32", "f64"])
@@ -1699,6 +1827,7 @@ def test_intersect_layout(impl, device, dtype):
             f"tiles of triangles",
             dtype,
         )
+    check_layout_edges_and_ties(impl, device, dtype)
     expect_error(
         "layout",
         impl.intersect_layout,

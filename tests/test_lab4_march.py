@@ -180,6 +180,11 @@ def sdf_nan(p):
     return torch.full(p.shape[:1], math.nan, dtype=p.dtype, device=p.device)
 
 
+def sdf_column(p):
+    """The plane y = -1, returned as (N, 1): the wrong shape."""
+    return (p[:, 1] + 1.0)[:, None]
+
+
 # ---------------------------------------------------------------------------------------
 # Checking helpers
 
@@ -691,11 +696,18 @@ def test_ray_box_interval(impl, device):
 @pytest.mark.task(1)
 @pytest.mark.points(0.5)
 def test_ray_box_interval_closed_box(impl, device):
-    # The box is closed: a ray through an edge, or across a flat box, touches it at one t.
-    o = torch.tensor([[-1.0, 1.0, 0.5], [0.25, 0.5, 0.0]], dtype=F64, device=device)
-    d = torch.tensor([[1.0, -1.0, 0.0], [0.0, 0.0, 2.0]], dtype=F64, device=device)
-    boxes = (([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]), ([0.0, 0.0, 0.5], [1.0, 1.0, 0.5]))
-    for k, ((lo, hi), want) in enumerate(zip(boxes, (1.0, 0.25))):
+    # The box is closed: a ray through an edge, or across a flat box, touches it at one t;
+    # a ray along the diagonal d = (1, 1, 1) (every component exactly 1) passes a corner.
+    o = torch.tensor(
+        [[-1.0, 1.0, 0.5], [0.25, 0.5, 0.0], [-2.0, -2.0, -2.0]], dtype=F64, device=device
+    )
+    d = torch.tensor([[1.0, -1.0, 0.0], [0.0, 0.0, 2.0], [1.0, 1.0, 1.0]], dtype=F64, device=device)
+    boxes = (
+        ([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]),
+        ([0.0, 0.0, 0.5], [1.0, 1.0, 0.5]),
+        ([-1.0, -1.0, -1.0], [-1.0, 1.0, 1.0]),
+    )
+    for k, ((lo, hi), want) in enumerate(zip(boxes, (1.0, 0.25, 1.0))):
         near, far, hit = impl.ray_box_interval(o[k : k + 1], d[k : k + 1], lo, hi)
         what = f"ray o={o[k].tolist()} d={d[k].tolist()} box {lo}..{hi}"
         assert bool(hit.cpu()[0]), (
@@ -799,6 +811,31 @@ def test_sample_grid_trilinear(impl, device):
         name="sample_grid at NaN coordinates must give 0 (never an index from a NaN)",
         where="point",
     )
+    assert_equal(
+        impl.sample_grid(color.to(device), nan_points.to(device)),
+        torch.zeros(2, color.shape[-1], dtype=F64),
+        name="sample_grid of a grid with channels (X, Y, Z, C) at NaN coordinates: 0 in every "
+        "channel",
+        where="point",
+    )
+    # An opaque voxel (+inf) next to an empty one, and an opaque one-voxel grid: inf where
+    # the opaque voxel weighs, its neighbour's value where it weighs nothing (not 0 * inf).
+    opaque = torch.tensor([math.inf, 0.0], dtype=F64).reshape(2, 1, 1)
+    at = torch.tensor([[0.1, 0.5, 0.5], [0.5, 0.3, 0.9], [0.75, 0.5, 0.5], [1.2, 0.0, 1.0]])
+    for field, want in (
+        (opaque, [math.inf, math.inf, 0.0, 0.0]),
+        (opaque[:1], [math.inf] * 4),
+        (
+            torch.stack([opaque, opaque.flip(0)], -1),
+            [[math.inf, 0.0], [math.inf] * 2, [0.0, math.inf], [0.0, math.inf]],
+        ),
+    ):
+        got = impl.sample_grid(field.to(device), at.to(F64).to(device)).cpu()
+        assert got.tolist() == want, (
+            f"sample_grid of the grid {field.squeeze().tolist()} (+inf is an opaque voxel) at "
+            f"{at.tolist()}: expected {want}, got {got.tolist()}; a corner of weight 0 adds "
+            f"nothing, even +inf (0 * inf is NaN)"
+        )
     expect_error("grid", impl.sample_grid, grid[0].to(device), uvw.to(device), case="a 2-D grid")
     expect_error(
         "uvw", impl.sample_grid, grid.to(device), uvw[:, :2].to(device), case="uvw of shape (N, 2)"
@@ -1351,15 +1388,20 @@ def test_march_box_extremes(impl, device):
     grid = torch.rand(4, 4, 4, generator=g, dtype=F64) * 3
     emis = torch.rand(4, 4, 4, generator=g, dtype=F64)
     results = []
+    # A box of sides 2, 0.5 and 1.5 (grid coordinates are divided by each side), the rays
+    # scaled with it; origins and corners exactly representable at both offsets (multiples
+    # of 1/128 near the box).
+    corner = torch.tensor([0.25, -0.5, 0.0], dtype=F64)
+    side = torch.tensor([2.0, 0.5, 1.5], dtype=F64)
+    oo = corner + torch.round(o * 64) / 64 * side
+    dd = d * side
     for shift, dtype in ((0.0, F64), (1e5, torch.float32)):
-        # Origins exactly representable at both offsets (multiples of 1/64 near the box).
-        oo = torch.round(o * 64) / 64
         got = march(
             impl,
             (oo + shift).to(device, dtype),
-            d.to(device, dtype),
-            [shift] * 3,
-            [shift + 1.0] * 3,
+            dd.to(device, dtype),
+            (corner + shift).tolist(),
+            (corner + side + shift).tolist(),
             grid.to(device, dtype),
             emis.to(device, dtype),
             16,
@@ -1373,10 +1415,10 @@ def test_march_box_extremes(impl, device):
     # with grid_sample at box coordinates, the exact step in float64).
     want = march_given_box(
         SimpleNamespace(segment_integral=lambda s, ds, _: given_step(s, ds)),
-        torch.round(o * 64) / 64,
-        d,
-        [0.0] * 3,
-        [1.0] * 3,
+        oo,
+        dd,
+        corner.tolist(),
+        (corner + side).tolist(),
         grid,
         emis,
         16,
@@ -1387,7 +1429,8 @@ def test_march_box_extremes(impl, device):
             want[key],
             rtol=1e-9,
             atol=1e-12,
-            name=f"march_box (a varied 4x4x4 grid, float64): {key} against a midpoint "
+            name=f"march_box (a varied 4x4x4 grid in a box of sides 2, 0.5, 1.5, float64): {key} "
+            f"against a midpoint "
             f"march sampling the grids trilinearly at the box coordinates "
             f"((o - box_min) + t d) / (box_max - box_min)",
             where="ray",
@@ -1528,6 +1571,86 @@ def test_march_box_extremes(impl, device):
         kinds=(ValueError,),
         case="a density callable returning NaN (the provided evaluate checks its values: call it)",
     )
+    # A flat box (z from 0.5 to 0.5) and rays in its plane: the chord runs along x and y, and
+    # the grids (varying along z) are read at the flat axis's middle, box coordinate 0.5 as
+    # documented, never 0 / 0 = NaN (which sample_grid turns into 0).
+    flat_rays, flat_dirs = o.clone(), d.clone()
+    flat_rays[:, 2], flat_dirs[:, 2] = 0.5, 0.0
+    got = march(
+        impl,
+        flat_rays.to(device),
+        flat_dirs.to(device),
+        [0.0, 0.0, 0.5],
+        [1.0, 1.0, 0.5],
+        grid[:, :, :2].to(device),
+        emis[:, :, :2].to(device),
+        8,
+        what="march_box (flat box z = 0.5, rays in its plane)",
+        n=32,
+        dtype=F64,
+        device=device,
+    )
+    want = march_given_box(
+        SimpleNamespace(segment_integral=lambda s, ds, _: given_step(s, ds)),
+        flat_rays,
+        flat_dirs,
+        [0.0] * 3,
+        [1.0] * 3,
+        grid[:, :, :2],
+        emis[:, :, :2],
+        8,
+    )
+    for key in ("radiance", "transmittance"):
+        assert_close(
+            got[key],
+            want[key],
+            rtol=1e-9,
+            atol=1e-12,
+            name=f"march_box (a flat box z in [0.5, 0.5], rays in the plane z = 0.5, grids "
+            f"varying along z): {key} against the same rays through the box [0, 1]^3. A flat "
+            f"axis is read at its middle (0.5); it has size 0: do not divide by it",
+            where="ray",
+        )
+    # The default steps is 64.
+    plain = march(
+        impl,
+        o.to(device),
+        d.to(device),
+        [0.0] * 3,
+        [1.0] * 3,
+        grid.to(device),
+        emis.to(device),
+        what="march_box (default steps)",
+        n=32,
+        dtype=F64,
+        device=device,
+    )
+    spelled = march(
+        impl,
+        o.to(device),
+        d.to(device),
+        [0.0] * 3,
+        [1.0] * 3,
+        grid.to(device),
+        emis.to(device),
+        64,
+        integrator="exact",
+        min_transmittance=0.0,
+        jitter=False,
+        seed=0,
+        what="march_box (steps=64)",
+        n=32,
+        dtype=F64,
+        device=device,
+    )
+    for key in MARCH_KEYS:
+        assert_equal(
+            plain[key],
+            spelled[key],
+            name=f"march_box: {key} with the default arguments vs steps=64, "
+            f"integrator='exact', min_transmittance=0, jitter=False spelled out",
+            where="ray",
+        )
 
 
 # ---------------------------------------------------------------------------------------
@@ -2148,12 +2271,33 @@ def scatter_grid():
     return 0.2 + 1.5 * torch.rand(4, 5, 3, generator=generator(141), dtype=F64)
 
 
+SHIFTED_LO, SHIFTED_HI = (2.0, -3.0, 0.5), (3.0, -1.0, 1.5)  # the scattering box, moved
+
+
 def scatter_grid_density(p):
     """The medium of ``scatter_grid()`` as a callable: its trilinear field at world points
-    of the scattering box."""
-    lo, hi = (torch.tensor(b, dtype=F64, device=p.device) for b in (SCATTER_LO, SCATTER_HI))
+    of the scattering box moved to ``SHIFTED_LO`` .. ``SHIFTED_HI``."""
+    lo, hi = (torch.tensor(b, dtype=F64, device=p.device) for b in (SHIFTED_LO, SHIFTED_HI))
     q = p.double()
     return given_field(scatter_grid().to(p.device), q, (q - lo) / (hi - lo)).to(p.dtype)
+
+
+FLAT_LO, FLAT_HI = (0.0, 0.0, 0.5), (1.0, 2.0, 0.5)  # the scattering box, flattened to z = 0.5
+
+
+def flat_grid():
+    """``scatter_grid()``'s first two layers: (4, 5, 2), varying along z."""
+    return scatter_grid()[:, :, :2].clone()
+
+
+def flat_grid_density(p):
+    """The medium of ``flat_grid()`` in the flat box as a callable: read at the flat axis's
+    middle (box coordinate 0.5), as the docstrings say a grid is."""
+    lo, hi = (torch.tensor(b, dtype=F64, device=p.device) for b in (FLAT_LO, FLAT_HI))
+    q = p.double()
+    local = (q - lo) / torch.where(hi > lo, hi - lo, 1.0)
+    local[:, 2] = 0.5
+    return given_field(flat_grid().to(p.device), q, local).to(p.dtype)
 
 
 def single_scatter(impl, *args, **kwargs):
@@ -2234,6 +2378,35 @@ def test_shadow_transmittance_grid_in_offset_box(impl, device):
         rtol=1e-12,
         atol=0.0,
         name="shadow_transmittance: the default is steps=16",
+        where="point",
+    )
+    # A flat box (z = 0.5), points and light in its plane: a grid varying along z is read at
+    # the flat axis's middle (0.5), like the same medium as a callable (do not divide by 0).
+    flat = torch.tensor(FLAT_LO, dtype=F64) + torch.tensor([1.0, 2.0, 0.0], dtype=F64) * torch.rand(
+        24, 3, generator=g, dtype=F64
+    )
+    flat_light = torch.tensor([0.3, 1.0, 0.0], dtype=F64)
+    got, twin = (
+        check_tensor(
+            impl.shadow_transmittance(
+                flat.to(device), flat_light.to(device), FLAT_LO, FLAT_HI, field, 4
+            ),
+            "shadow_transmittance (flat box)",
+            shape=(24,),
+            dtype=F64,
+            device=device,
+        ).cpu()
+        for field in (flat_grid().to(device), flat_grid_density)
+    )
+    assert (twin < 1).all() and twin.min() < 0.5, "test set-up: the flat medium shadows"
+    assert_close(
+        got,
+        twin,
+        rtol=1e-9,
+        atol=1e-12,
+        name="shadow_transmittance (a flat box z = 0.5, points and light in its plane, a grid "
+        "varying along z): against the same medium as a callable read at the flat axis's "
+        "middle (box coordinate 0.5)",
         where="point",
     )
 
@@ -2424,16 +2597,21 @@ def test_single_scatter_matches_closed_form(impl, device):
     )
     no_nan(what, radiance=got["radiance"], transmittance=got["transmittance"])
     # A grid is sampled at box coordinates (x - box_min) / (box_max - box_min) (the box is
-    # 1 x 2 x 1): the same medium as a grid and as a callable of world points scatters alike.
-    what = "march_single_scatter (a (4, 5, 3) grid density, steps=32, shadow_steps=4)"
+    # 1 x 2 x 1, away from the origin): the same medium as a grid and as a callable of world
+    # points scatters alike.
+    what = (
+        "march_single_scatter (a (4, 5, 3) grid density in the box (2, -3, 0.5)..(3, -1, 1.5), "
+        "steps=32, shadow_steps=4)"
+    )
+    shift = torch.tensor(SHIFTED_LO, dtype=F64) - torch.tensor(SCATTER_LO, dtype=F64)
     got, twin = (
         result_dict(
             single_scatter(
                 impl,
-                o.to(device),
+                (o + shift).to(device),
                 d.to(device),
-                SCATTER_LO,
-                SCATTER_HI,
+                SHIFTED_LO,
+                SHIFTED_HI,
                 field,
                 albedo,
                 light,
@@ -2526,6 +2704,136 @@ def test_single_scatter_matches_closed_form(impl, device):
             1,
             kinds=(ValueError,),
             case=f"albedo={bad} (an albedo is in [0, 1])",
+        )
+    expect_error(
+        "albedo",
+        impl.march_single_scatter,
+        o.to(device),
+        d.to(device),
+        SCATTER_LO,
+        SCATTER_HI,
+        dens,
+        1.0 + 1e-12,
+        light,
+        kinds=(ValueError,),
+        case="albedo=1 + 1e-12 (check the number as given, not rounded to float32)",
+    )
+    # The ends of [0, 1] are albedos: 0 (absorbing only) and 1 (conservative scattering).
+    for edge in (0.0, 1.0):
+        what = f"march_single_scatter (albedo={edge:g})"
+        got = result_dict(
+            single_scatter(
+                impl,
+                o.to(device),
+                d.to(device),
+                SCATTER_LO,
+                SCATTER_HI,
+                dens,
+                edge,
+                light,
+                irradiance,
+                g,
+                8,
+                1,
+            ),
+            what,
+            MARCH_KEYS,
+            48,
+            F64,
+            device,
+        )
+        scaled = single_scatter(
+            impl,
+            o.to(device),
+            d.to(device),
+            SCATTER_LO,
+            SCATTER_HI,
+            dens,
+            0.5,
+            light,
+            irradiance,
+            g,
+            8,
+            1,
+        )
+        assert_close(
+            got["radiance"],
+            2 * edge * scaled["radiance"],
+            rtol=1e-12,
+            atol=1e-300,
+            name=f"{what}: radiance (albedo {edge:g} is allowed; the light is albedo times that "
+            f"of albedo 1)",
+            where="ray",
+        )
+    # A flat box (z = 0.5) with the rays and the light in its plane: the grid (varying along
+    # z) is read at the flat axis's middle (0.5), like the same medium given as a callable.
+    fo, fd = o.clone(), d.clone()
+    fo[:, 2], fd[:, 2] = 0.5, 0.0
+    flat_light = torch.tensor([0.3, 1.0, 0.0], dtype=F64)
+    what = "march_single_scatter (a flat box z = 0.5, rays and light in its plane)"
+    got, twin = (
+        result_dict(
+            impl.march_single_scatter(
+                fo.to(device),
+                fd.to(device),
+                FLAT_LO,
+                FLAT_HI,
+                field,
+                albedo,
+                flat_light.to(device),
+                irradiance,
+                g,
+                16,
+                4,
+            ),
+            what,
+            MARCH_KEYS,
+            48,
+            F64,
+            device,
+        )
+        for field in (flat_grid().to(device), flat_grid_density)
+    )
+    assert twin["radiance"].abs().max() > 0.01, "test set-up: light scattered in the flat box"
+    for key in ("radiance", "transmittance"):
+        assert_close(
+            got[key],
+            twin[key],
+            rtol=1e-9,
+            atol=1e-12,
+            where="ray",
+            name=f"{what}: {key} of a grid varying along z against the same medium as a "
+            f"callable read at the flat axis's middle (0.5; never 0 / 0 = NaN)",
+        )
+    # The defaults: light_irradiance=1, g=0, steps=64, shadow_steps=16.
+    plain, spelled = (
+        result_dict(
+            single_scatter(
+                impl,
+                o.to(device),
+                d.to(device),
+                SCATTER_LO,
+                SCATTER_HI,
+                bowl_density,
+                albedo,
+                light,
+                *extra,
+            ),
+            "march_single_scatter (defaults)",
+            MARCH_KEYS,
+            48,
+            F64,
+            device,
+        )
+        for extra in ((), (1.0, 0.0, 64, 16))
+    )
+    for key in MARCH_KEYS:
+        assert_equal(
+            plain[key],
+            spelled[key],
+            name=f"march_single_scatter: {key} with the default arguments vs "
+            f"light_irradiance=1, g=0, steps=64, shadow_steps=16 spelled out",
+            where="ray",
         )
 
 
@@ -2711,6 +3019,13 @@ def test_voxel_walk_optical_depth_exact(impl, device):
             f"it crosses inside the box). A ray leaves the grid when its index "
             f"leaves 0 .. size - 1 or t reaches t_far, whichever comes first "
             f"(rounding may put the last plane a hair before t_far)",
+        )
+        assert_equal(
+            got["samples"],
+            steps,
+            where="ray",
+            name=f"{what}: samples (voxels whose density was read) without occupancy = steps: "
+            f"every voxel stepped through is read, and a ray that has left reads nothing more",
         )
     cpu_agrees(
         device,
@@ -2951,6 +3266,32 @@ def test_voxel_walk_emission_and_extremes(impl, device):
     expect_error(
         "macro_cell", impl.voxel_walk, *args, grid.to(device), None, None, 0, case="macro_cell=0"
     )
+    # A flat box (z from 0.5 to 0.5): voxels of no volume, so nothing is met, not even by
+    # rays lying in its plane (whose chord along x and y is not empty).
+    fo, fd = o.clone(), d.clone()
+    fo[:, 2], fd[:, 2] = 0.5, 0.0
+    what = "voxel_walk (a flat box z = 0.5, rays in its plane)"
+    got = walk(
+        impl,
+        fo.to(device),
+        fd.to(device),
+        [WALK_LO[0], WALK_LO[1], 0.5],
+        [WALK_HI[0], WALK_HI[1], 0.5],
+        grid.to(device),
+        color.to(device),
+        what=what,
+        n=200,
+        dtype=F64,
+        device=device,
+        channels=3,
+    )
+    for key, want in (("optical_depth", 0), ("radiance", 0), ("steps", 0), ("samples", 0)):
+        bad = got[key].cpu() != want
+        assert not bad.any(), (
+            f"{what}: {key} must be {want} for every ray (a flat box has voxels of no volume; "
+            f"do not divide by its voxel size 0), got {got[key].cpu()[bad][:4].tolist()} on "
+            f"{int(bad.sum())} rays"
+        )
 
 
 def blob_grid(n=24):
@@ -3049,6 +3390,37 @@ def test_voxel_walk_empty_space_skipping(impl, device):
         where="ray",
     )
     totals = {None: (plain["steps"].sum().item(), plain["samples"].sum().item())}
+    # The defaults: macro_cell=1 for build_occupancy and voxel_walk alike.
+    occ = check_tensor(
+        impl.build_occupancy(grid.to(device), emission=emission.to(device)),
+        "build_occupancy(grid, emission=emission) (the default macro_cell=1)",
+        shape=(24, 24, 24),
+        dtype=torch.bool,
+        device=device,
+    )
+    got = walk(
+        impl,
+        o.to(device),
+        d.to(device),
+        lo,
+        hi,
+        grid.to(device),
+        emission.to(device),
+        occ,
+        what="voxel_walk (occupancy of build_occupancy(grid, emission=emission), default "
+        "macro_cell=1)",
+        n=300,
+        dtype=F64,
+        device=device,
+    )
+    assert_close(
+        got["optical_depth"],
+        plain["optical_depth"],
+        rtol=1e-12,
+        atol=1e-14,
+        name="voxel_walk (the default macro_cell=1, with occupancy): optical depth as without",
+        where="ray",
+    )
     for m in (1, 4, 8):
         occ = impl.build_occupancy(grid.to(device), m, emission.to(device))
         what = f"voxel_walk (occupancy with macro_cell={m})"
@@ -3615,4 +3987,144 @@ def test_sphere_trace_direction_length(impl, device):
             "t |d| must be within epsilon t |d| / cos of the surface; the tolerance is "
             "relative to the world distance t |d|, not to t",
             where="hit",
+        )
+
+
+@pytest.mark.task(5)
+@pytest.mark.points(0.5)
+def test_sphere_trace_exact_boundaries(impl, device):
+    # The ground plane y = -1 with dyadic distances, so every t below is exact.
+    rays = {
+        "starting on the surface": ((0.0, -1.0, 0.0), (0.25, 1.0, 0.5), HIT, 0.0),
+        "zero direction, on the surface": ((0.0, -1.0, 0.0), (0.0, 0.0, 0.0), MISS, INF),
+        "NaN x, on the surface": ((math.nan, -1.0, 0.0), (0.0, 1.0, 0.0), MISS, INF),
+        "surface exactly at t_max = 4": ((0.0, 3.0, 0.0), (0.0, -1.0, 0.0), HIT, 4.0),
+        "first step lands on the surface past t_max": (
+            (0.0, 3.5, 0.0),
+            (0.0, -1.0, 0.0),
+            MISS,
+            INF,
+        ),
+        "parallel to the surface": ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), MISS, INF),
+    }
+    o = torch.tensor([r[0] for r in rays.values()], dtype=F64, device=device)
+    d = torch.tensor([r[1] for r in rays.values()], dtype=F64, device=device)
+    n = len(rays)
+    what = "sphere_trace (ground plane y = -1, t_max=4)"
+    got = trace(impl, o, d, sdf_ground, t_max=4.0, max_steps=64, what=what, n=n, device=device)
+    status, t = got["status"].cpu(), got["t"].cpu()
+    for i, (case, (_, _, want, t_want)) in enumerate(rays.items()):
+        assert status[i].item() == want and t[i].item() == t_want, (
+            f"{what}, ray {case}: expected {STATUS[want]} at t={t_want}, got "
+            f"{STATUS.get(status[i].item(), status[i].item())} at t={t[i].item()}. A hit is "
+            f"|f| <= epsilon t |d| (f = 0 at t = 0 is a hit; t = t_max is not beyond t_max); a "
+            f"ray past t_max misses even where it lands on a surface; zero directions and "
+            f"NaN rays miss without a hit test."
+        )
+    # Over-relaxed, a ray starting on the surface is a hit at its first evaluation too: there
+    # is no previous sphere yet (|f_prev| + |f| = 0 >= the last step, 0: they overlap).
+    what = "sphere_trace (starting on the ground plane, relaxation=1.5)"
+    on = trace(
+        impl, o[:1], d[:1], sdf_ground, t_max=4.0, relaxation=1.5, what=what, n=1, device=device
+    )
+    got = (on["status"].item(), on["t"].item(), on["steps"].item())
+    assert got == (HIT, 0.0, 1), (
+        f"{what}: expected a HIT at t = 0 after 1 evaluation, got "
+        f"{STATUS.get(got[0], got[0])} at t = {got[1]} after {got[2]} evaluations"
+    )
+    # One evaluation only: the ray from y = 3 stands at t = 4 = t_max, undecided: UNSURE.
+    what = "sphere_trace (surface at t_max = 4, max_steps=1)"
+    one = trace(
+        impl, o[3:4], d[3:4], sdf_ground, t_max=4.0, max_steps=1, what=what, n=1, device=device
+    )
+    assert one["status"].item() == UNSURE and one["steps"].item() == 1, (
+        f"{what}: after its one evaluation the ray is at t = 4, not past t_max = 4 and not "
+        f"decided: UNSURE with 1 step, got {STATUS.get(one['status'].item())} with "
+        f"{one['steps'].item()} steps"
+    )
+    expect_error(
+        "sdf",
+        impl.sphere_trace,
+        o,
+        d,
+        sdf_column,
+        case="an sdf returning shape (N, 1) instead of (N,)",
+        kinds=(ValueError,),
+    )
+    # Over-relaxation stepping back on rays with |d| far from 1: the backward step is a world
+    # length, so it is divided by |d| like every other step.
+    g = generator(181)
+    m = 16
+    dirs = torch.cat(
+        [torch.rand(m, 2, generator=g, dtype=F64) * 0.2 - 0.1, torch.ones(m, 1, dtype=F64)], 1
+    )
+    want = 4.99 / dirs[:, 2]
+    for scale in (1e-3, 1e3):
+        what = f"sphere_trace (thin slab, relaxation=1.9, |d| ~ {scale:g})"
+        runs = {
+            omega: trace(
+                impl,
+                torch.zeros(m, 3, dtype=F64, device=device),
+                (dirs * scale).to(device),
+                sdf_thin_slab,
+                t_max=50.0 / scale,
+                max_steps=200,
+                epsilon=1e-6,
+                relaxation=omega,
+                what=what,
+                n=m,
+                device=device,
+            )
+            for omega in (1.0, 1.9)
+        }
+        got = runs[1.9]
+        extra = runs[1.9]["steps"].cpu() - runs[1.0]["steps"].cpu()
+        assert (extra <= 2).all(), (
+            f"{what}: the first over-relaxed step jumps through the slab and fails; from the "
+            f"last safe point the ray must continue with omega = 1, which is the plain march's "
+            f"path, so it may take at most a step or two more than relaxation=1; it took "
+            f"{extra.max().item()} more"
+        )
+        assert (got["status"].cpu() == HIT).all(), (
+            f"{what}: every ray must hit the slab ({status_counts(got['status'])}); going back "
+            f"to the last safe point is t_prev + |f_prev| / |d|"
+        )
+        assert_close(got["t"].cpu() * scale, want, rtol=1e-5, name=f"{what}: t |d|", where="ray")
+    # The defaults are t_max=100, max_steps=128, epsilon=1e-4, relaxation=1: rays at shallow
+    # angles to the ground (hits near t = 100, some needing many steps) and one straight down
+    # onto the plane at t = 105 tell them apart.
+    angle = torch.deg2rad(torch.linspace(0.4, 3.0, 23, dtype=F64))
+    dirs = torch.stack([torch.cos(angle), -torch.sin(angle), torch.zeros_like(angle)], -1)
+    dirs = torch.cat([dirs, torch.tensor([[0.0, -1.0, 0.0]], dtype=F64)])  # the plane at t = 105
+    origin = torch.zeros(24, 3, dtype=F64, device=device)
+    origin[-1, 1] = 104.0
+    plain = trace(
+        impl,
+        origin,
+        dirs.to(device),
+        sdf_ground,
+        what="sphere_trace (defaults)",
+        n=24,
+        device=device,
+    )
+    spelled = trace(
+        impl,
+        origin,
+        dirs.to(device),
+        sdf_ground,
+        100.0,
+        128,
+        1e-4,
+        1.0,
+        what="sphere_trace (t_max=100, max_steps=128, epsilon=1e-4, relaxation=1)",
+        n=24,
+        device=device,
+    )
+    for key in TRACE_KEYS:
+        assert_equal(
+            plain[key],
+            spelled[key],
+            name=f"sphere_trace: {key} with the default arguments vs t_max=100, max_steps=128, "
+            f"epsilon=1e-4, relaxation=1 spelled out",
+            where="ray",
         )

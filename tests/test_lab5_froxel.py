@@ -60,6 +60,7 @@ from course.given.lab5 import (
     ray_boxes,
     sample_texture,
     scene_grid,
+    volume_bounds,
 )
 from course.given.lab5_reference import media as ref_media
 from course.given.lab5_reference import phase_value, reference_render
@@ -580,6 +581,17 @@ def test_media_at_sums_media(impl, device):
     assert_equal(
         empty["extinction"], torch.zeros(10, dtype=F64), name="media_at without media: extinction"
     )
+    assert_equal(empty["g"], torch.zeros(10, dtype=F64), name="media_at without media: g = 0")
+    dark = impl.media_at(
+        Scene(media=(ConstantFog(scattering=(0.0, 0.0, 0.0), extinction=0.3, g=0.7),)),
+        points[:10].to(device),
+    )
+    assert_equal(
+        dark["g"],
+        torch.zeros(10, dtype=F64),
+        name="media_at of a purely absorbing fog (g = 0.7, no scattering): g = 0 where nothing "
+        "scatters",
+    )
     expect_error(
         "points",
         impl.media_at,
@@ -622,6 +634,15 @@ def test_voxelize_samples_froxel_points(impl, device):
     check_tensor(
         vb["extinction"], "voxelize float32 extinction", shape=grid.shape, dtype=F32, device=device
     )
+    default = impl.voxelize(scene, grid, device=device)
+    for key in ("scattering", "extinction", "emissive", "g"):
+        assert_close(
+            default[key],
+            vb[key],
+            rtol=0,
+            name=f"voxelize(scene, grid)[{key!r}]: the defaults are jitter 0.5 and float32",
+            where="froxel",
+        )
     expect_error("jitter", impl.voxelize, scene, grid, 1.0, F32, device, case="jitter = 1")
     expect_error(
         "dtype",
@@ -681,6 +702,20 @@ def test_henyey_greenstein_normalised(impl, device):
         rtol=1e-10,
         name="henyey_greenstein with a tensor g",
     )
+    # |g| -> 1 in float32: the peak (about 1.6e7 sr^-1 at g = 0.9999) is finite and right;
+    # 1 + g^2 - 2 g cos loses every digit there (0 or noise: inf or a wrong value).
+    for g in (0.9999, -0.9999):
+        g32 = torch.tensor(g, dtype=F32).item()  # the g a float32 computation sees
+        cos32 = torch.tensor([1.0, 0.99999, 0.0, -1.0], dtype=F32)
+        got = impl.henyey_greenstein(cos32.to(device), g).cpu()
+        assert_close(
+            got.double(),
+            hg(cos32.double(), g32),
+            rtol=1e-3,
+            name=f"henyey_greenstein(cos = 1, 0.99999, 0, -1; g = {g}) in float32: the peak "
+            f"must stay finite and accurate (a denominator of non-negative terms)",
+            where="cos index",
+        )
     # cos_theta past +-1 (rounding, or a caller's bug) is clamped: finite, the value at +-1.
     past = torch.tensor([2.0, 1.0 + 1e-6, -1.0 - 1e-6, -3.0], dtype=F64, device=device)
     for g in (0.5, -0.7, 0.0):
@@ -852,6 +887,81 @@ def test_cull_lights_keeps_every_touched_tile(impl, device):
         f"cull_lights: {listed} light-tile pairs listed for {touched} touched: culling "
         f"should drop tiles the light cannot reach"
     )
+    # The rule itself, for spheres all around the frustum (beside it, above and below it,
+    # behind the eye, beyond far): listed exactly where no plane has the sphere entirely
+    # outside (signed distance >= -range for all six), up to rounding near a tangent.
+    _, right, up, fwd, (hw, hh) = grid.axes()
+    many = []
+    for _ in range(150):
+        x, y, z = (torch.rand(3, generator=g, dtype=F64) * 2 - 1).tolist()
+        depth = grid.near - 4 + (grid.far + 8) * (z + 1) / 2
+        reach = abs(depth) + 3
+        p = eye + depth * fwd + 1.3 * x * hw * reach * right + 1.3 * y * hh * reach * up
+        many.append(
+            PointLight(
+                position=tuple(p.tolist()), range=0.2 + 4 * float(torch.rand(1, generator=g))
+            )
+        )
+    listed = impl.cull_lights(grid, many, device).cpu()
+    for n, light in enumerate(many):
+        dist = tile_plane_distances(grid, light.position) + light.range
+        tol = 1e-6 * (1 + math.dist(light.position, grid.camera.eye))
+        wrong = ((dist > tol).all(-1) & ~listed[n]) | ((dist < -tol).any(-1) & listed[n])
+        if wrong.any():
+            j, i = wrong.nonzero()[0].tolist()
+            plane = int(dist[j, i].argmin())
+            depth = float((torch.tensor(light.position, dtype=F64) - eye) @ fwd)
+            raise AssertionError(
+                f"cull_lights: light at {tuple(round(v, 3) for v in light.position)} (range "
+                f"{light.range:.3f}, view depth {depth:.3f}) "
+                f"in tile (row {j}, column {i}): listed {bool(listed[n, j, i])}, but its "
+                f"signed distances + range to the tile's {TILE_PLANES} planes are "
+                f"{[round(v, 4) for v in dist[j, i].tolist()]} (nearest: {TILE_PLANES[plane]}); "
+                f"list it exactly where all six are >= 0 ({int(wrong.sum())} tiles wrong). "
+                f"Normalise each side plane's distance by its normal's length."
+            )
+    # 15 km from the origin, spheres 0.02 .. 0.3 mm from tangent to a tile's nearest plane
+    # (outside or inside): light positions rounded to float32 (1 mm steps there) decide
+    # wrongly; the docstring allows ~1e-7 of the light's distance from the eye (a few um).
+    cam = grid.camera
+    shift = torch.tensor([12000.3, 0.0, -9000.7], dtype=F64)
+    far_grid = dataclasses.replace(
+        grid,
+        camera=dataclasses.replace(
+            cam,
+            eye=tuple((torch.tensor(cam.eye, dtype=F64) + shift).tolist()),
+            target=tuple((torch.tensor(cam.target, dtype=F64) + shift).tolist()),
+        ),
+    )
+    far_eye = torch.tensor(far_grid.camera.eye, dtype=F64)
+    near_tangent, wanted = [], []
+    for light in many[:60]:
+        p = torch.tensor(light.position, dtype=F64) - eye + far_eye
+        dist = tile_plane_distances(far_grid, tuple(p.tolist()))
+        j, i = (
+            int(torch.randint(grid.ny, (1,), generator=g)),
+            int(torch.randint(grid.nx, (1,), generator=g)),
+        )
+        gap = float(dist[j, i].min())
+        if gap > -0.05:
+            continue  # inside the tile, or too close for a positive range
+        delta = (2e-5 + 2.8e-4 * float(torch.rand(1, generator=g))) * (1 if len(wanted) % 2 else -1)
+        near_tangent.append(PointLight(position=tuple(p.tolist()), range=-gap + delta))
+        wanted.append((j, i, delta > 0))
+    assert len(wanted) > 30, "test set-up: lights near tangent to a tile"
+    listed = impl.cull_lights(far_grid, near_tangent, device).cpu()
+    wrong = [
+        (n, j, i, want) for n, (j, i, want) in enumerate(wanted) if bool(listed[n, j, i]) != want
+    ]
+    if wrong:
+        n, j, i, want = wrong[0]
+        raise AssertionError(
+            f"cull_lights 15 km from the origin: light {near_tangent[n].position} (range "
+            f"{near_tangent[n].range:.6f}) is {'inside' if want else 'outside'} tile (row {j}, "
+            f"column {i})'s nearest plane by 0.02 .. 0.3 mm: "
+            f"want listed {want}, got {not want} ({len(wrong)} of {len(wanted)} such lights). "
+            f"Work relative to the eye in float64: float32 world positions are 1 mm apart there."
+        )
     expect_error(
         "lights",
         impl.cull_lights,
@@ -861,6 +971,30 @@ def test_cull_lights_keeps_every_touched_tile(impl, device):
         kinds=(TypeError,),
         case="a medium in the light list",
     )
+
+
+def texel_visibility(smap, points, occluders):
+    """The sun's visibility (N,) that build_shadow_map + shadow_lookup define, float64, and
+    each point's distance (N,) from a tie: the ray through the centre of the texel the point
+    falls in (along ``w``, from beyond every occluder) meets its first occluder ``L - t`` in
+    front of the point; lit where that is at most the bias of two texels (4 extent / R) or
+    the ray meets none, and outside the map. Uses the map's own frame (origin, axes)."""
+    a, b, _ = light_coords(smap, points)
+    res, extent = smap.data.shape[0], smap.extent
+    u, v, w = (torch.tensor(x, dtype=F64) for x in smap.axes)
+    i, j = ((a + 1) / 2 * res).floor(), ((b + 1) / 2 * res).floor()
+    inside = (i >= 0) & (i < res) & (j >= 0) & (j < res)
+    ac, bc = -1 + (2 * i + 1) / res, -1 + (2 * j + 1) / res
+    # The point moved across to its texel's centre line, at the same depth.
+    q = points + extent * ((ac - a)[:, None] * u + (bc - b)[:, None] * v)
+    up = 1e3
+    t = ray_boxes(q - up * w, w.expand_as(q), occluders)
+    ahead = up - t  # how far the first occluder lies in front of the point
+    bias = 4 * extent / res
+    vis = (~inside | torch.isinf(t) | (ahead <= bias)).to(F64)
+    edge = torch.minimum(((a + 1) / 2 * res - i).abs(), ((b + 1) / 2 * res - j).abs())
+    margin = torch.where(torch.isinf(t), INF, (ahead - bias).abs()).minimum(edge * 2 * extent / res)
+    return vis, margin
 
 
 @pytest.mark.task(3)
@@ -932,6 +1066,79 @@ def test_shadow_map_matches_exact_shadow_rays(impl, device):
         name="shadow_lookup: points outside the map are lit",
         where="point",
     )
+    # Far from the origin, a slab floating 25 m above the sphere and a pillar through it: every
+    # texel's ray starts beyond every occluder (the slab too), visibility is decided at the
+    # texel's centre with a bias of exactly two texels.
+    c = (-250.0, -30.0, 400.0)
+    far_scene = Scene(
+        media=(ConstantFog(),),
+        lights=(light,),
+        occluders=(
+            Box((c[0] + 1.0, c[1] + 25.0, c[2] - 5.0), (c[0] + 6.0, c[1] + 26.0, c[2] + 1.0)),
+            Box((c[0] + 2.0, c[1] - 8.0, c[2] - 1.0), (c[0] + 3.0, c[1] + 2.0, c[2] + 1.0)),
+        ),
+    )
+    smap = impl.build_shadow_map(far_scene, light, c, 6.0, 32, F64, device)
+    check_tensor(
+        smap.data, "build_shadow_map data (R = 32)", shape=(32, 32), dtype=F64, device=device
+    )
+    to_sun = torch.tensor(light.direction, dtype=F64)
+    w = torch.tensor(smap.axes[2], dtype=F64)
+    assert smap.extent == 6.0 and torch.allclose(w, -to_sun / to_sun.norm(), atol=1e-12), (
+        f"build_shadow_map: extent = radius (6.0, got {smap.extent}) and w = -light.direction "
+        f"(unit; got {smap.axes[2]})"
+    )
+    points = torch.tensor(c, dtype=F64) + (torch.rand(4000, 3, generator=g, dtype=F64) * 2 - 1) * 5
+    want, margin = texel_visibility(smap, points, far_scene.occluders)
+    sure = margin > 1e-6
+    assert 0.15 < want[sure].mean() < 0.85, "test set-up: lit and shadowed points"
+    vis = check_tensor(
+        impl.shadow_lookup(smap, points.to(device)),
+        "shadow_lookup (map at 470 m from the origin)",
+        shape=(4000,),
+        dtype=F64,
+        device=device,
+    ).cpu()
+    assert_equal(
+        vis[sure],
+        want[sure],
+        name="build_shadow_map + shadow_lookup 470 m from the origin, a slab floating 25 m "
+        "above the sphere (the plane lies beyond every occluder, not just the sphere) vs the "
+        "ray from the centre of each point's texel, lit within a bias of two texels "
+        "(4 extent / R)",
+        where="point",
+    )
+    # One texel: a point outside it is lit (no index past the map).
+    one = impl.build_shadow_map(far_scene, light, c, 6.0, 1, F64, device)
+    check_tensor(
+        one.data, "build_shadow_map(resolution=1) data", shape=(1, 1), dtype=F64, device=device
+    )
+    out = impl.shadow_lookup(one, torch.tensor([[c[0] + 50, c[1], c[2]]], dtype=F64, device=device))
+    assert out.cpu().tolist() == [1.0], "shadow_lookup on a 1 x 1 map: points outside it are lit"
+    for bad, name in ((0, "resolution"), (1.5, "resolution")):
+        expect_error(
+            name,
+            impl.build_shadow_map,
+            far_scene,
+            light,
+            c,
+            6.0,
+            bad,
+            F64,
+            device,
+            case=f"resolution = {bad}",
+        )
+    expect_error(
+        "radius", impl.build_shadow_map, far_scene, light, c, 0.0, 8, F64, device, case="radius = 0"
+    )
+    expect_error(
+        "shadow_map",
+        impl.shadow_lookup,
+        LightVolume("ortho", c, smap.axes, 6.0, 0.0, 1.0, torch.ones(4, 4, 3, dtype=F64)),
+        points[:3].to(device),
+        kinds=(TypeError,),
+        case="a transmittance volume's (R, R, K) data",
+    )
 
 
 def uniform_vbuffer(grid, sigma_s, sigma_t, g, dtype, device, mask=None):
@@ -945,8 +1152,9 @@ def uniform_vbuffer(grid, sigma_s, sigma_t, g, dtype, device, mask=None):
     }
 
 
-def expected_source(grid, scene, jitter, sigma_s, g):
-    """Lit source at every froxel (S, ny, nx, 3), float64, no shadows."""
+def expected_source(grid, scene, jitter, sigma_s, g, factor=None):
+    """Lit source at every froxel (S, ny, nx, 3), float64, no shadows; ``factor(light,
+    points)`` (points (..., 3) float64), when given, multiplies each light's term."""
     p = ref_points(grid, sample_coords(grid, jitter))
     eye = torch.tensor(grid.camera.eye, dtype=F64)
     v = (p - eye) / (p - eye).norm(dim=-1, keepdim=True)
@@ -965,6 +1173,8 @@ def expected_source(grid, scene, jitter, sigma_s, g):
                 lo, hi = (math.cos(math.radians(x)) for x in (light.outer_deg, light.inner_deg))
                 s = ((c - lo) / (hi - lo)).clamp(0, 1)
                 e = e * (s * s * (3 - 2 * s))[..., None]
+        if factor is not None:
+            e = e * factor(light, p)[..., None]
         total = total + e * hg((v * to).sum(-1), g)[..., None]
     return torch.tensor(sigma_s, dtype=F64) * total
 
@@ -1008,11 +1218,17 @@ def test_light_froxels_matches_closed_form(impl, device):
         assert report["froxels_lit"] == math.prod(grid.shape), (
             f"light_froxels: every froxel holds fog here, report says {report['froxels_lit']}"
         )
+        assert report["volume_bounds"] is None and report["volume_resolution"] == 0, (
+            f"light_froxels(volumetric_shadows=False) builds no volume: report['volume_bounds'] "
+            f"None and ['volume_resolution'] 0, got {report['volume_bounds']}, "
+            f"{report['volume_resolution']}"
+        )
     # Media in a few tiles only: the others are not lit (only their emission remains).
     mask = torch.zeros(grid.shape, dtype=torch.bool)
     mask[3:9, 1:3, 2:5] = True
     vb = uniform_vbuffer(grid, sigma_s, 0.06, g, F32, device, mask)
     vb["emissive"][-1, -1, -1] = 0.5  # an emitting froxel in an otherwise empty tile
+    vb["density"] = torch.ones(grid.shape, dtype=F32, device=device)  # extra keys are fine
     src, report = impl.light_froxels(scene, grid, vb, 0.5, volumetric_shadows=False)
     lit = src.cpu().abs().amax(-1) > 0
     assert not (lit & ~mask).reshape(-1)[:-1].any(), (
@@ -1033,6 +1249,43 @@ def test_light_froxels_matches_closed_form(impl, device):
     )
     assert report["light_evaluations"] <= len(scene.lights) * int(mask.sum()), (
         "light_froxels: light_evaluations counts froxel-light pairs actually evaluated"
+    )
+    assert report["light_tiles"][0] == tiles, (
+        f"light_froxels: report['light_tiles'][0] = {report['light_tiles'][0]}: the sun is "
+        f"listed everywhere, so it is evaluated in the {tiles} tiles with media, not elsewhere"
+    )
+    # One scattering froxel: lit by every light that reaches it (the sun does).
+    single = torch.zeros(grid.shape, dtype=torch.bool)
+    single[5, 2, 3] = True
+    src, report = impl.light_froxels(
+        scene,
+        grid,
+        uniform_vbuffer(grid, sigma_s, 0.06, g, F64, device, single),
+        0.5,
+        volumetric_shadows=False,
+    )
+    assert_close(
+        src.cpu()[5, 2, 3],
+        expected_source(grid, scene, 0.5, sigma_s, g)[5, 2, 3],
+        rtol=1e-7,
+        name="light_froxels with a single scattering froxel [5, 2, 3]: lit like any other",
+        where="channel",
+    )
+    assert report["froxels_lit"] == 1 and report["light_tiles"][0] == 1, (
+        f"light_froxels with one scattering froxel: froxels_lit 1 and the sun evaluated in its "
+        f"one tile, report {report}"
+    )
+    # Emission only (nothing scatters): nothing is lit, no light evaluated anywhere.
+    glow = uniform_vbuffer(grid, (0.0, 0.0, 0.0), 0.0, 0.0, F64, device)
+    glow["emissive"][2, 1, 1] = 0.25
+    src, report = impl.light_froxels(scene, grid, glow, 0.5)
+    assert_close(src, glow["emissive"], rtol=0, name="light_froxels with emission only")
+    assert report["froxels_lit"] == 0 and report["light_tiles"] == [0, 0, 0], (
+        f"light_froxels with emission only: no froxel lit, no light evaluated in any tile "
+        f"(light_tiles [0, 0, 0]), report {report}"
+    )
+    assert report["volume_bounds"] is None and report["volume_resolution"] == 0, (
+        f"light_froxels with nothing to light builds no volume: report {report}"
     )
     # A light inside the fog, on a froxel's sample point: finite.
     p = ref_points(grid, torch.tensor([4.5, 2.5, 6.5], dtype=F64))
@@ -1112,6 +1365,105 @@ def test_light_froxels_matches_closed_form(impl, device):
         kinds=(TypeError, ValueError),
         case="an incomplete V-buffer",
     )
+    expect_error(
+        "vbuffer",
+        impl.light_froxels,
+        scene,
+        grid,
+        {"scattering": vb["scattering"]},
+        0.5,
+        kinds=(TypeError,),
+        case="a V-buffer with only its 'scattering' entry",
+    )
+    for steps in (0, 2.0):
+        expect_error(
+            "light_steps",
+            impl.light_froxels,
+            scene,
+            grid,
+            vb,
+            0.5,
+            light_steps=steps,
+            case=f"light_steps = {steps!r}",
+        )
+
+
+@pytest.mark.task(3)
+@pytest.mark.points(0.5)
+def test_light_froxels_shadows_follow_the_recipe(impl, device):
+    """light_froxels with its shadows on, against its docstring's recipe built from the
+    lab's own shadow functions (each graded on its own elsewhere): the sun's shadow map over
+    the bounding sphere of frustum_bounds(grid) at shadow_resolution (default 128), one
+    extinction volume over volume_bounds(scene, grid) at volume_resolution, the sun
+    and spots through transmittance_volume(..., 4 resolution) and sample_light_volume,
+    point lights through light_transmittance(..., light_steps)."""
+    grid = small_grid()
+    sun = DirectionalLight(direction=(0.3, 1.0, -0.2), irradiance=(2.0, 2.0, 2.0))
+    scene = Scene(
+        media=(HeightFog(scattering=(0.1, 0.1, 0.1), extinction=0.15, base=0.0, falloff=0.3),),
+        ambient=(0.05, 0.05, 0.05),
+        lights=(
+            sun,
+            PointLight(position=(0.3, 1.2, -4.0), intensity=(4.0, 3.0, 2.0), range=6.0),
+            SpotLight(
+                position=(-0.5, 3.0, -6.0),
+                direction=(0.2, -1.0, 0.1),
+                range=9.0,
+                inner_deg=20.0,
+                outer_deg=35.0,
+            ),
+        ),
+        occluders=(Box((-1.5, 3.5, -10.0), (1.0, 4.0, -6.0)),),
+    )
+    sigma_s, g = (0.05, 0.04, 0.03), 0.4
+    vb = uniform_vbuffer(grid, sigma_s, 0.06, g, F64, device)
+    bounds = volume_bounds(scene, grid)
+    lo, hi = bounds
+    res = 12
+    ext = impl.extinction_volume(scene, lo, hi, res, F64, device)
+    view_lo, view_hi = frustum_bounds(grid)
+    centre = tuple((a + b) / 2 for a, b in zip(view_lo, view_hi))
+    smap = impl.build_shadow_map(
+        scene, sun, centre, 0.5 * math.dist(view_lo, view_hi), 128, F64, device
+    )
+    volumes = {
+        n: impl.transmittance_volume(ext, lo, hi, light, res, 4 * res)
+        for n, light in enumerate(scene.lights)
+        if not isinstance(light, PointLight)
+    }
+
+    def factor(light, points):
+        n = scene.lights.index(light)
+        flat = points.reshape(-1, 3).to(device)
+        if isinstance(light, PointLight):
+            t = impl.light_transmittance(ext, lo, hi, flat, light.position, 3)
+        else:
+            t = impl.sample_light_volume(volumes[n], flat)
+            if n == 0:
+                t = t * impl.shadow_lookup(smap, flat)
+        return t.cpu().double().reshape(points.shape[:-1])
+
+    src, report = impl.light_froxels(scene, grid, vb, 0.5, volume_resolution=res, light_steps=3)
+    want = expected_source(grid, scene, 0.5, sigma_s, g, factor)
+    shadowed = expected_source(grid, scene, 0.5, sigma_s, g)
+    assert (want - shadowed).abs().amax() > 0.1 * shadowed.amax(), "test set-up: shadows matter"
+    assert report["volume_bounds"] == bounds and report["volume_resolution"] == res, (
+        f"light_froxels: one extinction volume over volume_bounds(scene, grid) = {bounds} at "
+        f"volume_resolution = {res}; report says {report['volume_bounds']} at "
+        f"{report['volume_resolution']}"
+    )
+    assert_close(
+        src,
+        want,
+        rtol=1e-7,
+        atol=1e-12,
+        name="light_froxels (sun with shadow map and transmittance volume, point light through "
+        "light_transmittance(light_steps=3), spot through its transmittance volume) vs the "
+        "docstring's recipe: shadow map over the bounding sphere of frustum_bounds(grid) at "
+        "128 texels, transmittance volumes at the extinction volume's resolution with 4 "
+        "resolution depth samples, each light's term multiplied by its transmittance",
+        where="froxel [k, j, i, rgb]",
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -1126,6 +1478,38 @@ def slab_depth(points, to_light, lo, hi, sigma):
     t0 = torch.minimum(a, b).amax(-1).clamp(min=0)
     t1 = torch.maximum(a, b).amin(-1)
     return sigma * (t1 - t0).clamp(min=0)
+
+
+def sample_extinction(ext, lo, hi, points):
+    """Trilinear extinction (...) of the volume ``ext`` over ``lo .. hi`` at world points
+    (..., 3), 0 outside the box, float64 (voxel centres at lo + (index + 0.5) / R (hi - lo))."""
+    lo, hi = torch.tensor(lo, dtype=F64), torch.tensor(hi, dtype=F64)
+    local = (points - lo) / (hi - lo)
+    inside = ((local >= 0) & (local <= 1)).all(-1)
+    sizes = torch.tensor(ext.shape, dtype=F64)
+    return torch.where(inside, sample_texture(ext.cpu().double(), local * sizes), 0.0)
+
+
+def march_recipe(volume, ext, lo, hi):
+    """transmittance_volume's data (R, R, K) as its docstring defines it, float64, in the
+    volume's own frame: texel (i, j)'s ray from its centre (the sun: from the frame's plane
+    along w; a spot: from the light through the texel), K - 1 equal steps over near .. far,
+    ``exp(-sum_{m<k} sigma_t(mid_m) step)`` with sigma_t trilinear in ``ext`` (0 outside)."""
+    r, k = volume.data.shape[0], volume.data.shape[2]
+    c = -1 + (2 * torch.arange(r, dtype=F64) + 1) / r
+    a, b = (x[..., None] for x in torch.meshgrid(c, c, indexing="ij"))
+    o = torch.tensor(volume.origin, dtype=F64)
+    u, v, w = (torch.tensor(x, dtype=F64) for x in volume.axes)
+    if volume.kind == "ortho":
+        starts, dirs = o + volume.extent * (a * u + b * v), w.expand(r, r, 3)
+    else:
+        dirs = w + volume.extent * (a * u + b * v)
+        starts, dirs = o.expand(r, r, 3), dirs / dirs.norm(dim=-1, keepdim=True)
+    step = (volume.far - volume.near) / (k - 1)
+    mids = volume.near + (torch.arange(k - 1, dtype=F64) + 0.5) * step
+    sigma = sample_extinction(ext, lo, hi, starts[:, :, None] + mids[:, None] * dirs[:, :, None])
+    depth = torch.cat([torch.zeros(r, r, 1, dtype=F64), torch.cumsum(sigma * step, -1)], -1)
+    return torch.exp(-depth)
 
 
 @pytest.mark.task(4)
@@ -1172,6 +1556,40 @@ def test_transmittance_volume_sun(impl, device):
         ),
         where="voxel",
     )
+    two = check_tensor(
+        impl.extinction_volume(mixed_scene(), box_lo, box_hi, 2, F64, device),
+        "extinction_volume (resolution 2, the smallest)",
+        shape=(2, 2, 2),
+        dtype=F64,
+        device=device,
+    )
+    c2 = torch.tensor([0.25, 0.75], dtype=F64)
+    frac2 = torch.stack(torch.meshgrid(c2, c2, c2, indexing="ij"), -1).reshape(-1, 3)
+    assert_close(
+        two.reshape(-1),
+        ref_media(mixed_scene(), lo64 + frac2 * (hi64 - lo64))[1],
+        rtol=1e-9,
+        atol=1e-12,
+        name="extinction_volume(resolution=2): the extinction at the voxel centres 1/4, 3/4",
+        where="voxel",
+    )
+    for bad in (1, 2.0):
+        expect_error(
+            "resolution",
+            impl.extinction_volume,
+            scene,
+            lo,
+            hi,
+            bad,
+            F64,
+            device,
+            case=f"resolution = {bad!r}",
+        )
+    for bad_hi, what in (
+        ((4.0, 0.0, -2.0), "a flat box (lo = hi in y)"),
+        ((-5.0, 4.0, -2.0), "hi < lo in x"),
+    ):
+        expect_error("hi", impl.extinction_volume, scene, lo, bad_hi, 4, F64, device, case=what)
     light = DirectionalLight(direction=(0.4, 1.0, 0.3))
     tv = impl.transmittance_volume(ext, lo, hi, light, 48)
     assert isinstance(tv, LightVolume) and tv.data.ndim == 3, (
@@ -1246,6 +1664,33 @@ def test_transmittance_volume_sun(impl, device):
         kinds=(TypeError,),
         case="a point light",
     )
+    default = impl.transmittance_volume(ext, lo, hi, light)
+    check_tensor(
+        default.data,
+        "transmittance_volume data at the default resolution 32 (K = 64)",
+        shape=(32, 32, 64),
+        dtype=F64,
+        device=device,
+    )
+    flat = impl.transmittance_volume(ext, lo, hi, light, 3, 1)
+    assert_equal(
+        flat.data.cpu(),
+        torch.ones(3, 3, 1, dtype=F64),
+        name="transmittance_volume(steps=1): K = 1 depth sample (no steps), all 1",
+    )
+    expect_error(
+        "resolution", impl.transmittance_volume, ext, lo, hi, light, 0, case="resolution = 0"
+    )
+    expect_error(
+        "extinction",
+        impl.transmittance_volume,
+        ext[0],
+        lo,
+        hi,
+        light,
+        4,
+        case="a 2-D extinction (Y, Z)",
+    )
 
 
 @pytest.mark.task(4)
@@ -1288,6 +1733,84 @@ def test_transmittance_volume_spot(impl, device):
         tv, torch.tensor([[0.0, 8.0, -6.0]], dtype=F64, device=device)
     ).cpu()
     assert behind.item() == 1, "sample_light_volume: behind a spot light T = 1"
+    # The data themselves, in a medium varying along all three axes (a random (5, 6, 7)
+    # volume over a box): texel centres, K - 1 midpoint steps over the frame's depths.
+    ext = 0.05 + 0.5 * torch.rand(5, 6, 7, generator=generator(15), dtype=F64)
+    box_lo, box_hi = (-2.0, 0.5, -9.0), (1.0, 2.5, -4.0)
+    sun = DirectionalLight(direction=(0.35, 1.0, -0.25))
+    for light in (sun, spot):
+        vol = impl.transmittance_volume(ext.to(device), box_lo, box_hi, light, 4, 9)
+        check_tensor(
+            vol.data,
+            f"transmittance_volume({type(light).__name__}, 4, 9) data",
+            shape=(4, 4, 9),
+            dtype=F64,
+            device=device,
+        )
+        o = torch.tensor(vol.origin, dtype=F64)
+        u, v, w = (torch.tensor(x, dtype=F64) for x in vol.axes)
+        if light is sun:
+            d = torch.tensor(sun.direction, dtype=F64)
+            centre = (torch.tensor(box_lo, dtype=F64) + torch.tensor(box_hi, dtype=F64)) / 2
+            radius = 0.5 * math.dist(box_lo, box_hi)
+            rel = centre - o
+            frame = [
+                ("w = -direction (unit)", w, -d / d.norm()),
+                ("extent = the sphere's radius", torch.tensor(vol.extent), torch.tensor(radius)),
+                (
+                    "far - near = its diameter",
+                    torch.tensor(vol.far - vol.near),
+                    torch.tensor(2 * radius),
+                ),
+                (
+                    "the sphere's centre on the frame's axis at depth near + radius",
+                    torch.stack([rel @ u, rel @ v, rel @ w - vol.near]),
+                    torch.tensor([0.0, 0.0, radius], dtype=F64),
+                ),
+            ]
+        else:
+            d = torch.tensor(spot.direction, dtype=F64)
+            frame = [
+                ("origin = the light's position", o, torch.tensor(spot.position, dtype=F64)),
+                ("w = the light's direction (unit)", w, d / d.norm()),
+                (
+                    "extent = tan(outer_deg)",
+                    torch.tensor(vol.extent),
+                    torch.tensor(math.tan(math.radians(spot.outer_deg))),
+                ),
+                (
+                    "depths 0 .. range",
+                    torch.tensor([vol.near, vol.far]),
+                    torch.tensor([0.0, spot.range]),
+                ),
+            ]
+        for what, got, want in frame:
+            assert_close(
+                got.double(),
+                want.double(),
+                atol=1e-6,  # the frame itself: its data are read in it
+                name=f"transmittance_volume({type(light).__name__}) frame: {what}",
+            )
+        assert_close(
+            vol.data,
+            march_recipe(vol, ext, box_lo, box_hi),
+            rtol=1e-10,
+            atol=1e-12,
+            name=f"transmittance_volume({type(light).__name__}, R = 4, K = 9) over a random "
+            f"(5, 6, 7) extinction: texel (i, j)'s ray through a = -1 + (2 i + 1) / R along u, "
+            f"b likewise along v, K - 1 steps of (far - near) / (K - 1), sigma_t at each step's "
+            f"midpoint (trilinear, 0 outside the box), data[..., k] = exp(-sum over the first "
+            f"k steps)",
+            where="[i, j, k]",
+        )
+    expect_error(
+        "volume",
+        impl.sample_light_volume,
+        LightVolume("ortho", (0.0, 0.0, 0.0), vol.axes, 1.0, 0.0, 1.0, torch.ones(4, 4, dtype=F64)),
+        pts[:3].to(device),
+        kinds=(TypeError,),
+        case="a shadow map's (R, R) data",
+    )
     # sample_light_volume alone, on data linear in the texel and depth-sample indices:
     # trilinear interpolation reproduces it exactly between texel centres (a = -1 + (2 i + 1)
     # / R) and depth samples (near + k (far - near) / (K - 1)), clamped at the ends.
@@ -1380,6 +1903,32 @@ def test_light_transmittance_point_light(impl, device):
             f"light_transmittance: a point on the light, or with no medium between it and the "
             f"light, gets 1; got {t.cpu().tolist()} at {point} for a light at {position}"
         )
+    # A medium linear in space (trilinear data linear in the voxel indices, between the
+    # outermost voxel centres): the midpoint rule is exact whatever the count, one step too.
+    n = 8
+    ii, jj, kk = torch.meshgrid(*(torch.arange(n, dtype=F64),) * 3, indexing="ij")
+    linear = 0.2 + 0.05 * ii + 0.03 * jj - 0.02 * kk
+    lo64, size = (
+        torch.tensor(lo, dtype=F64),
+        torch.tensor(hi, dtype=F64) - torch.tensor(lo, dtype=F64),
+    )
+    inner = lo64 + size * (0.5 + torch.rand(200, 3, generator=g, dtype=F64) * (n - 1)) / n
+    light_at = lo64 + size * torch.tensor([0.6, 5.3, 6.9], dtype=F64) / n
+    rel = light_at - inner
+    mid = ((inner + light_at) / 2 - lo64) / size * n - 0.5  # voxel coordinates of the midpoint
+    want = torch.exp(-rel.norm(dim=-1) * (0.2 + mid @ torch.tensor([0.05, 0.03, -0.02], dtype=F64)))
+    for steps in (1, 3):
+        assert_close(
+            impl.light_transmittance(
+                linear.to(device), lo, hi, inner.to(device), tuple(light_at.tolist()), steps
+            ),
+            want,
+            rtol=1e-10,
+            name=f"light_transmittance({steps} steps) through a medium linear in space (inside "
+            f"the box's outermost voxel centres): the midpoint rule, exact here, samples each "
+            f"step's middle; sigma trilinear, voxel centres at lo + (index + 0.5) / R (hi - lo)",
+            where="point",
+        )
     expect_error(
         "steps",
         impl.light_transmittance,
@@ -1390,6 +1939,17 @@ def test_light_transmittance_point_light(impl, device):
         (0.0, 0.0, 0.0),
         0,
         case="0 steps",
+    )
+    expect_error(
+        "extinction",
+        impl.light_transmittance,
+        ext[0].to(device),
+        lo,
+        hi,
+        pts.to(device),
+        (0.0, 0.0, 0.0),
+        4,
+        case="a 2-D extinction (Y, Z)",
     )
 
 
@@ -1456,6 +2016,11 @@ def test_reproject_follows_the_camera(impl, device):
         "previous froxel coordinates",
         where="kept froxel",
     )
+    for bad, what in (
+        (torch.zeros(3, 4, 5, dtype=F64, device=device), "a (3, 4, 5) history"),
+        (torch.zeros(*grid.shape, 2, 2, dtype=F64, device=device), "a 5-D history"),
+    ):
+        expect_error("history", impl.reproject, bad, prev, prev, case=what)
 
 
 @pytest.mark.task(5)
@@ -1849,6 +2414,27 @@ def test_apply_froxels_trilinear_lookup(impl, device):
     bad = depth.clone()
     bad[3, 3] = math.nan
     expect_error("depth_image", impl.apply_froxels, L, T, grid, bad, opaque, case="a NaN depth")
+    bad[3, 3] = -0.5
+    expect_error(
+        "depth_image", impl.apply_froxels, L, T, grid, bad, opaque, case="a negative depth"
+    )
+    expect_error(
+        "inscatter", impl.apply_froxels, L[..., :2], T, grid, depth, opaque, case="2 channels"
+    )
+    expect_error(
+        "transmittance", impl.apply_froxels, L, T[:-1], grid, depth, opaque, case="a slice short"
+    )
+    expect_error(
+        "out",
+        impl.apply_froxels,
+        L,
+        T,
+        grid,
+        depth,
+        opaque,
+        torch.zeros(h, w, dtype=F64),
+        case="an out of shape (H, W)",
+    )
     expect_error(
         "opaque_image",
         impl.apply_froxels,
@@ -2353,6 +2939,53 @@ def test_render_froxels_models_only_what_is_needed(impl, device):
     assert report["history_valid"] == 0, (
         f"render_froxels without temporal integration: no froxel kept history, "
         f"report['history_valid'] must be 0, got {report['history_valid']!r}"
+    )
+    nothing = {
+        "tiles_with_media": 0,
+        "light_tiles": [0, 0],
+        "volume_bounds": None,
+        "volume_resolution": 0,
+    }
+    assert {key: report.get(key) for key in nothing} == nothing, (
+        f"render_froxels without media: the report of no work, {nothing}; got {report}"
+    )
+    # The sun's shadow map at shadow_resolution = 128 by default; the fraction of froxels
+    # that kept history is a fraction of whole froxels.
+    small = Camera(eye=(0.0, 1.5, 0.0), target=(0.0, 1.5, -10.0), fov_y=50.0, width=64, height=36)
+    sky, black = sky_images(small, device=device)
+    args = {"tile": 8, "slices": 8, "near": NEAR, "far": 20.0, "volumetric_shadows": False}
+    default, _ = impl.render_froxels(SHADOW, small, sky, black, **args)
+    given, _ = impl.render_froxels(SHADOW, small, sky, black, shadow_resolution=128, **args)
+    assert_image_close(
+        default, given, exact=True, name="render_froxels: shadow_resolution defaults to 128"
+    )
+    _, first = impl.render_froxels(HOMOGENEOUS, small, sky, black, temporal=True, **args)
+    moved = dataclasses.replace(small, eye=(0.4, 1.5, -0.5), target=(3.0, 2.5, -10.0))
+    _, second = impl.render_froxels(
+        HOMOGENEOUS, moved, sky, black, temporal=True, frame=1, history=first["history"], **args
+    )
+    kept = second["history_valid"] * second["froxels"]
+    assert 0 < second["history_valid"] < 1 and abs(kept - round(kept)) < 1e-9, (
+        f"render_froxels: history_valid is the fraction of the {second['froxels']} froxels "
+        f"that kept history (a camera that moved and turned keeps some), got "
+        f"{second['history_valid']!r} ({kept!r} froxels): count in float64 or integers"
+    )
+    expect_error(
+        "frame", impl.render_froxels, HOMOGENEOUS, small, sky, black, frame=-1, case="frame -1"
+    )
+    expect_error(
+        "history",
+        impl.render_froxels,
+        HOMOGENEOUS,
+        small,
+        sky,
+        black,
+        temporal=True,
+        frame=1,
+        history={"grid": first["history"]["grid"]},
+        kinds=(TypeError,),
+        case="a history dict without its volumes",
+        **args,
     )
     far_light = PointLight(position=(25.0, 1.0, -10.0), intensity=(5, 5, 5), range=2.0)
     near_light = PointLight(position=(0.0, 1.0, -7.0), intensity=(5, 5, 5), range=3.0)

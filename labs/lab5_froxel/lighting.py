@@ -53,7 +53,9 @@ def henyey_greenstein(cos_theta, g):
     cos_theta: any shape, float32/float64; g: a number or a tensor broadcasting with it,
     in (-1, 1). Normalised over the sphere, mean cosine ``g``; ``1 / (4 pi)`` at g = 0.
     ``cos_theta`` outside [-1, 1] (a dot product of unit vectors a rounding step past
-    +-1) is clamped to [-1, 1]: the value is always finite and positive.
+    +-1) is clamped to [-1, 1]: the value is always finite and positive, also at the peak
+    as ``|g| -> 1`` (where ``1 + g^2 - 2 g`` loses every digit: write the denominator as
+    ``(1 - g)^2 + 2 g (1 - cos)`` for g >= 0, ``(1 + g)^2 - 2 g (1 + cos)`` for g < 0).
 
     Errors: TypeError naming ``cos_theta`` unless it is a float32/float64 tensor; TypeError
     naming ``g`` unless it is a number or a tensor of the cos_theta's dtype and device;
@@ -96,6 +98,10 @@ def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float
 
     The frame's plane lies beyond every occluder and the sphere toward the sun, so every
     shadow caster is in front of it. Texel ``(i, j)`` traces one ray from its centre.
+
+    Errors: TypeError naming ``scene`` unless it is a Scene, ``light`` unless it is a
+    DirectionalLight, or ``dtype`` unless it is torch.float32 or torch.float64; ValueError
+    naming ``resolution`` unless it is an int >= 1, or ``radius`` unless it is > 0.
     """
     raise NotImplementedError("not implemented yet: build_shadow_map (task 3)")
 
@@ -103,7 +109,11 @@ def build_shadow_map(scene, light, center, radius, resolution, dtype=torch.float
 def shadow_lookup(shadow_map, points):
     """Sun visibility (N,) in {0, 1} of world ``points`` (N, 3): 0 where the nearest texel's
     occluder lies in front of the point by more than a bias of two texels (which keeps the
-    occluders' own lit faces from shadowing themselves); 1 outside the map."""
+    occluders' own lit faces from shadowing themselves); 1 outside the map.
+
+    Errors: TypeError naming ``shadow_map`` unless it is a LightVolume with (R, R) data;
+    TypeError or ValueError naming ``points`` unless it is a float tensor of shape (N, 3).
+    """
     raise NotImplementedError("not implemented yet: shadow_lookup (task 3)")
 
 

@@ -30,7 +30,12 @@ def reproject(history, prev_grid, grid):
     ``history``; its voxels sit at the froxel centres ``froxel_sample_coords(prev_grid,
     0.5)``, clamped at the border), ``valid`` (S, ny, nx) bool is True only where that
     point lies inside the previous froxel volume (``0 <= x <= nx``, ``0 <= y <= ny``,
-    ``0 <= z <= slices``): history from outside the previous frustum is dropped.
+    ``0 <= z <= slices``): history from outside the previous frustum is dropped (where
+    ``valid`` is False, ``values`` are finite but unspecified: they are not used).
+
+    Errors: TypeError naming ``grid`` or ``prev_grid`` unless it is a FroxelGrid; ValueError
+    naming ``prev_grid`` unless its shape is the grid's; TypeError or ValueError naming
+    ``history`` unless it is a float32/float64 tensor of shape (S, ny, nx) or (S, ny, nx, C).
     """
     raise NotImplementedError("not implemented yet: reproject (task 5)")
 

@@ -100,7 +100,8 @@ def sample_grid(grid, uvw):
     (``align_corners=False`` in ``torch.nn.functional.grid_sample`` terms). Between centres
     the value is trilinear; within half a voxel of a face, and outside the box, the
     coordinates are clamped to the nearest centre (``padding_mode="border"``), so a constant
-    grid is constant all the way to the faces. NaN coordinates give 0.
+    grid is constant all the way to the faces. NaN coordinates give 0. A voxel of +inf
+    (opaque) gives +inf wherever it weighs, and nothing (not NaN) where its weight is 0.
 
     Watch the axis order: x indexes the grid's *first* axis. ``grid_sample`` would want
     the grid as ``(1, C, Z, Y, X)`` (depth first) and coordinates ``2 uvw - 1`` in (x, y, z)
@@ -135,8 +136,10 @@ def sample_grid(grid, uvw):
     linear = (index[..., 0] * grid.shape[1] + index[..., 1]) * grid.shape[2] + index[..., 2]
     values = grid.reshape(-1, *grid.shape[3:])[linear]  # (..., 8) or (..., 8, C)
     if grid.ndim == 4:
-        return torch.where(finite[..., None], (weight[..., None] * values).sum(-2), 0)
-    return torch.where(finite, (weight * values).sum(-1), 0)
+        weight, finite = weight[..., None], finite[..., None]
+    # A corner of weight 0 adds nothing, even an opaque one (0 * inf would be NaN).
+    terms = torch.where(weight > 0, weight * values, 0)
+    return torch.where(finite, terms.sum(-1 - (grid.ndim == 4)), 0)
     # END SOLUTION
 
 
@@ -178,11 +181,12 @@ def march_box(
        most ``min_transmittance * max(q / sigma)`` (exact integrator).
 
     Grids are sampled at box coordinates computed as ``((o - box_min) + t d) / size``,
-    never from the absolute point, so a box far from the origin keeps its accuracy;
-    callables get world points. The density is an extinction coefficient, >= 0 or +inf: a
-    grid or a callable with negative or NaN values raises ValueError naming ``density`` (the
-    provided checks and ``evaluate`` do it). Rays that miss (and NaN/inf rays) sample nothing:
-    radiance 0, transmittance 1, samples 0. ``steps = 0`` is an empty march.
+    never from the absolute point, so a box far from the origin keeps its accuracy; on a
+    flat axis (``box_min = box_max`` there) at its middle, 0.5. Callables get world points.
+    The density is an extinction coefficient, >= 0 or +inf: a grid or a callable with
+    negative or NaN values raises ValueError naming ``density`` (the provided checks and
+    ``evaluate`` do it). Rays that miss (and NaN/inf rays) sample nothing: radiance 0,
+    transmittance 1, samples 0. ``steps = 0`` is an empty march.
 
     Errors: ValueError or TypeError naming ``origins``, ``directions``, ``box_min`` or
     ``box_max`` as in ``ray_box_interval``; ``density`` (neither a callable nor an (X, Y, Z)

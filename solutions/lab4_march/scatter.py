@@ -170,7 +170,8 @@ def march_single_scatter(
     size = torch.where(box_max > box_min, box_max - box_min, 1)
 
     def source(points):  # (N, 3) world points, one per ray, in ray order
-        sigma = evaluate(density, "density", points, (points - box_min) / size)
+        local = torch.where(box_max > box_min, (points - box_min) / size, 0.5)  # flat: middle
+        sigma = evaluate(density, "density", points, local)
         lit = shadow_transmittance(points, light, box_min, box_max, density, shadow_steps)
         scattered = sigma * phase * lit
         if isinstance(factor, torch.Tensor):

@@ -68,7 +68,8 @@ def voxel_walk(
     Ties: a ray lying exactly in a voxel plane (a zero direction component) belongs to the
     voxel on the plane's positive side, ``floor((o - box_min) / voxel)``; where the ray
     crosses several planes at one ``t`` (an edge or a corner), it steps one axis at a time
-    with zero-length segments in between.
+    with zero-length segments in between. A flat box (``box_min = box_max`` on an axis) has
+    voxels of no volume: every ray passes it untouched (optical depth 0, no steps).
 
     Errors: ValueError or TypeError naming ``origins``, ``directions``, ``box_min`` or
     ``box_max`` as in ``ray_box_interval``; TypeError naming ``density`` unless it is a grid

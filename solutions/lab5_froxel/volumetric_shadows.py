@@ -29,7 +29,12 @@ from .vbuffer import media_at
 def extinction_volume(scene, lo, hi, resolution, dtype=torch.float32, device="cpu"):
     """Extinction (R, R, R) at the voxel centres of the box ``lo .. hi`` (3 numbers each),
     R = ``resolution``, x the first axis: :func:`media_at` sampled on a world-aligned grid
-    around the camera, the input of every light's transmittance volume."""
+    around the camera, the input of every light's transmittance volume.
+
+    Errors: TypeError naming ``scene`` unless it is a Scene, or ``dtype`` unless it is
+    torch.float32 or torch.float64; ValueError naming ``resolution`` unless it is an int
+    >= 2, or ``hi`` unless ``lo < hi`` on every axis.
+    """
     # BEGIN SOLUTION (task 4)
     check_scene(scene)
     check_dtype(dtype)
@@ -186,7 +191,11 @@ def transmittance_volume(extinction, lo, hi, light, resolution=32, steps=None):
 def sample_light_volume(volume, points):
     """Transmittance (N,) toward the light at world ``points`` (N, 3): trilinear in the
     volume's texels and depth samples (clamped at its ends); 1 outside the map laterally
-    and behind a spot light."""
+    and behind a spot light.
+
+    Errors: TypeError naming ``volume`` unless it is a LightVolume with (R, R, K) data;
+    TypeError or ValueError naming ``points`` unless it is a float tensor of shape (N, 3).
+    """
     # BEGIN SOLUTION (task 4)
     if not isinstance(volume, LightVolume) or volume.data.ndim != 3:
         raise TypeError(

@@ -333,4 +333,34 @@ MUTANTS += [
         tests="occupancy",
         why="always computes the occupancy of 64-thread blocks",
     ),
+    Mutant(
+        name="watertight_fallback_only_on_u",
+        module=M,
+        function="watertight",
+        find="exact = (U == 0) | (V == 0) | (W == 0)",
+        replace="exact = U == 0",
+        tests="watertight",
+        why="runs the double fallback only when U rounds to 0: a ray grazing the edge of V or "
+        "W keeps a rounded 0.0 there and is decided by luck",
+    ),
+    Mutant(
+        name="mt_max_norm_without_abs",
+        module=M,
+        function="moller_trumbore",
+        find="scale = directions.abs().amax(-1)",
+        replace="scale = directions.amax(-1)",
+        tests="moller_trumbore",
+        why="the 'max-norm' of d without absolute values is negative for a direction with no "
+        "positive component: every near-parallel ray passes the parallel test",
+    ),
+    Mutant(
+        name="simple_reach_without_size",
+        module=M,
+        function="intersect_simple",
+        find="reach = (v0 - p).abs().amax(-1) + size",
+        replace="reach = (v0 - p).abs().amax(-1)",
+        tests="intersect_simple",
+        why="R = |v0 - p|_max alone is 0 at v0: a sliver too thin to resolve passes step 4 "
+        "near its first corner",
+    ),
 ]

@@ -375,4 +375,35 @@ MUTANTS += [
         tests="intersect_layout",
         why="the interval is closed: a hit exactly at t_max counts",
     ),
+    Mutant(
+        name="layout_open_triangle",
+        module=M,
+        function="intersect_layout",
+        find="& (u >= 0)\n            & (v >= 0)\n            & (u + v <= 1)",
+        replace="& (u > 0)\n            & (v > 0)\n            & (u + v < 1)",
+        tests="intersect_layout",
+        why="strict inequalities drop the triangle's edges and corners: a ray exactly through "
+        "an edge or a corner misses",
+    ),
+    Mutant(
+        name="layout_forgets_uv",
+        module=M,
+        function="intersect_layout",
+        find="        best.u[rows] = torch.where(better, u.gather(1, j)[:, 0], best.u[rows])\n"
+        "        best.v[rows] = torch.where(better, v.gather(1, j)[:, 0], best.v[rows])\n",
+        replace="",
+        tests="intersect_layout",
+        why="keeps t and the triangle of the nearest hit but not its barycentrics: every hit "
+        "reports u = v = 0",
+    ),
+    Mutant(
+        name="shadow_rays_on_the_horizon",
+        module=M,
+        function="shade_direct",
+        find="row, light = (cos > 0).nonzero(",
+        replace="row, light = (cos >= 0).nonzero(",
+        tests="shade_direct",
+        why="traces shadow rays toward lights exactly in the surface's plane (n . l = 0), "
+        "which cannot contribute",
+    ),
 ]

@@ -261,8 +261,8 @@ MUTANTS = [
         name="fresh_grid_nan_not_zero",
         module=M,
         function="sample_grid",
-        find="return torch.where(finite, (weight * values).sum(-1), 0)",
-        replace="return (weight * values).sum(-1)",
+        find="return torch.where(finite, terms.sum(-1 - (grid.ndim == 4)), 0)",
+        replace="return terms.sum(-1 - (grid.ndim == 4))",
         tests="sample_grid",
         why="NaN coordinates give 0, not the value at the clamped corner",
     ),
@@ -335,5 +335,64 @@ MUTANTS = [
         tests="sphere_trace",
         why="t is a ray parameter: the footprint's world size is epsilon t |d|; a direction "
         "of length 1e-4 or 1e2 gets a tolerance 1e4 times too tight or too loose",
+    ),
+    Mutant(
+        name="fresh_march_flat_axis_nan",
+        module=M,
+        function="march_box",
+        find="local = torch.where(size > 0, offset / size, 0.5)",
+        replace="local = offset / size",
+        tests="march_box_extremes",
+        why="a flat box (size 0 on an axis) gives 0 / 0 = NaN box coordinates there, which "
+        "sample_grid reads as 0: the medium of a flat box vanishes for rays in its plane",
+    ),
+    Mutant(
+        name="fresh_shadow_flat_axis_nan",
+        module=M,
+        function="shadow_transmittance",
+        find="torch.where(size > 0, offset / size, 0.5)",
+        replace="offset / size",
+        tests="shadow_transmittance",
+        why="0 / 0 = NaN box coordinates on a flat axis read as density 0: no shadow in a flat box",
+    ),
+    Mutant(
+        name="fresh_scatter_grid_absolute_points",
+        module=M,
+        function="march_single_scatter",
+        find="local = torch.where(box_max > box_min, (points - box_min) / size, 0.5)",
+        replace="local = torch.where(box_max > box_min, points / size, 0.5)",
+        tests="single_scatter",
+        why="the source reads a grid at points / size, forgetting box_min: right only for a box "
+        "at the origin",
+    ),
+    Mutant(
+        name="fresh_walk_samples_after_exit",
+        module=M,
+        function="voxel_walk",
+        find="sample = active & ~skip",
+        replace="sample = ~skip",
+        tests="voxel_walk",
+        why="rays that have left the grid keep 'reading' a voxel while others still walk: "
+        "samples overcounts (and an inf voxel would give inf * 0 = NaN)",
+    ),
+    Mutant(
+        name="fresh_trace_hit_past_t_max",
+        module=M,
+        function="sphere_trace",
+        find="hit = active & ~fail & (radius <= epsilon * t * length)",
+        replace="hit = valid & ~fail & (radius <= epsilon * t * length)",
+        tests="sphere_trace",
+        why="the hit test runs on rays that already went past t_max: one that lands on a "
+        "surface beyond t_max becomes a hit",
+    ),
+    Mutant(
+        name="fresh_trace_zero_direction_valid",
+        module=M,
+        function="sphere_trace",
+        find="& (length > 0)\n        & torch.isfinite(length)",
+        replace="& torch.isfinite(length)",
+        tests="sphere_trace",
+        why="a zero direction never moves: starting on a surface, |f| = 0 <= epsilon t |d| = 0 "
+        "makes it a hit, though a zero direction is no ray",
     ),
 ]

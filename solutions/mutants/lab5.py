@@ -51,8 +51,8 @@ MUTANTS = [
         name="hg_wrong_sign",
         module=M,
         function="henyey_greenstein",
-        find="denom = (1 + g * g - 2 * g * cos_theta).clamp(min=0)",
-        replace="denom = (1 + g * g + 2 * g * cos_theta).clamp(min=0)",
+        find="cos_theta = cos_theta.clamp(-1, 1)\n    # Non-negative",
+        replace="cos_theta = -cos_theta.clamp(-1, 1)\n    # Non-negative",
         tests="henyey_greenstein",
         why="cos theta measured between the view ray and the light's travel direction: "
         "forward scattering turns into back scattering",
@@ -291,5 +291,56 @@ MUTANTS = [
         tests="slice_integral",
         why="a negative length must raise ValueError naming length (it would give a "
         "transmittance above 1)",
+    ),
+    Mutant(
+        name="shadow_plane_at_sphere",
+        module=M,
+        function="build_shadow_map",
+        find="origin = c + (lift + 1.0) * toward",
+        replace="origin = c + radius * toward",
+        tests="shadow_map",
+        why="the shadow map's rays start on the sphere's light-side plane: an occluder "
+        "floating above the region (a roof, a cloud of boxes) lies behind them and casts "
+        "no shadow",
+    ),
+    Mutant(
+        name="texel_corner_rays",
+        module=M,
+        function="build_shadow_map",
+        find="texel = (torch.arange(resolution, dtype=dtype, device=device) + 0.5) / resolution",
+        replace="texel = torch.arange(resolution, dtype=dtype, device=device) / resolution",
+        tests="shadow_map",
+        why="each texel traces its ray from its corner, not its centre: the whole shadow "
+        "shifts by half a texel against the lookup",
+    ),
+    Mutant(
+        name="shadow_bias_one_texel",
+        module=M,
+        function="shadow_lookup",
+        find="bias = 4 * shadow_map.extent / res",
+        replace="bias = 2 * shadow_map.extent / res",
+        tests="shadow_map",
+        why="a texel is 2 extent / R wide: a bias of one texel where two are promised "
+        "lets sloped lit faces shadow themselves (acne)",
+    ),
+    Mutant(
+        name="light_volume_default_depth_samples",
+        module=M,
+        function="light_froxels",
+        find="transmittance_volume(extinction, lo, hi, light, resolution, 4 * resolution)",
+        replace="transmittance_volume(extinction, lo, hi, light, resolution)",
+        tests="light_froxels",
+        why="the sun's and spots' transmittance volumes keep the default 2 resolution "
+        "depth samples: a fog volume's faces cost up to a full step of optical depth",
+    ),
+    Mutant(
+        name="media_g_nan_without_scattering",
+        module=M,
+        function="media_at",
+        find="g = torch.where(weight > 0, g_weighted / torch.where(weight > 0, weight, 1.0), 0.0)",
+        replace="g = g_weighted / weight",
+        tests="media_at",
+        why="g divided by the scattering weight everywhere: 0 / 0 = NaN where nothing "
+        "scatters (no media, absorbing fog), and the NaN spreads through the phase function",
     ),
 ]

@@ -54,6 +54,12 @@ CONTRACTS = {
             "test_intersect_simple_degenerate_and_interval_cases",
             "simple_open_t_max",
         ),
+        (
+            "step 4: accept where 16 eps R^2 |n|_max <= n . n (equality too), "
+            "R = |v0 - p|_max + max(|e1|_max, |e2|_max) of absolute values",
+            "test_intersect_simple_degenerate_and_interval_cases",
+            "simple_reach_without_size",
+        ),
     ],
     "moller_trumbore": kernel("moller_trumbore")
     + [
@@ -87,6 +93,11 @@ CONTRACTS = {
             "test_moller_trumbore_any_direction_length",
             "mt_parallel_test_without_direction",
         ),
+        (
+            "|det| == eps |d| |e1| |e2| exactly is parallel; max-norms of absolute values",
+            "test_moller_trumbore_degenerate_and_interval_cases",
+            "mt_max_norm_without_abs",
+        ),
     ],
     "woop_precompute": [
         (
@@ -103,6 +114,11 @@ CONTRACTS = {
             "computed in float64 and rounded once",
             "test_woop_unit_matches_float64_reference",
             "woop_transform_in_input_precision",
+        ),
+        (
+            "each triangle's transform depends on its own corners only (batched as alone)",
+            "test_woop_precompute_maps_to_unit_triangle",
+            None,
         ),
         (
             "a degenerate triangle gets the zero transform, which every ray misses",
@@ -130,6 +146,11 @@ CONTRACTS = {
             "edge functions that round to 0 are recomputed in float64 (exact signs)",
             "test_watertight_decides_exactly_near_edges",
             "watertight_no_double_fallback",
+        ),
+        (
+            "the fallback runs where any of U, V, W rounds to 0 (not only U)",
+            "test_watertight_decides_exactly_near_edges",
+            "watertight_fallback_only_on_u",
         ),
         (
             "T compared with t_min det, t_max det sign-corrected: back faces hit",
@@ -166,6 +187,12 @@ CONTRACTS = {
             "box_min_for_t_near",
         ),
         ("a flat box (min == max) is not empty", "test_ray_box_matches_slabs", "box_flat_is_empty"),
+        (
+            "every |inv_direction| > 0: an infinite direction misses, even from inside the box",
+            "test_ray_box_matches_slabs",
+            None,
+        ),
+        ("default t_min = 0: t_near = 0 from inside the box", "test_ray_box_matches_slabs", None),
         (
             "hit = t_near <= t_far: an interval of one point hits",
             "test_ray_box_matches_slabs",
@@ -254,6 +281,11 @@ CONTRACTS = {
             "the occupancy of block_size threads per block",
             "test_register_estimate_and_occupancy",
             "occupancy_ignores_block_size",
+        ),
+        (
+            "defaults: arch 'g80', block_size 64",
+            "test_register_estimate_and_occupancy",
+            None,
         ),
         ("ValueError naming variant or arch", "test_register_estimate_and_occupancy", None),
     ],

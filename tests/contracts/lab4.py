@@ -40,6 +40,7 @@ CONTRACTS = {
             "fresh_grid_node_centred",
         ),
         ("NaN coordinates give 0", "test_sample_grid_trilinear", "fresh_grid_nan_not_zero"),
+        ("NaN coordinates give 0 in every channel", "test_sample_grid_trilinear", None),
     ],
     "march_box": [
         (
@@ -77,6 +78,17 @@ CONTRACTS = {
             "test_march_box_early_termination_and_jitter",
             None,
         ),
+        (
+            "grids at box coordinates: each axis divided by its own side",
+            "test_march_box_extremes",
+            None,
+        ),
+        (
+            "a flat box: grids read without dividing by its size 0",
+            "test_march_box_extremes",
+            "fresh_march_flat_axis_nan",
+        ),
+        ("the default is steps=64", "test_march_box_extremes", None),
     ],
     "segment_integral": [
         (
@@ -133,6 +145,11 @@ CONTRACTS = {
             "test_shadow_transmittance_grid_in_offset_box",
             None,
         ),
+        (
+            "a flat box: grids read without dividing by its size 0",
+            "test_shadow_transmittance_grid_in_offset_box",
+            "fresh_shadow_flat_axis_nan",
+        ),
     ],
     "march_single_scatter": [
         (
@@ -145,6 +162,26 @@ CONTRACTS = {
             "test_single_scatter_oblique_light_against_quadrature",
             None,
         ),
+        (
+            "the source reads grids at (x - box_min) / size, in a box away from the origin",
+            "test_single_scatter_matches_closed_form",
+            "fresh_scatter_grid_absolute_points",
+        ),
+        (
+            "a flat box: grids read without dividing by its size 0",
+            "test_single_scatter_matches_closed_form",
+            None,
+        ),
+        (
+            "albedo in [0, 1]: both ends allowed, 1 + 1e-12 refused",
+            "test_single_scatter_matches_closed_form",
+            None,
+        ),
+        (
+            "defaults: light_irradiance=1, g=0, steps=64, shadow_steps=16",
+            "test_single_scatter_matches_closed_form",
+            None,
+        ),
     ],
     "build_occupancy": [
         (
@@ -152,6 +189,7 @@ CONTRACTS = {
             "test_voxel_walk_empty_space_skipping",
             "skip_non_empty",
         ),
+        ("the default is macro_cell=1", "test_voxel_walk_empty_space_skipping", None),
     ],
     "voxel_walk": [
         (
@@ -165,6 +203,17 @@ CONTRACTS = {
             "dda_no_axis_guard",
         ),
         ("emission, channels and extremes", "test_voxel_walk_emission_and_extremes", None),
+        (
+            "samples = steps without occupancy: nothing is read after a ray leaves",
+            "test_voxel_walk_optical_depth_exact",
+            "fresh_walk_samples_after_exit",
+        ),
+        (
+            "a flat box has voxels of no volume: optical depth 0, no steps",
+            "test_voxel_walk_emission_and_extremes",
+            None,
+        ),
+        ("the default is macro_cell=1", "test_voxel_walk_empty_space_skipping", None),
     ],
     "sphere_trace": [
         (
@@ -193,5 +242,40 @@ CONTRACTS = {
             "trace_no_sor_fallback",
         ),
         ("hits agree with the analytic surfaces", "test_sphere_trace_matches_analytic", None),
+        (
+            "f = 0 at t = 0 is a hit (<=), at the first evaluation even over-relaxed",
+            "test_sphere_trace_exact_boundaries",
+            None,
+        ),
+        (
+            "zero directions and NaN rays miss, with no hit test",
+            "test_sphere_trace_exact_boundaries",
+            "fresh_trace_zero_direction_valid",
+        ),
+        (
+            "t = t_max is not past t_max: a HIT there, UNSURE when out of steps",
+            "test_sphere_trace_exact_boundaries",
+            None,
+        ),
+        (
+            "a ray past t_max misses even where it lands on a surface",
+            "test_sphere_trace_exact_boundaries",
+            "fresh_trace_hit_past_t_max",
+        ),
+        (
+            "an sdf returning another shape raises ValueError naming sdf",
+            "test_sphere_trace_exact_boundaries",
+            None,
+        ),
+        (
+            "the step back is divided by |d|, then omega = 1",
+            "test_sphere_trace_exact_boundaries",
+            None,
+        ),
+        (
+            "defaults: t_max=100, max_steps=128, epsilon=1e-4, relaxation=1",
+            "test_sphere_trace_exact_boundaries",
+            None,
+        ),
     ],
 }

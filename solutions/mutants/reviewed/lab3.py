@@ -79,4 +79,52 @@ EQUIVALENT = {
         "(depth < max_depth), so after that bounce no ray is left and the extra iteration "
         "breaks at its start (len(pixel) == 0) before tracing or recording any stats"
     ),
+    "lab3_wavefront:intersect_layout:op_BitAnd_BitOr:0": (
+        "valid is only a safety net: a NaN/inf origin or direction makes u non-finite in every "
+        "layout (MT: an inf times a nonzero is inf, times 0 is NaN, so dot(s, p) or det is inf"
+        " or NaN and u = inf or NaN; woop: the transformed coordinates or t are, and u = o'_x +"
+        " t d'_x follows), and u >= 0 & u + v <= 1 rejects every non-finite u"
+    ),
+    "lab3_wavefront:intersect_layout:op_BitAnd_BitOr:6": (
+        "ok (det != 0, d'_z != 0) is redundant with the inside test: det == 0 makes u = dot(s,"
+        " p) / 0 = inf or NaN, d'_z == 0 makes t = inf or NaN and u = o'_x + t d'_x inf or "
+        "NaN (0 * inf), and a non-finite u fails u >= 0 & u + v <= 1; valid is likewise "
+        "redundant (see op_BitAnd_BitOr:0)"
+    ),
+    "lab3_wavefront:intersect_layout:const_int:9": (
+        "reads the index from the w of corner 1 instead of corner 0; layout_float4's docstring:"
+        ' "every ``triangles[k, j, 3]`` holds ``order[k]`` bit for bit", so every corner\'s w '
+        "is the same index"
+    ),
+    "lab3_wavefront:intersect_layout:cmp_Lt_LtE:1": (
+        "tb <= inf differs only for a tile without a hit (tb = inf) meeting a best with t = inf"
+        ", i.e. a ray with no hit so far, whose triangle is -1; ib is a triangle index >= 0, "
+        "never < -1, so better stays False"
+    ),
+    "lab3_wavefront:intersect_layout:cmp_Lt_LtE:2": (
+        "ib <= best.triangle differs only at ib == best.triangle with tb == best.t: the same "
+        "triangle at the same t (each triangle is in exactly one tile of a ray), so replacing "
+        "it writes the same t, index, u and v"
+    ),
+    "lab3_wavefront:render_persistent:const_int:9": (
+        "free = pixel < 1 also takes slots holding pixel 0, but every slot is emptied (pixel "
+        "-1) at the end of each step, so at the refill no slot holds a pixel (as "
+        "render_persistent:cmp_Lt_LtE:0)"
+    ),
+    "lab3_wavefront:render_persistent:op_Sub_Add:0": (
+        "head is 0 whenever take is computed (it starts at 0 and is reset to 0 when the queue "
+        "is rebuilt at the end of every step), so len - head == len + head"
+    ),
+    "lab3_wavefront:render_persistent:cmp_Gt_GtE:0": (
+        "take >= 0 also enters the refill with take == 0, which assigns empty slices and adds 0"
+        " to head: a no-op"
+    ),
+    "lab3_wavefront:render_persistent:const_int:20": (
+        "-2 instead of -1 marks a finished slot: any negative pixel marks an empty slot (free ="
+        " pixel < 0, lane = pixel >= 0), as render_persistent:const_int:5"
+    ),
+    "lab3_wavefront:render_persistent:const_float:0": (
+        "only with no step at all (N = 0 rays), where the docstring's idle_fraction = 1 - "
+        "sum(active_lanes) / (pool_size * steps) is 0 / 0 and promises no value"
+    ),
 }
