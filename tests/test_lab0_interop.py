@@ -813,6 +813,15 @@ def test_measure_copy_bandwidth(impl, device, pinned):
         repeats=0,
         case="repeats=0 (nothing would be timed)",
     )
+    expect_error(
+        "repeats",
+        impl.measure_copy_bandwidth,
+        1,
+        pinned,
+        device,
+        repeats=2.0,
+        case="repeats=2.0 (a float, not an int)",
+    )
 
 
 @pytest.mark.task(3)

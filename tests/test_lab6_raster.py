@@ -50,6 +50,7 @@ from course.core.camera import Camera, primary_rays
 from course.core.files import import_file, lab_source
 from course.core.scenes import load_scene
 from course.core.types import Hits, Mesh
+from course.given.lab6 import BYTES_PER_FRAGMENT
 from course.grading.testing import (
     assert_close,
     assert_equal,
@@ -333,6 +334,29 @@ def scene(name: str) -> tuple[Mesh, Camera]:
         quad = torch.tensor([[n, n + 1, n + 2], [n, n + 2, n + 3]])
         mesh = Mesh(torch.cat([vertices, ground]).float(), torch.cat([faces, quad]))
         return mesh, dataclasses.replace(camera, width=48, height=48)
+    if name == "plates":
+        # Three square plates stacked along y, the middle one first (faces 0 and 1): it is
+        # in the top plate's shadow and casts its own onto the ground.
+        def plate(x0, x1, z0, z1, y):
+            return [[x0, y, z0], [x1, y, z0], [x1, y, z1], [x0, y, z1]]
+
+        vertices = torch.tensor(
+            plate(-1.5, 1.5, -1.5, 1.5, 1.0)
+            + plate(-0.8, 0.4, -0.4, 0.8, 2.0)
+            + plate(-4.0, 4.0, -4.0, 4.0, 0.0),
+            dtype=torch.float32,
+        )
+        quads = [[[i, i + 1, i + 2], [i, i + 2, i + 3]] for i in (0, 4, 8)]
+        camera = Camera(
+            eye=(2.5, 6.0, 5.0),
+            target=(0.0, 0.5, 0.0),
+            fov_y=50.0,
+            width=48,
+            height=40,
+            near=0.1,
+            far=50.0,
+        )
+        return Mesh(vertices, torch.tensor(quads).reshape(-1, 3)), camera
     raise ValueError(f"name: unknown test scene {name!r}")
 
 
@@ -363,6 +387,11 @@ def trace_suzanne(origins, directions, t_min, t_max):
 def trace_shadow_scene(origins, directions, t_min, t_max):
     """The tracer handed to the lab: brute force in float64 over ``scene("shadow_scene")``."""
     return _trace("shadow_scene", origins, directions, t_min, t_max)
+
+
+def trace_plates(origins, directions, t_min, t_max):
+    """The tracer handed to the lab: brute force in float64 over ``scene("plates")``."""
+    return _trace("plates", origins, directions, t_min, t_max)
 
 
 def reference_visibility(mesh: Mesh, camera: Camera):
@@ -931,17 +960,26 @@ def test_clip_triangles_corner_on_near_plane(impl, device):
         )
 
 
+def clip_to_screen4(clip, width, height):
+    """(K, 3, 4) screen triangles (x, y, z_ndc, 1/w) of clip coordinates, in float64: the
+    formula of ``to_screen``, written out here (task 1 is graded on its own)."""
+    x, y, z, w = clip.to(F64).unbind(-1)
+    return torch.stack([(x / w + 1) * (width / 2), (1 - y / w) * (height / 2), z / w, 1 / w], -1)
+
+
 @pytest.mark.task(2)
 @pytest.mark.points(1)
 def test_bounding_boxes(impl, device):
     g = generator(71)
-    for width, height in ((13, 5), (16, 16), (1, 1)):
+    for width, height in ((13, 5), (16, 16), (1, 1), (7, 3), (40, 9)):
         tris = (torch.rand(200, 3, 2, generator=g, dtype=F64) * 1.6 - 0.3) * torch.tensor(
             [width, height], dtype=F64
         )
         special = torch.tensor(
             [
                 [[-1e6, -1e6], [1e6, 0.0], [0.0, 1e6]],  # huge: the whole screen
+                [[-1e30, -1e30], [1e30, 0.0], [0.0, 1e30]],  # beyond int64: the whole screen
+                [[-1e30, -1e30], [-1e29, -1.0], [-3e29, -2e29]],  # far off to the top left
                 [[0.4, 0.4], [0.6, 0.4], [0.5, 0.6]],  # sub-pixel, on pixel 0's centre
                 [[-5.0, 1.0], [-3.0, 2.0], [-4.0, 3.0]],  # left of the screen
                 [[math.nan, 1.0], [2.0, 2.0], [1.0, 3.0]],  # NaN
@@ -952,42 +990,59 @@ def test_bounding_boxes(impl, device):
                     [width - 0.5, height + 3.0],
                 ],  # from the last pixel's centre
                 [[0.2, 0.2], [2.5, 0.2], [0.2, 2.5]],  # max exactly on pixel 2's centre
+                [[1.5, 0.5], [3.5, 0.5], [1.5, 2.5]],  # min and max exactly on centres
+                [[2.5, 1.5], [2.5, 1.5], [2.5, 1.5]],  # a point on a pixel centre
+                [[0.5, 0.5], [width - 0.5, 0.5], [0.5, height - 0.5]],  # centre to centre
+                [[0.51, 0.51], [width - 0.51, 0.51], [0.51, height - 0.51]],  # just inside
+                [[0.49, 0.49], [0.49, 0.49], [0.49, 0.49]],  # a point left of centre 0
             ],
             dtype=F64,
         )
-        tris = torch.cat([tris, special])
-        want, empty = box_reference(tris, width, height)
-        for dtype in (torch.float32, torch.float64):
-            got = check_tensor(
-                impl.bounding_boxes(tris.to(device, dtype), width, height),
-                "bounding_boxes(...)",
-                shape=(len(tris), 4),
-                dtype=torch.int64,
-                device=device,
-            ).cpu()
-            got_empty = (got[:, 2] <= got[:, 0]) | (got[:, 3] <= got[:, 1])
-            assert_equal(
-                got_empty,
-                empty,
-                name=f"bounding_boxes {width}x{height} ({dtype}): "
-                "which boxes are empty (off screen, NaN/inf)",
-                where="triangle",
-            )
-            assert (
-                bool((got >= 0).all())
-                and bool((got[:, [0, 2]] <= width).all())
-                and bool((got[:, [1, 3]] <= height).all())
-            ), f"bounding_boxes {width}x{height}: boxes must be clamped to the screen"
-            assert_equal(
-                torch.where(empty[:, None], 0, got),
-                want,
-                name=(
-                    f"bounding_boxes {width}x{height} ({dtype}): [col_begin, row_begin, col_end, "
-                    f"row_end) of the pixels whose centres lie in the triangle's extent (the last "
-                    f"row and column included, end = floor(max - 0.5) + 1)"
-                ),
-                where="triangle",
-            )
+        # Screens as to_screen makes them, C = 4 (x, y, z_ndc, 1/w) from clip corners with
+        # w != 1: z_ndc and 1/w are no coordinates of the box (z_ndc from -3 to 40 here).
+        w = torch.rand(120, 3, 1, generator=g, dtype=F64) * 3.5 + 0.25
+        xyz = (torch.rand(120, 3, 3, generator=g, dtype=F64) * 2 - 1) * w * 1.3
+        xyz[..., 2:] = (torch.rand(120, 3, 1, generator=g, dtype=F64) * 43 - 3) * w
+        screen = clip_to_screen4(torch.cat([xyz, w], -1), width, height)
+        screen[:4, :, 2] = math.nan  # NaN z_ndc or 1/w with finite x, y: a box all the same
+        screen[4:8, :, 3] = math.inf
+        for case, given in (
+            ("(K, 3, 2) triangles", torch.cat([tris, special])),
+            ("(K, 3, 4) screen triangles (x, y, z_ndc, 1/w)", screen),
+        ):
+            for dtype in (torch.float32, torch.float64):
+                # The reference sees the float32 coordinates too (a centre may move by rounding).
+                want, empty = box_reference(given[..., :2].to(dtype).to(F64), width, height)
+                got = check_tensor(
+                    impl.bounding_boxes(given.to(device, dtype), width, height),
+                    "bounding_boxes(...)",
+                    shape=(len(given), 4),
+                    dtype=torch.int64,
+                    device=device,
+                ).cpu()
+                what = f"bounding_boxes {width}x{height} of {case} ({dtype})"
+                got_empty = (got[:, 2] <= got[:, 0]) | (got[:, 3] <= got[:, 1])
+                assert_equal(
+                    got_empty,
+                    empty,
+                    name=f"{what}: which boxes are empty (off screen, NaN/inf x or y)",
+                    where="triangle",
+                )
+                assert (
+                    bool((got >= 0).all())
+                    and bool((got[:, [0, 2]] <= width).all())
+                    and bool((got[:, [1, 3]] <= height).all())
+                ), f"{what}: boxes must be clamped to the screen"
+                assert_equal(
+                    torch.where(empty[:, None], 0, got),
+                    want,
+                    name=(
+                        f"{what}: [col_begin, row_begin, col_end, row_end) of the pixels whose "
+                        f"centres lie in the triangle's x, y extent (the last row and column "
+                        f"included, end = floor(max - 0.5) + 1; only x and y count)"
+                    ),
+                    where="triangle",
+                )
     expect_error(
         "screen",
         impl.bounding_boxes,
@@ -1199,6 +1254,37 @@ def test_coverage_culling_degenerate_subpixel(impl, device):
             ),
             where="(triangle, pixel)",
         )
+    # Half-pixel triangles, E_12(v0) = +1 and -1 exactly, around the centre of pixel (2, 2).
+    half = torch.tensor([[[2.25, 2.25], [3.25, 2.25], [2.25, 3.25]]], dtype=F64)
+    half = torch.cat([half, half[:, [0, 2, 1]]])
+    for cull in (False, True):
+        for dtype in (torch.float32, torch.float64):
+            tri, pix, _ = fragments(impl, half.to(device, dtype), width, height, cull, device)
+            want_tri = [1] if cull else [0, 1]  # triangle 1 is the counter-clockwise one
+            assert tri.tolist() == want_tri and pix.tolist() == [2 * width + 2] * len(want_tri), (
+                f"coverage ({dtype}, cull_backfaces={cull}) of two half-pixel triangles of "
+                f"E_12(v0) = -1 and +1 (twice their area, in pixels), {half.tolist()}: expected "
+                f"triangles {want_tri} each on pixel {2 * width + 2} (row 2, col 2), got "
+                f"triangles {tri.tolist()} on pixels {pix.tolist()}"
+            )
+    # (K, 3, 4) screens: only x and y are read; z_ndc and 1/w may even be NaN or inf.
+    for dtype in (torch.float32, torch.float64):
+        tri, pix, _ = fragments(
+            impl,
+            screen4(tiny, inv_w=math.inf, z=math.nan).to(device, dtype),
+            width,
+            height,
+            device=device,
+        )
+        assert_equal(
+            coverage_matrix(tri, pix, 300, width * height),
+            want.to(torch.int64),
+            name=(
+                f"coverage of sub-pixel triangles as (K, 3, 4) screens (x, y, z_ndc = NaN, "
+                f"1/w = inf) ({dtype}): only x and y decide coverage"
+            ),
+            where="(triangle, pixel)",
+        )
     # No triangles; bad input.
     tri, pix, bary = fragments(
         impl, torch.zeros(0, 3, 4, device=device), width, height, device=device
@@ -1402,6 +1488,23 @@ def test_depth_test_atomic_min_order_independent(impl, device):
         case="a pixel index out of range",
     )
     expect_error(
+        "pixel",
+        impl.depth_test,
+        torch.tensor([3, -1], device=device),
+        torch.tensor([1, 2], device=device),
+        out,
+        case="a negative pixel index",
+    )
+    # Pixels not starting at 0 are fine.
+    got = impl.depth_test(
+        torch.tensor([4, 9], device=device),
+        torch.tensor([7, 8], device=device),
+        torch.full((10,), EMPTY, dtype=torch.int64, device=device),
+    ).cpu()
+    want = torch.full((10,), EMPTY, dtype=torch.int64)
+    want[4], want[9] = 7, 8
+    assert_equal(got, want, name="depth_test of fragments on pixels 4 and 9 only", where="pixel")
+    expect_error(
         "key",
         impl.depth_test,
         torch.tensor([3, 4], device=device),
@@ -1532,6 +1635,94 @@ def rasterized(impl, screen, width: int, height: int, **kwargs):
     return keys
 
 
+_CHUNKS: list = []
+
+
+def recording_coverage(screen, width: int, height: int, cull_backfaces: bool = False):
+    """In place of the lab's ``coverage``: remembers each chunk of triangles ``rasterize``
+    hands it (a CPU copy) and returns no fragments."""
+    _CHUNKS.append(screen.detach().to("cpu"))
+    none = torch.zeros(0, dtype=torch.int64, device=screen.device)
+    return none, none.clone(), torch.zeros(0, 3, dtype=screen.dtype, device=screen.device)
+
+
+def rasterize_chunks(lab, screen, width: int, height: int, **kwargs):
+    """``lab.rasterize`` with the given ``bounding_boxes`` and a ``coverage`` that records
+    the chunks. Returns the chunks (a list of (k_i, 3, 4) CPU tensors)."""
+    _CHUNKS.clear()
+    with replaced(lab, {"coverage": recording_coverage, "bounding_boxes": given_bounding_boxes}):
+        lab.rasterize(screen, width, height, **kwargs)
+    return list(_CHUNKS)
+
+
+def check_chunks(impl, screen, width, height, budget, case, device):
+    """The chunks of ``rasterize``: consecutive slices of the triangles, in order, each
+    holding at most ``budget // BYTES_PER_FRAGMENT`` box pixels (or one triangle), and not
+    needlessly many of them."""
+    kwargs = {} if budget is None else {"memory_budget_bytes": budget}
+    budget = 2**28 if budget is None else budget
+    chunks = impl.probe(rasterize_chunks, screen.to(device), width, height, **kwargs)
+    what = f"rasterize ({case}, memory_budget_bytes={budget}, {width}x{height})"
+    got = torch.cat(chunks) if chunks else screen[:0].cpu()
+    assert got.shape == screen.shape and torch.equal(got, screen.cpu()), (
+        f"{what}: the chunks handed to coverage must be consecutive slices of the triangles, "
+        f"together every triangle once and in order; got chunks of "
+        f"{[c.shape[0] for c in chunks]} triangles for {screen.shape[0]}"
+    )
+    boxes, empty = box_reference(screen[..., :2].cpu().to(F64), width, height)
+    pixels = torch.where(empty, 0, (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]))
+    per_chunk = max(1, budget // BYTES_PER_FRAGMENT)
+    sizes, first = [], 0
+    for chunk in chunks:
+        k = chunk.shape[0]
+        size = int(pixels[first : first + k].sum())
+        assert k <= 1 or size <= per_chunk, (
+            f"{what}: a chunk of {k} triangles (from triangle {first}) whose boxes hold {size} "
+            f"pixels, more than budget // BYTES_PER_FRAGMENT = {per_chunk} (only a single "
+            f"triangle may exceed it). A box holds (col_end - col_begin) * (row_end - "
+            f"row_begin) pixels."
+        )
+        sizes.append(size)
+        first += k
+    total = int(pixels.sum())
+    enough = 2 * math.ceil(total / per_chunk) + 1  # adjacent chunks could not be merged
+    busy = sum(1 for c in chunks if c.shape[0])
+    assert busy <= enough, (
+        f"{what}: {busy} chunks for boxes of {total} pixels in all (chunk pixels "
+        f"{sizes[:12]}...), where {math.ceil(total / per_chunk)} chunks of at most "
+        f"{per_chunk} pixels would do: put as many triangles in a chunk as fit, a Python "
+        f"loop over single triangles is slow"
+    )
+
+
+def cells(width, height, cols, rows):
+    """(K, 3, 4) screen triangles, one inside each listed pixel (a box of exactly it)."""
+    tris = [
+        [[c + 0.3, r + 0.3], [c + 0.5, r + 0.7], [c + 0.7, r + 0.3]] for r in rows for c in cols
+    ]
+    return screen4(torch.tensor(tris, dtype=F64), inv_w=0.5, z=0.2).float()
+
+
+def check_chunking(impl, device):
+    """The chunks ``rasterize`` hands to ``coverage`` (given bounding_boxes, a coverage that
+    only records what it is handed)."""
+    # 48 one-pixel triangles in the top right of a 24x18 screen.
+    small = cells(24, 18, range(12, 24), range(4))
+    for budget in (None, 1, 4 * BYTES_PER_FRAGMENT, 5 * BYTES_PER_FRAGMENT - 1, 2**14):
+        check_chunks(impl, small, 24, 18, budget, "48 one-pixel triangles", device)
+    # Triangles whose boxes (the whole 24x18 screen) each exceed the budget: one per chunk.
+    full = screen4(torch.tensor([[[-2.0, -2.0], [4.0, 40.0], [30.0, -2.0]]] * 6, dtype=F64)).float()
+    for budget in (100 * BYTES_PER_FRAGMENT, 1000 * BYTES_PER_FRAGMENT):
+        check_chunks(impl, full, 24, 18, budget, "6 full-screen triangles", device)
+    # The default budget, 2**28 bytes: at most 2**20 pixels a chunk (20 boxes of 256x256).
+    many = screen4(
+        torch.tensor([[[-1.0, -1.0], [100.0, 600.0], [600.0, -1.0]]] * 20, dtype=F64)
+    ).float()
+    check_chunks(impl, many, 256, 256, None, "20 triangles over a 256x256 screen", device)
+    mixed = torch.cat([small, full, small[:5], full[:1]])
+    check_chunks(impl, mixed, 24, 18, 30 * BYTES_PER_FRAGMENT, "small and large", device)
+
+
 @pytest.mark.task(3)
 @pytest.mark.points(1)
 def test_rasterize_visibility_buffer(impl, device):
@@ -1626,6 +1817,8 @@ def test_rasterize_visibility_buffer(impl, device):
         f"(allowed: the budget, what one triangle's box of 64 pixels needs, or the (64 * 64,) "
         f"int64 buffer). A box holds (col_end - col_begin) * (row_end - row_begin) pixels."
     )
+    # The chunks themselves, by their box sizes.
+    check_chunking(impl, device)
     # Culling, an empty scene, bad input.
     reversed_ = screen[:, [0, 2, 1]].float().to(device)
     culled = rasterized(impl, reversed_, width, height, cull_backfaces=True).cpu()
@@ -1772,6 +1965,123 @@ def test_perspective_correct_exact_surface_point(impl, reference, device):
             where="covered pixel",
         )
         assert bool((texcoords[~covered] == 0).all()), "interpolate: 0 where face == -1"
+        keys, screen, source, _ = reference_raster(reference, mesh, camera)
+        k = torch.where(keys == EMPTY, 0, keys & MASK).cpu()
+        want_face = torch.where(keys.cpu() == EMPTY, -1, source.cpu()[k]).reshape(face.shape)
+        assert_equal(
+            face,
+            want_face,
+            name=f"{case}: face = source[id of the key], -1 where the key is EMPTY",
+            where="pixel",
+        )
+        assert bool((bary[~covered] == 0).all()), f"{case}: bary 0 where face == -1"
+        check_one_triangle(impl, device, dtype, tol)
+
+
+def check_one_triangle(impl, device, dtype, tol):
+    """resolve_pixels and interpolate with one triangle (and with none): keys at its corners
+    and on its medians, where some sums of edge functions are exactly 0 (only the sum of all
+    three is the triangle's area), empty keys elsewhere."""
+    width = height = 12
+    xy = torch.tensor([[1.5, 1.5], [9.5, 1.5], [1.5, 9.5]], dtype=F64)
+    inv_w = torch.tensor([1.0, 0.5, 0.25], dtype=F64)
+    screen = torch.cat([xy, torch.full((3, 1), 0.5, dtype=F64), inv_w[:, None]], -1)[None]
+    weights = torch.tensor([[[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]], dtype=F64)
+    source = torch.tensor([3])
+    # corners, the centroid-ish middle, points on the medians and halfway up
+    points = [(1, 1), (1, 9), (9, 1), (5, 3), (5, 1), (1, 5), (3, 5), (5, 5), (3, 3)]
+    keys = torch.full((height * width,), EMPTY, dtype=torch.int64)
+    for row, col in points:
+        keys[row * width + col] = (1 << 32) | 0
+    covered = keys != EMPTY
+    pixel = torch.arange(height * width)
+    px, py = (pixel % width).to(F64) + 0.5, (pixel // width).to(F64) + 0.5
+    v = xy
+
+    def edge(i, j):
+        return (px - v[i, 0]) * (v[j, 1] - v[i, 1]) - (py - v[i, 1]) * (v[j, 0] - v[i, 0])
+
+    e = torch.stack([edge(1, 2), edge(2, 0), edge(0, 1)], -1)
+    q = e / e.sum(-1, keepdim=True) * inv_w
+    mu = q / q.sum(-1, keepdim=True)
+    want_bary = torch.where(covered[:, None], mu @ weights[0], 0.0).reshape(height, width, 3)
+    want_face = torch.where(covered, 3, -1).reshape(height, width)
+    case = (
+        f"resolve_pixels ({dtype}) of one triangle {xy.tolist()} (1/w = {inv_w.tolist()}), "
+        f"keys at its corners and medians"
+    )
+    result = impl.resolve_pixels(
+        keys.to(device),
+        screen.to(device, dtype),
+        source.to(device),
+        weights.to(device, dtype),
+        width,
+        height,
+    )
+    face = check_tensor(
+        result[0], f"{case}: face", shape=(height, width), dtype=torch.int64, device=device
+    ).cpu()
+    bary = check_tensor(
+        result[1], f"{case}: bary", shape=(height, width, 3), dtype=dtype, device=device
+    ).cpu()
+    assert_equal(face, want_face, name=f"{case}: face (source, -1 where empty)", where="pixel")
+    assert_close(
+        bary.double(),
+        want_bary,
+        atol=tol,
+        name=(
+            f"{case}: perspective-correct barycentrics (a pixel centre on a corner or a median "
+            f"is a pixel like any other; 0 where empty)"
+        ),
+        where="pixel",
+    )
+    # interpolate on a one-face mesh: its empty pixels index no other face.
+    values = torch.tensor([[1.0, -2.0], [4.0, 0.5], [-3.0, 8.0]], dtype=F64)
+    got = check_tensor(
+        impl.interpolate(
+            values.to(device, dtype),
+            torch.tensor([[0, 1, 2]], device=device),
+            torch.where(covered, 0, -1).reshape(height, width).to(device),
+            want_bary.to(device, dtype),
+        ),
+        "interpolate(...)",
+        shape=(height, width, 2),
+        dtype=dtype,
+        device=device,
+    ).cpu()
+    assert_close(
+        got.double(),
+        want_bary @ values,
+        atol=tol * 20,
+        name=f"interpolate ({dtype}) on a one-face mesh, 0 where face == -1",
+        where="pixel",
+    )
+    # Nothing rasterized: every pixel empty.
+    result = impl.resolve_pixels(
+        torch.full((height * width,), EMPTY, dtype=torch.int64, device=device),
+        torch.zeros(0, 3, 4, device=device, dtype=dtype),
+        torch.zeros(0, dtype=torch.int64, device=device),
+        torch.zeros(0, 3, 3, device=device, dtype=dtype),
+        width,
+        height,
+    )
+    face = check_tensor(
+        result[0],
+        "resolve_pixels of no triangles: face",
+        shape=(height, width),
+        dtype=torch.int64,
+        device=device,
+    ).cpu()
+    bary = check_tensor(
+        result[1],
+        "resolve_pixels of no triangles: bary",
+        shape=(height, width, 3),
+        dtype=dtype,
+        device=device,
+    ).cpu()
+    assert bool((face == -1).all()) and bool((bary == 0).all()), (
+        f"resolve_pixels ({dtype}) of no triangles (every key EMPTY): face -1 and bary 0 everywhere"
+    )
 
 
 def resolved(impl, reference, mesh: Mesh, camera: Camera):
@@ -1871,6 +2181,24 @@ def test_shade_flat_smooth(impl, reference, device):
     assert (smooth - sphere).abs().mean() < 0.5 * (flat - sphere).abs().mean(), (
         "shade: smooth shading should approximate the sphere much better than flat shading"
     )
+    # A one-face mesh: empty pixels index no other face.
+    one = Mesh(
+        torch.tensor([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], device=device),
+        torch.tensor([[0, 1, 2]], device=device),
+    )
+    one_face = torch.tensor([[0, -1], [-1, 0]], device=device)
+    one_bary = torch.tensor([[[0.2, 0.3, 0.5], [0.0] * 3], [[0.0] * 3, [1.0, 0.0, 0.0]]])
+    toward = torch.tensor([0.0, 0.6, 0.8], device=device)  # n = +z: n . l = 0.8
+    for smooth in (False, True):
+        got = impl.shade(one, one_face, one_bary.to(device), toward, smooth).cpu()
+        want = torch.tensor([[0.8, 0.0], [0.0, 0.8]])
+        assert_close(
+            got,
+            want,
+            atol=1e-6,
+            name=f"shade(smooth={smooth}) of a one-face mesh (normal +z), 0 where face == -1",
+            where="pixel",
+        )
     expect_error(
         "light_direction",
         impl.shade,
@@ -1946,6 +2274,34 @@ def reference_stages(reference, mesh: Mesh, camera: Camera) -> dict:
     }
 
 
+_BUDGETS: list = []
+
+
+def recording_rasterize(
+    screen,
+    width: int,
+    height: int,
+    *,
+    depth_bits: int = 32,
+    cull_backfaces: bool = False,
+    memory_budget_bytes: int = 2**28,
+    out=None,
+):
+    """In place of the lab's ``rasterize``: remembers the memory budget it is given and
+    draws nothing."""
+    _BUDGETS.append(memory_budget_bytes)
+    return torch.full((width * height,), EMPTY, dtype=torch.int64, device=screen.device)
+
+
+def rasterize_mesh_budgets(lab, mesh: Mesh, camera: Camera, **kwargs):
+    """The ``memory_budget_bytes`` that ``lab.rasterize_mesh(mesh, camera, **kwargs)``
+    hands to ``rasterize``."""
+    _BUDGETS.clear()
+    with replaced(lab, {"rasterize": recording_rasterize}):
+        lab.rasterize_mesh(mesh, camera, **kwargs)
+    return list(_BUDGETS)
+
+
 def rasterize_mesh_with_stage(lab, stage: str, value, mesh: Mesh, camera: Camera):
     """``lab.rasterize_mesh`` next to the lab, its ``stage`` returning ``value`` (the
     reference's result of that stage) whatever it is given."""
@@ -2011,6 +2367,12 @@ def test_rasterize_mesh_matches_ray_tracing(impl, reference, device):
         culled, mesh.to("cpu"), camera, "rasterize_mesh(cull_backfaces=True) of Suzanne", agree=0.99
     )
     print(f"raster vs float64 ray tracing: {rate:.3%} of pixels differ")
+    for kwargs, want in (({}, 2**28), ({"memory_budget_bytes": 3000}, 3000)):
+        budgets = impl.probe(rasterize_mesh_budgets, mesh, camera, **kwargs)
+        assert budgets == [want], (
+            f"rasterize_mesh(..., {kwargs}) handed rasterize memory_budget_bytes {budgets} "
+            f"(one call expected, with {want}: the default is 2**28)"
+        )
     if device != "cpu":
         face, _ = pipeline(impl, mesh, camera)
         cpu_face, _ = pipeline(impl, mesh.to("cpu"), camera)
@@ -2114,7 +2476,8 @@ def test_raster_far_from_origin_fp64_and_tiny_viewports(impl, device):
 
 
 def reference_shadows(mesh: Mesh, camera: Camera, light):
-    """Float64 shadows from exact primary hits: (triangle (N,), shadowed (N,))."""
+    """Float64 shadows from exact primary hits: (triangle (N,), shadowed (N,), the first
+    blocker (N,), -1 where none)."""
     rays, t, tri = reference_visibility(mesh, camera)
     hit = tri >= 0
     points = rays.origins[hit] + t[hit, None] * rays.directions[hit]
@@ -2129,7 +2492,9 @@ def reference_shadows(mesh: Mesh, camera: Camera, light):
     )
     shadowed = torch.zeros_like(hit)
     shadowed[hit] = blocker >= 0
-    return tri, shadowed
+    first = torch.full_like(tri, -1)
+    first[hit] = blocker
+    return tri, shadowed, first
 
 
 @pytest.mark.task(5)
@@ -2147,7 +2512,7 @@ def test_hybrid_shadows_match_traced(impl, reference, device):
         dtype=torch.bool,
         device=device,
     ).cpu()
-    ref_tri, ref_shadowed = reference_shadows(mesh, camera, light)
+    ref_tri, ref_shadowed, _ = reference_shadows(mesh, camera, light)
     shadowed_flat = shadowed.reshape(-1)
     assert not bool(shadowed_flat[face.reshape(-1) < 0].any()), (
         "hybrid_shadows: empty pixels are never shadowed"
@@ -2180,6 +2545,36 @@ def test_hybrid_shadows_match_traced(impl, reference, device):
         f"traced_shadows {traced.double().mean().item():.2%}: raster primary visibility "
         f"should change the shadowed fraction by less than 1%"
     )
+    # Three stacked plates: face 0 shows in shadow, and face 0 casts shadows.
+    plates, plates_camera = scene("plates")
+    sun = torch.tensor([-1.0, 1.0, 0.3])
+    face, bary = (x.cpu() for x in reference.rasterize_mesh(plates.to(device), plates_camera))
+    ref_tri, ref_shadowed, ref_blocker = reference_shadows(plates, plates_camera, sun)
+    hybrid = impl.hybrid_shadows(
+        trace_plates, plates.to(device), face.to(device), bary.to(device), sun.to(device)
+    )
+    traced_face, traced = impl.traced_shadows(trace_plates, plates.to(device), plates_camera, sun)
+    on_face0 = (ref_tri == 0) & ref_shadowed
+    by_face0 = ref_blocker == 0
+    assert int(on_face0.sum()) > 20 and int(by_face0.sum()) > 40, "test set-up: plates"
+    for what, got in (("hybrid_shadows", hybrid), ("traced_shadows", traced)):
+        got = got.cpu().reshape(-1)
+        for name, pixels in (
+            ("pixels showing face 0 in shadow", on_face0),
+            ("pixels whose shadow ray meets face 0 first", by_face0),
+        ):
+            missed = int((pixels & ~got).sum())
+            assert missed <= 0.1 * int(pixels.sum()), (
+                f"{what} of three stacked plates, light {sun.tolist()}: {missed} of the "
+                f"{int(pixels.sum())} {name} are not shadowed (face and triangle ids start "
+                f"at 0: a hit is id >= 0, a miss -1)"
+            )
+    assert_fraction(
+        traced_face.cpu().reshape(-1) != ref_tri,
+        name="traced_shadows of three stacked plates: primary hits",
+        at_most=0.02,
+        where="pixel",
+    )
     # The offset follows the scene's scale.
     eps = impl.shadow_epsilon(mesh)
     big = impl.shadow_epsilon(Mesh(mesh.vertices * 1000, mesh.faces))
@@ -2198,6 +2593,21 @@ def test_hybrid_shadows_match_traced(impl, reference, device):
             f"1e-4 * extent + 8 * eps * max|x| = {want:.6g} (max|x| the largest absolute "
             f"coordinate)"
         )
+    # Computed in float64: a float64 scene 1e-3 across, 1e6 from the origin (in float32 its
+    # corners would all be the same point).
+    tiny = Mesh(
+        torch.tensor([[0.0, 0.0, 0.0], [1e-3, 0.0, 0.0], [0.0, 1e-3, 0.0]], dtype=F64) + 1e6,
+        torch.tensor([[0, 1, 2]]),
+    )
+    want = 1e-4 * math.sqrt(2) * 1e-3 + 8 * torch.finfo(F64).eps * (1e6 + 1e-3)
+    got = impl.shadow_epsilon(tiny)
+    assert got == pytest.approx(want, rel=1e-6), (
+        f"shadow_epsilon of a float64 triangle 1e-3 across, 1e6 from the origin: {got!r}, "
+        f"expected {want:.6g} (compute in float64: float32 rounds its extent to 0)"
+    )
+    # No finite vertex: no scale, no offset.
+    got = impl.shadow_epsilon(Mesh(torch.full((3, 3), math.nan), torch.tensor([[0, 1, 2]])))
+    assert got == 0.0, f"shadow_epsilon of a mesh whose vertices are all NaN: {got!r}, expected 0.0"
     expect_error(
         "light_direction",
         impl.hybrid_shadows,

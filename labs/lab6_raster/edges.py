@@ -41,8 +41,9 @@ def bounding_boxes(screen, width: int, height: int):
     ``[col_begin, row_begin, col_end, row_end]``, half-open: columns ``col_begin <= col <
     col_end``. Pixel ``col`` qualifies when its centre ``col + 0.5`` lies in ``[x_min, x_max]``:
     ``col_begin = ceil(x_min - 0.5)``, ``col_end = floor(x_max - 0.5) + 1``, both clamped
-    to ``[0, width]`` (rows likewise). A triangle off screen, or with a NaN/inf coordinate,
-    gets an empty box (``begin == end``).
+    to ``[0, width]`` (rows likewise). A triangle off screen, or with a NaN/inf x or y,
+    gets an empty box (``begin == end``). Only x and y are read: further columns (``z_ndc``,
+    ``1/w``) play no part, even NaN.
 
     Clamping is what makes huge triangles cheap: a triangle 1e6 pixels across costs at
     most ``width * height`` fragments. (Clamp the floats before converting: ``1e30`` or
@@ -80,7 +81,8 @@ def coverage(screen, width: int, height: int, cull_backfaces: bool = False):
     behind). Returns ``(triangle, pixel, bary)``: triangle (N,) int64 indices into
     ``screen``, pixel (N,) int64 ``row * width + col``, bary (N, 3) the screen-space
     barycentrics ``e_i / (e0 + e1 + e2)`` at the pixel centre (same dtype as ``screen``).
-    Fragments come grouped by triangle, in increasing triangle order.
+    Fragments come grouped by triangle, in increasing triangle order. Only x and y are
+    read: further columns (``z_ndc``, ``1/w``) play no part, even NaN.
 
     1. Per triangle: its area ``E_12(v0)``; zero-area and non-finite triangles cover
        nothing, nor do back faces (area < 0) when culling.

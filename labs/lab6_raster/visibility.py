@@ -113,12 +113,13 @@ def rasterize(
     ``pack_depth_id(depth, k)`` of the nearest triangle ``k`` (an index into ``screen``);
     exact depth ties go to the lowest ``k``.
 
-    Clear ``out`` to ``EMPTY``; walk the triangles in chunks whose bounding boxes hold at
-    most ``memory_budget_bytes // BYTES_PER_FRAGMENT`` pixels (at least one triangle per
-    chunk); per chunk: ``coverage``, the fragment depth (see ``fragment_depth``; fragments
-    beyond the far plane, ``z_ndc > 1``, are dropped), ``pack_depth_id`` with the chunk's
-    offset added to the ids, ``depth_test``. The atomic minimum makes the result independent
-    of the chunking and of the triangle order: bit for bit the same keys.
+    Clear ``out`` to ``EMPTY``; walk the triangles in chunks (consecutive, as many triangles
+    as fit) whose bounding boxes hold at most ``memory_budget_bytes // BYTES_PER_FRAGMENT``
+    pixels (at least one triangle per chunk); per chunk: ``coverage``, the fragment depth
+    (see ``fragment_depth``; fragments beyond the far plane, ``z_ndc > 1``, are dropped),
+    ``pack_depth_id`` with the chunk's offset added to the ids, ``depth_test``. The atomic
+    minimum makes the result independent of the chunking and of the triangle order: bit for
+    bit the same keys.
 
     Errors: ValueError or TypeError naming ``screen`` (not a (K, 3, 4) float tensor) or
     ``out`` (not a (width * height,) int64 tensor on the screen's device); ValueError naming

@@ -66,6 +66,8 @@ def shadow_epsilon(mesh: Mesh) -> float:
     and far from the origin the ulps grow with the coordinates. Too large an offset lets
     light leak through thin occluders in contact: scale, not a constant.
 
+    Returns 0.0 when no vertex is finite.
+
     Hints: compute in float64; ``torch.finfo(mesh.dtype).eps``; ignore non-finite vertices.
     """
     # Provided: validates the arguments (ValueError/TypeError naming the argument).

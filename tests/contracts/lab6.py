@@ -73,6 +73,16 @@ CONTRACTS = {
             "test_bounding_boxes",
             None,
         ),
+        (
+            "only x and y are read: (K, 3, 4) screens with w != 1, NaN z_ndc or 1/w",
+            "test_bounding_boxes",
+            None,
+        ),
+        (
+            "extents ending exactly on pixel centres, beyond int64 (1e30), several sizes",
+            "test_bounding_boxes",
+            None,
+        ),
     ],
     "coverage": [
         (
@@ -97,6 +107,16 @@ CONTRACTS = {
         ),
         (
             "zero-area and NaN/inf triangles cover nothing",
+            "test_coverage_culling_degenerate_subpixel",
+            None,
+        ),
+        (
+            "a triangle of area exactly +-1/2 pixel covers its centre (culled when back-facing)",
+            "test_coverage_culling_degenerate_subpixel",
+            None,
+        ),
+        (
+            "only x and y are read: NaN z_ndc and infinite 1/w change nothing",
             "test_coverage_culling_degenerate_subpixel",
             None,
         ),
@@ -146,10 +166,21 @@ CONTRACTS = {
             "test_depth_test_atomic_min_order_independent",
             "pixel_bound_off_by_one",
         ),
+        (
+            "ValueError naming pixel for a negative index; pixels need not start at 0",
+            "test_depth_test_atomic_min_order_independent",
+            None,
+        ),
     ],
     "rasterize": [
         (
             "the visibility buffer of the nearest fragment per pixel, chunked or not",
+            "test_rasterize_visibility_buffer",
+            None,
+        ),
+        (
+            "chunks: consecutive, at most budget // BYTES_PER_FRAGMENT box pixels (or one "
+            "triangle), as many as fit; the default budget is 2**28; a budget of 1 is valid",
             "test_rasterize_visibility_buffer",
             None,
         ),
@@ -172,6 +203,16 @@ CONTRACTS = {
             "test_perspective_correct_exact_surface_point",
             None,
         ),
+        (
+            "face = source[id of the key], -1 and bary 0 where EMPTY; no triangles: all empty",
+            "test_perspective_correct_exact_surface_point",
+            None,
+        ),
+        (
+            "pixel centres on a corner or a median of a one-triangle buffer",
+            "test_perspective_correct_exact_surface_point",
+            None,
+        ),
     ],
     "rasterize_mesh": [
         (
@@ -184,11 +225,21 @@ CONTRACTS = {
             "test_raster_far_from_origin_fp64_and_tiny_viewports",
             None,
         ),
+        (
+            "memory_budget_bytes handed to rasterize, default 2**28",
+            "test_rasterize_mesh_matches_ray_tracing",
+            None,
+        ),
     ],
     "interpolate": [
         (
             "sum_i bary_i * values[faces[face, i]], zero where face < 0",
             "test_shade_flat_smooth",
+            None,
+        ),
+        (
+            "on a one-face mesh too (empty pixels index no other face)",
+            "test_perspective_correct_exact_surface_point",
             None,
         ),
     ],
@@ -197,6 +248,11 @@ CONTRACTS = {
             "smooth shading renormalises the interpolated normal",
             "test_shade_flat_smooth",
             "smooth_normal_not_renormalised",
+        ),
+        (
+            "0 where face == -1, on a one-face mesh too",
+            "test_shade_flat_smooth",
+            None,
         ),
     ],
     "traced_visibility": [
@@ -219,6 +275,11 @@ CONTRACTS = {
             "test_hybrid_shadows_match_traced",
             None,
         ),
+        (
+            "computed in float64; 0.0 when no vertex is finite",
+            "test_hybrid_shadows_match_traced",
+            None,
+        ),
     ],
     "hybrid_shadows": [
         (
@@ -231,10 +292,20 @@ CONTRACTS = {
             "test_hybrid_shadows_match_traced",
             None,
         ),
+        (
+            "face 0 is a surface and triangle 0 a blocker like any other",
+            "test_hybrid_shadows_match_traced",
+            None,
+        ),
     ],
     "traced_shadows": [
         (
             "the shadows of traced primary hits",
+            "test_hybrid_shadows_match_traced",
+            None,
+        ),
+        (
+            "triangle 0 is a primary hit and a blocker like any other",
             "test_hybrid_shadows_match_traced",
             None,
         ),

@@ -144,4 +144,22 @@ EQUIVALENT = {
         "the masked density of a missed point becomes 1: it is multiplied by dt = 0 (t_near = "
         "t_far = 0 where hit is False), so it adds 0 to the depth"
     ),
+    "lab4_march:sample_grid:op_Sub_Add:2": (
+        "i0 no longer clamped to n - 2 differs only at u = n - 1 exactly (the last centre or "
+        "past it): i0 = i1 = n - 1 with f = 0 reads grid[n - 1] at weight 1 and again at "
+        "weight 0, which adds nothing (a weight-0 corner is masked, even +inf): the same value"
+    ),
+    "lab4_march:sample_grid:const_int:5": (
+        "the clamp of n - 2 at 1 instead of 0 differs only for n = 2 at u = 1 exactly: i0 = "
+        "i1 = 1 with f = 0 reads grid[1] at weight 1, as i0 = 0, f = 1 does (grid[0] at weight "
+        "0 is masked, even +inf): the same value"
+    ),
+    "lab4_march:march_single_scatter:cmp_Gt_GtE:0": (
+        "size only divides where box_max > box_min: on a flat axis the local coordinate is the "
+        "0.5 of the torch.where that follows, whatever size holds there"
+    ),
+    "lab4_march:march_single_scatter:const_int:4": (
+        "the stand-in size 1 (or 2) of a flat axis is never used: the local coordinate there "
+        "is the 0.5 of the torch.where that follows"
+    ),
 }

@@ -253,4 +253,9 @@ EQUIVALENT = {
         "the placeholder divisor 1.0 or 1.1 is used only where the weight is 0, whose quotient "
         "the outer where replaces by 0"
     ),
+    "lab5_froxel:henyey_greenstein:cmp_GtE_Gt:0": (
+        "g = 0 picks the other denominator: (1 + g)^2 - 2 g (1 + cos) and "
+        "(1 - g)^2 + 2 g (1 - cos) are both exactly 1 at g = 0, so the value is the same for "
+        "every cos"
+    ),
 }
