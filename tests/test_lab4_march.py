@@ -885,7 +885,9 @@ def march_given_box(
     radiance, transmittance = 0, torch.ones(len(origins), **like)
     for i in range(steps):
         offset = (origins - lo) + (near + (i + 0.5) * dt)[:, None] * directions
-        points, local = lo + offset, offset / (hi - lo)
+        # box coordinates; a flat axis (lo = hi) is read at its middle, as documented
+        local = torch.where(hi > lo, offset / torch.where(hi > lo, hi - lo, 1), 0.5)
+        points = lo + offset
         sigma = torch.where(hit, given_field(density, points, local), 0)
         weight, t_seg = lab.segment_integral(sigma, torch.where(hit, ds, 0), integrator)
         if emission is not None:
@@ -2235,7 +2237,9 @@ def given_march_box(
     for i in range(steps):
         active = hit & (transmittance >= min_transmittance)
         offset = (origins - lo) + (near + (i + 0.5) * dt)[:, None] * directions
-        points, local = lo + offset, offset / (hi - lo)
+        # box coordinates; a flat axis (lo = hi) is read at its middle, as documented
+        local = torch.where(hi > lo, offset / torch.where(hi > lo, hi - lo, 1), 0.5)
+        points = lo + offset
         sigma = torch.where(active, given_field(density, points, local), 0)
         weight, t_step = given_step(sigma, torch.where(active, ds, 0))
         q = given_field(emission, points, local)
@@ -2773,7 +2777,8 @@ def test_single_scatter_matches_closed_form(impl, device):
     what = "march_single_scatter (a flat box z = 0.5, rays and light in its plane)"
     got, twin = (
         result_dict(
-            impl.march_single_scatter(
+            single_scatter(
+                impl,
                 fo.to(device),
                 fd.to(device),
                 FLAT_LO,
