@@ -172,9 +172,10 @@ def _needed(items) -> list[tuple[str, int]]:
         if item.module.__name__ != __name__:
             continue
         needs = NEEDS.get(item.originalname)
-        if needs is None and hasattr(item, "callspec"):
+        params = getattr(getattr(item, "callspec", None), "params", {})
+        if needs is None and "name" in params:  # a test parametrized by submission
             lab = 8 if "toy" in item.originalname else 0
-            needs = [(item.callspec.params["name"], lab)]
+            needs = [(params["name"], lab)]
         wanted |= set(needs or ())
     return [run for run in _ALL if run in wanted]
 
