@@ -198,10 +198,16 @@ class Worker:
             os.chown(self.workdir, *user)
         ctl_parent, ctl_child = socket.socketpair()
         data_parent, data_child = socket.socketpair()
+        # Compiled kernels in the worker's own folder, never in a cache the grader's
+        # environment names (torch sets TORCHINDUCTOR_CACHE_DIR there once the grader has
+        # used inductor): a submission must not plant artefacts another student's worker
+        # loads, and a worker user could not write to the grader's cache anyway.
         env = dict(
             worker_env(),
             PYTHONUNBUFFERED="1",
             TMPDIR=self.workdir,
+            TORCHINDUCTOR_CACHE_DIR=os.path.join(self.workdir, "inductor"),
+            TRITON_CACHE_DIR=os.path.join(self.workdir, "triton"),
             PYTORCH_NVML_BASED_CUDA_CHECK="1",
         )
         fds = (ctl_child.fileno(), data_child.fileno())

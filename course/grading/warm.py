@@ -9,7 +9,10 @@ submissions (:mod:`course.grading.classroom`) are graded this way.
 A *job* is a JSON-able dict with an ``id``. The parent talks to each worker through two
 files, so nothing a job prints, and no crash, can garble what the parent reads:
 
-* ``JOBS``: one JSON job a line, written before the worker starts;
+* ``JOBS``: one JSON job a line, written before the worker starts; in a pool with a shared
+  claims folder, a first line ``{"claims": FOLDER}`` names it (in the file, not on the
+  worker's command line, so that no worker command can leave it out: a worker without it
+  would run every job of the pool);
 * ``RESULTS``: the worker appends ``{"id": ..., "started": true}`` before a job and the
   job's outcome (a dict with its ``id`` and no ``started``) after it, each line flushed.
 
@@ -63,11 +66,14 @@ def _claim(claims: Path, job_id: str) -> bool:
 
 
 def serve(jobs: str, results: str, handle: Callable[[dict], dict], claims: str | None = None):
-    """Worker side: run ``handle(job)`` for each job of the file ``jobs`` (of those it can
-    claim, with ``claims``), appending to ``results`` as the module docstring says."""
+    """Worker side: run ``handle(job)`` for each job of the file ``jobs`` (only those it
+    can claim, where ``claims`` or the file's header names a claims folder), appending to
+    ``results`` as the module docstring says."""
     _die_with_parent()
     parent = os.getppid()
     specs = [json.loads(line) for line in Path(jobs).read_text().splitlines() if line.strip()]
+    if specs and "id" not in specs[0]:  # the pool's header: its claims folder
+        claims = claims or specs.pop(0).get("claims")
     with open(results, "a") as out:
         for spec in specs:
             if os.getppid() != parent:  # no parent-death signal on this system
@@ -121,6 +127,7 @@ def run_queue(
     jobs finished; ``stop``, once set, kills the worker and returns what finished."""
     done: dict[str, dict] = {}
     order: list[str] = []
+
     remaining = list(specs)
     while remaining and not (stop and stop.is_set()):
         with tempfile.TemporaryDirectory(dir=scratch) as tmp:
@@ -129,7 +136,8 @@ def run_queue(
                 Path(tmp, "results.jsonl"),
                 Path(tmp, "worker.log"),
             )
-            jobs.write_text("".join(json.dumps(s) + "\n" for s in remaining))
+            header = [{"claims": claims}] if claims else []
+            jobs.write_text("".join(json.dumps(s) + "\n" for s in header + remaining))
             results.touch()
             with open(log, "wb") as log_file:
                 proc = subprocess.Popen(
@@ -167,13 +175,13 @@ def run_queue(
                 if current and time.monotonic() - since > deadline:
                     _kill(proc)
                     killed = True
-                    done[current] = lost(current, f"timed out after {deadline:.0f} s")
+                    done[current] = _given_up(lost, current, f"timed out after {deadline:.0f} s")
                     order.append(current)
                     tick(1)
                     current = None
             read()
             if current is not None:  # it died while running this job
-                done[current] = lost(current, f"worker exited {proc.returncode}")
+                done[current] = _given_up(lost, current, f"worker exited {proc.returncode}")
                 order.append(current)
                 tick(1)
             elif proc.returncode != 0 and not killed:
@@ -186,7 +194,9 @@ def run_queue(
                         )
                 else:  # blame the next job, so the queue always moves on
                     first = next(s for s in remaining if s["id"] not in done)
-                    done[first["id"]] = lost(first["id"], f"worker exited {proc.returncode}")
+                    done[first["id"]] = _given_up(
+                        lost, first["id"], f"worker exited {proc.returncode}"
+                    )
                     order.append(first["id"])
                     tick(1)
         if claims:
@@ -200,6 +210,12 @@ def run_queue(
         else:
             remaining = [s for s in remaining if s["id"] not in done]
     return [done[i] for i in order]
+
+
+def _given_up(lost: Callable[[str, str], dict], job_id: str, why: str) -> dict:
+    """``lost``'s outcome for a job that ran past its deadline or whose worker died, naming
+    the job as every outcome does."""
+    return dict(lost(job_id, why), id=job_id)
 
 
 def _kill(proc: subprocess.Popen):

@@ -56,7 +56,7 @@ def folders():
 
     from torch._inductor.runtime.cache_dir_utils import cache_dir
 
-    return tempfile.gettempdir(), cache_dir()
+    return tempfile.gettempdir(), cache_dir(), os.environ.get("TRITON_CACHE_DIR", "")
 '''
 
 
@@ -103,14 +103,15 @@ def test_forked_worker_answers_as_a_fresh_one(forked):
     )
     assert os.getpgid(keeper) == keeper, "the keeper leads its own session, as a fresh one"
     workdir = lab._worker.workdir
-    tmp, inductor = lab.folders()
-    # Inductor's cache: where the grader's environment names one (torch sets the variable
-    # once it has used inductor in this process), else the worker's own folder; never the
-    # zygote's, which every student's worker would share.
-    want = os.environ.get("TORCHINDUCTOR_CACHE_DIR") or workdir + os.sep
-    assert tmp == workdir and inductor.startswith(want), (
-        f"temporary files in the worker's own folder {workdir} and inductor's cache at {want}"
-        f", not the zygote's {zygote._zygote.tmp}: got {tmp}, {inductor}"
+    tmp, inductor, triton = lab.folders()
+    # Inductor's cache: the worker's own folder, never the zygote's or the grader's (torch
+    # names one in this process's environment once it has used inductor), which every
+    # student's worker would share.
+    want = workdir + os.sep
+    assert tmp == workdir and inductor.startswith(want) and triton.startswith(want), (
+        f"temporary files in the worker's own folder {workdir} and inductor's and Triton's "
+        f"caches under it, not the zygote's {zygote._zygote.tmp}: got {tmp}, {inductor}, "
+        f"{triton}"
     )
 
 
