@@ -1655,18 +1655,43 @@ def rasterize_chunks(lab, screen, width: int, height: int, **kwargs):
     return list(_CHUNKS)
 
 
+def in_screen_order(chunks: list, screen) -> list:
+    """``chunks`` put in the order in which they tile ``screen`` (K, 3, 4) as consecutive
+    slices, or as given when no order does (a depth-first search: a chunk equal to one
+    already tried at a position is not tried again there)."""
+    chunks = [c.cpu() for c in chunks]
+
+    def tile(start: int, left: list):
+        if not left:
+            return [] if start == screen.shape[0] else None
+        tried = []
+        for i, chunk in enumerate(left):
+            end = start + chunk.shape[0]
+            fits = end <= screen.shape[0] and torch.equal(screen[start:end], chunk)
+            if fits and not any(torch.equal(chunk, t) for t in tried):
+                tried.append(chunk)
+                rest = tile(end, left[:i] + left[i + 1 :])
+                if rest is not None:
+                    return [chunk, *rest]
+        return None
+
+    return tile(0, chunks) or chunks
+
+
 def check_chunks(impl, screen, width, height, budget, case, device):
-    """The chunks of ``rasterize``: consecutive slices of the triangles, in order, each
-    holding at most ``budget // BYTES_PER_FRAGMENT`` box pixels (or one triangle), and not
-    needlessly many of them."""
+    """The chunks of ``rasterize``: consecutive slices of the triangles (walked in any
+    order: the atomic minimum makes the keys independent of it), each holding at most
+    ``budget // BYTES_PER_FRAGMENT`` box pixels (or one triangle), and not needlessly many
+    of them."""
     kwargs = {} if budget is None else {"memory_budget_bytes": budget}
     budget = 2**28 if budget is None else budget
     chunks = impl.probe(rasterize_chunks, screen.to(device), width, height, **kwargs)
     what = f"rasterize ({case}, memory_budget_bytes={budget}, {width}x{height})"
+    chunks = in_screen_order(chunks, screen.cpu())
     got = torch.cat(chunks) if chunks else screen[:0].cpu()
     assert got.shape == screen.shape and torch.equal(got, screen.cpu()), (
         f"{what}: the chunks handed to coverage must be consecutive slices of the triangles, "
-        f"together every triangle once and in order; got chunks of "
+        f"together every triangle once; got chunks of "
         f"{[c.shape[0] for c in chunks]} triangles for {screen.shape[0]}"
     )
     boxes, empty = box_reference(screen[..., :2].cpu().to(F64), width, height)

@@ -37,12 +37,22 @@ class Mutant:
 
 def load_mutants(root) -> list[Mutant]:
     """All mutants shipped under ``root/solutions/mutants``."""
+    return _load(root, "mutants", "MUTANTS")
+
+
+def load_alternatives(root) -> list[Mutant]:
+    """The correct alternative solutions under ``root/solutions/alternatives``: changes to
+    the reference that every grader must accept (no test they select may fail)."""
+    return _load(root, "alternatives", "ALTERNATIVES")
+
+
+def _load(root, folder: str, name: str) -> list[Mutant]:
     from course.core.files import import_file
 
-    mutants = []
-    for path in sorted(Path(root, "solutions", "mutants").glob("lab*.py")):
-        mutants += import_file(path, f"rtcourse_mutants_{path.stem}").MUTANTS
-    return mutants
+    found = []
+    for path in sorted(Path(root, "solutions", folder).glob("lab*.py")):
+        found += getattr(import_file(path, f"rtcourse_{folder}_{path.stem}"), name)
+    return found
 
 
 def _function_span(source: str, qualname: str) -> tuple[int, int]:
