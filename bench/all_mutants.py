@@ -12,6 +12,15 @@ files) grades only the rest. ``--budget`` stops starting chunks when the next on
 finish in time (estimated from the last). A mutant that hangs past ``--deadline`` counts as
 caught, as the real grader's deadline fails it.
 
+``--kept-since COMMIT`` (with ``--resume``): after the references or the graders changed,
+keep of the resumed outcomes only the caught mutants (and the reviewed equivalents) whose
+function is the same at
+``COMMIT`` (the commit the resumed run graded) and now (its code, docstring aside; ids
+number a function's sites, so an unchanged function keeps its ids); grade the rest again:
+the survivors (a new test may catch them now) and every mutant of a changed function. A
+test only ever added or strengthened keeps a caught mutant caught; one relaxed since needs
+its function's mutants graded again by hand (``rtcourse mutants --generated --only``).
+
 At the end: the score table over every outcome in the files, as ``rtcourse mutants
 --generated`` prints it (reviewed equivalents from ``solutions/mutants/reviewed/labN.py``).
 """
@@ -19,7 +28,9 @@ At the end: the score table over every outcome in the files, as ``rtcourse mutan
 from __future__ import annotations
 
 import argparse
+import ast
 import json
+import subprocess
 import sys
 import time
 from dataclasses import asdict
@@ -44,6 +55,45 @@ def read_outcomes(paths) -> dict[str, dict]:
     return done
 
 
+def _code(source: str | None, name: str) -> str | None:
+    """The code of the top-level function or class ``name`` in ``source``, docstring
+    aside (``ast.dump``), or None where there is none."""
+    if source is None:
+        return None
+    for node in ast.parse(source).body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            if node.name == name:
+                body = node.body[1:] if ast.get_docstring(node) is not None else node.body
+                return ast.dump(ast.Module(body, []))
+    return None
+
+
+def kept_since(done: dict[str, dict], commit: str, reviewed) -> dict[str, dict]:
+    """Of ``done`` (outcomes by id), the caught mutants and the ``reviewed`` equivalents
+    whose function's code is the same at ``commit`` and in the working tree."""
+    texts: dict[tuple[str, str], str | None] = {}
+
+    def text(rev: str, path: str) -> str | None:
+        if (rev, path) not in texts:
+            if rev:
+                shown = subprocess.run(
+                    ["git", "show", f"{rev}:{path}"], cwd=ROOT, capture_output=True, text=True
+                )
+                texts[rev, path] = shown.stdout if shown.returncode == 0 else None
+            else:
+                texts[rev, path] = (ROOT / path).read_text() if (ROOT / path).is_file() else None
+        return texts[rev, path]
+
+    kept = {}
+    for mutant_id, row in done.items():
+        path = f"solutions/{row['file']}"
+        then = _code(text(commit, path), row["function"])
+        settled = row.get("killed") or mutant_id in reviewed
+        if settled and then is not None and then == _code(text("", path), row["function"]):
+            kept[mutant_id] = row
+    return kept
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="JSON lines file the outcomes are appended to")
@@ -53,13 +103,19 @@ def main(argv=None) -> int:
     p.add_argument("--budget", type=float, default=None, help="seconds to start chunks in")
     p.add_argument("--deadline", type=float, default=120.0, help="seconds per mutant")
     p.add_argument("--chunk", type=int, default=None, help="mutants per chunk")
+    p.add_argument(
+        "--kept-since", default=None, help="commit the resumed outcomes graded (see above)"
+    )
     args = p.parse_args(argv)
     started = time.monotonic()
     workers = args.workers or allowed_cpus()
     chunk = args.chunk or 16 * workers
     plans = plan(ROOT, args.labs)
     mutants = sample(plans, None, 0)
-    done = read_outcomes([*args.resume, args.out])
+    done = read_outcomes(args.resume)
+    if args.kept_since:
+        done = kept_since(done, args.kept_since, load_reviewed(ROOT))
+    done.update(read_outcomes([args.out]))
     todo = [m for m in mutants if m.id not in done]
     # Lab 0's tests time copies and frame loops (~10x the others): start them first so the
     # last chunk is not one lab's slow tail.

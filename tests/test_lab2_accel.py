@@ -3284,3 +3284,512 @@ def test_fast_bvh_exact_at_vertices_and_edges(impl, device):
             ref,
             f"bvh_closest_hit_fast({label}, median BVH, leaf_size=2)",
         )
+
+
+# ---------------------------------------------------------------------------------------
+# Exact work and decisions: the cells a walk visits, the SAH decisions of a kd build
+
+
+def cells_crossed(rays: Rays, lo, hi, res, t_stop):
+    """Per ray, in float64: how many cells a DDA over the grid ``lo, hi, res`` visits from
+    its entry into the box to ``t_stop`` (its hit; t_max and the box's exit also stop it):
+    1 + the cell boundaries crossed, 0 for a ray that misses the box. Returns ``(cells,
+    clean)``: ``clean`` marks the rays whose entry, stop and crossings all lie at least
+    1e-4 apart, so that rounding decides nothing."""
+    o, d = rays.origins.cpu().double(), rays.directions.cpu().double()
+    lo, hi, res = lo.cpu().double(), hi.cpu().double(), res.cpu()
+    t0, t1 = (lo - o) / d, (hi - o) / d
+    t_in = torch.maximum(torch.minimum(t0, t1).amax(1), rays.t_min.cpu().double())
+    t_out = torch.minimum(torch.maximum(t0, t1).amin(1), rays.t_max.cpu().double())
+    stop = torch.minimum(t_out, t_stop.cpu().double())
+    width = (hi - lo) / res
+    cells = torch.zeros(len(o), dtype=torch.int64)
+    clean = torch.ones(len(o), dtype=torch.bool)
+    for i in range(len(o)):
+        a_in, a_stop = float(t_in[i]), float(stop[i])
+        if not a_in <= a_stop:  # misses the box (or its interval)
+            clean[i] = not abs(a_in - float(t_out[i])) <= 1e-4 * (1 + abs(a_in))
+            continue
+        marks = [a_in, a_stop]
+        for a in range(3):
+            k = torch.arange(1, int(res[a]), dtype=F64)
+            t = (lo[a] + k * width[a] - o[i, a]) / d[i, a]
+            near = t[(t > a_in - 1e-3) & (t < a_stop + 1e-3)]
+            cells[i] += int(((near > a_in) & (near < a_stop)).sum())
+            marks += near.tolist()
+        cells[i] += 1
+        m = torch.tensor(sorted(marks), dtype=F64)
+        clean[i] = bool(((m[1:] - m[:-1]) > 1e-4 * (1 + m[1:].abs())).all())
+    return cells, clean
+
+
+def step_rays(mesh: Mesh, seed: int) -> Rays:
+    """Rays from around the scene and from inside it, no component zero, some stopped by
+    t_max inside the grid: a DDA's cells are then well defined."""
+    rays = rays_around(mesh, 240, seed, clip=0.3)
+    d = rays.directions
+    d = torch.where(d.abs() < 1e-3, torch.full_like(d, 1e-3), d)
+    return Rays.create(rays.origins, d, rays.t_min, rays.t_max)
+
+
+def check_cells_visited(count, rays: Rays, mesh: Mesh, grid: dict, what: str) -> None:
+    """``count["steps"]`` must be the cells each ray crosses up to its hit (see
+    ``cells_crossed``), exactly, for the rays where no rounding decides."""
+    t_hit = reference(rays.to("cpu"), on(mesh, "cpu"))[0]
+    want, clean = cells_crossed(rays, grid["lo"], grid["hi"], grid["resolution"], t_hit)
+    assert int(clean.sum()) >= len(rays) // 2, "test set-up: most rays should be clean"
+    got = count["steps"].cpu()
+    bad = (clean & (got != want)).nonzero()[:, 0]
+    if len(bad):
+        i = int(bad[0])
+        raise AssertionError(
+            f"{what}: ray {i} ({describe(rays.to('cpu'), i)}) crosses {int(want[i])} cells of "
+            f"the {grid['resolution'].tolist()} grid from its entry to its hit at t="
+            f"{t_hit[i].item():.6g} (or t_max, or the grid's far side), but counters['steps'] "
+            f"is {int(got[i])} ({len(bad)} rays off). A walk starts in the cell holding o + "
+            f"t_enter d, visits each cell once, and ends in the cell where the closest hit "
+            f"lies, at t_max, or where it leaves the grid."
+        )
+
+
+@pytest.mark.task(1)
+@pytest.mark.points(0.5)
+def test_grid_steps_are_the_cells_crossed(impl, device):
+    mesh = on(scene("shards"), device)
+    grid = uniform_grid(mesh, (7, 5, 9))
+    rays = step_rays(mesh, 71).to(device)
+    count = compare(
+        impl.grid_closest_hit(rays, mesh, grid, mt64),
+        rays,
+        mesh,
+        "grid_closest_hit(shards, a 7 x 5 x 9 grid built by the grader)",
+        counters=GRID2_COUNTERS,
+    )
+    check_cells_visited(count, rays, mesh, grid, "grid_closest_hit(shards, 7 x 5 x 9 grid)")
+
+
+@pytest.mark.task(6)
+@pytest.mark.points(0.5)
+def test_two_level_steps_on_plain_cells(impl, device):
+    # No top cell crowded enough for a sub-grid: the walk is the uniform grid's DDA.
+    mesh = on(scene("shards"), device)
+    grid2 = simple_two_level(mesh, (7, 5, 9), min_triangles=mesh.num_faces)
+    rays = step_rays(mesh, 72).to(device)
+    what = "two_level_closest_hit(shards, a 7 x 5 x 9 top grid without sub-grids)"
+    count = compare(
+        impl.two_level_closest_hit(rays, mesh, grid2, mt64),
+        rays,
+        mesh,
+        what,
+        counters=GRID2_COUNTERS,
+    )
+    assert (grid2["sub_of"] < 0).all(), "test set-up: no sub-grids wanted"
+    check_cells_visited(count, rays, mesh, grid2, what)
+
+
+def kd_nodes(tree):
+    """Per node of a kd dict (CPU): its box ``(lo, hi)`` (float64, from the splits), its
+    depth and its triangles (the union of the leaf lists below it), as Python lists."""
+    axis, left, split = (tree[k].cpu() for k in ("axis", "left", "split"))
+    first, count, tris = (tree[k].cpu() for k in ("first", "count", "triangles"))
+    m = len(axis)
+    boxes = [None] * m
+    depth = [0] * m
+    boxes[0] = (tree["lo"].cpu().double(), tree["hi"].cpu().double())
+    order = [0]
+    for i in order:  # top-down: parents before children
+        if axis[i] >= 0:
+            a, s, c = int(axis[i]), float(split[i]), int(left[i])
+            lo, hi = boxes[i]
+            below_hi, above_lo = hi.clone(), lo.clone()
+            below_hi[a] = above_lo[a] = s
+            boxes[c], boxes[c + 1] = (lo, below_hi), (above_lo, hi)
+            depth[c] = depth[c + 1] = depth[i] + 1
+            order += [c, c + 1]
+    members = [set() for _ in range(m)]
+    for i in reversed(order):  # bottom-up
+        if axis[i] < 0:
+            members[i] = set(tris[int(first[i]) : int(first[i]) + int(count[i])].tolist())
+        else:
+            members[i] = members[int(left[i])] | members[int(left[i]) + 1]
+    return boxes, depth, [sorted(x) for x in members]
+
+
+def kd_node_costs(t_lo, t_hi, box, knobs):
+    """The docstring's SAH cost of every event of one node (float64): per axis
+    ``(position, cost)``, the node's triangles' bounds clipped to its box, sorted by
+    (position, start before end); ``inf`` for planes not strictly inside the box."""
+    traversal, inter, bonus = knobs
+    lo, hi = box
+    ext = hi - lo
+    area = 2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[2] * ext[0])
+    n = len(t_lo)
+    out = []
+    for a in range(3):
+        pos = torch.cat((t_lo[:, a], t_hi[:, a])).clamp(float(lo[a]), float(hi[a]))
+        is_end = torch.cat((torch.zeros(n), torch.ones(n))).double()
+        order = torch.argsort(pos * 0 + is_end, stable=True)
+        order = order[torch.argsort(pos[order], stable=True)]
+        pos, is_end = pos[order], is_end[order]
+        below = torch.cumsum(1 - is_end, 0) - (1 - is_end)
+        above = n - torch.cumsum(is_end, 0)
+        e1, e2 = ext[(a + 1) % 3], ext[(a + 2) % 3]
+        a_below = 2 * (e1 * e2 + (pos - lo[a]) * (e1 + e2))
+        a_above = 2 * (e1 * e2 + (hi[a] - pos) * (e1 + e2))
+        empty = ((below == 0) | (above == 0)).double()
+        cost = traversal + inter * (1 - bonus * empty) * (a_below * below + a_above * above) / area
+        out.append((pos, torch.where((pos > lo[a]) & (pos < hi[a]), cost, INF)))
+    return out
+
+
+def check_kd_sah(tree, mesh: Mesh, what: str, knobs, leaf_size: int, max_depth: int) -> None:
+    """Every node of a kd-tree decides as the docstring says: it splits iff it holds more
+    than ``leaf_size`` triangles, lies above ``max_depth`` and its cheapest event beats a
+    leaf; it splits at a cheapest event; and (a scene whose bounds are all distinct and
+    triangles not flat, so that no two events tie) a triangle goes below iff its lower
+    bound lies below the plane, above iff its upper bound lies above it."""
+    corners = mesh.triangles().cpu().double()
+    t_lo, t_hi = corners.amin(1), corners.amax(1)
+    assert (t_lo < t_hi).all(), "test set-up: no flat triangles"
+    for a in range(3):
+        bounds_a = torch.cat((t_lo[:, a], t_hi[:, a]))
+        assert len(torch.unique(bounds_a)) == len(bounds_a), "test set-up: distinct bounds"
+    inter = knobs[1]
+    boxes, depth, members = kd_nodes(tree)
+    axis, split, left = (tree[k].cpu() for k in ("axis", "split", "left"))
+    for i in range(len(axis)):
+        s_ids = torch.tensor(members[i], dtype=torch.int64)
+        n = len(s_ids)
+        costs = kd_node_costs(t_lo[s_ids], t_hi[s_ids], boxes[i], knobs)
+        best = min((float(c.min()) for _, c in costs if len(c)), default=INF)
+        may_split = n > leaf_size and depth[i] < max_depth
+        where = (
+            f"{what}: node {i} (depth {depth[i]}, {n} triangles, box "
+            f"{boxes[i][0].tolist()} .. {boxes[i][1].tolist()})"
+        )
+        if axis[i] < 0:
+            assert not (may_split and best < inter * n * (1 - 1e-6)), (
+                f"{where} is a leaf, but its cheapest split costs {best:.6g} < a leaf's "
+                f"intersect_cost * n = {inter * n:g}: with more than leaf_size={leaf_size} "
+                f"triangles and below max_depth={max_depth} it must split"
+            )
+            continue
+        assert may_split, (
+            f"{where} splits, but a node with at most leaf_size={leaf_size} triangles, or at "
+            f"max_depth={max_depth}, is a leaf"
+        )
+        assert best < inter * n * (1 + 1e-6), (
+            f"{where} splits, but its cheapest split costs {best:.6g}, no less than a "
+            f"leaf's intersect_cost * n = {inter * n:g}: it must stay a leaf"
+        )
+        a, s = int(axis[i]), float(split[i])
+        pos, cost = costs[a]
+        mine = cost[pos == s]
+        mine = float(mine.min()) if len(mine) else INF
+        assert mine <= best * (1 + 1e-6), (
+            f"{where} splits axis {a} at {s!r}, where the SAH cost is {mine:.6g}; its "
+            f"cheapest event costs {best:.6g} (cost = traversal + intersect * (1 - bonus if "
+            f"a side is empty) * (A_below N_below + A_above N_above) / A_node, over the "
+            f"node's triangles' bounds clipped to its box)"
+        )
+        c = int(left[i])
+        for child, side, want in (
+            (c, "below", [t for t in members[i] if t_lo[t, a] < s]),
+            (c + 1, "above", [t for t in members[i] if t_hi[t, a] > s]),
+        ):
+            assert members[child] == want, (
+                f"{where} splits axis {a} at {s!r}: its {side} child holds the triangles "
+                f"{members[child]}, expected {want}: a triangle goes below iff its start "
+                f"event comes before the split event (lower bound < plane, here where no two "
+                f"bounds are equal), above iff its end event comes after it"
+            )
+
+
+def kd_soup(seed: int, n: int = 24) -> Mesh:
+    """Small triangles in three clusters (empty space to cut away), all bounds distinct."""
+    g = generator(seed)
+    centre = torch.rand(3, 3, generator=g, dtype=F64)[torch.arange(n) % 3]
+    centre = centre + 0.15 * torch.rand(n, 3, generator=g, dtype=F64)
+    corners = centre[:, None] + 0.08 * (torch.rand(n, 3, 3, generator=g, dtype=F64) - 0.5)
+    return mesh_of(corners)
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(0.5)
+def test_kdtree_every_node_follows_the_sah(impl, device):
+    # Every node, not just the root: the documented decision with the default knobs
+    # (leaf_size=2, traversal 1, intersect 2, bonus 0.5) and others.
+    for seed, n in ((164, 24), (153, 16)):
+        mesh = on(kd_soup(seed, n), device)
+        tree = impl.build_kdtree(mesh)
+        what = f"build_kdtree({n} small triangles in three clusters, seed {seed}, default knobs)"
+        check_kdtree(tree, mesh, what)
+        max_depth = round(8 + 1.3 * math.log2(mesh.num_faces))
+        check_kd_sah(tree, mesh, what, (1.0, 2.0, 0.5), 2, max_depth)
+    mesh = on(kd_soup(133), device)
+    for leaf_size, knobs, max_depth in ((3, (0.5, 1.0, 0.9), 4), (1, (2.0, 1.5, 0.0), 9)):
+        traversal, inter, bonus = knobs
+        tree = impl.build_kdtree(mesh, max_depth, leaf_size, traversal, inter, bonus)
+        what = (
+            f"build_kdtree(three clusters, max_depth={max_depth}, leaf_size={leaf_size}, "
+            f"traversal_cost={traversal}, intersect_cost={inter}, empty_bonus={bonus})"
+        )
+        check_kdtree(tree, mesh, what)
+        check_kd_sah(tree, mesh, what, knobs, leaf_size, max_depth)
+    # A split that only ties with a leaf does not beat it: two triangles, each split costs
+    # 0.75 + 1 * (4 * 1 + 6 * 1) / 8 = 2 = intersect_cost * n, exactly (dyadic values).
+    corners = torch.tensor(
+        [
+            [[0.0, 0.0, 0.0], [0.5, 1.0, 0.0], [0.0, 1.0, 1.0]],
+            [[1.0, 0.0, 0.0], [1.5, 1.0, 0.0], [1.0, 1.0, 1.0]],
+        ],
+        dtype=F64,
+    )
+    mesh = on(mesh_of(corners), device)
+    tree = impl.build_kdtree(mesh, 4, 1, 0.75, 1.0, 0.5)
+    assert len(tree["axis"]) == 1, (
+        "build_kdtree(two triangles x in [0, 0.5] and [1, 1.5], leaf_size=1, traversal_cost="
+        f"0.75, intersect_cost=1): {len(tree['axis'])} nodes, expected a single leaf: the "
+        "cheapest split costs 0.75 + 1 * (4 * 1 + 6 * 1) / 8 = 2, exactly a leaf's "
+        "intersect_cost * n = 2, and a node splits only if the split BEATS the leaf"
+    )
+
+
+def octant_clusters(counts=(17,) * 8, scale: float = 1.0, shift: float = 0.0) -> Mesh:
+    """A cluster of small triangles (bounds about 0.03 x 0.02 x 0.01 of ``scale``, spread
+    over 0.2 x 0.1 x 0.05) at each corner of a cube of side ``scale``, ``counts[i]``
+    triangles at corner i (x fastest): one cluster per top cell of a 2 x 2 x 2 top grid
+    at top_density 1/16. A count of -n puts n triangles shrunk to the point (0, 0, 0)
+    there (corner 0 only, ``shift`` 0)."""
+    g = generator(181)
+    parts = []
+    for i, n in enumerate(counts):
+        corner = torch.tensor([i % 2, (i // 2) % 2, i // 4], dtype=F64)
+        if n < 0:
+            parts.append(torch.zeros(-n, 3, 3, dtype=F64))
+            continue
+        centre = corner + torch.rand(n, 1, 3, generator=g, dtype=F64) * torch.tensor(
+            [0.2, 0.1, 0.05], dtype=F64
+        )
+        parts.append(
+            centre
+            + torch.rand(n, 3, 3, generator=g, dtype=F64)
+            * torch.tensor([0.03, 0.02, 0.01], dtype=F64)
+        )
+    return mesh_of(torch.cat(parts) * scale + shift)
+
+
+def check_sub_grids(g, mesh: Mesh, what: str, density: float) -> None:
+    """What check_two_level leaves loose: ``sub_of`` is -1 for plain cells; each sub-grid's
+    box is its small triangles' bounds (clipped to the cell) padded by a small pad: strictly
+    larger (a few ulps of the coordinates at least), at most 1e-3 of its size plus a few
+    ulps larger; its resolution is exactly ``grid_resolutions`` of that box for its small
+    triangles; each entry's box of sub cells is exactly the cells its padded bounds reach."""
+    sub_of = g["sub_of"].cpu()
+    plain = sub_of < 0
+    assert (sub_of[plain] == -1).all(), (
+        f"{what}: sub_of holds {sorted(set(sub_of[plain].tolist()))} for plain cells, "
+        f"expected -1 (no sub-grid)"
+    )
+    s = int((~plain).sum())
+    if s == 0:
+        return
+    lo, hi, res = g["lo"].cpu().double(), g["hi"].cpu().double(), g["resolution"].cpu()
+    width = (hi - lo) / res
+    sub_lo, sub_hi = g["sub_lo"].cpu().double(), g["sub_hi"].cpu().double()
+    sres, s_count = g["sub_resolution"].cpu(), g["sub_cell_count"].cpu()
+    s_tris = g["sub_triangles"].cpu()
+    e_lo, e_hi = g["sub_tri_cell_lo"].cpu(), g["sub_tri_cell_hi"].cpu()
+    entry_sub = torch.repeat_interleave(
+        torch.repeat_interleave(torch.arange(s), sres.prod(1)), s_count
+    )
+    corners = mesh.triangles().cpu().double()
+    t_lo, t_hi = corners.amin(1), corners.amax(1)
+    eps = torch.finfo(mesh.dtype).eps
+    owner = torch.zeros(s, dtype=torch.int64)
+    owner[sub_of[~plain]] = (~plain).nonzero()[:, 0]
+    cc = torch.stack((owner % res[0], (owner // res[0]) % res[1], owner // (res[0] * res[1])), 1)
+    n_small = torch.zeros(s, dtype=torch.int64)
+    for i in range(s):
+        tris = torch.unique(s_tris[entry_sub == i])
+        n_small[i] = len(tris)
+        cell_lo, cell_hi = lo + cc[i] * width, lo + (cc[i] + 1) * width
+        b_lo = torch.maximum(t_lo[tris].amin(0), cell_lo)
+        b_hi = torch.minimum(t_hi[tris].amax(0), cell_hi)
+        size = float((b_hi - b_lo).amax())
+        slack = 1e-3 * size + 64 * eps * float(torch.maximum(b_lo.abs(), b_hi.abs()).amax())
+        slack = slack if size > 0 else 1e-3 * float(width.amin())  # a point: any thickness
+        ok = (sub_lo[i] < b_lo) & (sub_hi[i] > b_hi)
+        ok &= (sub_lo[i] >= b_lo - slack) & (sub_hi[i] <= b_hi + slack)
+        assert ok.all(), (
+            f"{what}: sub-grid {i} (top cell {cc[i].tolist()}) has the box "
+            f"{sub_lo[i].tolist()} .. {sub_hi[i].tolist()}; its small triangles' bounds, "
+            f"clipped to the cell, are {b_lo.tolist()} .. {b_hi.tolist()}: expected them "
+            f"padded by more than nothing and at most {slack:.3g} (relative to the sub-grid's "
+            f"own size, plus a few ulps of its coordinates)"
+        )
+        sw = (sub_hi[i] - sub_lo[i]) / sres[i]
+        k = (entry_sub == i).nonzero()[:, 0]
+        c_lo = torch.maximum(t_lo[s_tris[k]], cell_lo)
+        c_hi = torch.minimum(t_hi[s_tris[k]], cell_hi)
+        near_lo = torch.floor((c_lo - slack - sub_lo[i]) / sw).long().clamp(min=0)
+        near_hi = torch.minimum(torch.floor((c_hi + slack - sub_lo[i]) / sw).long(), sres[i] - 1)
+        loose = (e_lo[k] < near_lo) | (e_hi[k] > near_hi)
+        if loose.any():
+            j = int(k[loose.any(1)][0])
+            raise AssertionError(
+                f"{what}: sub-grid {i}'s entry of triangle {int(s_tris[j])} spans the sub cells "
+                f"{e_lo[j].tolist()} .. {e_hi[j].tolist()}, beyond the cells its bounds "
+                f"(padded) reach, at most {near_lo[loose.any(1)][0].tolist()} .. "
+                f"{near_hi[loose.any(1)][0].tolist()}: floor((tri_lo - pad - sub_lo) / w) to "
+                f"floor((tri_hi + pad - sub_lo) / w), as in build_grid"
+            )
+    want = grid_resolutions(g["sub_hi"] - g["sub_lo"], n_small.to(g["sub_lo"].device), density)
+    bad = (want.cpu() != sres).any(1)
+    if bad.any():
+        i = int(bad.nonzero()[0, 0])
+        raise AssertionError(
+            f"{what}: sub-grid {i} holds {int(n_small[i])} small triangles in a box of size "
+            f"{(sub_hi[i] - sub_lo[i]).tolist()}: resolution {sres[i].tolist()}, expected "
+            f"grid_resolutions(sub_hi - sub_lo, n, density={density:g}) = {want[i].tolist()} "
+            f"(n: the sub-grid's small triangles)"
+        )
+
+
+@pytest.mark.task(6)
+@pytest.mark.points(0.5)
+def test_build_two_level_grid_sub_grids_exactly(impl, device):
+    # Eight clusters of 17 small triangles, one in each cell of a 2 x 2 x 2 top grid: with
+    # the default min_triangles (16) each cell is crowded and gets a sub-grid, with the
+    # default density (2). Near the origin, far from it, shrunk, and with 17 triangles
+    # shrunk to the point (0, 0, 0) (a sub-grid box of size 0 needs a thickness).
+    for label, mesh in (
+        ("", octant_clusters()),
+        (" moved by 1e5 (scaled 100)", octant_clusters(scale=100.0, shift=1e5)),
+        (" shrunk 100 times", octant_clusters(scale=0.01)),
+        (" (17 points at the origin)", octant_clusters((-17,) + (17,) * 7)),
+        (" (17 points at the origin), shrunk", octant_clusters((-17,) + (17,) * 7, 0.01)),
+        (" but 5 in one (a plain cell)", octant_clusters((5,) + (17,) * 7)),
+    ):
+        mesh = on(mesh, device)
+        g = two_level_of(impl, mesh)
+        what = f"build_two_level_grid(8 clusters of 17 small triangles{label})"
+        assert g["resolution"].tolist() == [2, 2, 2], "test set-up: a 2 x 2 x 2 top grid"
+        check_two_level(g, mesh, what, 2.0)
+        check_sub_grids(g, mesh, what, 2.0)
+    # A sub-grid 1950 wide at x = 1e5 (under a big triangle, in a single flat top cell):
+    # 1e-4 of its size (0.195) is about its coordinates' 16 ulps-worth (0.194): a pad that
+    # drops the ulps term, or subtracts it, leaves nothing after rounding to float32.
+    i = torch.arange(17, dtype=F64)[:, None]
+    x0, y0 = 1e5 + 121.25 * i, 10.0 + i
+    small = torch.stack(
+        (
+            torch.cat((x0, y0, torch.ones_like(i)), 1),
+            torch.cat((x0 + 10, y0, torch.ones_like(i)), 1),
+            torch.cat((x0, y0 + 5, 3 * torch.ones_like(i)), 1),
+        ),
+        1,
+    )
+    floor = torch.tensor([[[-3000.0, 0.0, 0.0], [5000.0, 8000.0, 0.0], [0.0, 4000.0, 10.0]]])
+    mesh = on(mesh_of(torch.cat((small, floor.double() + torch.tensor([1e5, 0.0, 0.0])))), device)
+    g = two_level_of(impl, mesh)
+    what = "build_two_level_grid(17 small triangles 1950 wide at x = 1e5, on a big floor)"
+    assert int((g["sub_of"] >= 0).sum()) == 1, "test set-up: one sub-grid"
+    check_two_level(g, mesh, what, 2.0)
+    check_sub_grids(g, mesh, what, 2.0)
+    # The top grid at the default top_density, 1/16: 208 triangles, (3, 2, 2) cells.
+    mesh = on(octant_clusters((26,) * 8), device)
+    g = two_level_of(impl, mesh)
+    extent = (g["hi"] - g["lo"]).cpu().double().tolist()
+    want = heuristic_resolution(extent, mesh.num_faces, 1 / 16)
+    assert want == (3, 2, 2), "test set-up: a top grid of (3, 2, 2) cells"
+    assert tuple(g["resolution"].tolist()) == want, (
+        f"build_two_level_grid(8 clusters of 26 small triangles): top resolution "
+        f"{g['resolution'].tolist()}, expected {list(want)}: the top grid is build_grid's at "
+        f"density=top_density (default 1/16)"
+    )
+    # A triangle exactly one top cell wide is big ("at least one top cell wide").
+    base = octant_clusters()
+    g = two_level_of(impl, on(base, device))
+    w = float(((g["hi"] - g["lo"]) / g["resolution"]).amin())  # in the mesh's dtype
+    # x from w to 2 w (exact: 2 w - w = w), inside the scene's bounds
+    wide = torch.tensor([[[w, 0.5, 0.5], [2 * w, 0.5, 0.5], [w, 0.52, 0.5]]], dtype=F32)
+    mesh = on(mesh_of(torch.cat((base.triangles(), wide))), device)
+    g = two_level_of(impl, mesh)
+    what = "build_two_level_grid(8 clusters and a triangle exactly one top cell wide)"
+    width = (g["hi"] - g["lo"]) / g["resolution"]
+    assert float(width.amin()) == w, "test set-up: the same top grid"
+    assert bool(g["big"][-1]), (
+        f"{what}: the triangle {w!r} wide, exactly the top cells' smallest width, is not "
+        f"big: a triangle whose bounds are AT LEAST one top cell wide on some axis is big"
+    )
+    check_two_level(g, mesh, what, 2.0)
+    # min_triangles=0: a top cell with a single small triangle gets a sub-grid for one.
+    mesh = on(octant_clusters((1,) + (17,) * 7), device)
+    g = two_level_of(impl, mesh, 1 / 16, 3.0, 0)
+    what = "build_two_level_grid(a cluster of 1 and 7 of 17 triangles, density=3, min_triangles=0)"
+    check_two_level(g, mesh, what, 3.0, 0)
+    check_sub_grids(g, mesh, what, 3.0)
+
+
+def in_plane_case(lower_first: bool, shift: float = 0.0):
+    """A hand-built kd-tree whose root splits z at 0.5, and rays lying in that plane
+    (o_z = 0.5, d_z = +0.0 or -0.0) along x: they hit triangle 0 (x = 2) at t = 2 and
+    triangle 1 (x = 5) at t = 5, each exactly at an edge in the plane (dyadic values: exact).
+    Triangle 0 hangs below the plane, triangle 1 stands on it, triangle 2 (x = 10, never
+    hit) stretches the box. ``lower_first``: the split event is triangle 0's end (triangle
+    1's start comes before it: triangle 1 in both children, 0 below only); else the roles
+    of the sides swap (triangle 0 stands on the plane, 1 hangs below it)."""
+    z = (0.0, 1.0) if lower_first else (1.0, 0.0)
+    corners = torch.tensor(
+        [
+            [[2.0, 0.0, 0.5], [2.0, 1.0, 0.5], [2.0, 0.5, z[0]]],
+            [[5.0, 0.0, 0.5], [5.0, 1.0, 0.5], [5.0, 0.5, z[1]]],
+            [[10.0, 0.9, 0.9], [10.0, 1.0, 0.9], [10.0, 0.9, 1.0]],
+        ],
+        dtype=F64,
+    )
+    if not lower_first:
+        corners[2, :, 2] -= 0.9  # below the plane, with the near triangle
+    mesh = mesh_of(corners + shift)
+    below, above = ([0, 1], [1, 2]) if lower_first else ([1, 2], [0, 1])
+    tree = {
+        "kind": "kd",
+        "lo": torch.tensor([2.0, 0.0, 0.0]) + shift,
+        "hi": torch.tensor([10.0, 1.0, 1.0]) + shift,
+        "split": torch.tensor([0.5 + shift, 0.0, 0.0]),
+        "axis": torch.tensor([2, -1, -1]),
+        "left": torch.tensor([1, -1, -1]),
+        "first": torch.tensor([0, 0, len(below)]),
+        "count": torch.tensor([0, len(below), len(above)]),
+        "triangles": torch.tensor(below + above),
+    }
+    o = torch.tensor([[0.0, 0.25, 0.5]] * 4, dtype=F64) + shift
+    d = torch.tensor([[1.0, 0.0, 0.0], [1.0, 0.0, -0.0], [1.0, 0.1, 0.0], [1.0, -0.0, -0.0]])
+    rays = Rays.create(o.float(), d)
+    return mesh, tree, rays
+
+
+@pytest.mark.task(4)
+@pytest.mark.points(0.5)
+def test_kd_rays_in_a_split_plane_visit_both_children(impl, device):
+    # A ray lying in a split plane (o[axis] == split, d[axis] = +0.0 or -0.0) visits the
+    # lower child first ("== split with d[axis] <= 0"), then the upper one whatever it found:
+    # both children hold the whole interval, so no early exit may skip the second. Either
+    # child may list the near triangle alone (a split at a triangle's end or start event).
+    # Near the origin and moved by 1e5.
+    for lower_first in (True, False):
+        for shift in (0.0, 1e5):
+            mesh, tree, rays = in_plane_case(lower_first, shift)
+            mesh, rays = on(mesh, device), rays.to(device)
+            tree = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in tree.items()}
+            side = "lower" if lower_first else "upper"
+            compare(
+                impl.kd_closest_hit(rays, mesh, tree, mt64),
+                rays,
+                mesh,
+                f"kd_closest_hit(rays in the root's split plane z = {0.5 + shift:g} with d_z = "
+                f"+0.0 or -0.0; only the {side} child lists the near triangle, both list the "
+                f"far one: such a ray visits both children, and a hit in the first one visited "
+                f"must not end it before the second)",
+            )

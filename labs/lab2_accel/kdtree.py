@@ -157,7 +157,9 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
       t_split). ``reach`` (``course.given.lab2_robust``) keeps a child the ray crosses at a
       vertex in the plane, where the two ``t`` agree only up to rounding. For
       ``d[axis] = +-0``, ``t_split = +-inf`` selects the near child by these same rules; a
-      ray lying *in* the plane (``0 * inf = NaN``) visits both children, whole interval.
+      ray lying *in* the plane (``0 * inf = NaN``) visits both children, whole interval,
+      and exits early no more: its near child's interval is then the whole interval, so a
+      hit found there says nothing of a nearer triangle that only the far child lists.
     * leaf: test its triangles. **Early exit** only if the closest hit so far lies inside
       this leaf's interval, rounding included: ``reach(best_t) < t_far``. A vertex in the
       split plane is hit from both leaves at the same ``t`` give or take rounding, and

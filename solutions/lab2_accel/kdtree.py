@@ -360,7 +360,9 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
       t_split). ``reach`` (``course.given.lab2_robust``) keeps a child the ray crosses at a
       vertex in the plane, where the two ``t`` agree only up to rounding. For
       ``d[axis] = +-0``, ``t_split = +-inf`` selects the near child by these same rules; a
-      ray lying *in* the plane (``0 * inf = NaN``) visits both children, whole interval.
+      ray lying *in* the plane (``0 * inf = NaN``) visits both children, whole interval,
+      and exits early no more: its near child's interval is then the whole interval, so a
+      hit found there says nothing of a nearer triangle that only the far child lists.
     * leaf: test its triangles. **Early exit** only if the closest hit so far lies inside
       this leaf's interval, rounding included: ``reach(best_t) < t_far``. A vertex in the
       split plane is hit from both leaves at the same ``t`` give or take rounding, and
@@ -393,6 +395,7 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
     stack_near = torch.zeros((len(ray), depth), dtype=dtype, device=device)
     stack_far = torch.zeros((len(ray), depth), dtype=dtype, device=device)
     sp = torch.zeros(len(ray), dtype=torch.int64, device=device)
+    no_exit = torch.zeros(len(ray), dtype=torch.bool, device=device)  # went along a plane
     axis_of, left_of, split_of = tree["axis"], tree["left"], tree["split"]
     for _ in range(2 * len(axis_of) + 1):
         if len(ray) == 0:
@@ -418,7 +421,7 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
             closest,
             counters,
         )
-        exit_early = leaf & (reach(closest["t"][ray]) < t_far)
+        exit_early = leaf & ~no_exit & (reach(closest["t"][ray]) < t_far)
         pop = leaf & ~exit_early & (sp > 0)
         done |= leaf & ~pop
         rows = pop.nonzero()[:, 0]
@@ -449,10 +452,12 @@ def kd_closest_hit(rays: Rays, mesh: Mesh, tree: dict, intersect):
         stack_near[push, sp[push]] = torch.where(in_plane, tn, t_split)[both]
         stack_far[push, sp[push]] = tf[both]
         sp = sp.index_add(0, push, torch.ones_like(push))
+        no_exit[inner] |= in_plane
         node[inner] = torch.where(far_only, far, near)
         t_far[inner] = torch.where(both & ~in_plane, t_split, tf)
         keep = ~done
         ray, node, t_near, t_far, sp = ray[keep], node[keep], t_near[keep], t_far[keep], sp[keep]
+        no_exit = no_exit[keep]
         stack, stack_near, stack_far = stack[keep], stack_near[keep], stack_far[keep]
     return as_hits(closest), counters
     # END SOLUTION

@@ -129,8 +129,8 @@ MUTANTS = [
         name="kd_early_exit_anywhere",
         module=M,
         function="kd_closest_hit",
-        find='exit_early = leaf & (reach(closest["t"][ray]) < t_far)',
-        replace='exit_early = leaf & (closest["t"][ray] < math.inf)',
+        find='exit_early = leaf & ~no_exit & (reach(closest["t"][ray]) < t_far)',
+        replace='exit_early = leaf & ~no_exit & (closest["t"][ray] < math.inf)',
         tests="kd_closest_hit or kdtree_build",
         why="stops at the first leaf with a hit, even one beyond the leaf: a straddling "
         "triangle hides a nearer one in the next leaf",
@@ -470,5 +470,16 @@ MUTANTS = [
         replace="traverse = bvh_closest_hit",
         tests="closest_hit_entry_point",
         why="accepts stackless=True but always walks with the stack",
+    ),
+    Mutant(
+        name="kd_in_plane_exits_early",
+        module=M,
+        function="kd_closest_hit",
+        find='exit_early = leaf & ~no_exit & (reach(closest["t"][ray]) < t_far)',
+        replace='exit_early = leaf & (reach(closest["t"][ray]) < t_far)',
+        tests="kd_rays_in_a_split_plane",
+        why="a ray lying in a split plane exits early in the first child it visits (whose "
+        "interval is the whole one), before the other child that alone lists a nearer "
+        "triangle",
     ),
 ]

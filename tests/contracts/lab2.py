@@ -68,6 +68,11 @@ CONTRACTS = {
     ],
     "grid_closest_hit": [
         (
+            "steps: exactly the cells the ray crosses up to its hit, t_max or the grid's exit",
+            "test_grid_steps_are_the_cells_crossed",
+            None,
+        ),
+        (
             "stepping up, the next boundary is the cell's upper face lo + (cell + 1) w",
             "test_grid_closest_hit_matches_brute_force",
             "dda_lower_face_when_stepping_up",
@@ -226,6 +231,12 @@ CONTRACTS = {
     # Task 4: the kd-tree
     "build_kdtree": [
         (
+            "every node splits at a cheapest event iff that strictly beats a leaf and depth and "
+            "leaf_size allow; each child holds exactly the triangles its side of the event lists",
+            "test_kdtree_every_node_follows_the_sah",
+            None,
+        ),
+        (
             "a triangle straddling the split goes to both children",
             "test_kdtree_build",
             "kd_straddler_one_side",
@@ -306,6 +317,12 @@ CONTRACTS = {
             "test_kd_exact_at_vertices_and_edges",
             None,
         ),
+        (
+            "a ray lying in the plane visits the lower child first, then the upper one: "
+            "no early exit in between",
+            "test_kd_rays_in_a_split_plane_visit_both_children",
+            "kd_in_plane_exits_early",
+        ),
     ],
     # Task 5: the entry point
     "brute_force_closest_hit": [
@@ -340,6 +357,13 @@ CONTRACTS = {
     # Task 6: the two-level grid
     "build_two_level_grid": [
         (
+            "sub_of -1 for plain cells; sub_resolution exactly grid_resolution of the small "
+            "triangles; top grid at density 1/16; big from one top cell wide; boxes padded a "
+            "little, tight sub-cell lists",
+            "test_build_two_level_grid_sub_grids_exactly",
+            None,
+        ),
+        (
             "big triangles (a top cell wide) stay in the direct lists, never in a sub-grid",
             "test_two_level_build",
             "two_level_big_triangles_in_sub_grids",
@@ -366,6 +390,11 @@ CONTRACTS = {
         ),
     ],
     "two_level_closest_hit": [
+        (
+            "steps on plain top cells: exactly the cells crossed, as the uniform grid's walk",
+            "test_two_level_steps_on_plain_cells",
+            None,
+        ),
         (
             "the mailbox trusts a previous top cell only if it was plain (or the triangle big)",
             "test_two_level_mailboxing_and_work",

@@ -350,4 +350,94 @@ EQUIVALENT = {
         "the sub-grid walk's 'previous top cell was not plain' as -2 instead of -1: both lie "
         "outside every triangle's box of top cells (indices >= 0), so nothing is skipped either way"
     ),
+    "lab2_accel:build_kdtree:op_BitOr_BitAnd:0": (
+        "int | None is an annotation, never evaluated (from __future__ import annotations)"
+    ),
+    "lab2_accel:build_kdtree:const_int:11": (
+        "the root's initial 'left' entry as a 2-element tensor: the first level's iteration (which "
+        "always runs, max_depth >= 0) replaces the whole list entry (left[-1] = child) before it "
+        "is read"
+    ),
+    "lab2_accel:build_kdtree:const_int:12": (
+        "the root's initial 'left' entry as -2: the first level's iteration (which always runs, "
+        "max_depth >= 0) replaces it (left[-1] = child) before it is read"
+    ),
+    "lab2_accel:build_kdtree:const_int:47": (
+        "a new level's 'left' entries start at -2: a level is appended only when some node splits,"
+        " which needs depth < max_depth, so the next iteration runs and replaces them (left[-1] = "
+        "child) before they are read"
+    ),
+    "lab2_accel:build_kdtree:const_int:14": (
+        "range(max_depth + 2): the iteration at depth max_depth never splits (no sweep, best_cost "
+        "inf) and breaks, so the extra iteration is never reached"
+    ),
+    "lab2_accel:build_kdtree:cmp_Gt_GtE:0": (
+        "p >= 0 instead of p > 0: a level always has pairs (the root has F >= 1, and every "
+        "triangle of a splitting node goes to at least one child), so p >= 1 and both are true"
+    ),
+    "lab2_accel:build_kdtree:const_int:15": (
+        "p > 1 instead of p > 0 differs only where p == 1: the root of a single triangle (later "
+        "levels hold >= leaf_size + 1 >= 2 pairs); its only events are its own bounds, the faces "
+        "of the root box, none strictly inside: a leaf either way"
+    ),
+    "lab2_accel:build_kdtree:const_int:20": (
+        "the default event (2p - 2 instead of 2p - 1) of a node without a finite-cost event: it "
+        "is taken only where better is true, which needs a finite axis_best, and then the "
+        "scatter_reduce has set the node's event; plane[2p - 2] stays a valid index (p >= 1)"
+    ),
+    "lab2_accel:build_kdtree:cmp_Lt_LtE:1": (
+        "a later axis wins a tie of equal cheapest costs: the docstring asks for 'its cheapest "
+        "event' and leaves the choice among equally cheap planes free (test_kdtree_build and "
+        "test_kdtree_every_node_follows_the_sah accept any of them); nodes without a finite cost "
+        "do not split either way"
+    ),
+    "lab2_accel:kd_closest_hit:cmp_Lt_LtE:1": (
+        "ends at a leaf also where reach(best_t) == t_far to the last bit: reach's slack (2 "
+        "gamma(3) + HIT_ULPS eps) bounds the rounding of a plane crossing and of a hit's t, so a "
+        "later leaf, entered at >= t_far up to that rounding, holds no hit at or before best_t "
+        "unless every rounding hits its worst case at once; no input found"
+    ),
+    "lab2_accel:kd_closest_hit:cmp_Gt_GtE:2": (
+        "drops the far child also where t_split == reach(t_far) to the last bit: the far child "
+        "then begins beyond the node's exit by reach's whole slack, which bounds the rounding of "
+        "the crossings; a hit there lies beyond t_far (the box exit or t_max); no input found"
+    ),
+    "lab2_accel:kd_closest_hit:cmp_Lt_LtE:3": (
+        "drops the near child also where reach(t_split) == t_near to the last bit: the near child "
+        "then ends before the ray's entry by reach's whole slack, which bounds the rounding of "
+        "the crossings, so it holds no part of the ray's interval; no input found"
+    ),
+    "lab2_accel:grid_closest_hit:cmp_Lt_LtE:0": (
+        "ends also where reach(best_t) == t_out to the last bit: a triangle hit at or before "
+        "best_t meets the ray inside this cell (up to the rounding reach's slack bounds), so its "
+        "bounds overlap the cell and it is listed, and was tested, here; no input found"
+    ),
+    "lab2_accel:two_level_closest_hit:cmp_Lt_LtE:0": (
+        "ends also where reach(best_t) == t_out to the last bit: a triangle hit at or before "
+        "best_t meets the ray inside this top cell (up to the rounding reach's slack bounds), so "
+        "it is in the cell's direct list or its sub-grid, walked here to reach(t_out); no input "
+        "found"
+    ),
+    "lab2_accel:build_two_level_grid:const_float:1": (
+        "a sub-grid pad of 1.1e-4 instead of 1e-4 of its size: the docstring leaves the pad's "
+        "size free ('padded like the top grid'); the grader bounds it (at most 1e-3 of the size "
+        "plus a few ulps, and more than nothing: check_sub_grids)"
+    ),
+    "lab2_accel:build_two_level_grid:const_int:15": (
+        "17 ulps of the coordinates in a sub-grid's pad instead of 16: the pad's size is free "
+        "('padded like the top grid ... plus a few ulps of its coordinates')"
+    ),
+    "lab2_accel:build_two_level_grid:drop_abs:0": (
+        "max(lo, |hi|) instead of max(|lo|, |hi|) per axis of a sub-grid box: smaller only where "
+        "lo < 0 and |lo| > |hi|, by at most the axis's extent, so the ulps term shrinks by at "
+        "most 16 eps * size, far below the relative term 1e-4 * size; the pad's size is free"
+    ),
+    "lab2_accel:build_two_level_grid:drop_abs:1": (
+        "max(|lo|, hi) equals max(|lo|, |hi|): hi < 0 implies lo <= hi < 0, so |hi| < |lo|"
+    ),
+    "lab2_accel:build_two_level_grid:const_float:2": (
+        "the pad of a sub-grid whose box is a single point at the origin (size and coordinates "
+        "0): 1.1e-4 instead of 1e-4 of the top cell's width; any thickness will do (as for "
+        "build_grid's single point), and both stay far inside the top cell"
+    ),
 }
