@@ -127,7 +127,6 @@ def run_queue(
     jobs finished; ``stop``, once set, kills the worker and returns what finished."""
     done: dict[str, dict] = {}
     order: list[str] = []
-
     remaining = list(specs)
     while remaining and not (stop and stop.is_set()):
         with tempfile.TemporaryDirectory(dir=scratch) as tmp:

@@ -523,4 +523,9 @@ EQUIVALENT = {
         "under the same key (size, dtype, device, m, fuse, any_hit, calls, tables), the one "
         "already held, so the same graph replays (host time only; CUDA graphs only)"
     ),
+    "lab2_accel:kd_closest_hit:cmp_LtE_Lt:0": (
+        "d[axis] < 0 instead of <= 0 for the near side differs only where o[axis] == split and "
+        "d[axis] = +0.0: a ray lying in the plane, which visits both children with no early exit "
+        "between them, so the order changes neither its hit nor its counters"
+    ),
 }
