@@ -1444,6 +1444,16 @@ def test_render_persistent_stats(impl, device):
         f"render_persistent with the default pool of 4096 slots: {n} rays need one step per "
         f"bounce with {n} busy slots each; got active_lanes {s['active_lanes']}"
     )
+    # No rays: an empty image and a pool that never steps (idle_fraction 0.0, no 0 / 0).
+    image, stats = with_blocks(
+        impl, "render_persistent", scene, o[:0], d[:0], trace_brute_force, max_depth, 16
+    )
+    s = persistent_stats(stats, 16, "render_persistent (no rays, pool_size=16)")
+    assert tuple(image.shape) == (0, 3) and s["steps"] == 0 and s["work_generated"] == 0, (
+        f"render_persistent of no rays: expected an image of shape (0, 3), 0 steps and no "
+        f"work; got shape {tuple(image.shape)}, steps {s['steps']}, work_generated "
+        f"{s['work_generated']}"
+    )
     scene = scene_on("cornell_mirror", F64, device)
     o, d = camera_rays("cornell_mirror", F64, device)
     _, stats = with_blocks(impl, "render_persistent", scene, o, d, trace_brute_force, 2, 64)

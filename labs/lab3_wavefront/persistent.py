@@ -38,7 +38,8 @@ def render_persistent(
 
     Nothing may be lost or done twice: every item generated is processed exactly once.
     ``stats`` (plain Python data): ``pool_size``; ``steps``; ``active_lanes`` (list: busy
-    slots per step); ``idle_fraction`` = ``1 - sum(active_lanes) / (pool_size * steps)``;
+    slots per step); ``idle_fraction`` = ``1 - sum(active_lanes) / (pool_size * steps)``
+    (0.0 when no step ran: no rays);
     ``work_generated`` (primary rays + reflections appended); ``work_processed``;
     ``shadow_rays``.
 
