@@ -36,6 +36,7 @@ for round in $(seq "${REPEATS:-2}"); do
         for tree in new ${OLD:+old}; do
             (
                 cd "$G/$tree" || exit
+                rm -f "$OUT/$tree$lab.json"  # a round's score is its own, never the last round's
                 t=$( { time CUDA_VISIBLE_DEVICES= RTCOURSE_WORKER_USER=nobody \
                     PYTHONPATH="$G/site:$G/$tree" taskset -c "$core" timeout 400 \
                     python3 -m course.tools.cli grade --lab "$lab" --json "$OUT/$tree$lab.json" \
@@ -43,6 +44,10 @@ for round in $(seq "${REPEATS:-2}"); do
                 score=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['score'])" \
                     "$OUT/$tree$lab.json" 2>/dev/null)
                 printf '%s\t%s\t%s\t%s\t%s\n' "$tree" "$lab" "$round" "${t// /	}" "$score" >> "$OUT/times.tsv"
+                if [ -z "$score" ]; then  # no grade: say why where it comes back (times.tsv's neighbour)
+                    { echo "== $tree lab $lab round $round"; tail -n 15 "$OUT/$tree${lab}_r$round.log"; } \
+                        >> "$OUT/no_score.log"
+                fi
             ) &
             pids+=($!) core=$((core + 1))
         done
