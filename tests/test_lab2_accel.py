@@ -1884,19 +1884,18 @@ def test_kd_closest_hit(impl, device):
     )
 
 
-def kd_root_costs(mesh: Mesh, traversal: float, intersect: float, bonus: float):
-    """The docstring's SAH cost of every root event, in float64: per axis ``(position,
-    cost)`` of the events sorted by (position, start before end), ``inf`` for planes not
-    strictly inside the root box (the scene bounds)."""
-    corners = mesh.triangles().cpu().double()
-    t_lo, t_hi = corners.amin(1), corners.amax(1)
-    lo, hi = t_lo.amin(0), t_hi.amax(0)
+def kd_node_costs(t_lo, t_hi, box, knobs):
+    """The docstring's SAH cost of every event of one node (float64): per axis
+    ``(position, cost)``, the node's triangles' bounds clipped to its box, sorted by
+    (position, start before end); ``inf`` for planes not strictly inside the box."""
+    traversal, inter, bonus = knobs
+    lo, hi = box
     ext = hi - lo
     area = 2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[2] * ext[0])
     n = len(t_lo)
     out = []
     for a in range(3):
-        pos = torch.cat((t_lo[:, a], t_hi[:, a]))
+        pos = torch.cat((t_lo[:, a], t_hi[:, a])).clamp(float(lo[a]), float(hi[a]))
         is_end = torch.cat((torch.zeros(n), torch.ones(n))).double()
         order = torch.argsort(pos * 0 + is_end, stable=True)
         order = order[torch.argsort(pos[order], stable=True)]
@@ -1907,11 +1906,16 @@ def kd_root_costs(mesh: Mesh, traversal: float, intersect: float, bonus: float):
         a_below = 2 * (e1 * e2 + (pos - lo[a]) * (e1 + e2))
         a_above = 2 * (e1 * e2 + (hi[a] - pos) * (e1 + e2))
         empty = ((below == 0) | (above == 0)).double()
-        cost = (
-            traversal + intersect * (1 - bonus * empty) * (a_below * below + a_above * above) / area
-        )
+        cost = traversal + inter * (1 - bonus * empty) * (a_below * below + a_above * above) / area
         out.append((pos, torch.where((pos > lo[a]) & (pos < hi[a]), cost, INF)))
     return out
+
+
+def kd_root_costs(mesh: Mesh, traversal: float, intersect: float, bonus: float):
+    """:func:`kd_node_costs` of the root: every triangle, in the scene's bounds."""
+    corners = mesh.triangles().cpu().double()
+    t_lo, t_hi = corners.amin(1), corners.amax(1)
+    return kd_node_costs(t_lo, t_hi, (t_lo.amin(0), t_hi.amax(0)), (traversal, intersect, bonus))
 
 
 @pytest.mark.task(4)
@@ -3413,33 +3417,6 @@ def kd_nodes(tree):
         else:
             members[i] = members[int(left[i])] | members[int(left[i]) + 1]
     return boxes, depth, [sorted(x) for x in members]
-
-
-def kd_node_costs(t_lo, t_hi, box, knobs):
-    """The docstring's SAH cost of every event of one node (float64): per axis
-    ``(position, cost)``, the node's triangles' bounds clipped to its box, sorted by
-    (position, start before end); ``inf`` for planes not strictly inside the box."""
-    traversal, inter, bonus = knobs
-    lo, hi = box
-    ext = hi - lo
-    area = 2 * (ext[0] * ext[1] + ext[1] * ext[2] + ext[2] * ext[0])
-    n = len(t_lo)
-    out = []
-    for a in range(3):
-        pos = torch.cat((t_lo[:, a], t_hi[:, a])).clamp(float(lo[a]), float(hi[a]))
-        is_end = torch.cat((torch.zeros(n), torch.ones(n))).double()
-        order = torch.argsort(pos * 0 + is_end, stable=True)
-        order = order[torch.argsort(pos[order], stable=True)]
-        pos, is_end = pos[order], is_end[order]
-        below = torch.cumsum(1 - is_end, 0) - (1 - is_end)
-        above = n - torch.cumsum(is_end, 0)
-        e1, e2 = ext[(a + 1) % 3], ext[(a + 2) % 3]
-        a_below = 2 * (e1 * e2 + (pos - lo[a]) * (e1 + e2))
-        a_above = 2 * (e1 * e2 + (hi[a] - pos) * (e1 + e2))
-        empty = ((below == 0) | (above == 0)).double()
-        cost = traversal + inter * (1 - bonus * empty) * (a_below * below + a_above * above) / area
-        out.append((pos, torch.where((pos > lo[a]) & (pos < hi[a]), cost, INF)))
-    return out
 
 
 def check_kd_sah(tree, mesh: Mesh, what: str, knobs, leaf_size: int, max_depth: int) -> None:
