@@ -485,15 +485,16 @@ def main(argv):
             request = ctl.recv_bytes()
         except (EOFError, OSError):
             break
-        _preload_imports(request, preloaded, wire)
         ctl.send_bytes(
-            _run_probe(request, ctl_fd, folder, memory_bytes, reply_bytes, uid, gid, wire)
+            _run_probe(
+                request, ctl_fd, folder, memory_bytes, reply_bytes, uid, gid, wire, preloaded
+            )
         )
     clean()
     _exit_like(status)
 
 
-def _preload_imports(request_bytes, done: set[str], wire) -> None:
+def _preload_imports(request: dict, done: set[str]) -> None:
     """In the keeper, before a probe forks: import what the probe's test file imports at its
     top (course, torch, pytest, ...), once per file, so that each probe's fresh process
     loads only the test file's own code (about half a second of imports less per probe on
@@ -504,9 +505,8 @@ def _preload_imports(request_bytes, done: set[str], wire) -> None:
     import importlib
 
     try:
-        request = wire.pickle.loads(request_bytes)
         path = request["probe"].get("file")
-    except Exception:  # malformed: _run_probe answers it
+    except (KeyError, AttributeError, TypeError):  # malformed: the probe answers it
         return
     if not path or path in done:
         return
@@ -540,9 +540,12 @@ def _reap(server):
             return pid, st
 
 
-def _run_probe(request_bytes, ctl_fd, folder, memory_bytes, reply_bytes, uid, gid, wire):
-    """Fork a fresh probe process for one request; its reply, or why there is none."""
+def _run_probe(request_bytes, ctl_fd, folder, memory_bytes, reply_bytes, uid, gid, wire, preloaded):
+    """Fork a fresh probe process for one request; its reply, or why there is none.
+    ``preloaded``: the probe files whose imports this keeper has made (see
+    :func:`_preload_imports`)."""
     request = wire.pickle.loads(request_bytes)
+    _preload_imports(request, preloaded)
     where = request.get("where", "the probe")
     nonce = request.pop("nonce", None)
     read_end, write_end = os.pipe()
