@@ -30,26 +30,11 @@ ALTERNATIVES = [
         name="edge_functions_float64_inside",
         module=M,
         function="edge_functions",
-        find="""a = tri[..., [1, 2, 0], :2]
-    b = tri[..., [2, 0, 1], :2]
-    ax, ay, bx, by = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
-    px, py = px[..., None], py[..., None]
-    swap = (bx < ax) | ((bx == ax) & (by < ay))
-    rx, ry = torch.where(swap, bx, ax), torch.where(swap, by, ay)
-    sx, sy = torch.where(swap, ax, bx), torch.where(swap, ay, by)
-    value = (px - rx) * (sy - ry) - (py - ry) * (sx - rx)
-    return torch.where(swap, -value, value)""",
-        replace="""dtype = torch.result_type(tri, px)
-    tri, px, py = tri.to(torch.float64), px.to(torch.float64), py.to(torch.float64)
-    a = tri[..., [1, 2, 0], :2]
-    b = tri[..., [2, 0, 1], :2]
-    ax, ay, bx, by = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
-    px, py = px[..., None], py[..., None]
-    swap = (bx < ax) | ((bx == ax) & (by < ay))
-    rx, ry = torch.where(swap, bx, ax), torch.where(swap, by, ay)
-    sx, sy = torch.where(swap, ax, bx), torch.where(swap, ay, by)
-    value = (px - rx) * (sy - ry) - (py - ry) * (sx - rx)
-    return torch.where(swap, -value, value).to(dtype)""",
+        find="a = tri[..., [1, 2, 0], :2]",
+        replace="if tri.dtype != torch.float64:  # the work in float64, rounded once\n"
+        "        dtype = torch.result_type(tri, px)\n"
+        "        return edge_functions(tri.double(), px.double(), py.double()).to(dtype)\n"
+        "    a = tri[..., [1, 2, 0], :2]",
         tests="coverage",
         why="the edge functions of the corners in float64, rounded once: still exactly "
         "opposite on a shared edge (rounding is symmetric), more accurate",
