@@ -5,7 +5,8 @@
 # Each setting gets LIMIT seconds (default 270); grade_class.json is written after each lab,
 # so a setting cut short keeps its finished labs.
 #
-#   OUT=bench/results/<gpu>/grade_class [N=100] [LIMIT=270] bash bench/gpu_grade_class.sh
+#   OUT=bench/results/<gpu>/grade_class [N=100] [LIMIT=270] [LABS="2 5"] [DEVICES="cpu auto"] \
+#       bash bench/gpu_grade_class.sh
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT="${OUT:-bench/results/gpu-run/grade_class}"
@@ -13,8 +14,10 @@ mkdir -p "$OUT"
 export PYTHONUNBUFFERED=1
 { nproc; nvidia-smi -L; python3 -c "import torch; print('torch', torch.__version__)"; } \
     > "$OUT/device.txt" 2>&1
-for device in cpu auto; do
-    timeout "${LIMIT:-270}" python3 bench/grade_class.py --n "${N:-100}" --lab 2 --lab 5 \
+labs=()
+for lab in ${LABS:-2 5}; do labs+=(--lab "$lab"); done
+for device in ${DEVICES:-cpu auto}; do
+    timeout "${LIMIT:-270}" python3 bench/grade_class.py --n "${N:-100}" "${labs[@]}" \
         --task 1 --time-limit 10 --device "$device" --out "$OUT/$device" > "$OUT/$device.log" 2>&1
     echo "exit $?" >> "$OUT/$device.log"
 done

@@ -245,9 +245,10 @@ def run(
     workers: int = 1,
     deadline: float = 300.0,
     progress: bool = False,
+    device: str = "cpu",
 ) -> list[dict]:
     """Grade every mutant with ``workers`` parallel workers; one outcome dict each.
-    ``progress`` shows a bar on a terminal."""
+    ``progress`` shows a bar on a terminal; ``device`` as :func:`run_specs`."""
     root = Path(root)
     tests = {(p.module, f): names for p in plans for f, names in p.tests.items()}
     sources = {(p.module, file): text for p in plans for file, text in p.sources.items()}
@@ -261,22 +262,35 @@ def run(
         }
         for m in mutants
     ]
-    return run_specs(root, specs, workers=workers, deadline=deadline, progress=progress)
+    return run_specs(
+        root, specs, workers=workers, deadline=deadline, progress=progress, device=device
+    )
 
 
 def run_specs(
-    root, specs: list[dict], *, workers: int = 1, deadline: float = 300.0, progress: bool = False
+    root,
+    specs: list[dict],
+    *,
+    workers: int = 1,
+    deadline: float = 300.0,
+    progress: bool = False,
+    device: str = "cpu",
 ) -> list[dict]:
     """Grade mutated modules, one outcome dict each (``id``, ``killed``, ``ran``, ``by``,
     ``error`` when the run proves nothing), in ``workers`` warm worker processes. A spec is
     ``{"id", "module": "labN_name", "tests": [-k expressions, or-ed], "file": the mutated
-    file as copy_module names it, "source": its mutated text}``."""
+    file as copy_module names it, "source": its mutated text}``. ``device="cpu"`` hides
+    CUDA from the workers (many small runs: CUDA's start-up in every worker costs more than
+    it saves); ``"auto"`` leaves it visible, so that the graders' ``[cuda]`` cases also run:
+    the only way to grade a mistake on a path that only CUDA takes (a CUDA graph)."""
     from tqdm import tqdm
 
     from course.grading.warm import run_pool
 
     root = Path(root)
-    env = dict(os.environ, CUDA_VISIBLE_DEVICES="", OMP_NUM_THREADS="1")
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    if device == "cpu":
+        env["CUDA_VISIBLE_DEVICES"] = ""
     with tqdm(
         total=len(specs), unit="mutant", disable=not (progress and sys.stderr.isatty())
     ) as bar:
@@ -333,7 +347,15 @@ def score_table(mutants: list[Generated], outcomes: list[dict], reviewed: dict[s
 
 
 def main_cli(
-    root, *, labs=None, per_lab=None, seed=0, workers=None, json_path=None, only=None
+    root,
+    *,
+    labs=None,
+    per_lab=None,
+    seed=0,
+    workers=None,
+    json_path=None,
+    only=None,
+    device="cpu",
 ) -> int:
     """``rtcourse mutants --generated``: print the score table; 1 if a lab is under 90 %."""
     root = Path(root)
@@ -351,9 +373,10 @@ def main_cli(
     )
     if only:
         how = f"{len(mutants)} of {total} (ids matching {only!r})"
-    print(f"grading {how} generated mutants with {workers} worker(s)", flush=True)
+    where = "CUDA hidden" if device == "cpu" else "CUDA visible"
+    print(f"grading {how} generated mutants with {workers} worker(s), {where}", flush=True)
     started = time.monotonic()
-    outcomes = run(root, mutants, plans, workers=workers, progress=True)
+    outcomes = run(root, mutants, plans, workers=workers, progress=True, device=device)
     table = score_table(mutants, outcomes, reviewed)
     print(
         f"\n{'lab':>3} {'generated':>9} {'killed':>6} {'equiv':>5} {'survived':>8} "
@@ -376,6 +399,7 @@ def main_cli(
             json.dumps(
                 {
                     "sampling": how,
+                    "device": device,
                     "seconds": round(time.monotonic() - started, 1),
                     "labs": table,
                     "mutants": [dict(asdict(m), **o) for m, o in zip(mutants, outcomes)],

@@ -34,6 +34,12 @@ def cmd_demo(args):
 
 
 def cmd_grade(args):
+    if args.device == "cpu":
+        # Before anything starts CUDA: the graders (this process) and every sandboxed
+        # worker it starts (they inherit the environment) see no GPU.
+        import os
+
+        os.environ["CUDA_VISIBLE_DEVICES"] = ""
     from course.grading.runner import grade
 
     data = grade(
@@ -87,6 +93,7 @@ def cmd_mutants(args):
             workers=args.workers,
             json_path=args.json,
             only=args.only,
+            device=args.device,
         )
     mutants = [m for m in load_mutants(root) if not args.lab or m.lab in args.lab]
     outcomes = catch_mutants(mutants, root, workers=args.workers or allowed_cpus())
@@ -218,6 +225,13 @@ def main(argv=None):
         help="run the implementation in-process (only for code you trust)",
     )
     p.add_argument(
+        "--device",
+        choices=("cpu", "auto"),
+        default="cpu",
+        help="cpu hides CUDA from the graders: the Gradescope grade, and faster on a GPU "
+        "machine (default); auto also runs every test's [cuda] case where CUDA is present",
+    )
+    p.add_argument(
         "-v",
         "--verbose",
         action="store_true",
@@ -285,6 +299,13 @@ def main(argv=None):
         "--only", default=None, help="with --generated: only mutants whose id matches this regex"
     )
     p.add_argument("--json", default=None, help="with --generated: write the table here")
+    p.add_argument(
+        "--device",
+        choices=("cpu", "auto"),
+        default="cpu",
+        help="with --generated: cpu hides CUDA from the graders (default); auto lets the "
+        "[cuda] cases run too, for mistakes on paths only CUDA takes",
+    )
     p.set_defaults(func=cmd_mutants)
 
     p = sub.add_parser(
