@@ -2948,6 +2948,75 @@ def test_fast_bvh_any_hit_and_knobs(impl, device):
     )
 
 
+def corner_and_far_rays(mesh: Mesh, quick: int, far: int, seed: int) -> Rays:
+    """``quick`` rays starting in the corners of the bounds of ``mesh`` (a sphere), outside
+    it, aimed away: they enter the root's box and leave the tree within about 10 steps; then
+    ``far`` rays from a sphere of 4x the bounds aimed into the mesh (about 30 steps)."""
+    g = generator(seed)
+    lo, hi = (b.float() for b in bounds(mesh))
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    sign = 2.0 * torch.randint(0, 2, (quick, 3), generator=g) - 1
+    origins = centre + sign * half * (0.97 + 0.02 * torch.rand(quick, 3, generator=g))
+    directions = sign * (0.5 + torch.rand(quick, 3, generator=g))
+    u = torch.nn.functional.normalize(torch.randn(far, 3, generator=g), dim=1)
+    start = centre + 4 * half * u
+    aim = centre + half * (0.5 * torch.randn(far, 3, generator=g)).clamp(-1, 1)
+    return Rays.create(torch.cat((origins, start)), torch.cat((directions, aim - start)))
+
+
+@pytest.mark.task(7)
+@pytest.mark.points(0.5)
+@pytest.mark.gpu
+def test_fast_bvh_cached_graphs_compact(impl):
+    # CUDA only: compile="reduce-overhead" with a walk packed once replays cached CUDA
+    # graphs, whose rays are padded with finished ones to a graph size. 72,000 rays (a graph
+    # of 73,728), 90% of them done within the first look (the reference's steps: at most 9
+    # for a corner ray; over 16 for 6,994 of the far ones): the walk compacts, and only the
+    # rays still running (never the padding) must go on.
+    mesh = on(scene("ico"), "cuda")
+    bvh = median_bvh(mesh, 2)
+    walk = pack_bvh(bvh, mesh)
+    rays = corner_and_far_rays(mesh, 64_800, 7_200, 191).to("cuda")
+    what = (
+        'bvh_closest_hit_fast(compile="reduce-overhead", walk=pack_bvh(...), check_every=16) '
+        "of 72,000 rays, 64,800 of them done within 16 steps"
+    )
+    runs = [
+        check_result(
+            impl.bvh_closest_hit_fast(
+                rays, mesh, bvh, walk=walk, check_every=16, compile="reduce-overhead"
+            ),
+            len(rays),
+            F32,
+            rays.device,
+            f"{what}, call {call}",
+        )
+        for call in (1, 2)  # the second replays the graphs the first captured
+    ]
+    eager, eager_count = check_result(
+        impl.bvh_closest_hit_fast(rays, mesh, bvh, walk=walk, check_every=16),
+        len(rays),
+        F32,
+        rays.device,
+        "bvh_closest_hit_fast(walk=..., check_every=16), eager",
+    )
+    for call, (hits, count) in enumerate(runs, 1):
+        # Fused arithmetic may decide a ray grazing an edge the other way: 1 in 1000.
+        same = (hits.triangle == eager.triangle).cpu()
+        assert int((~same).sum()) <= len(rays) // 1000, (
+            f"{what}, call {call}: {int((~same).sum())} of {len(rays)} rays hit another "
+            f"triangle than the eager walk (first: ray {int((~same).nonzero()[0, 0])}); at a "
+            f"compaction keep only the rays still running, never the padding rows"
+        )
+        for key in ("steps", "tests"):
+            assert_equal(
+                count[key].cpu()[same],
+                eager_count[key].cpu()[same],
+                where="ray",
+                name=f"{what}, call {call}: counters[{key!r}] against the eager walk",
+            )
+
+
 def test_pack_bvh_lays_out_each_octant_near_first():
     """The given layout of the sync-free walk: per octant, a depth-first array of the same
     nodes with skip links, the child nearer along the split axis first; also for a BVH whose

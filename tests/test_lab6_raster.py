@@ -2578,7 +2578,9 @@ def test_hybrid_shadows_match_traced(impl, reference, device):
     hybrid = impl.hybrid_shadows(
         trace_plates, plates.to(device), face.to(device), bary.to(device), sun.to(device)
     )
-    traced_face, traced = impl.traced_shadows(trace_plates, plates.to(device), plates_camera, sun)
+    traced_face, traced = impl.traced_shadows(
+        trace_plates, plates.to(device), plates_camera, sun.to(device)
+    )
     on_face0 = (ref_tri == 0) & ref_shadowed
     by_face0 = ref_blocker == 0
     assert int(on_face0.sum()) > 20 and int(by_face0.sum()) > 40, "test set-up: plates"
