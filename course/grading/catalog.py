@@ -45,11 +45,13 @@ class LabInfo:
         """Points graded on a CPU run, for one task or all; ``hidden`` filters by visibility."""
         return sum(t.points for t in self.graded(task, hidden=hidden))
 
-    def graded(self, task=None, *, hidden=None) -> list[GradedTest]:
+    def graded(self, task=None, *, hidden=None, needs=()) -> list[GradedTest]:
+        """The graded tests (of ``task``; hidden or visible ones) that need nothing beyond
+        ``needs`` (e.g. ``("gpu",)`` where CUDA is visible)."""
         return [
             t
             for t in self.tests
-            if not t.needs
+            if set(t.needs) <= set(needs)
             and (task is None or t.task == task)
             and (hidden is None or (t.visibility != "visible") == hidden)
         ]

@@ -74,8 +74,9 @@ class LabPlan:
     sources: dict[str, str]  # file (Generated.file) -> the solution's text the mutants apply to
 
 
-def plan(root, labs=None) -> list[LabPlan]:
-    """The generated mutants of every lab (or the chosen ones) and their tests."""
+def plan(root, labs=None, *, gpu: bool = False) -> list[LabPlan]:
+    """The generated mutants of every lab (or the chosen ones) and their tests; with
+    ``gpu``, also the tests that need CUDA (graded only where it is visible)."""
     root = Path(root)
     catalog = lab_catalog(lab_test_files(root, labs))
     plans = []
@@ -101,7 +102,13 @@ def plan(root, labs=None) -> list[LabPlan]:
         public = skeleton_functions(skeleton)
         graph = _call_graph(tree)
         direct = {
-            f: sorted({t.name for t in info.graded() if f in functions_of(t, public)})
+            f: sorted(
+                {
+                    t.name
+                    for t in info.graded(needs=("gpu",) if gpu else ())
+                    if f in functions_of(t, public)
+                }
+            )
             for f in public
         }
         tests = {}
@@ -359,7 +366,7 @@ def main_cli(
 ) -> int:
     """``rtcourse mutants --generated``: print the score table; 1 if a lab is under 90 %."""
     root = Path(root)
-    plans = plan(root, labs)
+    plans = plan(root, labs, gpu=device != "cpu")
     mutants = sample(plans, per_lab, seed)
     if only:
         mutants = [m for m in mutants if re.search(only, m.id)]
