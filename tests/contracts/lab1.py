@@ -112,7 +112,7 @@ CONTRACTS = {
         ),
         (
             "computed in float64 and rounded once",
-            "test_woop_unit_matches_float64_reference",
+            "test_woop_precompute_rounded_once_from_float64",
             "woop_transform_in_input_precision",
         ),
         (
