@@ -157,3 +157,19 @@ def test_a_package_reference_is_mutated_in_the_file_defining_the_function(tmp_pa
     )
     outcomes = run(course, [*mutants, same], plans, workers=1, deadline=120)
     assert all(o["killed"] for o in outcomes[:-1]) and not outcomes[-1]["killed"], outcomes
+
+
+def test_graders_that_need_cuda_join_the_plan_only_where_cuda_grades(tmp_path):
+    """``mutants --generated --device auto`` grades mistakes on paths only CUDA takes
+    (Lab 2's cached CUDA graphs): its plan must hold the ``gpu``-marked graders, which a
+    CPU plan leaves out (they would be skipped, and a skip catches nothing)."""
+    course = _toy(tmp_path)
+    grader = course / "tests" / "test_lab9_toy.py"
+    grader.write_text(
+        grader.read_text() + "\n\n@pytest.mark.task(1)\n@pytest.mark.points(1)\n@pytest.mark.gpu\n"
+        "def test_double_on_cuda(impl):\n"
+        "    x = torch.arange(5.0, device='cuda')\n"
+        "    torch.testing.assert_close(impl.double(x), 2 * x)\n"
+    )
+    assert plan(course)[0].tests["double"] == ["test_double"]
+    assert plan(course, gpu=True)[0].tests["double"] == ["test_double", "test_double_on_cuda"]
