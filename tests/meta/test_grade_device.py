@@ -18,7 +18,11 @@ from course.tools.cli import main
 @pytest.fixture
 def seen(monkeypatch):
     """What the grading run would see: CUDA_VISIBLE_DEVICES when it starts (None: unset)."""
-    monkeypatch.delenv("CUDA_VISIBLE_DEVICES", raising=False)  # restored after the test
+    # cmd_grade sets the variable in this process: setenv records its value (or absence)
+    # so that it is restored after the test; a bare delenv of an unset variable records
+    # nothing, and CUDA would stay hidden from every later test of the run.
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0")
+    monkeypatch.delenv("CUDA_VISIBLE_DEVICES")
     calls = []
 
     def grade(impl, **kwargs):
